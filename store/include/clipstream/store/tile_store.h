@@ -1,0 +1,172 @@
+// The tile store: one file holding a full mip pyramid of square tiles.
+// Reader and writer live side by side here and in src/; nothing else in the
+// project parses these bytes. The byte layout is specified in
+// docs/tile-store.md.
+#pragma once
+
+#include <clipstream/store/types.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+enum class Compression : uint32_t { kNone = 0, kZstd = 1 };
+// Reversible transform applied to each tile before compression.
+enum class Predictor : uint32_t {
+  kNone = 0,
+  kLeftDelta = 1,  // per row, per channel: p[x] - p[x-1] (mod 2^bits)
+};
+
+// Everything the header records besides geometry.
+struct StoreEncoding {
+  Compression compression = Compression::kZstd;
+  int zstd_level = 1;
+  Predictor predictor = Predictor::kLeftDelta;
+  DownsampleFilter filter = DownsampleFilter::kBox;
+  bool linear_light = false;  // filter ran in linear light (informational)
+};
+
+// What a store says about itself.
+struct StoreInfo {
+  PyramidGeometry geometry;
+  StoreEncoding encoding;
+  GeoReference geo;
+  uint64_t file_bytes = 0;
+  uint32_t format_version = 0;
+};
+
+// Where one tile's payload lives, as recorded in the index.
+struct TileLocation {
+  bool constant = false;     // all pixels equal; no payload, value in constant_pixel
+  uint8_t constant_pixel[8] = {};  // first bytesPerPixel() bytes valid
+  uint64_t offset = 0;       // payload byte offset in the file (non-constant)
+  uint32_t stored_bytes = 0; // payload size on disk
+  uint32_t checksum = 0;     // checksum of the stored payload bytes
+};
+
+// A payload as read from disk, verified against its checksum, not yet decoded.
+struct RawTile {
+  TileKey key;
+  TileLocation location;
+  std::vector<uint8_t> payload;  // empty for constant tiles
+};
+
+// Per-level totals for `clipstream-info`.
+struct LevelStats {
+  uint64_t tiles = 0;
+  uint64_t constant_tiles = 0;
+  uint64_t stored_bytes = 0;  // payload bytes on disk
+  uint64_t raw_bytes = 0;     // tiles * tileBytes()
+};
+
+// Reads a tile store. Opening reads only the header, the level table and the
+// small per-level page directories; index pages are read on first use.
+//
+// Thread-safe: all const methods may be called from any number of threads at
+// once. Tile reads are positional (pread) and take no lock around I/O.
+class TileStoreReader {
+ public:
+  // Opens and validates header, level table and page directories. On
+  // failure *out is left empty and the Status names the problem.
+  static Status open(const std::string& path, std::unique_ptr<TileStoreReader>* out);
+  ~TileStoreReader();
+  TileStoreReader(const TileStoreReader&) = delete;
+  TileStoreReader& operator=(const TileStoreReader&) = delete;
+
+  const StoreInfo& info() const;
+  const PyramidGeometry& geometry() const { return info().geometry; }
+
+  // Looks up a tile's index entry (reads and verifies its index page on
+  // first use). kOutOfRange for keys outside the pyramid.
+  Status locate(const TileKey& key, TileLocation* out) const;
+
+  // Reads a tile's payload and verifies its checksum. No decompression.
+  Status readRaw(const TileKey& key, RawTile* out) const;
+
+  // Decodes a verified raw tile into `pixels`, which must hold exactly
+  // geometry().tileBytes() bytes, in the store's pixel format. Pure: safe on
+  // any thread. kCorruptTile if the payload does not decode to that size.
+  Status decode(const RawTile& raw, std::span<uint8_t> pixels) const;
+
+  // readRaw + decode. `pixels` is resized to tileBytes().
+  Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
+
+  // Totals per level; reads every index page.
+  Status levelStats(std::vector<LevelStats>* out) const;
+
+  struct Problem {
+    TileKey key;
+    Status status;
+  };
+  // Reads, verifies and decodes every tile. Calls progress(done, total)
+  // now and then from the calling thread. Returns ok only when no problem
+  // was found; problems lists each failing tile (capped at max_problems).
+  Status verifyAll(std::vector<Problem>* problems, size_t max_problems = 100,
+                   const std::function<void(uint64_t, uint64_t)>& progress = {},
+                   unsigned threads = 0) const;
+
+ private:
+  TileStoreReader();
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+// Options for writing a store.
+struct WriterOptions {
+  StoreEncoding encoding;
+  GeoReference geo;
+  bool fsync = true;  // flush to disk before the final rename
+};
+
+// Encodes one tile: constant detection, predictor, compression, checksum.
+// Pure and thread-safe: the tiler runs it on worker threads.
+// `pixels` holds tileBytes() bytes in the geometry's format.
+struct EncodedTile {
+  TileKey key;
+  TileLocation location;        // constant/checksum/stored_bytes filled; offset by writer
+  std::vector<uint8_t> payload; // empty when constant
+};
+Status encodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding,
+                  const TileKey& key, std::span<const uint8_t> pixels, EncodedTile* out);
+
+// Writes a store atomically: everything goes to a temporary file next to the
+// final path, which appears (fsync + rename) only in finish(). Destroying an
+// unfinished writer, or a failed finish(), removes every temporary file.
+//
+// Thread-safe: write() may be called from several threads at once; create()
+// and finish() from one thread.
+class TileStoreWriter {
+ public:
+  // Fails (kIo / kNotFound / kInvalidArgument) if the directory of `path`
+  // does not exist or is not writable, or the geometry is invalid.
+  static Status create(const std::string& path, const PyramidGeometry& geometry,
+                       const WriterOptions& options, std::unique_ptr<TileStoreWriter>* out);
+  ~TileStoreWriter();
+  TileStoreWriter(const TileStoreWriter&) = delete;
+  TileStoreWriter& operator=(const TileStoreWriter&) = delete;
+
+  // Stores one encoded tile. Each tile of the pyramid must be written exactly
+  // once, in any order. kNoSpace when the disk is full.
+  Status write(EncodedTile&& tile);
+
+  // Writes the index and header, flushes and renames into place. Fails
+  // (kInvalidArgument) if any tile is missing.
+  Status finish();
+
+  // Bytes written so far (payloads), for progress and summaries.
+  uint64_t bytesWritten() const;
+  uint64_t constantTiles() const;
+
+ private:
+  TileStoreWriter();
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+}  // namespace clipstream

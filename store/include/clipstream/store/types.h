@@ -1,0 +1,119 @@
+// Plain types shared by every component: pixel formats, tile keys, store
+// geometry and the Status every fallible call returns.
+//
+// Thread-safe: plain data and pure functions only.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+// Pixel layout of a store's tiles. Channels are interleaved, 16-bit samples
+// are little-endian. The numeric values are part of the on-disk format.
+enum class PixelFormat : uint32_t {
+  kR8 = 1,
+  kR16 = 2,
+  kRGB8 = 3,
+  kRGBA8 = 4,
+};
+
+uint32_t channelCount(PixelFormat format);   // 1, 1, 3, 4
+uint32_t bytesPerPixel(PixelFormat format);  // 1, 2, 3, 4
+const char* pixelFormatName(PixelFormat format);  // "R8", "R16", "RGB8", "RGBA8"
+bool isValidPixelFormat(uint32_t raw);
+
+// Filter used to build each coarser level from the one below it. Values are
+// part of the on-disk format (recorded in the header, informational only).
+enum class DownsampleFilter : uint32_t {
+  kBox = 0,      // exact 2x2 average, odd edges handled (see docs/tile-store.md)
+  kLanczos3 = 1, // separable Lanczos-3, optionally in linear light
+};
+const char* downsampleFilterName(DownsampleFilter filter);
+
+// Identifies one tile. Level 0 is the finest; x and y count tiles from the
+// top-left corner of that level.
+struct TileKey {
+  uint32_t level = 0;
+  uint32_t x = 0;
+  uint32_t y = 0;
+
+  friend bool operator==(const TileKey&, const TileKey&) = default;
+};
+static_assert(sizeof(TileKey) == 12, "TileKey is hashed whole: no padding allowed");
+
+struct TileKeyHash {
+  size_t operator()(const TileKey& key) const noexcept;  // hashes all 12 bytes
+};
+
+// Size of one level of the pyramid. Level l has width max(1, ceil(w / 2^l))
+// (same for height); tiles_x = ceil(width_px / tile_px).
+struct LevelInfo {
+  uint64_t width_px = 0;
+  uint64_t height_px = 0;
+  uint32_t tiles_x = 0;
+  uint32_t tiles_y = 0;
+};
+
+// Affine georeference, GDAL order: for pixel corner (col, row) of level 0,
+//   X = t[0] + col * t[1] + row * t[2];  Y = t[3] + col * t[4] + row * t[5].
+struct GeoReference {
+  bool present = false;
+  double transform[6] = {0, 1, 0, 0, 0, 1};
+  std::string crs;  // coordinate system text (WKT or "EPSG:nnnn"); may be empty
+};
+
+// Geometry of a pyramid: everything a reader needs to address tiles.
+struct PyramidGeometry {
+  uint64_t width_px = 0;   // level 0
+  uint64_t height_px = 0;  // level 0
+  uint32_t tile_px = 128;
+  PixelFormat format = PixelFormat::kRGB8;
+  std::vector<LevelInfo> levels;  // levels[0] finest; last level is one tile
+
+  uint32_t levelCount() const { return static_cast<uint32_t>(levels.size()); }
+  size_t tileBytes() const { return size_t(tile_px) * tile_px * bytesPerPixel(format); }
+  bool contains(const TileKey& key) const;
+};
+
+// Computes the full level list down to (and including) the first level that
+// fits in one tile. Returns false for zero sizes or tile_px of 0.
+bool makePyramidGeometry(uint64_t width_px, uint64_t height_px, uint32_t tile_px,
+                         PixelFormat format, PyramidGeometry* out);
+
+// Error categories. Bad data is never an assert: it is one of these.
+enum class ErrorCode : uint32_t {
+  kOk = 0,
+  kIo,             // open/read/write/rename failed (errno text in message)
+  kNotFound,       // file does not exist
+  kTruncated,      // file shorter than its structures say
+  kBadMagic,       // not a clipstream tile store
+  kBadVersion,     // a format version this reader does not know
+  kBadHeader,      // header fields inconsistent or checksum wrong
+  kCorruptIndex,   // an index page or level table failed its checksum or bounds
+  kCorruptTile,    // a tile payload failed its checksum or did not decode
+  kOutOfRange,     // a tile key outside the pyramid
+  kInvalidArgument,
+  kUnsupported,    // valid input of a kind we do not handle (pixel type, ...)
+  kNoSpace,        // disk full
+  kCancelled,
+  kUnavailable,    // transient source failure (e.g. injected), may be retried
+};
+const char* errorCodeName(ErrorCode code);
+
+// Result of a fallible call: a code plus a message that names the problem
+// (file, tile, field) in words a user can act on.
+struct [[nodiscard]] Status {
+  ErrorCode code = ErrorCode::kOk;
+  std::string message;
+
+  static Status ok() { return {}; }
+  static Status error(ErrorCode c, std::string msg) { return {c, std::move(msg)}; }
+  bool isOk() const { return code == ErrorCode::kOk; }
+  explicit operator bool() const { return isOk(); }
+  std::string toString() const;  // "corrupt tile: level 3 tile (4, 7): checksum mismatch"
+};
+
+}  // namespace clipstream

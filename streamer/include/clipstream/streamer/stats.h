@@ -1,0 +1,39 @@
+// Streaming statistics: per level and overall, as a struct and as JSON.
+// Thread-safe: plain data (a snapshot).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+struct LevelCounters {
+  uint64_t requests = 0;        // tiles asked of the loader
+  uint64_t ram_hits = 0;        // needed tile found decoded in RAM
+  uint64_t ram_misses = 0;      // needed tile had to be read
+  uint64_t gpu_handoffs = 0;    // tiles given to the renderer
+  uint64_t cancellations = 0;   // queued requests dropped by a newer plan
+  uint64_t evictions = 0;
+  uint64_t redundant_reads = 0; // reads of a tile that had been read before
+  uint64_t bytes_read = 0;      // payload bytes from the source
+  uint64_t failures = 0;
+};
+
+struct StreamerStats {
+  std::vector<LevelCounters> levels;  // index = level
+  LevelCounters total;
+  uint64_t ram_bytes = 0;             // current, including accounted overhead
+  uint64_t ram_budget_bytes = 0;
+  uint64_t ram_peak_bytes = 0;
+  uint64_t queue_depth = 0;
+  uint64_t in_flight = 0;
+  double decode_ms_total = 0.0;
+  double queue_latency_p50_ms = 0.0;
+  double queue_latency_p99_ms = 0.0;
+  uint32_t max_texture_lod = 0;
+
+  std::string toJson() const;
+};
+
+}  // namespace clipstream

@@ -1,0 +1,88 @@
+// The streamer: plans what each frame needs, loads tiles on worker threads
+// into a RAM cache with a hard byte budget, and hands ready tiles to the
+// renderer under a per-frame budget. No GL here.
+//
+// Thread rule: update(), takeReady(), plan() and maxTextureLod() are for
+// the render thread only and never block on I/O. stats() is thread-safe.
+// Shutdown order: shutdown() stops accepting work, cancels queued requests,
+// lets in-flight reads finish, joins the workers; the destructor calls it.
+#pragma once
+
+#include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/planner.h>
+#include <clipstream/streamer/stats.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+struct StreamerConfig {
+  uint64_t ram_budget_bytes = uint64_t(256) << 20;  // hard: never exceeded
+  unsigned io_threads = 0;       // 0 = number of cores
+  bool prefetch = true;          // velocity-predictive prefetch
+  bool frustum_priority = true;  // visible tiles before hidden ones
+  bool throttle = true;          // compute MaxTextureLOD from residency
+  uint32_t lod_hysteresis_frames = 8;  // frames a finer LOD must be ready before use
+  PlannerConfig planner;
+  std::string trace_path;        // non-empty: record the request stream here
+};
+
+// A decoded tile ready for upload: RGBA8, tile_px * tile_px * 4 bytes.
+struct ReadyTile {
+  TileKey key;
+  std::shared_ptr<const std::vector<uint8_t>> rgba;
+};
+
+// Which tiles of a level's clip window are handed to the GPU.
+struct LevelResidency {
+  uint32_t level = 0;
+  TileRect window;
+  std::vector<uint8_t> resident;  // window.width() * window.height(), row-major, 1 = handed off
+};
+
+struct FrameHandoff {
+  std::vector<ReadyTile> tiles;           // upload all of these this frame, in order
+  uint32_t max_texture_lod = 0;           // finest level the shader may sample
+  std::vector<LevelResidency> residency;  // stack levels, after these tiles
+};
+
+class Streamer {
+ public:
+  Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& config);
+  ~Streamer();
+  Streamer(const Streamer&) = delete;
+  Streamer& operator=(const Streamer&) = delete;
+
+  const PyramidGeometry& geometry() const;
+
+  // Render thread. Plans for this camera, queues what is missing, cancels
+  // what the plan no longer needs, and queues predicted tiles at low priority.
+  void update(const Camera& camera, const Viewport& viewport, double time_s);
+
+  // Render thread. Up to max_tiles tiles and max_bytes bytes (0 = no byte
+  // limit) that are decoded and needed, in priority order; marks them as
+  // resident on the GPU. Also the MaxTextureLOD and residency after them.
+  FrameHandoff takeReady(size_t max_tiles, size_t max_bytes = 0);
+
+  // Render thread. Forgets GPU residency (e.g. after the renderer recreates
+  // its textures on a viewport resize); tiles are handed off again.
+  void resetGpuResidency();
+
+  const ClipmapPlan& plan() const;
+
+  // True when every tile the current plan needs is handed off.
+  bool settled() const;
+
+  StreamerStats stats() const;  // thread-safe snapshot
+  void shutdown();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+}  // namespace clipstream
