@@ -97,8 +97,15 @@ class TileStoreReader {
   // readRaw + decode. `pixels` is resized to tileBytes().
   Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
 
-  // Totals per level; reads every index page.
+  // Totals per level; reads every index page that is not a constant page.
   Status levelStats(std::vector<LevelStats>* out) const;
+
+  // Bytes read from the file so far by this reader (open, index pages and
+  // payloads). For tests and statistics; relaxed atomic counter.
+  uint64_t bytesRead() const;
+  // Number of index pages loaded so far (a page read twice by racing
+  // threads counts once: only the published copy counts).
+  uint64_t indexPagesLoaded() const;
 
   struct Problem {
     TileKey key;
@@ -135,12 +142,24 @@ struct EncodedTile {
 Status encodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding,
                   const TileKey& key, std::span<const uint8_t> pixels, EncodedTile* out);
 
+// Decodes a raw tile (checksum already verified) into `pixels`, which must
+// hold exactly geometry.tileBytes() bytes. The inverse of encodeTile(); pure
+// and thread-safe. kCorruptTile if the payload does not decode to exactly
+// that size; never reads outside raw.payload.
+Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding,
+                  const RawTile& raw, std::span<uint8_t> pixels);
+
 // Writes a store atomically: everything goes to a temporary file next to the
 // final path, which appears (fsync + rename) only in finish(). Destroying an
 // unfinished writer, or a failed finish(), removes every temporary file.
 //
-// Thread-safe: write() may be called from several threads at once; create()
-// and finish() from one thread.
+// Thread-safe: write() and writeConstantTiles() may be called from several
+// threads at once (payload bytes are written outside the writer's lock);
+// create() and finish() from one thread, finish() after every write returned.
+//
+// Memory: 64 bytes per index page of the pyramid plus 16 bytes per tile of
+// each index page that has begun but not finished (pages are flushed to a
+// temporary file as soon as their last tile arrives); see docs/tile-store.md.
 class TileStoreWriter {
  public:
   // Fails (kIo / kNotFound / kInvalidArgument) if the directory of `path`
@@ -154,6 +173,14 @@ class TileStoreWriter {
   // Stores one encoded tile. Each tile of the pyramid must be written exactly
   // once, in any order. kNoSpace when the disk is full.
   Status write(EncodedTile&& tile);
+
+  // Marks every tile in [x0, x1) x [y0, y1) of `level` as constant with
+  // `pixel` (bytesPerPixel() bytes) without per-tile calls: index pages
+  // entirely inside the rectangle become page-level constants costing no
+  // per-tile memory or disk. Tiles in the rectangle must not have been
+  // written. kInvalidArgument / kOutOfRange on bad arguments.
+  Status writeConstantTiles(uint32_t level, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
+                            std::span<const uint8_t> pixel);
 
   // Writes the index and header, flushes and renames into place. Fails
   // (kInvalidArgument) if any tile is missing.

@@ -1,0 +1,22 @@
+// Private: positional file I/O that loops over short transfers and turns
+// errno into a Status naming the file.
+#pragma once
+
+#include <clipstream/store/types.h>
+
+#include <cstdint>
+#include <string>
+
+namespace clipstream::fileio {
+
+// Reads exactly `bytes` at `offset`; kTruncated if the file ends first.
+Status preadAll(int fd, void* data, size_t bytes, uint64_t offset, const std::string& path);
+// Writes exactly `bytes` at `offset`; kNoSpace on ENOSPC/EDQUOT, else kIo.
+Status pwriteAll(int fd, const void* data, size_t bytes, uint64_t offset,
+                 const std::string& path);
+// Copies `bytes` from the start of `from_fd` to `to_fd` at `to_offset`.
+Status copyRange(int from_fd, const std::string& from_path, uint64_t bytes, int to_fd,
+                 uint64_t to_offset, const std::string& to_path);
+std::string errnoText(int err);
+
+}  // namespace clipstream::fileio

@@ -1,0 +1,682 @@
+// TileStoreReader: validates header, level table, page directories and
+// metadata at open; index pages are read on first use, outside any lock,
+// and published with a compare-and-swap (a racing loser frees its copy).
+#include "file_io.h"
+#include "format.h"
+
+#include <clipstream/store/tile_store.h>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+#include <tuple>
+
+namespace clipstream {
+
+namespace {
+
+struct PageDirEntry {
+  uint64_t offset = 0;
+  uint32_t bytes = 0;
+  uint32_t flags = 0;
+  uint64_t constant_value = 0;
+  uint64_t checksum = 0;
+};
+
+struct TileEntry {
+  uint64_t offset_or_value = 0;
+  uint32_t stored_bytes = 0;
+  uint32_t checksum = 0;
+};
+
+struct Page {
+  std::vector<TileEntry> entries;
+};
+
+struct LevelRead {
+  uint64_t payload_offset = 0;
+  uint64_t payload_bytes = 0;
+  uint32_t pages_x = 0;
+  uint32_t pages_y = 0;
+  std::vector<PageDirEntry> directory;
+  std::unique_ptr<std::atomic<const Page*>[]> pages;  // null until loaded
+};
+
+// a + b <= limit without overflow.
+bool fits(uint64_t a, uint64_t b, uint64_t limit) { return a <= limit && b <= limit - a; }
+
+// Bytes above the pixel size in a packed constant value must be zero.
+bool valueFits(uint64_t value, size_t bpp) { return bpp >= 8 || (value >> (8 * bpp)) == 0; }
+
+}  // namespace
+
+struct TileStoreReader::Impl {
+  std::string path;
+  int fd = -1;
+  StoreInfo info;
+  uint64_t pages_begin = 0;  // index pages region [pages_begin, pages_end)
+  uint64_t pages_end = 0;
+  size_t max_stored_bytes = 0;
+  std::vector<LevelRead> levels;
+  mutable std::atomic<uint64_t> bytes_read{0};
+  mutable std::atomic<uint64_t> pages_loaded{0};
+
+  ~Impl() {
+    for (LevelRead& level : levels) {
+      if (!level.pages) continue;
+      for (size_t i = 0; i < level.directory.size(); ++i) delete level.pages[i].load();
+    }
+    if (fd >= 0) ::close(fd);
+  }
+
+  Status read(void* data, size_t bytes, uint64_t offset) const {
+    bytes_read.fetch_add(bytes, std::memory_order_relaxed);
+    return fileio::preadAll(fd, data, bytes, offset, path);
+  }
+
+  Status bad(ErrorCode code, const std::string& what) const {
+    return Status::error(code, path + ": " + what);
+  }
+
+  Status openImpl();
+  // Reads and checks one index page without publishing it.
+  Status readPage(uint32_t level_index, uint32_t px, uint32_t py,
+                  std::unique_ptr<Page>* out) const;
+  // Returns the published page, reading and publishing it on first use.
+  Status loadPage(uint32_t level_index, uint32_t px, uint32_t py, const Page** out) const;
+  // Published page or, if not loaded yet, a private copy kept in *scratch:
+  // whole-file scans use this so they do not pin the entire index in RAM.
+  Status peekPage(uint32_t level_index, uint32_t px, uint32_t py, std::unique_ptr<Page>* scratch,
+                  const Page** out) const;
+  void entryLocation(uint32_t level_index, const TileEntry& entry, TileLocation* out) const;
+  Status locate(const TileKey& key, TileLocation* out) const;
+  Status readPayload(const TileKey& key, RawTile* out) const;
+};
+
+Status TileStoreReader::Impl::openImpl() {
+  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int err = errno;
+    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                         "cannot open " + path + ": " + fileio::errnoText(err));
+  }
+  struct stat file_stat {};
+  if (::fstat(fd, &file_stat) != 0) {
+    return bad(ErrorCode::kIo, std::string("fstat: ") + fileio::errnoText(errno));
+  }
+  if (!S_ISREG(file_stat.st_mode)) return bad(ErrorCode::kIo, "not a regular file");
+  const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
+
+  // Header.
+  uint8_t header[format::kHeaderBytes];
+  if (actual_bytes < sizeof(format::kMagic)) {
+    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
+                                          " bytes, too short to be a tile store");
+  }
+  const size_t header_read = static_cast<size_t>(std::min<uint64_t>(actual_bytes, sizeof(header)));
+  Status status = read(header, header_read, 0);
+  if (!status) return status;
+  if (std::memcmp(header, format::kMagic, sizeof(format::kMagic)) != 0) {
+    return bad(ErrorCode::kBadMagic, "not a clipstream tile store (bad magic)");
+  }
+  if (header_read < format::kOffHeaderBytes + 4) {
+    return bad(ErrorCode::kTruncated, "file ends inside the header");
+  }
+  const uint32_t version = format::get32(header + format::kOffVersion);
+  if (version != format::kVersion) {
+    return bad(ErrorCode::kBadVersion, "format version " + std::to_string(version) +
+                                           " (this reader knows version " +
+                                           std::to_string(format::kVersion) + ")");
+  }
+  if (header_read < sizeof(header)) {
+    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
+                                          " bytes, shorter than the " +
+                                          std::to_string(format::kHeaderBytes) + "-byte header");
+  }
+  if (format::get64(header + format::kHeaderChecksumOffset) !=
+      format::checksum64(header, format::kHeaderChecksumOffset)) {
+    return bad(ErrorCode::kBadHeader, "header checksum mismatch");
+  }
+  const uint64_t file_bytes = format::get64(header + format::kOffFileBytes);
+  if (actual_bytes < file_bytes) {
+    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
+                                          " bytes, the header says " +
+                                          std::to_string(file_bytes));
+  }
+  if (actual_bytes > file_bytes) {
+    return bad(ErrorCode::kBadHeader, "file has " + std::to_string(actual_bytes - file_bytes) +
+                                          " bytes after the end the header records");
+  }
+  if (format::get32(header + format::kOffHeaderBytes) != format::kHeaderBytes) {
+    return bad(ErrorCode::kBadHeader, "header size field is not " +
+                                          std::to_string(format::kHeaderBytes));
+  }
+  const uint64_t width = format::get64(header + format::kOffWidth);
+  const uint64_t height = format::get64(header + format::kOffHeight);
+  const uint32_t tile_px = format::get32(header + format::kOffTilePx);
+  const uint32_t raw_format = format::get32(header + format::kOffPixelFormat);
+  const uint32_t level_count = format::get32(header + format::kOffLevelCount);
+  const uint32_t compression = format::get32(header + format::kOffCompression);
+  const int32_t zstd_level = static_cast<int32_t>(format::get32(header + format::kOffZstdLevel));
+  const uint32_t predictor = format::get32(header + format::kOffPredictor);
+  const uint32_t filter = format::get32(header + format::kOffFilter);
+  const uint32_t flags = format::get32(header + format::kOffFlags);
+  if (tile_px < format::kMinTilePx || tile_px > format::kMaxTilePx) {
+    return bad(ErrorCode::kBadHeader, "tile size " + std::to_string(tile_px) + " outside 16..4096");
+  }
+  if (!isValidPixelFormat(raw_format)) {
+    return bad(ErrorCode::kUnsupported, "unknown pixel format " + std::to_string(raw_format));
+  }
+  if (compression > 1) {
+    return bad(ErrorCode::kUnsupported, "unknown compression " + std::to_string(compression));
+  }
+  if (predictor > 1) {
+    return bad(ErrorCode::kUnsupported, "unknown predictor " + std::to_string(predictor));
+  }
+  if (filter > 1) return bad(ErrorCode::kBadHeader, "unknown filter " + std::to_string(filter));
+  if ((flags & ~format::kKnownFlags) != 0) {
+    return bad(ErrorCode::kBadHeader, "unknown header flags");
+  }
+  if (format::get32(header + format::kOffPageTiles) != format::kPageTiles ||
+      format::get32(header + format::kOffEntryBytes) != format::kTileEntryBytes) {
+    return bad(ErrorCode::kBadHeader, "index page shape is not 64 tiles of 16 bytes");
+  }
+  PyramidGeometry geometry;
+  if (!makePyramidGeometry(width, height, tile_px, static_cast<PixelFormat>(raw_format),
+                           &geometry)) {
+    return bad(ErrorCode::kBadHeader, "image size " + std::to_string(width) + "x" +
+                                          std::to_string(height) + " is not representable");
+  }
+  if (geometry.levelCount() != level_count) {
+    return bad(ErrorCode::kBadHeader, "level count " + std::to_string(level_count) +
+                                          " does not match the image size (expected " +
+                                          std::to_string(geometry.levelCount()) + ")");
+  }
+  info.geometry = geometry;
+  info.encoding.compression = static_cast<Compression>(compression);
+  info.encoding.zstd_level = zstd_level;
+  info.encoding.predictor = static_cast<Predictor>(predictor);
+  info.encoding.filter = static_cast<DownsampleFilter>(filter);
+  info.encoding.linear_light = (flags & format::kFlagLinearLight) != 0;
+  info.file_bytes = file_bytes;
+  info.format_version = version;
+  max_stored_bytes = format::maxStoredBytes(geometry.tileBytes(), info.encoding.compression);
+
+  // Region layout: payloads, index, level table, metadata, end of file,
+  // each starting where the previous ends.
+  const uint64_t table_offset = format::get64(header + format::kOffLevelTableOffset);
+  const uint64_t table_bytes = format::get64(header + format::kOffLevelTableBytes);
+  const uint64_t index_offset = format::get64(header + format::kOffIndexOffset);
+  const uint64_t index_bytes = format::get64(header + format::kOffIndexBytes);
+  const uint64_t metadata_offset = format::get64(header + format::kOffMetadataOffset);
+  const uint64_t metadata_bytes = format::get64(header + format::kOffMetadataBytes);
+  if (table_bytes != uint64_t(level_count) * format::kLevelEntryBytes + format::kChecksumBytes) {
+    return bad(ErrorCode::kBadHeader, "level table size does not match the level count");
+  }
+  if (!fits(index_offset, index_bytes, file_bytes) || table_offset != index_offset + index_bytes ||
+      !fits(table_offset, table_bytes, file_bytes) || metadata_offset != table_offset + table_bytes ||
+      !fits(metadata_offset, metadata_bytes, file_bytes) ||
+      metadata_offset + metadata_bytes != file_bytes || index_offset < format::kHeaderBytes) {
+    return bad(ErrorCode::kBadHeader, "region offsets in the header are inconsistent");
+  }
+  if (metadata_bytes < format::kMetadataFixedBytes ||
+      metadata_bytes > format::kMetadataFixedBytes + format::kMaxCrsBytes) {
+    return bad(ErrorCode::kBadHeader, "metadata block size out of range");
+  }
+
+  // Level table.
+  std::vector<uint8_t> table(static_cast<size_t>(table_bytes));
+  status = read(table.data(), table.size(), table_offset);
+  if (!status) return status;
+  const size_t table_body = table.size() - format::kChecksumBytes;
+  if (format::get64(table.data() + table_body) != format::checksum64(table.data(), table_body)) {
+    return bad(ErrorCode::kCorruptIndex, "level table checksum mismatch");
+  }
+  levels.resize(level_count);
+  uint64_t payload_end = format::kHeaderBytes;
+  uint64_t directories_bytes = 0;
+  for (uint32_t l = 0; l < level_count; ++l) {
+    const uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
+    const LevelInfo& expected = geometry.levels[l];
+    LevelRead& level = levels[l];
+    const std::string where = "level table entry " + std::to_string(l) + ": ";
+    if (format::get64(p) != expected.width_px || format::get64(p + 8) != expected.height_px ||
+        format::get32(p + 16) != expected.tiles_x || format::get32(p + 20) != expected.tiles_y) {
+      return bad(ErrorCode::kCorruptIndex, where + "size does not match the pyramid rule");
+    }
+    level.pages_x = format::get32(p + 24);
+    level.pages_y = format::get32(p + 28);
+    if (level.pages_x != format::pagesAlong(expected.tiles_x) ||
+        level.pages_y != format::pagesAlong(expected.tiles_y)) {
+      return bad(ErrorCode::kCorruptIndex, where + "page grid does not match the tile grid");
+    }
+    level.payload_offset = format::get64(p + 32);
+    level.payload_bytes = format::get64(p + 40);
+    if (level.payload_offset != payload_end || !fits(level.payload_offset, level.payload_bytes,
+                                                     index_offset)) {
+      return bad(ErrorCode::kCorruptIndex, where + "payload region out of place");
+    }
+    payload_end = level.payload_offset + level.payload_bytes;
+    const uint64_t page_count = uint64_t(level.pages_x) * level.pages_y;
+    if (format::get64(p + 56) != page_count * format::kPageEntryBytes + format::kChecksumBytes) {
+      return bad(ErrorCode::kCorruptIndex, where + "page directory size does not match");
+    }
+    directories_bytes += format::get64(p + 56);
+  }
+  if (payload_end != index_offset) {
+    return bad(ErrorCode::kCorruptIndex, "payload regions do not end where the index begins");
+  }
+  // Directories sit back to back at the end of the index region.
+  if (directories_bytes > index_bytes) {
+    return bad(ErrorCode::kCorruptIndex, "page directories larger than the index region");
+  }
+  pages_begin = index_offset;
+  pages_end = index_offset + index_bytes - directories_bytes;
+  uint64_t directory_offset = pages_end;
+  for (uint32_t l = 0; l < level_count; ++l) {
+    const uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
+    LevelRead& level = levels[l];
+    const uint64_t bytes = format::get64(p + 56);
+    if (format::get64(p + 48) != directory_offset) {
+      return bad(ErrorCode::kCorruptIndex,
+                 "level table entry " + std::to_string(l) + ": page directory out of place");
+    }
+    std::vector<uint8_t> directory(static_cast<size_t>(bytes));
+    status = read(directory.data(), directory.size(), directory_offset);
+    if (!status) return status;
+    const size_t body = directory.size() - format::kChecksumBytes;
+    if (format::get64(directory.data() + body) != format::checksum64(directory.data(), body)) {
+      return bad(ErrorCode::kCorruptIndex,
+                 "page directory of level " + std::to_string(l) + ": checksum mismatch");
+    }
+    const size_t page_count = size_t(level.pages_x) * level.pages_y;
+    level.directory.resize(page_count);
+    const size_t bpp = bytesPerPixel(geometry.format);
+    for (size_t i = 0; i < page_count; ++i) {
+      const uint8_t* e = directory.data() + i * format::kPageEntryBytes;
+      PageDirEntry& entry = level.directory[i];
+      entry.offset = format::get64(e);
+      entry.bytes = format::get32(e + 8);
+      entry.flags = format::get32(e + 12);
+      entry.constant_value = format::get64(e + 16);
+      entry.checksum = format::get64(e + 24);
+      const uint32_t px = static_cast<uint32_t>(i % level.pages_x);
+      const uint32_t py = static_cast<uint32_t>(i / level.pages_x);
+      const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
+                                ") of level " + std::to_string(l) + ": ";
+      if ((entry.flags & ~format::kPageFlagConstant) != 0) {
+        return bad(ErrorCode::kCorruptIndex, where + "unknown flags");
+      }
+      if (entry.flags & format::kPageFlagConstant) {
+        if (entry.offset != 0 || entry.bytes != 0 || entry.checksum != 0 ||
+            !valueFits(entry.constant_value, bpp)) {
+          return bad(ErrorCode::kCorruptIndex, where + "malformed constant page entry");
+        }
+        continue;
+      }
+      const uint64_t tiles = uint64_t(format::pageSpan(geometry.levels[l].tiles_x, px)) *
+                             format::pageSpan(geometry.levels[l].tiles_y, py);
+      if (entry.bytes != tiles * format::kTileEntryBytes || entry.constant_value != 0 ||
+          entry.offset < pages_begin || !fits(entry.offset, entry.bytes, pages_end)) {
+        return bad(ErrorCode::kCorruptIndex, where + "page location out of bounds");
+      }
+    }
+    level.pages.reset(new std::atomic<const Page*>[page_count]);
+    for (size_t i = 0; i < page_count; ++i) level.pages[i].store(nullptr);
+    directory_offset += bytes;
+  }
+
+  // Metadata block.
+  std::vector<uint8_t> metadata(static_cast<size_t>(metadata_bytes));
+  status = read(metadata.data(), metadata.size(), metadata_offset);
+  if (!status) return status;
+  const size_t metadata_body = metadata.size() - format::kChecksumBytes;
+  if (format::get64(metadata.data() + metadata_body) !=
+      format::checksum64(metadata.data(), metadata_body)) {
+    return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
+  }
+  const uint32_t crs_bytes = format::get32(metadata.data() + 48);
+  if (uint64_t(crs_bytes) + format::kMetadataFixedBytes != metadata_bytes) {
+    return bad(ErrorCode::kBadHeader, "metadata CRS length does not match the block size");
+  }
+  info.geo.present = (flags & format::kFlagGeoPresent) != 0;
+  for (int i = 0; i < 6; ++i) info.geo.transform[i] = format::getF64(metadata.data() + 8 * i);
+  info.geo.crs.assign(reinterpret_cast<const char*>(metadata.data() + 52), crs_bytes);
+  return Status::ok();
+}
+
+Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32_t py,
+                                       std::unique_ptr<Page>* out) const {
+  const LevelRead& level = levels[level_index];
+  const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+  const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
+                            ") of level " + std::to_string(level_index);
+  std::vector<uint8_t> bytes(dir.bytes);
+  Status status = read(bytes.data(), bytes.size(), dir.offset);
+  if (!status) return status;
+  if (format::checksum64(bytes.data(), bytes.size()) != dir.checksum) {
+    return bad(ErrorCode::kCorruptIndex, where + ": checksum mismatch");
+  }
+  const LevelInfo& level_info = info.geometry.levels[level_index];
+  const uint32_t w = format::pageSpan(level_info.tiles_x, px);
+  const size_t bpp = bytesPerPixel(info.geometry.format);
+  auto page = std::make_unique<Page>();
+  const size_t count = bytes.size() / format::kTileEntryBytes;
+  page->entries.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    const uint8_t* p = bytes.data() + i * format::kTileEntryBytes;
+    TileEntry& entry = page->entries[i];
+    entry.offset_or_value = format::get64(p);
+    entry.stored_bytes = format::get32(p + 8);
+    entry.checksum = format::get32(p + 12);
+    const bool ok = entry.stored_bytes == 0
+                        ? entry.checksum == 0 && valueFits(entry.offset_or_value, bpp)
+                        : entry.stored_bytes <= max_stored_bytes &&
+                              fits(entry.offset_or_value, entry.stored_bytes, level.payload_bytes);
+    if (!ok) {
+      const TileKey key{level_index, px * format::kPageTiles + uint32_t(i % w),
+                        py * format::kPageTiles + uint32_t(i / w)};
+      return bad(ErrorCode::kCorruptIndex, where + ": entry for " + format::keyText(key) +
+                                               " is out of bounds");
+    }
+  }
+  *out = std::move(page);
+  return Status::ok();
+}
+
+Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32_t py,
+                                       const Page** out) const {
+  const LevelRead& level = levels[level_index];
+  const size_t page_index = size_t(py) * level.pages_x + px;
+  if (const Page* page = level.pages[page_index].load(std::memory_order_acquire)) {
+    *out = page;
+    return Status::ok();
+  }
+  // Read and check without any lock; concurrent first users may both read.
+  std::unique_ptr<Page> page;
+  Status status = readPage(level_index, px, py, &page);
+  if (!status) return status;
+  const Page* expected = nullptr;
+  const Page* mine = page.get();
+  if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
+                                                      std::memory_order_acquire)) {
+    page.release();
+    pages_loaded.fetch_add(1, std::memory_order_relaxed);
+    *out = mine;
+  } else {
+    *out = expected;  // another thread published first; ours is freed
+  }
+  return Status::ok();
+}
+
+Status TileStoreReader::Impl::peekPage(uint32_t level_index, uint32_t px, uint32_t py,
+                                       std::unique_ptr<Page>* scratch, const Page** out) const {
+  const LevelRead& level = levels[level_index];
+  if (const Page* page =
+          level.pages[size_t(py) * level.pages_x + px].load(std::memory_order_acquire)) {
+    *out = page;
+    return Status::ok();
+  }
+  Status status = readPage(level_index, px, py, scratch);
+  if (!status) return status;
+  *out = scratch->get();
+  return Status::ok();
+}
+
+void TileStoreReader::Impl::entryLocation(uint32_t level_index, const TileEntry& entry,
+                                          TileLocation* out) const {
+  *out = TileLocation{};
+  if (entry.stored_bytes == 0) {
+    out->constant = true;
+    std::memcpy(out->constant_pixel, &entry.offset_or_value, 8);
+    return;
+  }
+  out->offset = levels[level_index].payload_offset + entry.offset_or_value;
+  out->stored_bytes = entry.stored_bytes;
+  out->checksum = entry.checksum;
+}
+
+Status TileStoreReader::Impl::locate(const TileKey& key, TileLocation* out) const {
+  if (!info.geometry.contains(key)) {
+    return Status::error(ErrorCode::kOutOfRange, format::keyText(key) + " is outside the pyramid");
+  }
+  *out = TileLocation{};
+  const LevelRead& level = levels[key.level];
+  const uint32_t px = key.x / format::kPageTiles;
+  const uint32_t py = key.y / format::kPageTiles;
+  const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+  if (dir.flags & format::kPageFlagConstant) {
+    out->constant = true;
+    std::memcpy(out->constant_pixel, &dir.constant_value, 8);
+    return Status::ok();
+  }
+  const Page* page = nullptr;
+  Status status = loadPage(key.level, px, py, &page);
+  if (!status) return status;
+  const uint32_t w = format::pageSpan(info.geometry.levels[key.level].tiles_x, px);
+  entryLocation(key.level,
+                page->entries[size_t(key.y % format::kPageTiles) * w + key.x % format::kPageTiles],
+                out);
+  return Status::ok();
+}
+
+Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) const {
+  out->key = key;
+  out->payload.clear();
+  if (out->location.constant) return Status::ok();
+  out->payload.resize(out->location.stored_bytes);
+  Status status = read(out->payload.data(), out->payload.size(), out->location.offset);
+  if (!status) {
+    return Status::error(status.code, format::keyText(key) + ": " + status.message);
+  }
+  // Checked before any decompression: zstd never sees bytes we did not write.
+  if (format::tileChecksum(out->payload.data(), out->payload.size()) != out->location.checksum) {
+    return Status::error(ErrorCode::kCorruptTile,
+                         format::keyText(key) + ": payload checksum mismatch");
+  }
+  return Status::ok();
+}
+
+TileStoreReader::TileStoreReader() : m_impl(std::make_unique<Impl>()) {}
+TileStoreReader::~TileStoreReader() = default;
+
+Status TileStoreReader::open(const std::string& path, std::unique_ptr<TileStoreReader>* out) {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  out->reset();
+  std::unique_ptr<TileStoreReader> reader(new TileStoreReader());
+  reader->m_impl->path = path;
+  Status status = reader->m_impl->openImpl();
+  if (!status) return status;
+  *out = std::move(reader);
+  return Status::ok();
+}
+
+const StoreInfo& TileStoreReader::info() const { return m_impl->info; }
+
+uint64_t TileStoreReader::bytesRead() const {
+  return m_impl->bytes_read.load(std::memory_order_relaxed);
+}
+
+uint64_t TileStoreReader::indexPagesLoaded() const {
+  return m_impl->pages_loaded.load(std::memory_order_relaxed);
+}
+
+Status TileStoreReader::locate(const TileKey& key, TileLocation* out) const {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  return m_impl->locate(key, out);
+}
+
+Status TileStoreReader::readRaw(const TileKey& key, RawTile* out) const {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  out->key = key;
+  out->payload.clear();
+  Status status = m_impl->locate(key, &out->location);
+  if (!status) return status;
+  return m_impl->readPayload(key, out);
+}
+
+Status TileStoreReader::decode(const RawTile& raw, std::span<uint8_t> pixels) const {
+  return decodeTile(m_impl->info.geometry, m_impl->info.encoding, raw, pixels);
+}
+
+Status TileStoreReader::readTile(const TileKey& key, std::vector<uint8_t>* pixels) const {
+  if (pixels == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  RawTile raw;
+  Status status = readRaw(key, &raw);
+  if (!status) return status;
+  pixels->resize(geometry().tileBytes());
+  return decode(raw, *pixels);
+}
+
+Status TileStoreReader::levelStats(std::vector<LevelStats>* out) const {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  const Impl& impl = *m_impl;
+  out->assign(impl.levels.size(), LevelStats{});
+  const PyramidGeometry& geometry = impl.info.geometry;
+  for (uint32_t l = 0; l < impl.levels.size(); ++l) {
+    const LevelRead& level = impl.levels[l];
+    LevelStats& stats = (*out)[l];
+    stats.tiles = uint64_t(geometry.levels[l].tiles_x) * geometry.levels[l].tiles_y;
+    stats.raw_bytes = stats.tiles * geometry.tileBytes();
+    for (uint32_t py = 0; py < level.pages_y; ++py) {
+      for (uint32_t px = 0; px < level.pages_x; ++px) {
+        const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+        if (dir.flags & format::kPageFlagConstant) {
+          stats.constant_tiles += uint64_t(format::pageSpan(geometry.levels[l].tiles_x, px)) *
+                                  format::pageSpan(geometry.levels[l].tiles_y, py);
+          continue;
+        }
+        std::unique_ptr<Page> scratch;
+        const Page* page = nullptr;
+        Status status = impl.peekPage(l, px, py, &scratch, &page);
+        if (!status) return status;
+        for (const TileEntry& entry : page->entries) {
+          if (entry.stored_bytes == 0) {
+            ++stats.constant_tiles;
+          } else {
+            stats.stored_bytes += entry.stored_bytes;
+          }
+        }
+      }
+    }
+  }
+  return Status::ok();
+}
+
+Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_problems,
+                                  const std::function<void(uint64_t, uint64_t)>& progress,
+                                  unsigned threads) const {
+  const Impl& impl = *m_impl;
+  const PyramidGeometry& geometry = impl.info.geometry;
+  // Work items are index pages, numbered level by level, row-major, so one
+  // atomic counter hands out work roughly in file order. Pages not already
+  // loaded are read privately and dropped after use: verifying a huge store
+  // holds one page per thread, not the whole index.
+  std::vector<uint64_t> level_start(geometry.levels.size() + 1, 0);
+  uint64_t total = 0;
+  for (size_t l = 0; l < geometry.levels.size(); ++l) {
+    level_start[l + 1] = level_start[l] + impl.levels[l].directory.size();
+    total += uint64_t(geometry.levels[l].tiles_x) * geometry.levels[l].tiles_y;
+  }
+  const uint64_t page_total = level_start.back();
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = static_cast<unsigned>(std::min<uint64_t>(threads, page_total));
+
+  std::atomic<uint64_t> next{0};
+  std::atomic<uint64_t> done{0};
+  std::atomic<uint64_t> failed{0};
+  std::mutex problems_mutex;  // guards found and first_failure
+  Status first_failure;
+  std::vector<Problem> found;
+
+  auto record = [&](const TileKey& key, const Status& status) {
+    failed.fetch_add(1);
+    std::lock_guard<std::mutex> lock(problems_mutex);
+    if (first_failure.isOk()) first_failure = status;
+    if (found.size() < max_problems) found.push_back({key, status});
+  };
+
+  auto worker = [&]() {
+    std::vector<uint8_t> pixels(geometry.tileBytes());
+    RawTile raw;
+    for (;;) {
+      const uint64_t item = next.fetch_add(1);
+      if (item >= page_total) break;
+      uint32_t l = 0;
+      while (item >= level_start[l + 1]) ++l;
+      const LevelRead& level = impl.levels[l];
+      const uint64_t page_index = item - level_start[l];
+      const uint32_t px = static_cast<uint32_t>(page_index % level.pages_x);
+      const uint32_t py = static_cast<uint32_t>(page_index / level.pages_x);
+      const uint32_t w = format::pageSpan(geometry.levels[l].tiles_x, px);
+      const uint32_t h = format::pageSpan(geometry.levels[l].tiles_y, py);
+      auto keyOf = [&](uint32_t slot) {
+        return TileKey{l, px * format::kPageTiles + slot % w, py * format::kPageTiles + slot / w};
+      };
+      if (level.directory[page_index].flags & format::kPageFlagConstant) {
+        done.fetch_add(uint64_t(w) * h);  // checked at open; nothing to read
+        continue;
+      }
+      std::unique_ptr<Page> scratch;
+      const Page* page = nullptr;
+      const Status page_status = impl.peekPage(l, px, py, &scratch, &page);
+      for (uint32_t slot = 0; slot < w * h; ++slot) {
+        const TileKey key = keyOf(slot);
+        Status status = page_status;
+        if (status) {
+          impl.entryLocation(l, page->entries[slot], &raw.location);
+          status = impl.readPayload(key, &raw);
+        }
+        if (status) status = decode(raw, pixels);
+        if (!status) record(key, status);
+      }
+      done.fetch_add(uint64_t(w) * h);
+    }
+  };
+
+  std::mutex done_mutex;  // pairs with done_cv; guards nothing else
+  std::condition_variable done_cv;
+  unsigned running = threads;
+  std::vector<std::thread> pool;
+  for (unsigned i = 0; i < threads; ++i) {
+    pool.emplace_back([&] {
+      worker();
+      std::lock_guard<std::mutex> lock(done_mutex);
+      if (--running == 0) done_cv.notify_all();
+    });
+  }
+  // The calling thread only reports progress, so callbacks never run on a
+  // worker and need no locking of their own.
+  {
+    std::unique_lock<std::mutex> lock(done_mutex);
+    while (running > 0) {
+      if (progress) {
+        lock.unlock();
+        progress(done.load(), total);
+        lock.lock();
+      }
+      done_cv.wait_for(lock, std::chrono::milliseconds(100), [&] { return running == 0; });
+    }
+  }
+  for (std::thread& thread : pool) thread.join();
+  if (progress) progress(done.load(), total);
+
+  // Report in file order regardless of which worker found what.
+  std::sort(found.begin(), found.end(), [](const Problem& a, const Problem& b) {
+    return std::tie(a.key.level, a.key.y, a.key.x) < std::tie(b.key.level, b.key.y, b.key.x);
+  });
+  if (problems != nullptr) *problems = std::move(found);
+  if (failed.load() == 0) return Status::ok();
+  return Status::error(first_failure.code,
+                       std::to_string(failed.load()) + " of " + std::to_string(total) +
+                           " tiles failed verification in " + m_impl->path);
+}
+
+}  // namespace clipstream

@@ -1,0 +1,127 @@
+// Pure helpers behind types.h: pixel format tables, pyramid geometry and
+// Status formatting. No I/O here.
+#include <clipstream/store/types.h>
+
+#include <xxhash.h>
+
+#include <limits>
+
+namespace clipstream {
+
+uint32_t channelCount(PixelFormat format) {
+  switch (format) {
+    case PixelFormat::kR8: return 1;
+    case PixelFormat::kR16: return 1;
+    case PixelFormat::kRGB8: return 3;
+    case PixelFormat::kRGBA8: return 4;
+  }
+  return 0;
+}
+
+uint32_t bytesPerPixel(PixelFormat format) {
+  switch (format) {
+    case PixelFormat::kR8: return 1;
+    case PixelFormat::kR16: return 2;
+    case PixelFormat::kRGB8: return 3;
+    case PixelFormat::kRGBA8: return 4;
+  }
+  return 0;
+}
+
+const char* pixelFormatName(PixelFormat format) {
+  switch (format) {
+    case PixelFormat::kR8: return "R8";
+    case PixelFormat::kR16: return "R16";
+    case PixelFormat::kRGB8: return "RGB8";
+    case PixelFormat::kRGBA8: return "RGBA8";
+  }
+  return "unknown";
+}
+
+bool isValidPixelFormat(uint32_t raw) { return raw >= 1 && raw <= 4; }
+
+const char* downsampleFilterName(DownsampleFilter filter) {
+  switch (filter) {
+    case DownsampleFilter::kBox: return "box";
+    case DownsampleFilter::kLanczos3: return "lanczos3";
+  }
+  return "unknown";
+}
+
+size_t TileKeyHash::operator()(const TileKey& key) const noexcept {
+  // TileKey has no padding (static_assert in types.h), so hashing the raw
+  // bytes is well defined and mixes all three fields.
+  return static_cast<size_t>(XXH3_64bits(&key, sizeof(key)));
+}
+
+bool PyramidGeometry::contains(const TileKey& key) const {
+  if (key.level >= levels.size()) return false;
+  const LevelInfo& level = levels[key.level];
+  return key.x < level.tiles_x && key.y < level.tiles_y;
+}
+
+bool makePyramidGeometry(uint64_t width_px, uint64_t height_px, uint32_t tile_px,
+                         PixelFormat format, PyramidGeometry* out) {
+  if (width_px == 0 || height_px == 0 || tile_px == 0 || out == nullptr) return false;
+  if (!isValidPixelFormat(static_cast<uint32_t>(format))) return false;
+  PyramidGeometry geometry;
+  geometry.width_px = width_px;
+  geometry.height_px = height_px;
+  geometry.tile_px = tile_px;
+  geometry.format = format;
+  // ceil(w / 2^l) without overflow: (w - 1) >> l, plus one.
+  for (uint32_t level = 0; level < 64; ++level) {
+    LevelInfo info;
+    info.width_px = ((width_px - 1) >> level) + 1;
+    info.height_px = ((height_px - 1) >> level) + 1;
+    const uint64_t tiles_x = (info.width_px - 1) / tile_px + 1;
+    const uint64_t tiles_y = (info.height_px - 1) / tile_px + 1;
+    // Tile coordinates are 32-bit everywhere (TileKey); larger grids are
+    // not representable.
+    if (tiles_x > std::numeric_limits<uint32_t>::max() ||
+        tiles_y > std::numeric_limits<uint32_t>::max()) {
+      return false;
+    }
+    info.tiles_x = static_cast<uint32_t>(tiles_x);
+    info.tiles_y = static_cast<uint32_t>(tiles_y);
+    geometry.levels.push_back(info);
+    if (tiles_x == 1 && tiles_y == 1) {
+      *out = std::move(geometry);
+      return true;
+    }
+  }
+  return false;
+}
+
+const char* errorCodeName(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kOk: return "ok";
+    case ErrorCode::kIo: return "I/O error";
+    case ErrorCode::kNotFound: return "not found";
+    case ErrorCode::kTruncated: return "truncated";
+    case ErrorCode::kBadMagic: return "bad magic";
+    case ErrorCode::kBadVersion: return "bad version";
+    case ErrorCode::kBadHeader: return "bad header";
+    case ErrorCode::kCorruptIndex: return "corrupt index";
+    case ErrorCode::kCorruptTile: return "corrupt tile";
+    case ErrorCode::kOutOfRange: return "out of range";
+    case ErrorCode::kInvalidArgument: return "invalid argument";
+    case ErrorCode::kUnsupported: return "unsupported";
+    case ErrorCode::kNoSpace: return "no space";
+    case ErrorCode::kCancelled: return "cancelled";
+    case ErrorCode::kUnavailable: return "unavailable";
+  }
+  return "unknown error";
+}
+
+std::string Status::toString() const {
+  if (isOk()) return "ok";
+  std::string text = errorCodeName(code);
+  if (!message.empty()) {
+    text += ": ";
+    text += message;
+  }
+  return text;
+}
+
+}  // namespace clipstream

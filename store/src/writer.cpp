@@ -1,0 +1,648 @@
+// TileStoreWriter: payloads of level 0 go straight into the temporary
+// output after the header; coarser levels are spilled to one temporary file
+// per level and appended at finish(), so the file is laid out level by level
+// without holding payloads in RAM. Index pages are serialised to their own
+// temporary file as soon as every tile of the page has been written, so RAM
+// holds entries only for pages still being filled.
+#include "file_io.h"
+#include "format.h"
+
+#include <clipstream/store/tile_store.h>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zstd.h>
+
+#include <cerrno>
+#include <filesystem>
+#include <mutex>
+#include <random>
+
+namespace clipstream {
+
+namespace {
+
+// One tile's index entry while its page is being filled (same 16 bytes as
+// on disk: relative offset or constant value, stored size, checksum).
+struct PendingEntry {
+  uint64_t offset_or_value = 0;
+  uint32_t stored_bytes = 0;
+  uint32_t checksum = 0;
+};
+
+enum class PageState : uint8_t { kEmpty, kFilling, kDone, kConstant };
+
+struct PageBuild {
+  PageState state = PageState::kEmpty;
+  uint32_t claimed = 0;  // tiles whose slot is taken (payload may be in flight)
+  uint32_t stored = 0;   // tiles whose entry is complete
+  std::unique_ptr<PendingEntry[]> entries;
+  std::unique_ptr<uint64_t[]> claimed_bits;
+  // Directory entry once done (offset relative to the index pages region).
+  uint64_t rel_offset = 0;
+  uint32_t bytes = 0;
+  uint64_t constant_value = 0;
+  uint64_t checksum = 0;
+};
+
+struct LevelBuild {
+  int fd = -1;              // level 0 shares the main output
+  std::string temp_path;    // empty for level 0
+  uint64_t payload_bytes = 0;
+  uint32_t pages_x = 0;
+  uint32_t pages_y = 0;
+  std::vector<PageBuild> pages;
+};
+
+uint64_t packValue(const uint8_t* pixel, size_t bpp) {
+  uint64_t value = 0;
+  std::memcpy(&value, pixel, bpp);
+  return value;
+}
+
+}  // namespace
+
+struct TileStoreWriter::Impl {
+  std::string path;
+  std::string directory;
+  std::string temp_prefix;  // ".NAME.tmp-PID-RANDOM" joined to the directory
+  std::string main_temp;
+  std::string index_temp;
+  PyramidGeometry geometry;
+  WriterOptions options;
+  int main_fd = -1;
+  int index_fd = -1;
+
+  std::mutex mutex;  // guards everything below
+  std::vector<LevelBuild> levels;
+  uint64_t index_bytes = 0;
+  Status failure;     // first I/O failure; later calls return it
+  bool finished = false;
+  std::atomic<uint64_t> bytes_written{0};
+  std::atomic<uint64_t> constant_tiles{0};
+
+  ~Impl() { removeTemps(); }
+
+  void removeTemps() {
+    if (main_fd >= 0) ::close(main_fd);
+    main_fd = -1;
+    if (index_fd >= 0) ::close(index_fd);
+    index_fd = -1;
+    for (LevelBuild& level : levels) {
+      if (level.fd >= 0 && !level.temp_path.empty()) ::close(level.fd);
+      if (!level.temp_path.empty()) ::unlink(level.temp_path.c_str());
+      level.fd = -1;
+    }
+    if (!main_temp.empty()) ::unlink(main_temp.c_str());
+    if (!index_temp.empty()) ::unlink(index_temp.c_str());
+    main_temp.clear();
+    index_temp.clear();
+  }
+
+  Status openTemp(const std::string& temp_path, int* fd) {
+    *fd = ::open(temp_path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (*fd < 0) {
+      const int err = errno;
+      if (err == ENOSPC || err == EDQUOT) {
+        return Status::error(ErrorCode::kNoSpace, "no space left on device creating " + temp_path);
+      }
+      return Status::error(ErrorCode::kIo, "cannot create " + temp_path + ": " +
+                                               fileio::errnoText(err));
+    }
+    return Status::ok();
+  }
+
+  // Called with the mutex held.
+  Status levelFd(uint32_t level_index, int* fd) {
+    LevelBuild& level = levels[level_index];
+    if (level.fd < 0) {
+      level.temp_path = temp_prefix + ".L" + std::to_string(level_index);
+      Status status = openTemp(level.temp_path, &level.fd);
+      if (!status) {
+        level.temp_path.clear();
+        return status;
+      }
+    }
+    *fd = level.fd;
+    return Status::ok();
+  }
+
+  uint64_t payloadBase(uint32_t level_index) const {
+    // Level 0 payloads live in the main file right after the header.
+    return level_index == 0 ? format::kHeaderBytes : 0;
+  }
+
+  void pageSpan(uint32_t level_index, uint32_t px, uint32_t py, uint32_t* w, uint32_t* h) const {
+    const LevelInfo& info = geometry.levels[level_index];
+    *w = format::pageSpan(info.tiles_x, px);
+    *h = format::pageSpan(info.tiles_y, py);
+  }
+
+  // Claims the slot of one tile (mutex held). kInvalidArgument if taken.
+  Status claim(const TileKey& key, PageBuild** page_out, uint32_t* slot_out) {
+    LevelBuild& level = levels[key.level];
+    const uint32_t px = key.x / format::kPageTiles;
+    const uint32_t py = key.y / format::kPageTiles;
+    PageBuild& page = level.pages[size_t(py) * level.pages_x + px];
+    uint32_t w, h;
+    pageSpan(key.level, px, py, &w, &h);
+    if (page.state == PageState::kDone || page.state == PageState::kConstant) {
+      return Status::error(ErrorCode::kInvalidArgument, format::keyText(key) + " written twice");
+    }
+    const uint32_t slot = (key.y % format::kPageTiles) * w + (key.x % format::kPageTiles);
+    if (page.state == PageState::kEmpty) {
+      const uint32_t count = w * h;
+      page.entries.reset(new PendingEntry[count]);
+      page.claimed_bits.reset(new uint64_t[(count + 63) / 64]());
+      page.state = PageState::kFilling;
+    }
+    uint64_t& word = page.claimed_bits[slot / 64];
+    const uint64_t bit = uint64_t(1) << (slot % 64);
+    if (word & bit) {
+      return Status::error(ErrorCode::kInvalidArgument, format::keyText(key) + " written twice");
+    }
+    word |= bit;
+    ++page.claimed;
+    *page_out = &page;
+    *slot_out = slot;
+    return Status::ok();
+  }
+
+  // Records a completed entry and serialises the page once full (mutex held).
+  Status store(const TileKey& key, PageBuild* page, uint32_t slot, const PendingEntry& entry) {
+    page->entries[slot] = entry;
+    ++page->stored;
+    uint32_t w, h;
+    pageSpan(key.level, key.x / format::kPageTiles, key.y / format::kPageTiles, &w, &h);
+    if (page->stored == w * h) return sealPage(page, w * h);
+    return Status::ok();
+  }
+
+  // Writes a full page to the index temporary file, or turns it into a
+  // page-level constant when every tile holds the same constant value.
+  Status sealPage(PageBuild* page, uint32_t count) {
+    bool all_constant = true;
+    for (uint32_t i = 0; i < count && all_constant; ++i) {
+      all_constant = page->entries[i].stored_bytes == 0 &&
+                     page->entries[i].offset_or_value == page->entries[0].offset_or_value;
+    }
+    if (all_constant) {
+      page->state = PageState::kConstant;
+      page->constant_value = page->entries[0].offset_or_value;
+    } else {
+      std::vector<uint8_t> bytes(size_t(count) * format::kTileEntryBytes);
+      for (uint32_t i = 0; i < count; ++i) {
+        uint8_t* p = bytes.data() + size_t(i) * format::kTileEntryBytes;
+        format::put64(p, page->entries[i].offset_or_value);
+        format::put32(p + 8, page->entries[i].stored_bytes);
+        format::put32(p + 12, page->entries[i].checksum);
+      }
+      Status status = fileio::pwriteAll(index_fd, bytes.data(), bytes.size(), index_bytes,
+                                        index_temp);
+      if (!status) return status;
+      page->state = PageState::kDone;
+      page->rel_offset = index_bytes;
+      page->bytes = static_cast<uint32_t>(bytes.size());
+      page->checksum = format::checksum64(bytes.data(), bytes.size());
+      index_bytes += bytes.size();
+    }
+    page->entries.reset();
+    page->claimed_bits.reset();
+    return Status::ok();
+  }
+
+  Status fail(Status status) {
+    if (failure.isOk()) failure = status;
+    return status;
+  }
+
+  Status finishLocked();
+};
+
+TileStoreWriter::TileStoreWriter() : m_impl(std::make_unique<Impl>()) {}
+TileStoreWriter::~TileStoreWriter() = default;
+
+Status TileStoreWriter::create(const std::string& path, const PyramidGeometry& geometry,
+                               const WriterOptions& options,
+                               std::unique_ptr<TileStoreWriter>* out) {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  out->reset();
+  if (path.empty()) return Status::error(ErrorCode::kInvalidArgument, "empty output path");
+  if (geometry.tile_px < format::kMinTilePx || geometry.tile_px > format::kMaxTilePx) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "tile size " + std::to_string(geometry.tile_px) + " outside " +
+                             std::to_string(format::kMinTilePx) + ".." +
+                             std::to_string(format::kMaxTilePx));
+  }
+  PyramidGeometry expected;
+  if (!makePyramidGeometry(geometry.width_px, geometry.height_px, geometry.tile_px,
+                           geometry.format, &expected) ||
+      expected.levels.size() != geometry.levels.size()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "geometry is not the pyramid makePyramidGeometry() gives for " +
+                             std::to_string(geometry.width_px) + "x" +
+                             std::to_string(geometry.height_px));
+  }
+  for (size_t i = 0; i < expected.levels.size(); ++i) {
+    const LevelInfo& a = expected.levels[i];
+    const LevelInfo& b = geometry.levels[i];
+    if (a.width_px != b.width_px || a.height_px != b.height_px || a.tiles_x != b.tiles_x ||
+        a.tiles_y != b.tiles_y) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "level " + std::to_string(i) + " size differs from the pyramid rule");
+    }
+  }
+  const StoreEncoding& encoding = options.encoding;
+  if (encoding.compression != Compression::kNone && encoding.compression != Compression::kZstd) {
+    return Status::error(ErrorCode::kInvalidArgument, "unknown compression");
+  }
+  if (encoding.compression == Compression::kZstd &&
+      (encoding.zstd_level < ZSTD_minCLevel() || encoding.zstd_level > ZSTD_maxCLevel())) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "zstd level " + std::to_string(encoding.zstd_level) + " out of range");
+  }
+  if (encoding.predictor != Predictor::kNone && encoding.predictor != Predictor::kLeftDelta) {
+    return Status::error(ErrorCode::kInvalidArgument, "unknown predictor");
+  }
+  if (encoding.filter != DownsampleFilter::kBox && encoding.filter != DownsampleFilter::kLanczos3) {
+    return Status::error(ErrorCode::kInvalidArgument, "unknown downsample filter");
+  }
+  if (options.geo.crs.size() > format::kMaxCrsBytes) {
+    return Status::error(ErrorCode::kInvalidArgument, "CRS text longer than 1 MiB");
+  }
+
+  const std::filesystem::path fs_path(path);
+  std::string directory = fs_path.parent_path().string();
+  if (directory.empty()) directory = ".";
+  const std::string name = fs_path.filename().string();
+  if (name.empty() || name == "." || name == "..") {
+    return Status::error(ErrorCode::kInvalidArgument, "output path " + path + " names no file");
+  }
+  struct stat dir_stat {};
+  if (::stat(directory.c_str(), &dir_stat) != 0) {
+    const int err = errno;
+    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                         "output directory " + directory + ": " + fileio::errnoText(err));
+  }
+  if (!S_ISDIR(dir_stat.st_mode)) {
+    return Status::error(ErrorCode::kNotFound, "output directory " + directory +
+                                                   " is not a directory");
+  }
+
+  std::unique_ptr<TileStoreWriter> writer(new TileStoreWriter());
+  Impl& impl = *writer->m_impl;
+  impl.path = path;
+  impl.directory = directory;
+  impl.geometry = geometry;
+  impl.options = options;
+  std::random_device random;
+  char suffix[64];
+  std::snprintf(suffix, sizeof(suffix), ".tmp-%ld-%08x", static_cast<long>(::getpid()),
+                static_cast<unsigned>(random()));
+  impl.temp_prefix = directory + "/." + name + suffix;
+  impl.main_temp = impl.temp_prefix;
+  Status status = impl.openTemp(impl.main_temp, &impl.main_fd);
+  if (!status) {
+    impl.main_temp.clear();
+    return status;
+  }
+  impl.index_temp = impl.temp_prefix + ".idx";
+  status = impl.openTemp(impl.index_temp, &impl.index_fd);
+  if (!status) {
+    impl.index_temp.clear();
+    return status;
+  }
+  impl.levels.resize(geometry.levels.size());
+  for (size_t i = 0; i < geometry.levels.size(); ++i) {
+    LevelBuild& level = impl.levels[i];
+    level.pages_x = format::pagesAlong(geometry.levels[i].tiles_x);
+    level.pages_y = format::pagesAlong(geometry.levels[i].tiles_y);
+    level.pages.resize(size_t(level.pages_x) * level.pages_y);
+  }
+  impl.levels[0].fd = impl.main_fd;
+  *out = std::move(writer);
+  return Status::ok();
+}
+
+Status TileStoreWriter::write(EncodedTile&& tile) {
+  Impl& impl = *m_impl;
+  const TileKey key = tile.key;
+  if (!impl.geometry.contains(key)) {
+    return Status::error(ErrorCode::kOutOfRange, format::keyText(key) + " is outside the pyramid");
+  }
+  PendingEntry entry;
+  const size_t bpp = bytesPerPixel(impl.geometry.format);
+  if (tile.location.constant) {
+    if (!tile.payload.empty()) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           format::keyText(key) + ": constant tile with a payload");
+    }
+    entry.offset_or_value = packValue(tile.location.constant_pixel, bpp);
+  } else {
+    const size_t max_bytes = format::maxStoredBytes(impl.geometry.tileBytes(),
+                                                    impl.options.encoding.compression);
+    if (tile.payload.empty() || tile.payload.size() > max_bytes ||
+        tile.payload.size() != tile.location.stored_bytes) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           format::keyText(key) + ": payload size " +
+                               std::to_string(tile.payload.size()) + " is invalid");
+    }
+    if (format::tileChecksum(tile.payload.data(), tile.payload.size()) !=
+        tile.location.checksum) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           format::keyText(key) + ": payload does not match its checksum");
+    }
+    entry.stored_bytes = static_cast<uint32_t>(tile.payload.size());
+    entry.checksum = tile.location.checksum;
+  }
+
+  PageBuild* page = nullptr;
+  uint32_t slot = 0;
+  int fd = -1;
+  uint64_t file_offset = 0;
+  {
+    std::lock_guard<std::mutex> lock(impl.mutex);
+    if (!impl.failure.isOk()) return impl.failure;
+    if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "write after finish");
+    Status status = impl.claim(key, &page, &slot);
+    if (!status) return status;
+    if (tile.location.constant) {
+      impl.constant_tiles.fetch_add(1, std::memory_order_relaxed);
+      status = impl.store(key, page, slot, entry);
+      if (!status) return impl.fail(status);
+      return Status::ok();
+    }
+    status = impl.levelFd(key.level, &fd);
+    if (!status) return impl.fail(status);
+    entry.offset_or_value = impl.levels[key.level].payload_bytes;
+    impl.levels[key.level].payload_bytes += entry.stored_bytes;
+    file_offset = impl.payloadBase(key.level) + entry.offset_or_value;
+  }
+  // The payload is written outside the lock: its range is reserved above.
+  const std::string& file_path =
+      key.level == 0 ? impl.main_temp : impl.levels[key.level].temp_path;
+  Status status = fileio::pwriteAll(fd, tile.payload.data(), tile.payload.size(), file_offset,
+                                    file_path);
+  std::lock_guard<std::mutex> lock(impl.mutex);
+  if (!status) return impl.fail(status);
+  impl.bytes_written.fetch_add(entry.stored_bytes, std::memory_order_relaxed);
+  status = impl.store(key, page, slot, entry);
+  if (!status) return impl.fail(status);
+  return Status::ok();
+}
+
+Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, uint32_t y0,
+                                           uint32_t x1, uint32_t y1,
+                                           std::span<const uint8_t> pixel) {
+  Impl& impl = *m_impl;
+  const size_t bpp = bytesPerPixel(impl.geometry.format);
+  if (pixel.size() != bpp) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "constant pixel has " + std::to_string(pixel.size()) +
+                             " bytes, the format needs " + std::to_string(bpp));
+  }
+  if (level_index >= impl.geometry.levels.size()) {
+    return Status::error(ErrorCode::kOutOfRange, "level " + std::to_string(level_index) +
+                                                     " is outside the pyramid");
+  }
+  const LevelInfo& info = impl.geometry.levels[level_index];
+  if (x0 > x1 || y0 > y1 || x1 > info.tiles_x || y1 > info.tiles_y) {
+    return Status::error(ErrorCode::kOutOfRange, "constant rectangle outside level " +
+                                                     std::to_string(level_index));
+  }
+  PendingEntry entry;
+  entry.offset_or_value = packValue(pixel.data(), bpp);
+
+  std::lock_guard<std::mutex> lock(impl.mutex);
+  if (!impl.failure.isOk()) return impl.failure;
+  if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "write after finish");
+  LevelBuild& level = impl.levels[level_index];
+  const uint32_t kPage = format::kPageTiles;
+  if (x0 == x1 || y0 == y1) return Status::ok();
+  for (uint32_t py = y0 / kPage; py <= (y1 - 1) / kPage; ++py) {
+    for (uint32_t px = x0 / kPage; px <= (x1 - 1) / kPage; ++px) {
+      PageBuild& page = level.pages[size_t(py) * level.pages_x + px];
+      uint32_t w, h;
+      impl.pageSpan(level_index, px, py, &w, &h);
+      const uint32_t bx0 = px * kPage, by0 = py * kPage;
+      const bool covers = x0 <= bx0 && y0 <= by0 && x1 >= bx0 + w && y1 >= by0 + h;
+      if (covers && page.state == PageState::kEmpty) {
+        // Whole page at once: no per-tile memory, no page on disk.
+        page.state = PageState::kConstant;
+        page.constant_value = entry.offset_or_value;
+        impl.constant_tiles.fetch_add(uint64_t(w) * h, std::memory_order_relaxed);
+        continue;
+      }
+      const uint32_t tx0 = std::max(x0, bx0), tx1 = std::min(x1, bx0 + w);
+      const uint32_t ty0 = std::max(y0, by0), ty1 = std::min(y1, by0 + h);
+      for (uint32_t ty = ty0; ty < ty1; ++ty) {
+        for (uint32_t tx = tx0; tx < tx1; ++tx) {
+          const TileKey key{level_index, tx, ty};
+          PageBuild* claimed = nullptr;
+          uint32_t slot = 0;
+          Status status = impl.claim(key, &claimed, &slot);
+          if (!status) return status;
+          impl.constant_tiles.fetch_add(1, std::memory_order_relaxed);
+          status = impl.store(key, claimed, slot, entry);
+          if (!status) return impl.fail(status);
+        }
+      }
+    }
+  }
+  return Status::ok();
+}
+
+uint64_t TileStoreWriter::bytesWritten() const {
+  return m_impl->bytes_written.load(std::memory_order_relaxed);
+}
+
+uint64_t TileStoreWriter::constantTiles() const {
+  return m_impl->constant_tiles.load(std::memory_order_relaxed);
+}
+
+Status TileStoreWriter::finish() {
+  Impl& impl = *m_impl;
+  std::lock_guard<std::mutex> lock(impl.mutex);
+  if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "finish called twice");
+  impl.finished = true;
+  Status status = impl.failure.isOk() ? impl.finishLocked() : impl.failure;
+  // Success renamed the main file away; either way no temporary remains.
+  impl.removeTemps();
+  return status;
+}
+
+Status TileStoreWriter::Impl::finishLocked() {
+  // Every tile must be present before anything is laid out.
+  for (uint32_t l = 0; l < levels.size(); ++l) {
+    const LevelBuild& level = levels[l];
+    for (uint32_t py = 0; py < level.pages_y; ++py) {
+      for (uint32_t px = 0; px < level.pages_x; ++px) {
+        const PageBuild& page = level.pages[size_t(py) * level.pages_x + px];
+        if (page.state == PageState::kDone || page.state == PageState::kConstant) continue;
+        uint32_t w, h;
+        pageSpan(l, px, py, &w, &h);
+        for (uint32_t slot = 0; slot < w * h; ++slot) {
+          const bool claimed = page.state == PageState::kFilling &&
+                               (page.claimed_bits[slot / 64] >> (slot % 64)) & 1;
+          if (!claimed) {
+            const TileKey key{l, px * format::kPageTiles + slot % w,
+                              py * format::kPageTiles + slot / w};
+            return Status::error(ErrorCode::kInvalidArgument,
+                                 format::keyText(key) + " was never written");
+          }
+        }
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "level " + std::to_string(l) + ": a tile write did not complete");
+      }
+    }
+  }
+
+  // Payload regions, level by level.
+  std::vector<uint64_t> payload_offset(levels.size());
+  uint64_t position = format::kHeaderBytes;
+  for (uint32_t l = 0; l < levels.size(); ++l) {
+    payload_offset[l] = position;
+    if (l > 0 && levels[l].payload_bytes > 0) {
+      Status status = fileio::copyRange(levels[l].fd, levels[l].temp_path,
+                                        levels[l].payload_bytes, main_fd, position, main_temp);
+      if (!status) return status;
+      // The spill file is no longer needed; free its disk space early.
+      ::close(levels[l].fd);
+      levels[l].fd = -1;
+      ::unlink(levels[l].temp_path.c_str());
+      levels[l].temp_path.clear();
+    }
+    position += levels[l].payload_bytes;
+  }
+
+  // Index region: all pages, then every level's page directory.
+  const uint64_t index_offset = position;
+  if (index_bytes > 0) {
+    Status status = fileio::copyRange(index_fd, index_temp, index_bytes, main_fd, position,
+                                      main_temp);
+    if (!status) return status;
+  }
+  position += index_bytes;
+  std::vector<uint64_t> directory_offset(levels.size());
+  std::vector<uint64_t> directory_bytes(levels.size());
+  for (uint32_t l = 0; l < levels.size(); ++l) {
+    const LevelBuild& level = levels[l];
+    const size_t page_count = level.pages.size();
+    std::vector<uint8_t> bytes(page_count * format::kPageEntryBytes + format::kChecksumBytes);
+    for (size_t i = 0; i < page_count; ++i) {
+      const PageBuild& page = level.pages[i];
+      uint8_t* p = bytes.data() + i * format::kPageEntryBytes;
+      if (page.state == PageState::kConstant) {
+        format::put32(p + 12, format::kPageFlagConstant);
+        format::put64(p + 16, page.constant_value);
+      } else {
+        format::put64(p, index_offset + page.rel_offset);
+        format::put32(p + 8, page.bytes);
+        format::put64(p + 24, page.checksum);
+      }
+    }
+    format::put64(bytes.data() + page_count * format::kPageEntryBytes,
+                  format::checksum64(bytes.data(), page_count * format::kPageEntryBytes));
+    Status status = fileio::pwriteAll(main_fd, bytes.data(), bytes.size(), position, main_temp);
+    if (!status) return status;
+    directory_offset[l] = position;
+    directory_bytes[l] = bytes.size();
+    position += bytes.size();
+  }
+  const uint64_t index_total = position - index_offset;
+
+  // Level table.
+  const uint64_t level_table_offset = position;
+  std::vector<uint8_t> table(levels.size() * format::kLevelEntryBytes + format::kChecksumBytes);
+  for (uint32_t l = 0; l < levels.size(); ++l) {
+    uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
+    const LevelInfo& info = geometry.levels[l];
+    format::put64(p, info.width_px);
+    format::put64(p + 8, info.height_px);
+    format::put32(p + 16, info.tiles_x);
+    format::put32(p + 20, info.tiles_y);
+    format::put32(p + 24, levels[l].pages_x);
+    format::put32(p + 28, levels[l].pages_y);
+    format::put64(p + 32, payload_offset[l]);
+    format::put64(p + 40, levels[l].payload_bytes);
+    format::put64(p + 48, directory_offset[l]);
+    format::put64(p + 56, directory_bytes[l]);
+  }
+  const size_t table_body = levels.size() * format::kLevelEntryBytes;
+  format::put64(table.data() + table_body, format::checksum64(table.data(), table_body));
+  Status status = fileio::pwriteAll(main_fd, table.data(), table.size(), position, main_temp);
+  if (!status) return status;
+  position += table.size();
+
+  // Metadata block: georeference.
+  const uint64_t metadata_offset = position;
+  // Without a georeference the block holds the identity transform and no
+  // CRS, so stale caller values never reach the file.
+  const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
+  std::vector<uint8_t> metadata(format::kMetadataFixedBytes + geo.crs.size());
+  for (int i = 0; i < 6; ++i) format::putF64(metadata.data() + 8 * i, geo.transform[i]);
+  format::put32(metadata.data() + 48, static_cast<uint32_t>(geo.crs.size()));
+  std::memcpy(metadata.data() + 52, geo.crs.data(), geo.crs.size());
+  const size_t metadata_body = metadata.size() - format::kChecksumBytes;
+  format::put64(metadata.data() + metadata_body,
+                format::checksum64(metadata.data(), metadata_body));
+  status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
+  if (!status) return status;
+  position += metadata.size();
+
+  // Header last: a crash before this point leaves no valid magic.
+  uint8_t header[format::kHeaderBytes] = {};
+  std::memcpy(header + format::kOffMagic, format::kMagic, sizeof(format::kMagic));
+  format::put32(header + format::kOffVersion, format::kVersion);
+  format::put32(header + format::kOffHeaderBytes, format::kHeaderBytes);
+  format::put64(header + format::kOffWidth, geometry.width_px);
+  format::put64(header + format::kOffHeight, geometry.height_px);
+  format::put32(header + format::kOffTilePx, geometry.tile_px);
+  format::put32(header + format::kOffPixelFormat, static_cast<uint32_t>(geometry.format));
+  format::put32(header + format::kOffLevelCount, static_cast<uint32_t>(levels.size()));
+  const StoreEncoding& encoding = options.encoding;
+  format::put32(header + format::kOffCompression, static_cast<uint32_t>(encoding.compression));
+  format::put32(header + format::kOffZstdLevel, static_cast<uint32_t>(encoding.zstd_level));
+  format::put32(header + format::kOffPredictor, static_cast<uint32_t>(encoding.predictor));
+  format::put32(header + format::kOffFilter, static_cast<uint32_t>(encoding.filter));
+  uint32_t flags = 0;
+  if (encoding.linear_light) flags |= format::kFlagLinearLight;
+  if (geo.present) flags |= format::kFlagGeoPresent;
+  format::put32(header + format::kOffFlags, flags);
+  format::put32(header + format::kOffPageTiles, format::kPageTiles);
+  format::put32(header + format::kOffEntryBytes, format::kTileEntryBytes);
+  format::put64(header + format::kOffLevelTableOffset, level_table_offset);
+  format::put64(header + format::kOffLevelTableBytes, table.size());
+  format::put64(header + format::kOffIndexOffset, index_offset);
+  format::put64(header + format::kOffIndexBytes, index_total);
+  format::put64(header + format::kOffMetadataOffset, metadata_offset);
+  format::put64(header + format::kOffMetadataBytes, metadata.size());
+  format::put64(header + format::kOffFileBytes, position);
+  format::put64(header + format::kHeaderChecksumOffset,
+                format::checksum64(header, format::kHeaderChecksumOffset));
+  status = fileio::pwriteAll(main_fd, header, sizeof(header), 0, main_temp);
+  if (!status) return status;
+
+  if (options.fsync && ::fsync(main_fd) != 0) {
+    const int err = errno;
+    return Status::error(err == ENOSPC ? ErrorCode::kNoSpace : ErrorCode::kIo,
+                         "fsync " + main_temp + ": " + fileio::errnoText(err));
+  }
+  if (::rename(main_temp.c_str(), path.c_str()) != 0) {
+    return Status::error(ErrorCode::kIo, "renaming " + main_temp + " to " + path + ": " +
+                                             fileio::errnoText(errno));
+  }
+  main_temp.clear();  // now the final file: removeTemps() must leave it
+  if (options.fsync) {
+    // Make the rename itself durable.
+    const int dir_fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dir_fd >= 0) {
+      ::fsync(dir_fd);
+      ::close(dir_fd);
+    }
+  }
+  return Status::ok();
+}
+
+}  // namespace clipstream

@@ -1,0 +1,242 @@
+// clipstream-info: prints what a tile store holds and, with --verify,
+// decodes every tile. Thin: all format knowledge lives in clipstream_store.
+#include <clipstream/store/progress.h>
+#include <clipstream/store/tile_store.h>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cinttypes>
+#include <cstdio>
+#include <string>
+
+namespace {
+
+using namespace clipstream;
+
+// Exit codes, also listed in --help.
+constexpr int kExitOk = 0;
+constexpr int kExitUsage = 1;
+constexpr int kExitOpenFailed = 2;
+constexpr int kExitCorrupt = 3;
+
+const char* compressionName(Compression compression) {
+  return compression == Compression::kZstd ? "zstd" : "none";
+}
+const char* predictorName(Predictor predictor) {
+  return predictor == Predictor::kLeftDelta ? "left-delta" : "none";
+}
+
+std::string humanBytes(uint64_t bytes) {
+  char text[32];
+  if (bytes >= (uint64_t(1) << 30)) {
+    std::snprintf(text, sizeof(text), "%.2f GiB", double(bytes) / double(uint64_t(1) << 30));
+  } else if (bytes >= (uint64_t(1) << 20)) {
+    std::snprintf(text, sizeof(text), "%.2f MiB", double(bytes) / double(uint64_t(1) << 20));
+  } else if (bytes >= 1024) {
+    std::snprintf(text, sizeof(text), "%.1f KiB", double(bytes) / 1024.0);
+  } else {
+    std::snprintf(text, sizeof(text), "%" PRIu64 " B", bytes);
+  }
+  return text;
+}
+
+double ratio(uint64_t raw, uint64_t stored) {
+  return stored == 0 ? 0.0 : double(raw) / double(stored);
+}
+
+// Text form of raw/stored; "-" when nothing is stored (all tiles constant).
+std::string ratioText(uint64_t raw, uint64_t stored) {
+  if (stored == 0) return "-";
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.2f", ratio(raw, stored));
+  return text;
+}
+
+// "level L tile (x, y): <problem>", without repeating the key the status
+// message may already start with.
+std::string problemLine(const TileStoreReader::Problem& problem) {
+  const std::string key = "level " + std::to_string(problem.key.level) + " tile (" +
+                          std::to_string(problem.key.x) + ", " + std::to_string(problem.key.y) +
+                          ")";
+  std::string message = problem.status.message;
+  if (message.rfind(key + ": ", 0) == 0) message = message.substr(key.size() + 2);
+  return key + ": " + errorCodeName(problem.status.code) + ": " + message;
+}
+
+void printText(const std::string& path, const StoreInfo& info,
+               const std::vector<LevelStats>* stats) {
+  const PyramidGeometry& g = info.geometry;
+  std::printf("store        %s\n", path.c_str());
+  std::printf("version      %u\n", info.format_version);
+  std::printf("file size    %" PRIu64 " bytes (%s)\n", info.file_bytes,
+              humanBytes(info.file_bytes).c_str());
+  std::printf("image        %" PRIu64 " x %" PRIu64 " px, %s\n", g.width_px, g.height_px,
+              pixelFormatName(g.format));
+  std::printf("tile size    %u px\n", g.tile_px);
+  std::printf("levels       %u\n", g.levelCount());
+  if (info.encoding.compression == Compression::kZstd) {
+    std::printf("compression  zstd level %d\n", info.encoding.zstd_level);
+  } else {
+    std::printf("compression  none\n");
+  }
+  std::printf("predictor    %s\n", predictorName(info.encoding.predictor));
+  std::printf("filter       %s%s\n", downsampleFilterName(info.encoding.filter),
+              info.encoding.linear_light ? " (linear light)" : "");
+  if (info.geo.present) {
+    const double* t = info.geo.transform;
+    std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n",
+                t[0], t[3], t[1], t[5], t[2], t[4]);
+    std::printf("CRS          %s\n", info.geo.crs.empty() ? "(none)" : info.geo.crs.c_str());
+  } else {
+    std::printf("georeference none\n");
+  }
+  if (stats == nullptr) return;
+  std::printf("\nlevel\twidth_px\theight_px\ttiles\tconstant_tiles\tstored_bytes\traw_bytes\tratio\n");
+  LevelStats total;
+  for (uint32_t l = 0; l < stats->size(); ++l) {
+    const LevelStats& s = (*stats)[l];
+    std::printf("%u\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64
+                "\t%s\n",
+                l, g.levels[l].width_px, g.levels[l].height_px, s.tiles, s.constant_tiles,
+                s.stored_bytes, s.raw_bytes, ratioText(s.raw_bytes, s.stored_bytes).c_str());
+    total.tiles += s.tiles;
+    total.constant_tiles += s.constant_tiles;
+    total.stored_bytes += s.stored_bytes;
+    total.raw_bytes += s.raw_bytes;
+  }
+  std::printf("total\t\t\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%s\n", total.tiles,
+              total.constant_tiles, total.stored_bytes, total.raw_bytes,
+              ratioText(total.raw_bytes, total.stored_bytes).c_str());
+}
+
+nlohmann::json toJson(const std::string& path, const StoreInfo& info,
+                      const std::vector<LevelStats>* stats) {
+  const PyramidGeometry& g = info.geometry;
+  nlohmann::json out;
+  out["path"] = path;
+  out["version"] = info.format_version;
+  out["file_bytes"] = info.file_bytes;
+  out["width_px"] = g.width_px;
+  out["height_px"] = g.height_px;
+  out["tile_px"] = g.tile_px;
+  out["pixel_format"] = pixelFormatName(g.format);
+  out["levels"] = g.levelCount();
+  out["compression"] = compressionName(info.encoding.compression);
+  out["zstd_level"] = info.encoding.zstd_level;
+  out["predictor"] = predictorName(info.encoding.predictor);
+  out["filter"] = downsampleFilterName(info.encoding.filter);
+  out["linear_light"] = info.encoding.linear_light;
+  if (info.geo.present) {
+    out["georeference"] = {
+        {"transform", std::vector<double>(info.geo.transform, info.geo.transform + 6)},
+        {"origin", {info.geo.transform[0], info.geo.transform[3]}},
+        {"pixel_size", {info.geo.transform[1], info.geo.transform[5]}},
+        {"crs", info.geo.crs}};
+  } else {
+    out["georeference"] = nullptr;
+  }
+  if (stats != nullptr) {
+    nlohmann::json levels = nlohmann::json::array();
+    for (uint32_t l = 0; l < stats->size(); ++l) {
+      const LevelStats& s = (*stats)[l];
+      levels.push_back({{"level", l},
+                        {"width_px", g.levels[l].width_px},
+                        {"height_px", g.levels[l].height_px},
+                        {"tiles_x", g.levels[l].tiles_x},
+                        {"tiles_y", g.levels[l].tiles_y},
+                        {"tiles", s.tiles},
+                        {"constant_tiles", s.constant_tiles},
+                        {"stored_bytes", s.stored_bytes},
+                        {"raw_bytes", s.raw_bytes},
+                        {"ratio", ratio(s.raw_bytes, s.stored_bytes)}});
+    }
+    out["level_stats"] = levels;
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Describe a clipstream tile store and optionally verify every tile."};
+  std::string path;
+  bool verify = false;
+  bool json = false;
+  unsigned threads = 0;
+  app.add_option("STORE", path, "tile store file")->required();
+  app.add_flag("--verify", verify, "read, check and decode every tile");
+  app.add_flag("--json", json, "print JSON on stdout instead of text");
+  app.add_option("--threads", threads, "verification threads (0 = all cores)")
+      ->check(CLI::Range(0u, 1024u));
+  app.footer(
+      "Exit codes:\n"
+      "  0  success (and, with --verify, every tile verified)\n"
+      "  1  bad command line\n"
+      "  2  the store could not be opened (missing, unreadable, bad header)\n"
+      "  3  corruption found (an index page or a tile failed its checks)\n"
+      "Progress is drawn on stderr when it is a terminal; CLIPSTREAM_PROGRESS=0/1 overrides.");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& error) {
+    const int code = app.exit(error);
+    return code == 0 ? kExitOk : kExitUsage;
+  }
+
+  std::unique_ptr<TileStoreReader> reader;
+  Status status = TileStoreReader::open(path, &reader);
+  if (!status) {
+    std::fprintf(stderr, "clipstream-info: cannot open store: %s\n", status.toString().c_str());
+    return kExitOpenFailed;
+  }
+  int exit_code = kExitOk;
+  std::vector<LevelStats> stats;
+  const Status stats_status = reader->levelStats(&stats);
+  if (!stats_status) {
+    std::fprintf(stderr, "clipstream-info: index: %s\n", stats_status.toString().c_str());
+    exit_code = kExitCorrupt;
+  }
+  const std::vector<LevelStats>* stats_ptr = stats_status ? &stats : nullptr;
+
+  nlohmann::json json_out;
+  if (json) {
+    json_out = toJson(path, reader->info(), stats_ptr);
+  } else {
+    printText(path, reader->info(), stats_ptr);
+  }
+
+  if (verify) {
+    std::fflush(stdout);  // the table before the progress line on a terminal
+    constexpr size_t kMaxProblems = 1000;
+    uint64_t total_tiles = 0;
+    for (const LevelInfo& level : reader->geometry().levels) {
+      total_tiles += uint64_t(level.tiles_x) * level.tiles_y;
+    }
+    ProgressBar bar("verify", total_tiles, progressEnabledByDefault(), "tiles");
+    std::vector<TileStoreReader::Problem> problems;
+    const Status verify_status = reader->verifyAll(
+        &problems, kMaxProblems, [&](uint64_t done, uint64_t) { bar.update(done); }, threads);
+    bar.finish();
+    std::vector<std::string> lines;
+    for (const auto& problem : problems) lines.push_back(problemLine(problem));
+    if (json) {
+      json_out["verify"] = {{"ok", verify_status.isOk()},
+                            {"tiles", total_tiles},
+                            {"message", verify_status.isOk() ? "" : verify_status.message},
+                            {"problems", lines}};
+    } else {
+      if (verify_status) {
+        std::printf("\nverify: OK (%" PRIu64 " tiles)\n", total_tiles);
+      } else {
+        std::printf("\nverify: FAILED: %s\n", verify_status.message.c_str());
+        for (const std::string& line : lines) std::printf("%s\n", line.c_str());
+        if (problems.size() >= kMaxProblems) {
+          std::printf("(only the first %zu problems are listed)\n", kMaxProblems);
+        }
+      }
+    }
+    if (!verify_status) exit_code = kExitCorrupt;
+  }
+  if (json) std::printf("%s\n", json_out.dump(2).c_str());
+  return exit_code;
+}

@@ -1,0 +1,228 @@
+// Write -> read round trips over geometries, pixel formats and encodings.
+#include "store_test_util.h"
+
+#include <tuple>
+
+namespace clipstream {
+namespace {
+
+using testutil::makeTile;
+
+struct RoundTripCase {
+  uint64_t width;
+  uint64_t height;
+  uint32_t tile_px;
+  PixelFormat format;
+  Compression compression;
+  Predictor predictor;
+};
+
+class StoreRoundTrip : public ::testing::TestWithParam<RoundTripCase> {};
+
+TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
+  const RoundTripCase& c = GetParam();
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(c.width, c.height, c.tile_px, c.format, &g));
+  const auto dir = testutil::tempDir("roundtrip");
+  const std::string path = (dir / "store.cst").string();
+  WriterOptions options;
+  options.encoding.compression = c.compression;
+  options.encoding.predictor = c.predictor;
+  options.encoding.zstd_level = 3;
+  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+
+  std::unique_ptr<TileStoreReader> reader;
+  Status status = TileStoreReader::open(path, &reader);
+  ASSERT_TRUE(status.isOk()) << status.toString();
+  EXPECT_EQ(reader->geometry().width_px, c.width);
+  EXPECT_EQ(reader->geometry().height_px, c.height);
+  EXPECT_EQ(reader->geometry().tile_px, c.tile_px);
+  EXPECT_EQ(reader->geometry().format, c.format);
+  EXPECT_EQ(reader->geometry().levelCount(), g.levelCount());
+  EXPECT_EQ(reader->info().encoding.compression, c.compression);
+  EXPECT_EQ(reader->info().encoding.predictor, c.predictor);
+
+  uint64_t constant_tiles = 0, tiles = 0;
+  std::vector<uint8_t> pixels;
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        const TileKey key{l, x, y};
+        status = reader->readTile(key, &pixels);
+        ASSERT_TRUE(status.isOk()) << status.toString();
+        ASSERT_EQ(pixels, makeTile(g, key)) << "level " << l << " tile " << x << "," << y;
+        TileLocation location;
+        ASSERT_TRUE(reader->locate(key, &location).isOk());
+        EXPECT_EQ(location.constant, testutil::isConstantTile(key));
+        constant_tiles += location.constant;
+        ++tiles;
+      }
+    }
+  }
+  std::vector<LevelStats> stats;
+  ASSERT_TRUE(reader->levelStats(&stats).isOk());
+  uint64_t stat_tiles = 0, stat_constant = 0;
+  for (const LevelStats& s : stats) {
+    stat_tiles += s.tiles;
+    stat_constant += s.constant_tiles;
+  }
+  EXPECT_EQ(stat_tiles, tiles);
+  EXPECT_EQ(stat_constant, constant_tiles);
+  std::vector<TileStoreReader::Problem> problems;
+  EXPECT_TRUE(reader->verifyAll(&problems, 10, {}, 2).isOk());
+  EXPECT_TRUE(problems.empty());
+  std::filesystem::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Geometries, StoreRoundTrip,
+    ::testing::Values(
+        RoundTripCase{1000, 777, 128, PixelFormat::kRGB8, Compression::kZstd, Predictor::kLeftDelta},
+        RoundTripCase{1000, 777, 64, PixelFormat::kRGBA8, Compression::kZstd, Predictor::kNone},
+        RoundTripCase{129, 1, 16, PixelFormat::kR8, Compression::kZstd, Predictor::kLeftDelta},
+        RoundTripCase{1, 1, 128, PixelFormat::kR16, Compression::kZstd, Predictor::kLeftDelta},
+        RoundTripCase{1, 1, 16, PixelFormat::kRGBA8, Compression::kNone, Predictor::kNone},
+        RoundTripCase{300, 5000, 32, PixelFormat::kR16, Compression::kNone, Predictor::kLeftDelta},
+        RoundTripCase{513, 257, 16, PixelFormat::kRGB8, Compression::kNone, Predictor::kNone},
+        RoundTripCase{2048, 2048, 16, PixelFormat::kR8, Compression::kZstd, Predictor::kLeftDelta}));
+
+TEST(StoreGeometry, LevelsHalveWithCeilingDownToOneTile) {
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(1000, 777, 128, PixelFormat::kRGB8, &g));
+  ASSERT_EQ(g.levelCount(), 4u);  // 1000 -> 500 -> 250 -> 125 (one tile)
+  EXPECT_EQ(g.levels[0].tiles_x, 8u);
+  EXPECT_EQ(g.levels[0].tiles_y, 7u);
+  EXPECT_EQ(g.levels[1].width_px, 500u);
+  EXPECT_EQ(g.levels[1].height_px, 389u);
+  EXPECT_EQ(g.levels[3].width_px, 125u);
+  EXPECT_EQ(g.levels[3].height_px, 98u);
+  EXPECT_EQ(g.levels[3].tiles_x, 1u);
+  ASSERT_TRUE(makePyramidGeometry(1, 1, 128, PixelFormat::kR8, &g));
+  EXPECT_EQ(g.levelCount(), 1u);
+  EXPECT_FALSE(makePyramidGeometry(0, 5, 128, PixelFormat::kR8, &g));
+  ASSERT_TRUE(makePyramidGeometry(uint64_t(1) << 20, uint64_t(1) << 20, 128, PixelFormat::kRGBA8, &g));
+  EXPECT_EQ(g.levelCount(), 14u);
+}
+
+TEST(StoreEncode, ConstantTilesHaveNoPayloadAndKeepTheirValue) {
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(256, 256, 16, PixelFormat::kRGB8, &g));
+  std::vector<uint8_t> pixels(g.tileBytes());
+  for (size_t i = 0; i < pixels.size(); i += 3) {
+    pixels[i] = 10;
+    pixels[i + 1] = 20;
+    pixels[i + 2] = 30;
+  }
+  EncodedTile encoded;
+  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
+  EXPECT_TRUE(encoded.location.constant);
+  EXPECT_TRUE(encoded.payload.empty());
+  EXPECT_EQ(encoded.location.constant_pixel[0], 10);
+  EXPECT_EQ(encoded.location.constant_pixel[1], 20);
+  EXPECT_EQ(encoded.location.constant_pixel[2], 30);
+  pixels[pixels.size() - 1] = 31;  // one sample differs: no longer constant
+  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
+  EXPECT_FALSE(encoded.location.constant);
+  EXPECT_FALSE(encoded.payload.empty());
+}
+
+TEST(StoreEncode, ConstantTilesCostNoPayloadBytesInTheFile) {
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(512, 512, 16, PixelFormat::kRGBA8, &g));
+  const auto dir = testutil::tempDir("constant");
+  const std::string path = (dir / "flat.cst").string();
+  std::unique_ptr<TileStoreWriter> writer;
+  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
+  const std::vector<uint8_t> flat = [&] {
+    std::vector<uint8_t> p(g.tileBytes());
+    for (size_t i = 0; i < p.size(); ++i) p[i] = uint8_t(i % 4 == 3 ? 255 : 7);
+    return p;
+  }();
+  uint64_t tiles = 0;
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        EncodedTile encoded;
+        ASSERT_TRUE(encodeTile(g, {}, TileKey{l, x, y}, flat, &encoded).isOk());
+        ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+        ++tiles;
+      }
+    }
+  }
+  EXPECT_EQ(writer->constantTiles(), tiles);
+  EXPECT_EQ(writer->bytesWritten(), 0u);
+  ASSERT_TRUE(writer->finish().isOk());
+  std::unique_ptr<TileStoreReader> reader;
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  // Whole constant pages need no index page either: the file is header,
+  // directories, level table and metadata only.
+  EXPECT_LT(reader->info().file_bytes, 1024u);
+  std::vector<uint8_t> pixels;
+  ASSERT_TRUE(reader->readTile(TileKey{1, 3, 5}, &pixels).isOk());
+  EXPECT_EQ(pixels, flat);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(100, 60, 16, PixelFormat::kRGB8, &g));
+  const auto dir = testutil::tempDir("geo");
+  const std::string path = (dir / "geo.cst").string();
+  WriterOptions options;
+  options.geo.present = true;
+  const double transform[6] = {635747.5, 0.25, 0.0, 848898.75, 0.0, -0.25};
+  std::copy(transform, transform + 6, options.geo.transform);
+  options.geo.crs = "PROJCS[\"NAD83 / Oregon GIC Lambert (ft)\",UNIT[\"foot\",0.3048]]";
+  options.encoding.linear_light = true;
+  options.encoding.filter = DownsampleFilter::kLanczos3;
+  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+  std::unique_ptr<TileStoreReader> reader;
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  const GeoReference& geo = reader->info().geo;
+  EXPECT_TRUE(geo.present);
+  for (int i = 0; i < 6; ++i) EXPECT_EQ(geo.transform[i], transform[i]) << i;
+  EXPECT_EQ(geo.crs, options.geo.crs);
+  EXPECT_TRUE(reader->info().encoding.linear_light);
+  EXPECT_EQ(reader->info().encoding.filter, DownsampleFilter::kLanczos3);
+
+  const std::string plain = (dir / "plain.cst").string();
+  WriterOptions no_geo;
+  no_geo.geo.crs = "EPSG:4326";  // ignored: present is false
+  no_geo.geo.transform[0] = 5.0;
+  ASSERT_TRUE(testutil::writeStore(plain, g, no_geo).isOk());
+  ASSERT_TRUE(TileStoreReader::open(plain, &reader).isOk());
+  EXPECT_FALSE(reader->info().geo.present);
+  EXPECT_TRUE(reader->info().geo.crs.empty());
+  EXPECT_EQ(reader->info().geo.transform[0], 0.0);
+  EXPECT_EQ(reader->info().geo.transform[1], 1.0);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(StoreEncode, PredictorRoundTripsEveryFormatAtWrapAround) {
+  // Values that wrap modulo 2^bits between neighbours.
+  for (PixelFormat format : {PixelFormat::kR8, PixelFormat::kR16, PixelFormat::kRGB8,
+                             PixelFormat::kRGBA8}) {
+    PyramidGeometry g;
+    ASSERT_TRUE(makePyramidGeometry(16, 16, 16, format, &g));
+    std::vector<uint8_t> pixels(g.tileBytes());
+    std::mt19937 rng(42);
+    for (uint8_t& b : pixels) b = (rng() & 1) ? 0xff : 0x00;
+    pixels[0] = 1;
+    for (Compression compression : {Compression::kNone, Compression::kZstd}) {
+      StoreEncoding encoding;
+      encoding.compression = compression;
+      encoding.predictor = Predictor::kLeftDelta;
+      EncodedTile encoded;
+      ASSERT_TRUE(encodeTile(g, encoding, {}, pixels, &encoded).isOk());
+      RawTile raw;
+      raw.location = encoded.location;
+      raw.payload = encoded.payload;
+      std::vector<uint8_t> decoded(g.tileBytes());
+      ASSERT_TRUE(decodeTile(g, encoding, raw, decoded).isOk());
+      EXPECT_EQ(decoded, pixels) << pixelFormatName(format);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace clipstream
