@@ -46,17 +46,31 @@ struct ClipmapPlan {
   uint32_t pyramid_level = 0;  // levels >= this fit whole in a clip and are always resident
   uint32_t finest_level = 0;   // finest level any visible pixel needs
   std::vector<ClipLevelPlan> stack;  // one entry per level in [0, pyramid_level)
+  // Whole tile grid of each pyramid level: pyramid[i] is level pyramid_level + i.
+  // Lets diffPlans() and the loader see every wanted tile without the geometry.
+  std::vector<TileRect> pyramid;
+  // Camera's ground point (level-0 texels, x and z). Ranking measures "near"
+  // from here; windows are centred a little ahead of it (see planClipmap()).
+  glm::dvec2 focus_texel{0.0, 0.0};
+  bool ground_visible = false;  // false: the frustum misses the ground (no stack level needed)
 };
 
 // Chooses the clip size (tiles) for a viewport: the window must cover about
 // twice the screen's resolution plus a tile of margin for toroidal updates.
 uint32_t chooseClipTiles(const Viewport& viewport, uint32_t tile_px);
 
-// Plans the clipmap for one frame.
+// Plans the clipmap for one frame. Pure; double precision throughout.
+// Window centre for level l: the camera's ground point moved a quarter of
+// the window's extent along the horizontal view direction (scaled by
+// cos(pitch)), so a camera looking ahead keeps 3/4 of each window in front;
+// the window is then snapped to the tile grid and shifted to lie inside the
+// level. `needed` comes from the nearest visible ground distance.
 ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewport,
                         const Camera& camera, const PlannerConfig& config);
 
-// Tiles that entered and left the needed windows between two plans.
+// Tiles that entered and left the needed windows (stack levels with
+// needed = true, plus every pyramid tile) between two plans. Order: level by
+// level, row-major; no duplicates.
 struct PlanDelta {
   std::vector<TileKey> entered;
   std::vector<TileKey> left;
@@ -64,7 +78,9 @@ struct PlanDelta {
 PlanDelta diffPlans(const ClipmapPlan& before, const ClipmapPlan& after);
 
 // Tiles of the plan in load order: pyramid first (coarse to fine), then the
-// stack coarse to fine, visible before hidden, near the window centre first.
+// needed stack levels coarse to fine; inside a level visible before hidden
+// (when frustum_first) and near the camera's ground point first. Tiles of
+// levels that are not needed are not listed.
 std::vector<TileKey> rankPlanTiles(const PyramidGeometry& geometry, const ClipmapPlan& plan,
                                    bool frustum_first = true);
 

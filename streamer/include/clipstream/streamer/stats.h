@@ -1,5 +1,6 @@
 // Streaming statistics: per level and overall, as a struct and as JSON.
-// Thread-safe: plain data (a snapshot).
+// Thread-safe: plain data (a snapshot taken under the streamer's lock, so
+// its counters are mutually consistent).
 #pragma once
 
 #include <cstdint>
@@ -18,6 +19,10 @@ struct LevelCounters {
   uint64_t redundant_reads = 0; // reads of a tile that had been read before
   uint64_t bytes_read = 0;      // payload bytes from the source
   uint64_t failures = 0;
+  uint64_t loads = 0;           // successful reads inserted into the RAM cache
+  uint64_t budget_skips = 0;    // requests dropped because no worse-ranked tile could be evicted
+  // Every request ends in exactly one of loads, failures, cancellations,
+  // budget_skips, or is still queued / in flight (see StreamerStats).
 };
 
 struct StreamerStats {
@@ -32,7 +37,11 @@ struct StreamerStats {
   double queue_latency_p50_ms = 0.0;
   double queue_latency_p99_ms = 0.0;
   uint32_t max_texture_lod = 0;
+  uint64_t ram_entries = 0;           // decoded tiles (and placeholders) in RAM
+  uint64_t entry_overhead_bytes = 0;  // per-entry overhead counted with each payload
 
+  // One JSON object: {"total": {...}, "levels": [{...}, ...], "ram_bytes": ...}
+  // with the field names above. Always valid JSON (non-finite numbers as 0).
   std::string toJson() const;
 };
 

@@ -2,8 +2,9 @@
 // into a RAM cache with a hard byte budget, and hands ready tiles to the
 // renderer under a per-frame budget. No GL here.
 //
-// Thread rule: update(), takeReady(), plan() and maxTextureLod() are for
-// the render thread only and never block on I/O. stats() is thread-safe.
+// Thread rule: update(), takeReady(), resetGpuResidency(), plan() and
+// settled() are for the render thread only and never block on I/O (no
+// source call ever runs on it). stats() and queuedTiles() are thread-safe.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
@@ -14,11 +15,23 @@
 #include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace clipstream {
+
+// What the RAM cache does with tiles that are on the GPU and still inside a
+// window (docs/architecture.md, "Eviction"). kGpuFirst is the default: on
+// the benchmark flights at 256-512 MiB it gets 3-13x the RAM hits of
+// kProtectGpu, because such a tile cannot be wanted again before it leaves
+// its window; kProtectGpu trades that for re-uploading from RAM after a
+// renderer resize (resetGpuResidency()).
+enum class EvictionMode : uint8_t {
+  kGpuFirst,     // evict them first: RAM is a victim cache behind the GPU
+  kProtectGpu,   // keep them longest, after every tile outside the windows
+};
 
 struct StreamerConfig {
   uint64_t ram_budget_bytes = uint64_t(256) << 20;  // hard: never exceeded
@@ -29,7 +42,17 @@ struct StreamerConfig {
   uint32_t lod_hysteresis_frames = 8;  // frames a finer LOD must be ready before use
   PlannerConfig planner;
   std::string trace_path;        // non-empty: record the request stream here
+  double prefetch_ahead_s = 0.5; // how far ahead the predicted camera is placed
+  EvictionMode eviction = EvictionMode::kGpuFirst;
+  // Test hook: called after every RAM insert (placeholder reservation) with
+  // the accounted bytes and the budget, under the cache lock, on the thread
+  // that inserted. Must not call back into the streamer.
+  std::function<void(uint64_t ram_bytes, uint64_t budget_bytes)> on_ram_insert;
 };
+
+// Bytes counted per RAM cache entry on top of its RGBA payload: the map
+// node, key, shared_ptr control block and vector header, rounded up.
+constexpr uint64_t kCacheEntryOverheadBytes = 256;
 
 // A decoded tile ready for upload: RGBA8, tile_px * tile_px * 4 bytes.
 struct ReadyTile {
@@ -74,10 +97,15 @@ class Streamer {
 
   const ClipmapPlan& plan() const;
 
-  // True when every tile the current plan needs is handed off.
+  // True when every tile the current plan needs is handed off (tiles that
+  // failed and are not being retried count as done).
   bool settled() const;
 
   StreamerStats stats() const;  // thread-safe snapshot
+
+  // Thread-safe. Snapshot of the load queue, front (next to load) first:
+  // for diagnostics overlays and tests of priority and prefetch.
+  std::vector<TileKey> queuedTiles() const;
   void shutdown();
 
  private:

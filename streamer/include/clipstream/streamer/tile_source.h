@@ -12,6 +12,12 @@
 
 namespace clipstream {
 
+// What one fetch cost, for the streamer's statistics.
+struct FetchInfo {
+  uint64_t bytes_read = 0;  // payload bytes taken from the medium (0 for generated tiles)
+  double decode_ms = 0.0;   // decompression + conversion time
+};
+
 // Thread-safe: fetch() may be called from any number of threads at once and
 // must not hold a lock across I/O or decompression.
 class TileSource {
@@ -27,18 +33,27 @@ class TileSource {
   // and returns kCorruptTile, kIo, kUnavailable, kOutOfRange, ...
   virtual Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) = 0;
 
+  // fetch() that also reports its cost. The default calls fetch() and
+  // reports nothing; sources that read a medium override it.
+  virtual Status fetchWithInfo(const TileKey& key, std::vector<uint8_t>* rgba, FetchInfo* info) {
+    *info = {};
+    return fetch(key, rgba);
+  }
+
   // Short human name for logs: "store:path", "procedural:67108864x67108864".
   virtual std::string describe() const = 0;
 };
 
 // Opens a tile store file as a source. On failure returns null and sets *status.
+// Conversion to RGBA8: R8 -> (v, v, v, 255); R16 -> grey of the high byte
+// (v >> 8: a linear rescale, exact for data that uses the full 16-bit range;
+// data sets needing a window belong in the tiler); RGB8 -> A = 255.
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status);
 
 // Deterministic procedural texture of any size up to 2^31 texels a side,
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)
-// in that level's texel coordinates; coarser levels are the exact 2x2 box
-// average of the finer level's definition where it matters for tests
-// (see proceduralTexel()).
+// in that level's texel coordinates (see proceduralTexel()). Texels of edge
+// tiles beyond the level's size follow the same function (no padding rule).
 struct ProceduralSpec {
   uint64_t width_px = uint64_t(1) << 26;
   uint64_t height_px = uint64_t(1) << 26;
@@ -49,6 +64,15 @@ std::shared_ptr<TileSource> makeProceduralSource(const ProceduralSpec& spec);
 
 // The RGBA8 value the procedural source gives texel (tx, ty) of `level`.
 // Exposed so renderer tests can compute CPU references without the source.
+// Definition: six layers of hashed colours over aligned square cells of
+// 8, 16, 32, 64, 128 and 256 texels of this level, weights 2,2,3,3,4,4
+// (so every 8x8 block differs from its neighbours). A cell is identified by its size and
+// position in level-0 texels, so a cell of level l+1 is the same cell (same
+// colour) as the one covering the same ground at level l: levels agree on
+// structure, and a coarser level looks like a smoothed finer one (it drops
+// the finest layer). Texels on a tile boundary of their level (x or y a
+// multiple of tile_px) are darkened to half, drawing the tile grid.
+// Alpha is always 255.
 void proceduralTexel(const ProceduralSpec& spec, uint32_t level, uint64_t tx, uint64_t ty,
                      uint8_t rgba[4]);
 
@@ -62,5 +86,9 @@ struct FaultSpec {
 };
 std::shared_ptr<TileSource> makeFaultySource(std::shared_ptr<TileSource> inner,
                                              const FaultSpec& spec);
+
+// True when the faulty source fails `key` (a pure function of key and seed),
+// so tests know exactly which tiles fail.
+bool failsTile(const FaultSpec& spec, const TileKey& key);
 
 }  // namespace clipstream

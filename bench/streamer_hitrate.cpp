@@ -1,0 +1,156 @@
+// RAM hit rate of the streamer's plan-aware eviction against LRU and
+// Belady's OPT. Drives a Streamer over a procedural 2^22-texel texture along
+// scripted camera paths (pass, dive, orbit, teleport, zoom), records each
+// request trace, then replays it at several budgets.
+//
+// Usage: bench_streamer_hitrate [frames_per_path=600] [trace_dir=/tmp]
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/trace.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <string>
+#include <vector>
+
+using namespace clipstream;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kSide = 4194304.0;  // 2^22 texels
+constexpr double kFps = 60.0;
+
+struct Path {
+  const char* name;
+  std::function<Camera(double t)> at;  // camera at time t (s)
+};
+
+Camera make(double x, double height, double z, double heading, double pitch) {
+  Camera c;
+  c.position = {x, height, z};
+  c.heading_rad = heading;
+  c.pitch_rad = pitch;
+  return c;
+}
+
+// Ten-second paths (at 60 fps) that come back over ground they saw, as
+// real flights do; a path that never returns has no hits for any policy.
+std::vector<Path> paths() {
+  const double cx = kSide * 0.5, cz = kSide * 0.5;
+  return {
+      {"pass",  // east for 2.5 s, back west, twice
+       [=](double t) {
+         const double u = std::fmod(t, 5.0);
+         const double x = u < 2.5 ? 3000.0 * u : 3000.0 * (5.0 - u);
+         return make(cx + x, 300.0, cz, u < 2.5 ? kPi / 2 : -kPi / 2, -0.4);
+       }},
+      {"dive",  // 20000 -> 50 texels high in 5 s and back up, drifting east
+       [=](double t) {
+         const double u = t < 5.0 ? t / 5.0 : (10.0 - t) / 5.0;
+         const double h = 20000.0 * std::pow(50.0 / 20000.0, std::clamp(u, 0.0, 1.0));
+         return make(cx + 100.0 * t, h, cz, 0.3, -0.8);
+       }},
+      {"orbit",  // two laps of radius 3000 at height 800, looking at the centre
+       [=](double t) {
+         const double a = 2.0 * kPi * t / 5.0;
+         return make(cx + 3000.0 * std::sin(a), 800.0, cz + 3000.0 * std::cos(a), a + kPi,
+                     -std::atan2(800.0, 3000.0));
+       }},
+      {"teleport",  // four places, one second each, round and round
+       [=](double t) {
+         const int hop = int(t) % 4;
+         const double ox[4] = {0.2, 0.7, 0.3, 0.8}, oz[4] = {0.3, 0.2, 0.8, 0.6};
+         return make(kSide * ox[hop] + 50.0 * std::fmod(t, 1.0), 400.0, kSide * oz[hop], 0.5 * hop, -0.6);
+       }},
+      {"zoom",  // 100 <-> 10000 texels high, period 5 s, looking down ahead
+       [=](double t) {
+         const double h = 100.0 * std::pow(100.0, 0.5 - 0.5 * std::cos(2.0 * kPi * t / 5.0));
+         return make(cx, h, cz, 0.0, -1.2);
+       }},
+  };
+}
+
+// Trace recording needs plans, not pixels: this source returns a flat tile
+// at memory speed so the benchmark spends its time in the streamer.
+class FlatSource final : public TileSource {
+ public:
+  explicit FlatSource(const PyramidGeometry& g) : m_geometry(g) {}
+  const PyramidGeometry& geometry() const override { return m_geometry; }
+  Status fetch(const TileKey&, std::vector<uint8_t>* rgba) override {
+    rgba->assign(size_t(m_geometry.tile_px) * m_geometry.tile_px * 4, 128);
+    return Status::ok();
+  }
+  std::string describe() const override { return "flat"; }
+
+ private:
+  PyramidGeometry m_geometry;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int frames = argc > 1 ? std::atoi(argv[1]) : 600;
+  const std::string dir = argc > 2 ? argv[2] : "/tmp";
+  const double budgets_mb[] = {128, 256, 512, 1024};
+  const uint64_t entry_bytes = 128 * 128 * 4 + kCacheEntryOverheadBytes;
+  PyramidGeometry geometry;
+  makePyramidGeometry(uint64_t(kSide), uint64_t(kSide), 128, PixelFormat::kRGBA8, &geometry);
+  auto source = std::make_shared<FlatSource>(geometry);
+  const Viewport vp{1280, 720};
+
+  std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
+              kSide, kSide, frames);
+  std::printf("path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\n");
+  struct FrameCost {
+    const char* path;
+    double mean_ms, p99_ms, max_ms;
+  };
+  std::vector<FrameCost> costs;
+  for (const Path& p : paths()) {
+    std::vector<double> frame_ms;
+    StreamerConfig cfg;
+    cfg.io_threads = 1;
+    cfg.ram_budget_bytes = uint64_t(64) << 20;
+    cfg.trace_path = dir + "/clipstream_" + p.name + ".trace";
+    {
+      Streamer s(source, cfg);
+      for (int f = 0; f < frames; ++f) {
+        const auto t0 = std::chrono::steady_clock::now();
+        s.update(p.at(f / kFps), vp, f / kFps);
+        (void)s.takeReady(64);
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        frame_ms.push_back(ms);
+      }
+    }
+    std::sort(frame_ms.begin(), frame_ms.end());
+    double sum = 0.0;
+    for (double v : frame_ms) sum += v;
+    costs.push_back({p.name, sum / double(frame_ms.size()),
+                     frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)], frame_ms.back()});
+    std::vector<TraceEvent> events;
+    if (Status st = readTrace(cfg.trace_path, &events); !st) {
+      std::fprintf(stderr, "%s\n", st.toString().c_str());
+      return 1;
+    }
+    for (double mb : budgets_mb) {
+      const ReplayResult r = replayTrace(events, uint64_t(mb * 1048576.0) / entry_bytes);
+      auto pct = [&](uint64_t h) { return r.accesses ? 100.0 * double(h) / double(r.accesses) : 0.0; };
+      auto ofOpt = [&](uint64_t h) { return r.hits_opt ? 100.0 * double(h) / double(r.hits_opt) : 100.0; };
+      std::printf("%s\t%.0f\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
+                  (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles,
+                  pct(r.hits_opt), pct(r.hits_lru), pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
+                  pct(r.hits_plan), ofOpt(r.hits_plan));
+    }
+  }
+  // Render-thread cost of update() + takeReady(64) per frame (plan, ranking,
+  // queue rebuild on plan changes, hand-off, residency bitmaps).
+  std::printf("\npath\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\n");
+  for (const FrameCost& c : costs)
+    std::printf("%s\t%.3f\t%.3f\t%.3f\n", c.path, c.mean_ms, c.p99_ms, c.max_ms);
+  return 0;
+}

@@ -1,0 +1,65 @@
+// Request traces: what the streamer asked for, frame by frame, and offline
+// replay of a trace against cache policies (Belady OPT, LRU, ours).
+//
+// Thread-safe: plain functions over caller-owned data.
+//
+// File format (text, one event per line, '#' starts a comment line):
+//   "F L X Y"    tile (L, X, Y) entered the wanted set at frame F: an access
+//   "- F L X Y"  the tile left the wanted set at frame F
+//   "w F L X0 Y0 X1 Y1 K"  level L's window [X0,X1) x [Y0,Y1) from frame F on;
+//                K = 0 not needed, 1 needed, 2 pyramid (whole level)
+//   "p F L X0 Y0 X1 Y1 K"  the same for the predicted (prefetch) plan
+// Window lines of a plan change come before its tile lines.
+// An access is a hit when the tile is decoded in RAM at that moment; tiles
+// that stay wanted are on the GPU and cost nothing more, so only entries
+// are accesses.
+#pragma once
+
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/planner.h>
+#include <clipstream/streamer/streamer.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+inline constexpr const char* kTraceHeader =
+    "# clipstream trace v1: 'frame level x y' = tile entered the wanted set, "
+    "'- frame level x y' = it left";
+
+struct TraceEvent {
+  uint64_t frame = 0;
+  TileKey key;         // tile events; window events use key.level only
+  bool leave = false;
+  char window = 0;     // 0: tile event; 'w': current window; 'p': predicted window
+  TileRect rect;       // window events
+  uint8_t kind = 0;    // window events: 0 not needed, 1 needed, 2 pyramid
+
+  bool isAccess() const { return window == 0 && !leave; }
+};
+
+// Reads a trace file. kNotFound / kIo if it cannot be read, kInvalidArgument
+// naming the line if a line does not parse.
+Status readTrace(const std::string& path, std::vector<TraceEvent>* events);
+
+struct ReplayResult {
+  uint64_t accesses = 0;
+  uint64_t distinct_tiles = 0;
+  uint64_t capacity_tiles = 0;
+  uint64_t hits_opt = 0;   // Belady's optimal replacement (with bypass)
+  uint64_t hits_lru = 0;   // least recently used
+  uint64_t hits_plan = 0;       // the streamer's policy, EvictionMode::kProtectGpu
+  uint64_t hits_gpu_first = 0;  // the streamer's policy, EvictionMode::kGpuFirst (default)
+};
+
+// Replays accesses against a cache of capacity_tiles tiles under each policy.
+// The plan-aware policy is the streamer's (eviction.h): it sees the window
+// lines as the streamer sees its plans, never evicts pyramid tiles, evicts
+// the highest plan-distance score first (ties: least recently wanted), and
+// bypasses when only pyramid tiles are cached. Every access is taken to be
+// handed to the GPU at once.
+ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles);
+
+}  // namespace clipstream

@@ -1,0 +1,49 @@
+// The RAM cache's eviction score, shared by the streamer and the trace
+// replay so both run the same policy. Pure functions; thread-safe.
+//
+// Policy (plan distance): the cost of evicting a tile is a read when it is
+// next wanted. Tiles inside a needed window are on the GPU (or about to be)
+// and come back only after leaving, so they go last: every outside tile
+// scores higher than every inside one ("protected as long as possible");
+// among inside tiles the deepest go first. An outside tile scores its
+// Chebyshev distance to the window (tiles) times 4^level; levels the plan
+// does not need add a clip's width per level away from the finest needed
+// level. The predicted plan counts too (the smaller score wins). Larger
+// score = evicted sooner; ties go least recently wanted first.
+// The 4^level weight (coarse outside tiles first) was chosen by replaying
+// the benchmark flight paths: 2^level (pure travel distance) and 4^level
+// agree on passes and orbits, 4^level keeps far more of revisited places
+// (docs/decisions.md, Streamer).
+#pragma once
+
+#include <clipstream/streamer/planner.h>
+#include <clipstream/streamer/streamer.h>
+
+#include <cstdint>
+#include <vector>
+
+namespace clipstream {
+
+// The plan as the eviction sees it: one rect per level.
+struct PlanWindows {
+  enum Kind : uint8_t { kNotNeeded = 0, kNeeded = 1, kPyramid = 2 };
+  std::vector<TileRect> rects;  // index = level
+  std::vector<uint8_t> kinds;   // Kind per level
+  uint32_t clip_tiles = 0;
+  uint32_t finest_level = 0;
+
+  bool empty() const { return rects.empty(); }
+  // Fills clip_tiles and finest_level from rects and kinds.
+  void finish();
+};
+
+PlanWindows planWindows(const ClipmapPlan& plan);
+
+// True for tiles of pyramid levels: always wanted, never scored.
+bool isPyramidTile(const TileKey& key, const PlanWindows& windows);
+
+// Eviction score (see above). `predicted` may be empty.
+double evictionScore(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
+                     EvictionMode mode);
+
+}  // namespace clipstream

@@ -1,0 +1,117 @@
+// TileSource over a tile store file: positional reads through
+// TileStoreReader (no lock around I/O), then conversion to RGBA8.
+#include <clipstream/store/tile_store.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include "convert.h"
+
+#include <bit>
+#include <chrono>
+#include <cstring>
+
+namespace clipstream {
+namespace {
+
+class StoreSource final : public TileSource {
+ public:
+  StoreSource(std::unique_ptr<TileStoreReader> reader, std::string path)
+      : m_reader(std::move(reader)), m_path(std::move(path)) {}
+
+  const PyramidGeometry& geometry() const override { return m_reader->geometry(); }
+
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    FetchInfo info;
+    return fetchWithInfo(key, rgba, &info);
+  }
+
+  Status fetchWithInfo(const TileKey& key, std::vector<uint8_t>* rgba, FetchInfo* info) override {
+    *info = {};
+    const PyramidGeometry& geo = m_reader->geometry();
+    // Scratch buffers are per thread so concurrent fetches share nothing.
+    thread_local RawTile raw;
+    thread_local std::vector<uint8_t> pixels;
+    Status status = m_reader->readRaw(key, &raw);
+    if (!status) return status;
+    info->bytes_read = raw.payload.size();
+    const auto start = std::chrono::steady_clock::now();
+    const size_t tile_px2 = size_t(geo.tile_px) * geo.tile_px;
+    rgba->resize(tile_px2 * 4);
+    if (geo.format == PixelFormat::kRGBA8) {
+      status = m_reader->decode(raw, std::span<uint8_t>(*rgba));
+    } else {
+      pixels.resize(geo.tileBytes());
+      status = m_reader->decode(raw, std::span<uint8_t>(pixels));
+      if (status) status = convertToRgba8(geo.format, pixels, rgba->data(), tile_px2);
+    }
+    info->decode_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return status;
+  }
+
+  std::string describe() const override { return "store:" + m_path; }
+
+ private:
+  std::unique_ptr<TileStoreReader> m_reader;
+  std::string m_path;
+};
+
+}  // namespace
+
+Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t* dst,
+                      size_t pixel_count) {
+  if (!isValidPixelFormat(uint32_t(format)))
+    return Status::error(ErrorCode::kUnsupported, "cannot convert unknown pixel format to RGBA8");
+  if (src.size() < pixel_count * bytesPerPixel(format))
+    return Status::error(ErrorCode::kInvalidArgument, "pixel buffer smaller than the tile");
+  const uint8_t* s = src.data();
+  switch (format) {
+    case PixelFormat::kR8:
+      for (size_t i = 0; i < pixel_count; ++i, dst += 4) {
+        dst[0] = dst[1] = dst[2] = s[i];
+        dst[3] = 255;
+      }
+      break;
+    case PixelFormat::kR16:
+      // Little-endian samples; the high byte is the second one.
+      for (size_t i = 0; i < pixel_count; ++i, dst += 4) {
+        dst[0] = dst[1] = dst[2] = s[2 * i + 1];
+        dst[3] = 255;
+      }
+      break;
+    case PixelFormat::kRGB8: {
+      size_t i = 0;
+      if constexpr (std::endian::native == std::endian::little) {
+        // Four pixels from three 32-bit loads: r0g0b0r1 g1b1r2g2 b2r3g3b3.
+        for (; i + 4 <= pixel_count; i += 4, s += 12, dst += 16) {
+          uint32_t a, b, c;
+          std::memcpy(&a, s, 4);
+          std::memcpy(&b, s + 4, 4);
+          std::memcpy(&c, s + 8, 4);
+          const uint32_t out[4] = {a | 0xFF000000u, (a >> 24) | (b << 8) | 0xFF000000u,
+                                   (b >> 16) | (c << 16) | 0xFF000000u, (c >> 8) | 0xFF000000u};
+          std::memcpy(dst, out, 16);
+        }
+      }
+      for (; i < pixel_count; ++i, dst += 4, s += 3) {
+        dst[0] = s[0];
+        dst[1] = s[1];
+        dst[2] = s[2];
+        dst[3] = 255;
+      }
+      break;
+    }
+    case PixelFormat::kRGBA8:
+      std::copy(s, s + pixel_count * 4, dst);
+      break;
+  }
+  return Status::ok();
+}
+
+std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status) {
+  std::unique_ptr<TileStoreReader> reader;
+  *status = TileStoreReader::open(path, &reader);
+  if (!*status) return nullptr;
+  return std::make_shared<StoreSource>(std::move(reader), path);
+}
+
+}  // namespace clipstream

@@ -1,0 +1,243 @@
+// Trace reading and offline replay against three cache policies.
+#include <clipstream/streamer/trace.h>
+
+#include "eviction.h"
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <list>
+#include <set>
+#include <sstream>
+#include <unordered_map>
+
+namespace clipstream {
+
+Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
+  events->clear();
+  std::ifstream in(path);
+  if (!in) {
+    return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                         "cannot open trace " + path + ": " + std::strerror(errno));
+  }
+  std::string line;
+  uint64_t line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream fields(line);
+    TraceEvent e;
+    if (line[0] == 'w' || line[0] == 'p') {
+      e.window = line[0];
+      fields.get();
+      uint64_t level = 0;
+      int kind = 0;
+      if (!(fields >> e.frame >> level >> e.rect.x0 >> e.rect.y0 >> e.rect.x1 >> e.rect.y1 >> kind) ||
+          level > 63 || kind < 0 || kind > 2) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             path + ":" + std::to_string(line_no) +
+                                 ": expected 'w|p frame level x0 y0 x1 y1 kind', got '" +
+                                 line.substr(0, 80) + "'");
+      }
+      e.key.level = uint32_t(level);
+      e.kind = uint8_t(kind);
+      events->push_back(e);
+      continue;
+    }
+    if (line[0] == '-') {
+      e.leave = true;
+      fields.get();
+    }
+    uint64_t level = 0, x = 0, y = 0;
+    if (!(fields >> e.frame >> level >> x >> y) || level > 63 || x > UINT32_MAX || y > UINT32_MAX) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           path + ":" + std::to_string(line_no) + ": expected 'frame level x y', got '" +
+                               line.substr(0, 80) + "'");
+    }
+    e.key = {uint32_t(level), uint32_t(x), uint32_t(y)};
+    events->push_back(e);
+  }
+  if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);
+  return Status::ok();
+}
+
+ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles) {
+  ReplayResult result;
+  result.capacity_tiles = capacity_tiles;
+  // Dense ids for keys.
+  std::unordered_map<TileKey, uint32_t, TileKeyHash> ids;
+  std::vector<uint32_t> id_of(events.size());
+  std::vector<uint32_t> level_of;
+  for (size_t i = 0; i < events.size(); ++i) {
+    if (events[i].window) continue;
+    auto [it, added] = ids.emplace(events[i].key, uint32_t(ids.size()));
+    if (added) level_of.push_back(events[i].key.level);
+    id_of[i] = it->second;
+  }
+  result.distinct_tiles = ids.size();
+  const size_t n_ids = ids.size();
+  constexpr uint64_t kNever = UINT64_MAX;
+
+  // Next access (not leave) of the same tile, for OPT.
+  std::vector<uint64_t> next_use(events.size(), kNever);
+  {
+    std::vector<uint64_t> seen(n_ids, kNever);
+    for (size_t i = events.size(); i-- > 0;) {
+      if (!events[i].isAccess()) continue;
+      next_use[i] = seen[id_of[i]];
+      seen[id_of[i]] = i;
+    }
+  }
+  for (const TraceEvent& e : events) result.accesses += e.isAccess() ? 1 : 0;
+  if (capacity_tiles == 0) return result;
+
+  // OPT: evict the tile used farthest in the future; bypass when the
+  // newcomer itself is used farthest.
+  {
+    std::set<std::pair<uint64_t, uint32_t>> by_next;  // (next use, id)
+    std::vector<uint64_t> cached_next(n_ids, 0);
+    std::vector<uint8_t> in_cache(n_ids, 0);
+    for (size_t i = 0; i < events.size(); ++i) {
+      if (!events[i].isAccess()) continue;
+      const uint32_t id = id_of[i];
+      if (in_cache[id]) {
+        result.hits_opt++;
+        by_next.erase({cached_next[id], id});
+      } else if (by_next.size() >= capacity_tiles) {
+        auto last = std::prev(by_next.end());
+        if (last->first <= next_use[i]) continue;  // bypass
+        in_cache[last->second] = 0;
+        by_next.erase(last);
+      }
+      in_cache[id] = 1;
+      cached_next[id] = next_use[i];
+      by_next.insert({next_use[i], id});
+    }
+  }
+
+  // LRU.
+  {
+    std::list<uint32_t> order;  // front = most recent
+    std::vector<std::list<uint32_t>::iterator> where(n_ids);
+    std::vector<uint8_t> in_cache(n_ids, 0);
+    for (size_t i = 0; i < events.size(); ++i) {
+      if (!events[i].isAccess()) continue;
+      const uint32_t id = id_of[i];
+      if (in_cache[id]) {
+        result.hits_lru++;
+        order.erase(where[id]);
+      } else if (order.size() >= capacity_tiles) {
+        in_cache[order.back()] = 0;
+        order.pop_back();
+      }
+      in_cache[id] = 1;
+      order.push_front(id);
+      where[id] = order.begin();
+    }
+  }
+
+  // Plan-aware: the streamer's policy over the recorded windows, both modes.
+  for (EvictionMode mode : {EvictionMode::kProtectGpu, EvictionMode::kGpuFirst}) {
+    uint64_t& hits = mode == EvictionMode::kProtectGpu ? result.hits_plan : result.hits_gpu_first;
+    std::vector<TileKey> key_of(n_ids);
+    for (const auto& [key, id] : ids) key_of[id] = key;
+    PlanWindows current, predicted, building_w, building_p;
+    uint64_t building_frame = UINT64_MAX;
+    bool dirty = false;
+    auto placeWindow = [](PlanWindows* w, const TraceEvent& e) {
+      if (w->rects.size() <= e.key.level) {
+        w->rects.resize(e.key.level + 1);
+        w->kinds.resize(e.key.level + 1, PlanWindows::kNotNeeded);
+      }
+      w->rects[e.key.level] = e.rect;
+      w->kinds[e.key.level] = e.kind;
+    };
+    // (score, stamp, id): victims are taken from the end (highest score,
+    // then oldest stamp).
+    using Slot = std::tuple<double, uint64_t, uint32_t>;
+    auto order = [](const Slot& a, const Slot& b) {
+      if (std::get<0>(a) != std::get<0>(b)) return std::get<0>(a) < std::get<0>(b);
+      if (std::get<1>(a) != std::get<1>(b)) return std::get<1>(a) > std::get<1>(b);
+      return std::get<2>(a) < std::get<2>(b);
+    };
+    std::set<Slot, decltype(order)> candidates(order);
+    std::vector<uint8_t> in_cache(n_ids, 0), wanted(n_ids, 0);
+    std::vector<uint64_t> stamp(n_ids, 0);
+    std::vector<double> score(n_ids, 0.0);
+    std::vector<uint32_t> cached_ids;
+    uint64_t cached = 0;
+    auto slotOf = [&](uint32_t id) { return Slot{score[id], stamp[id], id}; };
+    auto enroll = [&](uint32_t id) {
+      if (isPyramidTile(key_of[id], current)) return;
+      score[id] = evictionScore(key_of[id], current, predicted, mode);
+      candidates.insert(slotOf(id));
+    };
+    auto rescore = [&](uint64_t seq) {
+      candidates.clear();
+      std::vector<uint32_t> live;
+      for (uint32_t id : cached_ids) {
+        if (!in_cache[id]) continue;
+        live.push_back(id);
+        if (wanted[id]) stamp[id] = seq;
+        enroll(id);
+      }
+      cached_ids.swap(live);
+    };
+    for (size_t i = 0; i < events.size(); ++i) {
+      const TraceEvent& e = events[i];
+      if (e.window) {
+        if (e.frame != building_frame) {
+          building_frame = e.frame;
+          building_w = {};
+          building_p = {};
+        }
+        placeWindow(e.window == 'w' ? &building_w : &building_p, e);
+        dirty = true;
+        continue;
+      }
+      if (dirty) {
+        current = building_w;
+        current.finish();
+        predicted = building_p;
+        if (!predicted.empty()) predicted.finish();
+        rescore(i);
+        dirty = false;
+      }
+      const uint32_t id = id_of[i];
+      if (e.leave) {
+        if (in_cache[id] && !isPyramidTile(key_of[id], current)) {
+          candidates.erase(slotOf(id));
+          stamp[id] = i;
+          candidates.insert(slotOf(id));
+        } else {
+          stamp[id] = i;
+        }
+        wanted[id] = 0;
+        continue;
+      }
+      wanted[id] = 1;
+      if (in_cache[id]) {
+        hits++;
+        if (!isPyramidTile(key_of[id], current)) candidates.erase(slotOf(id));
+        stamp[id] = i;
+        enroll(id);
+        continue;
+      }
+      stamp[id] = i;
+      if (cached >= capacity_tiles) {
+        if (candidates.empty()) continue;  // only pyramid tiles cached: bypass
+        auto victim = std::prev(candidates.end());
+        in_cache[std::get<2>(*victim)] = 0;
+        candidates.erase(victim);
+        cached--;
+      }
+      in_cache[id] = 1;
+      cached++;
+      cached_ids.push_back(id);
+      enroll(id);
+    }
+  }
+  return result;
+}
+
+}  // namespace clipstream
