@@ -18,3 +18,15 @@ if(STORE_BENCH_OIIO_FOUND)
   target_compile_definitions(store_read_bench PRIVATE
     CLIPSTREAM_STORE_BENCH_DATA="${CLIPSTREAM_STORE_BENCH_DATA}")
 endif()
+
+# Reader fuzz driver, only with -DCLIPSTREAM_FUZZ=ON (option in store/). It
+# uses the private format helpers to re-seal checksums after mutation.
+#   CLIPSTREAM_FUZZ_SEEDS=corpus ./store_fuzz -runs=0   # seed stores
+#   ./store_fuzz -max_total_time=300 -timeout=10 corpus
+if(CLIPSTREAM_FUZZ)
+  add_executable(store_fuzz ${CMAKE_CURRENT_SOURCE_DIR}/store_fuzz.cpp)
+  target_include_directories(store_fuzz PRIVATE ${CMAKE_SOURCE_DIR}/store/src)
+  target_compile_options(store_fuzz PRIVATE -fsanitize=fuzzer)
+  target_link_options(store_fuzz PRIVATE -fsanitize=fuzzer)
+  target_link_libraries(store_fuzz PRIVATE clipstream::store clipstream_warnings)
+endif()

@@ -194,6 +194,13 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
     if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN) {
       return Status::error(ErrorCode::kCorruptTile, where + ": payload is not a zstd frame");
     }
+    // Exactly one frame: trailing bytes (even a skippable frame, which
+    // ZSTD_decompressDCtx would accept) mean the payload is not ours.
+    const size_t frame_bytes = ZSTD_findFrameCompressedSize(raw.payload.data(), raw.payload.size());
+    if (ZSTD_isError(frame_bytes) || frame_bytes != raw.payload.size()) {
+      return Status::error(ErrorCode::kCorruptTile,
+                           where + ": payload is not exactly one zstd frame");
+    }
     if (content != tile_bytes) {
       return Status::error(ErrorCode::kCorruptTile,
                            where + ": payload decodes to " + std::to_string(content) +
@@ -221,6 +228,200 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
   }
   if (encoding.predictor == Predictor::kLeftDelta) {
     undoLeftDelta(pixels.data(), geometry.tile_px, geometry.format);
+  }
+  return Status::ok();
+}
+
+}  // namespace clipstream
+
+// ---------------------------------------------------------------------------
+// decodeTileRgba8: decode + predictor inverse + RGBA8 expansion in one pass.
+//
+// The left-delta inverse is a prefix sum along each row. Done byte by byte in
+// place (undoLeftDelta) every byte waits on a store a pixel earlier; here each
+// row is summed in registers, four pixels (SSE2) or one pixel (portable) at a
+// time, and written straight out as RGBA8, so the tile is touched once after
+// zstd instead of twice (undo, then convert).
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+namespace clipstream {
+namespace {
+
+inline uint32_t load32(const uint8_t* p) {
+  uint32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
+inline void storeRgba(uint8_t* dst, uint8_t r, uint8_t g, uint8_t b, uint8_t a) {
+  dst[0] = r;
+  dst[1] = g;
+  dst[2] = b;
+  dst[3] = a;
+}
+
+// One row of `px` pixels from src (stored format, predictor applied when
+// kDelta) to RGBA8 at dst. Grey for R8/R16 (R16 keeps the high byte), A = 255
+// unless stored. Same results as undoLeftDelta followed by the streamer's
+// conversion, which the store tests check bit for bit.
+template <bool kDelta>
+void rowR8(const uint8_t* src, uint8_t* dst, uint32_t px) {
+  uint32_t x = 0;
+  uint8_t run = 0;
+#if defined(__SSE2__)
+  const __m128i alpha = _mm_set1_epi32(int32_t(0xFF000000u));
+  __m128i carry = _mm_setzero_si128();
+  for (; x + 16 <= px; x += 16, src += 16, dst += 64) {
+    __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src));
+    if constexpr (kDelta) {
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 1));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 2));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi8(v, carry);
+      carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(_mm_unpackhi_epi8(v, v), 0xFF), 0xFF);
+    }
+    const __m128i lo = _mm_unpacklo_epi8(v, v), hi = _mm_unpackhi_epi8(v, v);
+    __m128i* out = reinterpret_cast<__m128i*>(dst);
+    _mm_storeu_si128(out + 0, _mm_or_si128(_mm_unpacklo_epi16(lo, lo), alpha));
+    _mm_storeu_si128(out + 1, _mm_or_si128(_mm_unpackhi_epi16(lo, lo), alpha));
+    _mm_storeu_si128(out + 2, _mm_or_si128(_mm_unpacklo_epi16(hi, hi), alpha));
+    _mm_storeu_si128(out + 3, _mm_or_si128(_mm_unpackhi_epi16(hi, hi), alpha));
+  }
+  run = uint8_t(_mm_cvtsi128_si32(carry));
+#endif
+  for (; x < px; ++x, ++src, dst += 4) {
+    run = kDelta ? uint8_t(run + src[0]) : src[0];
+    storeRgba(dst, run, run, run, 255);
+  }
+}
+
+template <bool kDelta>
+void rowR16(const uint8_t* src, uint8_t* dst, uint32_t px) {
+  uint32_t x = 0;
+  uint16_t run = 0;
+#if defined(__SSE2__)
+  const __m128i alpha = _mm_set1_epi32(int32_t(0xFF000000u));
+  __m128i carry = _mm_setzero_si128();
+  for (; x + 8 <= px; x += 8, src += 16, dst += 32) {
+    __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src));
+    if constexpr (kDelta) {
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 2));
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi16(v, carry);
+      carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(v, 0xFF), 0xFF);
+    }
+    const __m128i high = _mm_packus_epi16(_mm_srli_epi16(v, 8), _mm_setzero_si128());
+    const __m128i twice = _mm_unpacklo_epi8(high, high);
+    __m128i* out = reinterpret_cast<__m128i*>(dst);
+    _mm_storeu_si128(out + 0, _mm_or_si128(_mm_unpacklo_epi16(twice, twice), alpha));
+    _mm_storeu_si128(out + 1, _mm_or_si128(_mm_unpackhi_epi16(twice, twice), alpha));
+  }
+  run = uint16_t(_mm_cvtsi128_si32(carry));
+#endif
+  for (; x < px; ++x, src += 2, dst += 4) {
+    const uint16_t sample = uint16_t(src[0] | (src[1] << 8));
+    run = kDelta ? uint16_t(run + sample) : sample;
+    const uint8_t grey = uint8_t(run >> 8);
+    storeRgba(dst, grey, grey, grey, 255);
+  }
+}
+
+// RGB8 and RGBA8 (kChannels 3 or 4). RGBA8 may run in place (src == dst).
+template <bool kDelta, int kChannels>
+void rowRgb(const uint8_t* src, uint8_t* dst, uint32_t px) {
+  uint32_t x = 0;
+  uint8_t run[4] = {0, 0, 0, 0};
+#if defined(__SSE2__)
+  // Byte-wise adds never carry between channels, so the junk in the alpha
+  // byte of the RGB8 lanes cannot reach R, G or B; it is overwritten by A=255.
+  const __m128i alpha = _mm_set1_epi32(kChannels == 3 ? int32_t(0xFF000000u) : 0);
+  __m128i carry = _mm_setzero_si128();
+  for (; x + 4 <= px; x += 4, src += 4 * kChannels, dst += 16) {
+    __m128i v;
+    if constexpr (kChannels == 3) {
+      // Four pixels from three 32-bit loads: r0g0b0r1 g1b1r2g2 b2r3g3b3.
+      const uint32_t a = load32(src), b = load32(src + 4), c = load32(src + 8);
+      v = _mm_set_epi32(int32_t(c >> 8), int32_t((b >> 16) | (c << 16)),
+                        int32_t((a >> 24) | (b << 8)), int32_t(a));
+    } else {
+      v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src));
+    }
+    if constexpr (kDelta) {
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi8(v, carry);
+      carry = _mm_shuffle_epi32(v, 0xFF);
+    }
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), _mm_or_si128(v, alpha));
+  }
+  const uint32_t last = uint32_t(_mm_cvtsi128_si32(carry));
+  std::memcpy(run, &last, 4);
+#endif
+  for (; x < px; ++x, src += kChannels, dst += 4) {
+    for (int c = 0; c < kChannels; ++c) run[c] = kDelta ? uint8_t(run[c] + src[c]) : src[c];
+    storeRgba(dst, run[0], run[1], run[2], kChannels == 3 ? 255 : run[3]);
+  }
+}
+
+template <bool kDelta>
+void tileToRgba8(const uint8_t* src, uint8_t* dst, uint32_t tile_px, PixelFormat format) {
+  const size_t in_row = size_t(tile_px) * bytesPerPixel(format), out_row = size_t(tile_px) * 4;
+  for (uint32_t y = 0; y < tile_px; ++y, src += in_row, dst += out_row) {
+    switch (format) {
+      case PixelFormat::kR8: rowR8<kDelta>(src, dst, tile_px); break;
+      case PixelFormat::kR16: rowR16<kDelta>(src, dst, tile_px); break;
+      case PixelFormat::kRGB8: rowRgb<kDelta, 3>(src, dst, tile_px); break;
+      case PixelFormat::kRGBA8: rowRgb<kDelta, 4>(src, dst, tile_px); break;
+    }
+  }
+}
+
+}  // namespace
+
+Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& encoding,
+                       const RawTile& raw, std::span<uint8_t> rgba) {
+  const size_t pixel_count = size_t(geometry.tile_px) * geometry.tile_px;
+  if (!isValidPixelFormat(uint32_t(geometry.format))) {
+    return Status::error(ErrorCode::kUnsupported, "decode: unknown pixel format");
+  }
+  if (rgba.size() != pixel_count * 4) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "decode: RGBA8 output holds " + std::to_string(rgba.size()) +
+                             " bytes, expected " + std::to_string(pixel_count * 4));
+  }
+  if (encoding.predictor != Predictor::kNone && encoding.predictor != Predictor::kLeftDelta) {
+    return Status::error(ErrorCode::kInvalidArgument, "unknown predictor");
+  }
+  const bool delta = encoding.predictor == Predictor::kLeftDelta;
+  if (raw.location.constant) {
+    // One pixel, expanded once, repeated; no predictor on constant tiles.
+    uint8_t one[4];
+    const uint8_t* p = raw.location.constant_pixel;
+    tileToRgba8<false>(p, one, 1, geometry.format);
+    for (size_t i = 0; i < pixel_count; ++i) std::memcpy(rgba.data() + 4 * i, one, 4);
+    return Status::ok();
+  }
+  // Decompression and every payload check is decodeTile's, with the
+  // predictor left in; the inverse then runs fused with the expansion.
+  StoreEncoding stored = encoding;
+  stored.predictor = Predictor::kNone;
+  if (geometry.format == PixelFormat::kRGBA8) {
+    Status status = decodeTile(geometry, stored, raw, rgba);
+    if (!status) return status;
+    if (delta) tileToRgba8<true>(rgba.data(), rgba.data(), geometry.tile_px, geometry.format);
+    return Status::ok();
+  }
+  thread_local std::vector<uint8_t> scratch;
+  scratch.resize(geometry.tileBytes());
+  Status status = decodeTile(geometry, stored, raw, scratch);
+  if (!status) return status;
+  if (delta) {
+    tileToRgba8<true>(scratch.data(), rgba.data(), geometry.tile_px, geometry.format);
+  } else {
+    tileToRgba8<false>(scratch.data(), rgba.data(), geometry.tile_px, geometry.format);
   }
   return Status::ok();
 }

@@ -105,7 +105,11 @@ size_t maxStoredBytes(size_t tile_bytes, Compression compression);
 
 // Number of tiles covered by page (px, py) of a level (edge pages are
 // clipped to the level's tile grid).
-inline uint32_t pagesAlong(uint32_t tiles) { return (tiles + kPageTiles - 1) / kPageTiles; }
+// Computed in 64 bits: tiles_x may be as large as 2^32 - 1, where the 32-bit
+// sum tiles + 63 would wrap to a page count of 0.
+inline uint32_t pagesAlong(uint32_t tiles) {
+  return static_cast<uint32_t>((uint64_t(tiles) + kPageTiles - 1) / kPageTiles);
+}
 inline uint32_t pageSpan(uint32_t tiles, uint32_t page) {
   const uint32_t begin = page * kPageTiles;
   const uint32_t end = std::min<uint64_t>(uint64_t(begin) + kPageTiles, tiles);

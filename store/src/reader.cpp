@@ -111,6 +111,7 @@ Status TileStoreReader::Impl::openImpl() {
   if (::fstat(fd, &file_stat) != 0) {
     return bad(ErrorCode::kIo, std::string("fstat: ") + fileio::errnoText(errno));
   }
+  if (S_ISDIR(file_stat.st_mode)) return bad(ErrorCode::kIo, "is a directory, not a tile store");
   if (!S_ISREG(file_stat.st_mode)) return bad(ErrorCode::kIo, "not a regular file");
   const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
 
@@ -126,7 +127,7 @@ Status TileStoreReader::Impl::openImpl() {
   if (std::memcmp(header, format::kMagic, sizeof(format::kMagic)) != 0) {
     return bad(ErrorCode::kBadMagic, "not a clipstream tile store (bad magic)");
   }
-  if (header_read < format::kOffHeaderBytes + 4) {
+  if (header_read < format::kOffVersion + 4) {
     return bad(ErrorCode::kTruncated, "file ends inside the header");
   }
   const uint32_t version = format::get32(header + format::kOffVersion);

@@ -342,8 +342,12 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
   } else {
     const size_t max_bytes = format::maxStoredBytes(impl.geometry.tileBytes(),
                                                     impl.options.encoding.compression);
-    if (tile.payload.empty() || tile.payload.size() > max_bytes ||
-        tile.payload.size() != tile.location.stored_bytes) {
+    // Uncompressed payloads are exactly one raw tile (the reader rejects
+    // any other size), so a short one is refused here, not found later.
+    const bool size_ok = impl.options.encoding.compression == Compression::kNone
+                             ? tile.payload.size() == impl.geometry.tileBytes()
+                             : !tile.payload.empty() && tile.payload.size() <= max_bytes;
+    if (!size_ok || tile.payload.size() != tile.location.stored_bytes) {
       return Status::error(ErrorCode::kInvalidArgument,
                            format::keyText(key) + ": payload size " +
                                std::to_string(tile.payload.size()) + " is invalid");
@@ -626,7 +630,7 @@ Status TileStoreWriter::Impl::finishLocked() {
 
   if (options.fsync && ::fsync(main_fd) != 0) {
     const int err = errno;
-    return Status::error(err == ENOSPC ? ErrorCode::kNoSpace : ErrorCode::kIo,
+    return Status::error(err == ENOSPC || err == EDQUOT ? ErrorCode::kNoSpace : ErrorCode::kIo,
                          "fsync " + main_temp + ": " + fileio::errnoText(err));
   }
   if (::rename(main_temp.c_str(), path.c_str()) != 0) {

@@ -64,6 +64,17 @@ std::string problemLine(const TileStoreReader::Problem& problem) {
   return key + ": " + errorCodeName(problem.status.code) + ": " + message;
 }
 
+// Text from the file shown on a terminal: control bytes (newlines, escape
+// sequences, NUL) become '?' so the CRS stays on its one line.
+std::string printableText(const std::string& text) {
+  std::string out = text;
+  for (char& c : out) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte < 0x20 || byte == 0x7f) c = '?';
+  }
+  return out;
+}
+
 void printText(const std::string& path, const StoreInfo& info,
                const std::vector<LevelStats>* stats) {
   const PyramidGeometry& g = info.geometry;
@@ -87,7 +98,8 @@ void printText(const std::string& path, const StoreInfo& info,
     const double* t = info.geo.transform;
     std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n",
                 t[0], t[3], t[1], t[5], t[2], t[4]);
-    std::printf("CRS          %s\n", info.geo.crs.empty() ? "(none)" : info.geo.crs.c_str());
+    std::printf("CRS          %s\n",
+                info.geo.crs.empty() ? "(none)" : printableText(info.geo.crs).c_str());
   } else {
     std::printf("georeference none\n");
   }
@@ -237,6 +249,11 @@ int main(int argc, char** argv) {
     }
     if (!verify_status) exit_code = kExitCorrupt;
   }
-  if (json) std::printf("%s\n", json_out.dump(2).c_str());
+  // The CRS text comes from the file and need not be valid UTF-8: replace
+  // bad sequences instead of letting dump() throw.
+  if (json) {
+    std::printf("%s\n",
+                json_out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+  }
   return exit_code;
 }

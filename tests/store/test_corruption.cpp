@@ -205,5 +205,27 @@ TEST_F(StoreCorruption, WrongMagicVersionAndTrailingBytesAreNamed) {
             ErrorCode::kNotFound);
 }
 
+TEST_F(StoreCorruption, VersionIsReportedFromTheFirstTwelveBytes) {
+  // Magic and version are all a reader needs to say "a newer format": a
+  // 12-byte prefix of a version-2 file is kBadVersion, not kTruncated.
+  std::vector<uint8_t> bytes(m_bytes.begin(), m_bytes.begin() + 12);
+  bytes[8] = 2;
+  testutil::writeFile(m_damaged, bytes, bytes.size());
+  std::unique_ptr<TileStoreReader> reader;
+  Status status = TileStoreReader::open(m_damaged, &reader);
+  EXPECT_EQ(status.code, ErrorCode::kBadVersion) << status.toString();
+  testutil::writeFile(m_damaged, bytes, 11);
+  status = TileStoreReader::open(m_damaged, &reader);
+  EXPECT_EQ(status.code, ErrorCode::kTruncated) << status.toString();
+}
+
+TEST_F(StoreCorruption, DirectoryIsNamedAsADirectory) {
+  std::unique_ptr<TileStoreReader> reader;
+  const Status status = TileStoreReader::open(m_dir.string(), &reader);
+  EXPECT_EQ(status.code, ErrorCode::kIo);
+  EXPECT_NE(status.message.find("is a directory"), std::string::npos) << status.message;
+  EXPECT_EQ(reader, nullptr);
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -97,5 +97,53 @@ TEST_F(InfoTool, OpenErrorsExitNonZeroWithAMessage) {
   EXPECT_EQ(runInfo("--no-such-flag").exit_code, 1);
 }
 
+TEST_F(InfoTool, BadInputsGiveOneLineAndExitTwo) {
+  const std::string empty = (m_dir / "empty.cst").string();
+  testutil::writeFile(empty, {}, 0);
+  // The first bytes of a JFIF file.
+  const std::vector<uint8_t> jpeg = {0xff, 0xd8, 0xff, 0xe0, 0x00, 0x10, 'J', 'F', 'I', 'F', 0x00,
+                                     0x01, 0x01, 0x00, 0x00, 0x01, 0x00, 0x01, 0x00, 0x00};
+  const std::string jpeg_path = (m_dir / "photo.jpg").string();
+  testutil::writeFile(jpeg_path, jpeg, jpeg.size());
+  const std::string sub = (m_dir / "sub").string();
+  std::filesystem::create_directories(sub);
+  const struct {
+    std::string path;
+    const char* expect;
+  } cases[] = {{empty, "truncated"}, {jpeg_path, "bad magic"}, {sub, "is a directory"},
+               {(m_dir / "absent.cst").string(), "not found"}};
+  for (const auto& c : cases) {
+    for (const char* flags : {"", "--verify ", "--json "}) {
+      const RunResult result = runInfo(std::string(flags) + "'" + c.path + "'");
+      EXPECT_EQ(result.exit_code, 2) << flags << c.path << ": " << result.output;
+      EXPECT_NE(result.output.find(c.expect), std::string::npos) << result.output;
+      EXPECT_NE(result.output.find(c.path), std::string::npos) << result.output;
+      // One line: the message, then the newline that ends it.
+      EXPECT_EQ(result.output.find('\n'), result.output.size() - 1) << result.output;
+    }
+  }
+}
+
+TEST_F(InfoTool, CrsTextThatIsNotUtf8OrHasControlBytesIsPrintedSafely) {
+  // The CRS comes from the file: invalid UTF-8 once made --json throw
+  // (and abort); a newline or escape must not break the one-line field.
+  WriterOptions options;
+  options.fsync = false;
+  options.geo.present = true;
+  options.geo.crs = "EPSG:\xff\xfe\n\x1b[2Jx";
+  const std::string path = (m_dir / "odd_crs.cst").string();
+  ASSERT_TRUE(testutil::writeStore(path, m_geometry, options).isOk());
+  const RunResult json = runInfo("--json '" + path + "'");
+  EXPECT_EQ(json.exit_code, 0) << json.output;
+  EXPECT_NE(json.output.find("\"crs\": \"EPSG:"), std::string::npos) << json.output;
+  const RunResult text = runInfo("'" + path + "'");
+  EXPECT_EQ(text.exit_code, 0) << text.output;
+  EXPECT_EQ(text.output.find('\x1b'), std::string::npos) << text.output;
+  const size_t crs = text.output.find("CRS ");
+  ASSERT_NE(crs, std::string::npos) << text.output;
+  const std::string line = text.output.substr(crs, text.output.find('\n', crs) - crs);
+  EXPECT_NE(line.find("[2Jx"), std::string::npos) << line;
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -1,6 +1,8 @@
 // Write -> read round trips over geometries, pixel formats and encodings.
 #include "store_test_util.h"
 
+#include "format.h"  // private: the page-grid rule shared by reader and writer
+
 #include <tuple>
 
 namespace clipstream {
@@ -104,6 +106,21 @@ TEST(StoreGeometry, LevelsHalveWithCeilingDownToOneTile) {
   EXPECT_EQ(g.levelCount(), 14u);
 }
 
+TEST(StoreGeometry, PageCountDoesNotWrapAtTheLargestTileGrid) {
+  // tiles_x may be up to 2^32 - 1; ceil(tiles / 64) must not wrap to 0 (it
+  // did in 32 bits, leaving an empty page directory that lookups indexed).
+  EXPECT_EQ(format::pagesAlong(0xFFFFFFFFu), 0x4000000u);
+  EXPECT_EQ(format::pagesAlong(0xFFFFFFC1u), 0x3FFFFFFu + 1);
+  EXPECT_EQ(format::pagesAlong(64), 1u);
+  EXPECT_EQ(format::pagesAlong(65), 2u);
+  EXPECT_EQ(format::pageSpan(0xFFFFFFFFu, 0x3FFFFFF), 63u);
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(uint64_t(0xFFFFFFFFu) * 16, 16, 16, PixelFormat::kR8, &g));
+  EXPECT_EQ(g.levels[0].tiles_x, 0xFFFFFFFFu);
+  EXPECT_EQ(uint64_t(format::pagesAlong(g.levels[0].tiles_x)) * format::kPageTiles,
+            uint64_t(0xFFFFFFFFu) + 1);
+}
+
 TEST(StoreEncode, ConstantTilesHaveNoPayloadAndKeepTheirValue) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(256, 256, 16, PixelFormat::kRGB8, &g));
@@ -196,6 +213,32 @@ TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   EXPECT_EQ(reader->info().geo.transform[0], 0.0);
   EXPECT_EQ(reader->info().geo.transform[1], 1.0);
   std::filesystem::remove_all(dir);
+}
+
+TEST(StoreDecode, RejectsBytesAfterTheZstdFrame) {
+  // A payload is exactly one frame. ZSTD_decompressDCtx alone would accept a
+  // trailing skippable frame (or a second frame that fits), so the decoder
+  // checks the frame length itself.
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(16, 16, 16, PixelFormat::kRGB8, &g));
+  StoreEncoding encoding;  // zstd + left delta
+  EncodedTile encoded;
+  ASSERT_TRUE(encodeTile(g, encoding, {}, testutil::makeTile(g, {}, false), &encoded).isOk());
+  RawTile raw;
+  raw.location = encoded.location;
+  raw.payload = encoded.payload;
+  std::vector<uint8_t> pixels(g.tileBytes());
+  ASSERT_TRUE(decodeTile(g, encoding, raw, pixels).isOk());
+  // Skippable frame: magic 0x184D2A50, zero-length body.
+  for (uint8_t b : {0x50, 0x2A, 0x4D, 0x18, 0x00, 0x00, 0x00, 0x00}) raw.payload.push_back(b);
+  raw.location.stored_bytes = static_cast<uint32_t>(raw.payload.size());
+  Status status = decodeTile(g, encoding, raw, pixels);
+  EXPECT_EQ(status.code, ErrorCode::kCorruptTile) << status.toString();
+  EXPECT_NE(status.message.find("exactly one zstd frame"), std::string::npos) << status.message;
+  // A truncated frame is reported too, never read past.
+  raw.payload.assign(encoded.payload.begin(), encoded.payload.end() - 1);
+  raw.location.stored_bytes = static_cast<uint32_t>(raw.payload.size());
+  EXPECT_EQ(decodeTile(g, encoding, raw, pixels).code, ErrorCode::kCorruptTile);
 }
 
 TEST(StoreEncode, PredictorRoundTripsEveryFormatAtWrapAround) {

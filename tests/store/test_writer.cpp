@@ -2,6 +2,7 @@
 #include "store_test_util.h"
 
 #include "file_io.h"  // private: exercised directly for the disk-full path
+#include "format.h"   // private: tile checksum for hand-made payloads
 
 #include <fcntl.h>
 
@@ -98,6 +99,32 @@ TEST(TileStoreWriter, RejectsDuplicateTilesAndBadGeometry) {
   bad = g;
   bad.levels.pop_back();
   EXPECT_EQ(TileStoreWriter::create(path, bad, {}, &writer).code, ErrorCode::kInvalidArgument);
+  EXPECT_TRUE(testutil::listDir(dir).empty());
+  std::filesystem::remove_all(dir);
+}
+
+TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
+  // The reader refuses any other size, so the writer must not store one.
+  const auto dir = testutil::tempDir("short_raw");
+  const std::string path = (dir / "out.cst").string();
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(64, 64, 16, PixelFormat::kRGB8, &g));
+  WriterOptions options;
+  options.encoding.compression = Compression::kNone;
+  std::unique_ptr<TileStoreWriter> writer;
+  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  EncodedTile encoded;
+  ASSERT_TRUE(encodeTile(g, options.encoding, {0, 1, 1}, testutil::makeTile(g, {0, 1, 1}, false),
+                         &encoded).isOk());
+  ASSERT_EQ(encoded.payload.size(), g.tileBytes());
+  EncodedTile shorter = encoded;
+  shorter.payload.resize(g.tileBytes() - 3);
+  shorter.location.stored_bytes = static_cast<uint32_t>(shorter.payload.size());
+  shorter.location.checksum = format::tileChecksum(shorter.payload.data(), shorter.payload.size());
+  EXPECT_EQ(writer->write(std::move(shorter)).code, ErrorCode::kInvalidArgument);
+  // The slot was not taken: the real tile still goes in.
+  EXPECT_TRUE(writer->write(std::move(encoded)).isOk());
+  writer.reset();
   EXPECT_TRUE(testutil::listDir(dir).empty());
   std::filesystem::remove_all(dir);
 }

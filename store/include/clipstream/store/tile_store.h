@@ -144,10 +144,19 @@ Status encodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
 
 // Decodes a raw tile (checksum already verified) into `pixels`, which must
 // hold exactly geometry.tileBytes() bytes. The inverse of encodeTile(); pure
-// and thread-safe. kCorruptTile if the payload does not decode to exactly
-// that size; never reads outside raw.payload.
+// and thread-safe. kCorruptTile if the payload is not exactly one zstd frame
+// (when compressed) or does not decode to exactly that size; never reads
+// outside raw.payload.
 Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding,
                   const RawTile& raw, std::span<uint8_t> pixels);
+
+// decodeTile() straight to RGBA8: `rgba` must hold exactly tile_px^2 * 4
+// bytes. R8/R16 become grey (R16 keeps the high byte), RGB8 gets A = 255.
+// Same checks and errors as decodeTile(); the predictor inverse runs fused
+// with the expansion (one pass, per-thread scratch, no allocation per tile
+// once warm). Pure and thread-safe.
+Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& encoding,
+                       const RawTile& raw, std::span<uint8_t> rgba);
 
 // Writes a store atomically: everything goes to a temporary file next to the
 // final path, which appears (fsync + rename) only in finish(). Destroying an
@@ -171,7 +180,9 @@ class TileStoreWriter {
   TileStoreWriter& operator=(const TileStoreWriter&) = delete;
 
   // Stores one encoded tile. Each tile of the pyramid must be written exactly
-  // once, in any order. kNoSpace when the disk is full.
+  // once, in any order. kInvalidArgument if the payload disagrees with its
+  // location (size, checksum) or is too large (uncompressed: not exactly
+  // tileBytes()); kNoSpace when the disk is full.
   Status write(EncodedTile&& tile);
 
   // Marks every tile in [x0, x1) x [y0, y1) of `level` as constant with

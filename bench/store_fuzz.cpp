@@ -1,0 +1,195 @@
+// libFuzzer driver for TileStoreReader: opens a mutated store and reads,
+// locates, verifies and decodes every tile. Built only with
+// -DCLIPSTREAM_FUZZ=ON (clang); see docs/tile-store.md for the format.
+//
+// Input: one control byte, then the store bytes. Control bit 0 re-seals the
+// mutated bytes (recomputes every checksum it can find and the file size
+// field) so mutations reach the checks behind the checksums; without it the
+// checksums themselves are attacked.
+//
+//   CLIPSTREAM_FUZZ_SEEDS=corpus ./store_fuzz -runs=0   # write seed stores
+//   ./store_fuzz -max_total_time=300 -timeout=10 corpus
+#include "format.h"
+
+#include <clipstream/store/tile_store.h>
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace clipstream;
+
+bool inFile(uint64_t offset, uint64_t bytes, size_t size) {
+  return offset <= size && bytes <= size - offset;
+}
+
+// Recomputes tile, page, directory, level-table, metadata and header
+// checksums wherever the (mutated) offsets still point inside the buffer.
+void reseal(std::vector<uint8_t>& b) {
+  if (b.size() < format::kHeaderBytes) return;
+  uint8_t* h = b.data();
+  format::put64(h + format::kOffFileBytes, b.size());
+  const uint64_t table_offset = format::get64(h + format::kOffLevelTableOffset);
+  const uint64_t table_bytes = format::get64(h + format::kOffLevelTableBytes);
+  const uint32_t levels = format::get32(h + format::kOffLevelCount);
+  if (levels <= format::kMaxLevels && table_bytes >= format::kChecksumBytes &&
+      inFile(table_offset, table_bytes, b.size())) {
+    const uint64_t body = table_bytes - format::kChecksumBytes;
+    for (uint64_t l = 0; l < levels && (l + 1) * format::kLevelEntryBytes <= body; ++l) {
+      const uint8_t* e = h + table_offset + l * format::kLevelEntryBytes;
+      const uint64_t payload_offset = format::get64(e + 32);
+      const uint64_t dir_offset = format::get64(e + 48);
+      const uint64_t dir_bytes = format::get64(e + 56);
+      if (dir_bytes < format::kChecksumBytes || !inFile(dir_offset, dir_bytes, b.size())) continue;
+      const uint64_t dir_body = dir_bytes - format::kChecksumBytes;
+      for (uint64_t p = 0; p + format::kPageEntryBytes <= dir_body; p += format::kPageEntryBytes) {
+        uint8_t* d = h + dir_offset + p;
+        const uint64_t page_offset = format::get64(d);
+        const uint32_t page_bytes = format::get32(d + 8);
+        if (!inFile(page_offset, page_bytes, b.size())) continue;
+        for (uint32_t t = 0; t + format::kTileEntryBytes <= page_bytes;
+             t += format::kTileEntryBytes) {
+          uint8_t* te = h + page_offset + t;
+          const uint64_t rel = format::get64(te);
+          const uint32_t stored = format::get32(te + 8);
+          if (stored == 0 || rel > UINT64_MAX - payload_offset ||
+              !inFile(payload_offset + rel, stored, b.size())) {
+            continue;
+          }
+          format::put32(te + 12, format::tileChecksum(h + payload_offset + rel, stored));
+        }
+        format::put64(d + 24, format::checksum64(h + page_offset, page_bytes));
+      }
+      format::put64(h + dir_offset + dir_body, format::checksum64(h + dir_offset, dir_body));
+    }
+    format::put64(h + table_offset + body, format::checksum64(h + table_offset, body));
+  }
+  const uint64_t meta_offset = format::get64(h + format::kOffMetadataOffset);
+  const uint64_t meta_bytes = format::get64(h + format::kOffMetadataBytes);
+  if (meta_bytes >= format::kChecksumBytes && inFile(meta_offset, meta_bytes, b.size())) {
+    const uint64_t body = meta_bytes - format::kChecksumBytes;
+    format::put64(h + meta_offset + body, format::checksum64(h + meta_offset, body));
+  }
+  format::put64(h + format::kHeaderChecksumOffset,
+                format::checksum64(h, format::kHeaderChecksumOffset));
+}
+
+std::string scratchPath() {
+  const char* dir = std::getenv("TMPDIR");
+  return std::string(dir ? dir : "/tmp") + "/clipstream_store_fuzz_" + std::to_string(::getpid()) +
+         ".cst";
+}
+
+void writeBytes(const std::string& path, const uint8_t* data, size_t size) {
+  std::FILE* file = std::fopen(path.c_str(), "wb");
+  if (file == nullptr) std::abort();
+  if (size > 0 && std::fwrite(data, 1, size, file) != size) std::abort();
+  std::fclose(file);
+}
+
+// Small stores covering every structure: edge pages, constant tiles and
+// pages, every pixel format, both compressions, a georeference.
+void writeSeeds(const std::string& dir) {
+  struct Seed {
+    uint64_t w, h;
+    uint32_t tile;
+    PixelFormat format;
+    Compression compression;
+    Predictor predictor;
+  };
+  const Seed seeds[] = {
+      {150, 70, 16, PixelFormat::kRGB8, Compression::kZstd, Predictor::kLeftDelta},
+      {40, 33, 16, PixelFormat::kR16, Compression::kNone, Predictor::kLeftDelta},
+      {70, 20, 16, PixelFormat::kRGBA8, Compression::kZstd, Predictor::kNone},
+      {16, 16, 16, PixelFormat::kR8, Compression::kNone, Predictor::kNone},
+  };
+  int n = 0;
+  for (const Seed& s : seeds) {
+    PyramidGeometry g;
+    if (!makePyramidGeometry(s.w, s.h, s.tile, s.format, &g)) std::abort();
+    WriterOptions options;
+    options.fsync = false;
+    options.encoding.compression = s.compression;
+    options.encoding.predictor = s.predictor;
+    options.geo.present = (n % 2) == 0;
+    options.geo.crs = "EPSG:2992";
+    const std::string path = dir + "/seed" + std::to_string(n) + ".store";
+    std::unique_ptr<TileStoreWriter> writer;
+    if (!TileStoreWriter::create(path, g, options, &writer)) std::abort();
+    const size_t bpp = bytesPerPixel(g.format);
+    for (uint32_t l = 0; l < g.levelCount(); ++l) {
+      for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
+        for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+          std::vector<uint8_t> pixels(g.tileBytes());
+          const bool constant = (x + y + l) % 3 == 0;
+          for (size_t i = 0; i < pixels.size(); ++i) {
+            pixels[i] = uint8_t(constant ? (i % bpp) * 50 + l : i * 7 + x * 13 + y * 29 + l);
+          }
+          EncodedTile encoded;
+          if (!encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded) ||
+              !writer->write(std::move(encoded))) {
+            std::abort();
+          }
+        }
+      }
+    }
+    if (!writer->finish()) std::abort();
+    FILE* in = std::fopen(path.c_str(), "rb");
+    std::vector<uint8_t> bytes(1, 0);
+    for (int c; (c = std::fgetc(in)) != EOF;) bytes.push_back(uint8_t(c));
+    std::fclose(in);
+    ::unlink(path.c_str());
+    for (uint8_t control : {0, 1}) {
+      bytes[0] = control;
+      writeBytes(dir + "/seed" + std::to_string(n) + "_" + std::to_string(control), bytes.data(),
+                 bytes.size());
+    }
+    ++n;
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  if (const char* dir = std::getenv("CLIPSTREAM_FUZZ_SEEDS")) writeSeeds(dir);
+  return 0;
+}
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  if (size == 0) return 0;
+  std::vector<uint8_t> bytes(data + 1, data + size);
+  if (data[0] & 1) reseal(bytes);
+  static const std::string path = scratchPath();
+  writeBytes(path, bytes.data(), bytes.size());
+
+  std::unique_ptr<TileStoreReader> reader;
+  if (!TileStoreReader::open(path, &reader)) return 0;
+  const PyramidGeometry& g = reader->geometry();
+  // Keep each run short: skip pathological tile sizes' pixel work.
+  if (g.tileBytes() > (size_t(4) << 20)) return 0;
+  std::vector<LevelStats> stats;
+  (void)reader->levelStats(&stats);
+  std::vector<uint8_t> pixels;
+  uint64_t budget = 4096;  // tile reads per input
+  for (uint32_t l = 0; l < g.levelCount() && budget > 0; ++l) {
+    for (uint32_t y = 0; y < g.levels[l].tiles_y && budget > 0; ++y) {
+      for (uint32_t x = 0; x < g.levels[l].tiles_x && budget > 0; ++x, --budget) {
+        TileLocation location;
+        (void)reader->locate({l, x, y}, &location);
+        (void)reader->readTile({l, x, y}, &pixels);
+      }
+    }
+  }
+  uint64_t tiles = 0;
+  for (const LevelInfo& level : g.levels) tiles += uint64_t(level.tiles_x) * level.tiles_y;
+  if (tiles <= 4096) {
+    std::vector<TileStoreReader::Problem> problems;
+    (void)reader->verifyAll(&problems, 10, {}, 1);
+  }
+  return 0;
+}
