@@ -1,0 +1,32 @@
+// Renderer tunables in one place, each with the reason for its value. The
+// shaders receive the ones they need as #defines (see shaders.cpp), so the
+// C++ and GLSL sides can never disagree.
+//
+// Thread-safe: constants only.
+#pragma once
+
+#include <cstdint>
+
+namespace clipstream::renderer_config {
+
+// Uniform arrays in the ground shader are sized for this many pyramid
+// levels; 2^31 texels a side at 128-px tiles needs 25, so 32 leaves room.
+inline constexpr uint32_t kMaxLevels = 32;
+
+// Tiles uploaded per frame when the caller does not say: 16 tiles of 128^2
+// RGBA8 are 1 MiB, about 1.5 ms of glTexSubImage3D on llvmpipe.
+inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
+
+// Simulated frame pacing for clipstream-fly: every frame advances path time
+// by this much, whatever the real render time, so runs are deterministic.
+inline constexpr double kSimulatedFrameSeconds = 1.0 / 60.0;
+
+// Colour written where the view ray misses the textured ground (sky, or
+// outside the texture). Tests compare against the same constant.
+inline constexpr uint8_t kSkyRgba[4] = {46, 51, 64, 255};
+
+// Frames kept in flight between the render thread and the PNG writer
+// thread; a slower disk makes the render thread skip saving, never wait.
+inline constexpr uint32_t kMaxQueuedPngFrames = 4;
+
+}  // namespace clipstream::renderer_config

@@ -1,0 +1,40 @@
+// OpenGL 4.5 core contexts: a headless one through EGL (tests, benchmarks,
+// clipstream-fly) and the GLFW window of clipstream-view (window.h).
+//
+// Owned by the GL thread: a context is made current on the thread that
+// creates it and every GL call of the renderer happens on that thread.
+#pragma once
+
+#include <clipstream/store/types.h>
+
+#include <memory>
+#include <string>
+
+namespace clipstream {
+
+class HeadlessContext {
+ public:
+  // Creates an OpenGL 4.5 core context without any window or surface and
+  // makes it current on the calling thread. Tries Mesa's surfaceless EGL
+  // platform first, then every EGL device (EGL_EXT_platform_device) so a
+  // machine with a GPU driver but no Mesa works too. kUnavailable with the
+  // EGL error text when none gives a context (tests then skip).
+  static Status create(std::unique_ptr<HeadlessContext>* out);
+  ~HeadlessContext();
+  HeadlessContext(const HeadlessContext&) = delete;
+  HeadlessContext& operator=(const HeadlessContext&) = delete;
+
+  // "surfaceless: llvmpipe (LLVM 15.0.6, 256 bits) / 4.5 (Core Profile) Mesa 22.3.6"
+  const std::string& describe() const { return m_description; }
+
+ private:
+  HeadlessContext() = default;
+  void* m_display = nullptr;  // EGLDisplay
+  void* m_context = nullptr;  // EGLContext
+  std::string m_description;
+};
+
+// Returns the GL_RENDERER / GL_VERSION pair of the current context.
+std::string currentGlDescription();
+
+}  // namespace clipstream

@@ -1,0 +1,196 @@
+// The clipmap on the GPU and the ground it draws.
+//
+// Owned by the GL thread: every method must be called on the thread whose
+// context was current at create(). Tile pixels are shared_ptr-held so the
+// double-buffered mode can upload them a second time a frame later without
+// copying.
+#pragma once
+
+#include <clipstream/renderer/clipmap.h>
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/streamer.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace clipstream {
+
+// How stack tiles reach the texture the shader samples.
+enum class Buffering {
+  kSingle,             // one set of layers: upload straight into what is sampled
+  kDoubleUploadTwice,  // two sets; a tile goes to the back set, and again a frame later
+  kDoubleCopy,         // two sets; the second copy is glCopyImageSubData on the GPU
+};
+const char* bufferingName(Buffering buffering);
+
+enum class Overlay { kOff = 0, kLevels = 1 };
+
+struct RendererConfig {
+  uint32_t clip_tiles = 0;     // from the plan (ClipmapPlan::clip_tiles)
+  uint32_t pyramid_level = 0;  // from the plan (ClipmapPlan::pyramid_level)
+  Buffering buffering = Buffering::kDoubleUploadTwice;
+};
+
+struct UploadStats {
+  uint32_t tiles = 0;          // new tiles this frame (stack and pyramid)
+  uint32_t second_copies = 0;  // tiles re-uploaded / copied into the other set
+  double upload_ms = 0.0;      // wall time of all of the frame's texture work below
+  double coarser_mips_ms = 0.0;  // mip-1 copies (level L + 1 under level L's window)
+  double usable_ms = 0.0;      // usable map: compute and upload
+};
+
+class ClipmapRenderer {
+ public:
+  // Compiles the shaders and allocates the textures: the stack array (one
+  // or two sets of pyramid_level + 1 layers of slots^2 tiles, where slots is
+  // clip_tiles rounded up to even plus 2; layer L < pyramid_level holds
+  // level L in mip 0 and level L + 1 over the same ground in mip 1; layer
+  // pyramid_level holds the whole coarse pyramid as its mip chain) and the
+  // usable map. kInvalidArgument for a zero clip or a
+  // pyramid level outside the geometry; kUnavailable if GL fails (with the
+  // shader log).
+  static Status create(const PyramidGeometry& geometry, const RendererConfig& config,
+                       std::unique_ptr<ClipmapRenderer>* out);
+  ~ClipmapRenderer();
+  ClipmapRenderer(const ClipmapRenderer&) = delete;
+  ClipmapRenderer& operator=(const ClipmapRenderer&) = delete;
+
+  // Frame protocol: beginFrame(), any number of uploadTile(), then
+  // setResidency()/setMaxTextureLod(), endUploads(), draw(). beginFrame()
+  // brings the back set up to date with the front (double-buffered modes).
+  void beginFrame();
+
+  // Uploads one RGBA8 tile (tile_px^2 * 4 bytes; other sizes are ignored and
+  // counted). Stack levels go to the slot toroidalSlot() names; levels at or
+  // above pyramid_level go to the pyramid layer's mip chain, in every set,
+  // once (a pyramid tile already loaded is skipped).
+  void uploadTile(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba);
+
+  // Windows and resident flags of the stack levels after this frame's
+  // uploads (FrameHandoff::residency). Turned into the usable map.
+  void setResidency(const std::vector<LevelResidency>& residency);
+  void setMaxTextureLod(uint32_t level) { m_max_texture_lod = level; }
+
+  // Publishes the frame's uploads: writes the usable map and, when
+  // double-buffered and anything changed, swaps the sets.
+  void endUploads();
+
+  // All of the above for one streamer handoff.
+  void applyHandoff(const FrameHandoff& handoff);
+
+  // Draws the ground seen by `camera` into the bound framebuffer (whole
+  // viewport; the caller clears it to kSkyRgba first or uses clearSky()).
+  void draw(const Camera& camera, const Viewport& viewport);
+  static void clearSky();
+
+  void setOverlay(Overlay overlay) { m_overlay = overlay; }
+  Overlay overlay() const { return m_overlay; }
+
+  // Test hook: puts every stack tile `bias` slots off its true slot
+  // (toroidalSlot(x + bias)), a deliberately wrong toroidal offset.
+  void setTestSlotBias(int64_t bias) { m_test_slot_bias = bias; }
+
+  // True once every tile of every level >= pyramid_level was uploaded.
+  bool pyramidComplete() const { return m_pyramid_missing == 0; }
+  uint32_t pyramidTilesMissing() const { return m_pyramid_missing; }
+
+  const UsableMap& usableMap() const { return m_front_map; }
+  const UploadStats& lastUploads() const { return m_stats; }
+  uint64_t textureBytes() const { return m_texture_bytes; }
+  uint32_t rejectedTiles() const { return m_rejected_tiles; }
+  const RendererConfig& config() const { return m_config; }
+
+ private:
+  ClipmapRenderer() = default;
+  struct Pending {
+    TileKey key;
+    std::shared_ptr<const std::vector<uint8_t>> rgba;
+  };
+  void uploadStack(uint32_t set, const TileKey& key, const uint8_t* rgba);
+  void uploadPyramid(const TileKey& key, const uint8_t* rgba);
+  void fillCoarserMips(uint32_t set);
+  uint32_t setCount() const { return m_config.buffering == Buffering::kSingle ? 1 : 2; }
+  uint32_t slot(int64_t tile, uint32_t period) const {
+    return toroidalSlot(tile + m_test_slot_bias, period);
+  }
+
+  PyramidGeometry m_geometry;
+  RendererConfig m_config;
+  uint32_t m_slots = 0;  // slot period: clip_tiles rounded up to even, plus 2 (see create())
+  uint32_t m_mips = 0;   // mips of the stack array: 0 = level L, 1 = level L + 1, ...
+  // Two builds of the ground shader: without and with the overlay. A
+  // uniform switch would cost the overlay's arithmetic on every fragment
+  // (llvmpipe runs both sides of a branch), about 0.6 ms per 640x360 frame.
+  uint32_t m_program[2] = {0, 0};
+  uint32_t m_vao = 0;
+  uint32_t m_stack[2] = {0, 0};
+  uint32_t m_usable_tex[2] = {0, 0};
+  uint32_t m_front = 0;           // index of the set the shader samples
+  // Which tile each slot holds, per set and stack level (x | y << 32;
+  // kNoTile = none): mip 0 slots (period m_slots) and mip 1 slots (period
+  // m_slots / 2, the next coarser level over this level's window).
+  static constexpr uint64_t kNoTile = ~uint64_t(0);
+  std::vector<std::vector<uint64_t>> m_mip0_tile[2];
+  std::vector<std::vector<uint64_t>> m_mip1_tile[2];
+  std::vector<Pending> m_pending; // landed in the front set, not yet in the back
+  std::vector<LevelResidency> m_residency;
+  UsableMap m_front_map;
+  bool m_changed = false;
+  uint32_t m_max_texture_lod = 0;
+  Overlay m_overlay = Overlay::kOff;
+  int64_t m_test_slot_bias = 0;
+  std::vector<uint8_t> m_pyramid_have;  // per pyramid tile, 1 = uploaded
+  std::vector<size_t> m_pyramid_first;  // index of each pyramid level's first tile
+  uint32_t m_pyramid_missing = 0;
+  uint32_t m_rejected_tiles = 0;
+  uint64_t m_texture_bytes = 0;
+  UploadStats m_stats;
+  double m_issue_ms = 0.0;
+};
+
+// An offscreen framebuffer: RGBA8 colour + 24-bit depth, with readback.
+// Owned by the GL thread.
+class OffscreenTarget {
+ public:
+  // kUnavailable if the framebuffer is incomplete.
+  static Status create(const Viewport& viewport, std::unique_ptr<OffscreenTarget>* out);
+  ~OffscreenTarget();
+  OffscreenTarget(const OffscreenTarget&) = delete;
+  OffscreenTarget& operator=(const OffscreenTarget&) = delete;
+
+  void bind() const;  // binds the FBO for drawing and sets the GL viewport
+  // Reads the colour buffer as RGBA8, top row first (waits for the GPU).
+  void readRgba(std::vector<uint8_t>* rgba) const;
+  const Viewport& viewport() const { return m_viewport; }
+
+ private:
+  OffscreenTarget() = default;
+  Viewport m_viewport;
+  uint32_t m_fbo = 0, m_color = 0, m_depth = 0;
+};
+
+// Binds the window's default framebuffer and sets the GL viewport to it.
+// GL thread only.
+void bindWindowFramebuffer(const Viewport& framebuffer);
+
+// Baseline for benchmarks: the same ground from one ordinary mipmapped 2D
+// texture (hardware trilinear). Owned by the GL thread.
+class PlainTextureRenderer {
+ public:
+  // `rgba` holds width*height*4 bytes, top row first.
+  static Status create(const uint8_t* rgba, uint32_t width_px, uint32_t height_px,
+                       std::unique_ptr<PlainTextureRenderer>* out);
+  ~PlainTextureRenderer();
+  PlainTextureRenderer(const PlainTextureRenderer&) = delete;
+  PlainTextureRenderer& operator=(const PlainTextureRenderer&) = delete;
+  void draw(const Camera& camera, const Viewport& viewport);
+
+ private:
+  PlainTextureRenderer() = default;
+  uint32_t m_program = 0, m_vao = 0, m_texture = 0;
+  uint32_t m_width_px = 0, m_height_px = 0;
+};
+
+}  // namespace clipstream

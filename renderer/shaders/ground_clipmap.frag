@@ -1,0 +1,90 @@
+// The clipmap ground: level from screen-space derivatives of the level-0
+// texel position, clamped to MaxTextureLOD and to per-tile residency (the
+// usable map), trilinear across levels. Stack level L is layer L of one
+// array texture, placed toroidally (GL_REPEAT does the wrap), with level
+// L + 1 over the same ground in its mip 1; the pyramid level's layer holds
+// the whole coarse pyramid as its mip chain. So every fragment makes one
+// trilinear fetch, whatever its level: llvmpipe runs both sides of a
+// divergent branch, and a second texture path cost about 2 ms per 640x360
+// frame (docs/benchmarks.md).
+layout(location = 0) out vec4 outColor;
+
+uniform sampler2DArray uStack;    // layer l: level l (mip 0), l + 1 (mip 1); pyramid layer: chain
+uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 4
+uniform int uPyramidLevel;
+uniform float uMinLod;            // MaxTextureLOD from the streamer
+uniform float uMaxLod;            // coarsest level
+uniform int uSlots;               // slot period (tiles)
+// Per level, computed in double on the CPU: xy = the camera in tiles
+// relative to the slot cell it lies in (a multiple of the slot period, so
+// only small numbers reach the GPU), zw = that cell's index mod 4.
+uniform vec4 uCamCell[MAX_LEVELS];
+uniform float uInvTileTexels[MAX_LEVELS];  // 1 / (tile_px * 2^level)
+uniform float uTilePx;
+
+vec3 levelTint(int level) {
+  const vec3 k[8] = vec3[8](vec3(1, 0.2, 0.2), vec3(1, 0.6, 0.1), vec3(1, 1, 0.2), vec3(0.3, 1, 0.3),
+                            vec3(0.2, 1, 1), vec3(0.3, 0.5, 1), vec3(0.7, 0.3, 1), vec3(1, 0.4, 0.8));
+  return k[level & 7];
+}
+
+// Position of the ground point in level `level`'s slots (tiles, [0, slots)),
+// its slot, and the code the usable map holds for it: 1 + the tile's slot
+// period (tile / slots) mod 4 per axis, so a tile outside the window never
+// passes for the one sharing its slot. Slot = tile mod slots is
+// toroidalSlot() of clipmap.h; usableCode() there writes the code.
+vec2 slotPosition(int level, vec2 rel, out ivec2 slot, out uint code) {
+  vec4 cam = uCamCell[level];
+  float slots = float(uSlots);
+  vec2 tq = cam.xy + rel * uInvTileTexels[level];
+  vec2 tile = floor(tq);  // relative to the cell: small, exact
+  vec2 period = floor((tile + 0.5) / slots);
+  vec2 s = tile - period * slots;
+  slot = ivec2(s);
+  vec2 p4 = mod(cam.zw + period, 4.0);
+  code = 1u + uint(p4.x) + 4u * uint(p4.y);
+  return s + (tq - tile);
+}
+
+void main() {
+  bool onGround;
+  vec2 rel = groundRel(onGround);
+  // Derivatives first, while every lane of the quad is still running.
+  vec2 gx = dFdx(rel);
+  vec2 gy = dFdy(rel);
+  if (!onGround) discard;
+  float lambda = log2(max(max(length(gx), length(gy)), 1e-30));
+  float lod = clamp(lambda, uMinLod, uMaxLod);
+  int wanted = int(lod);
+  // One lookup at the wanted level gives the finest usable level for this
+  // spot (usable map, bits 4-7); a tile outside the wanted level's window
+  // (code mismatch) falls back to the always complete pyramid level.
+  int level = uPyramidLevel;
+  {
+    ivec2 slot;
+    uint code;
+    int probe = min(wanted, max(uPyramidLevel - 1, 0));
+    slotPosition(probe, rel, slot, code);
+    uint v = texelFetch(uUsable, ivec3(slot, probe), 0).r;
+    if (wanted < uPyramidLevel && (v & 15u) == code) level = min(wanted + int(v >> 4), uPyramidLevel);
+  }
+  float used = max(lod, float(level));
+  // Levels past the pyramid level are mips of the pyramid layer.
+  int layer = min(level, uPyramidLevel);
+  // Cell-relative is enough here: GL_REPEAT wraps onto the slots.
+  vec2 tq = uCamCell[layer].xy + rel * uInvTileTexels[layer];
+  vec4 color = textureLod(uStack, vec3(tq / float(uSlots), float(layer)), used - float(layer));
+#ifdef OVERLAY
+  {
+    color.rgb = mix(color.rgb, levelTint(int(used)), 0.4);
+    vec2 stripe = fract((gl_FragCoord.xy) / 8.0);
+    if (level > wanted && stripe.x + stripe.y > 1.0) color.rgb = vec3(1.0, 0.0, 0.0);  // missing
+    if (lambda < uMinLod && uMinLod > 0.0 && stripe.x < 0.25) color.rgb = vec3(0.0, 0.0, 1.0);  // throttled
+    if (level < uPyramidLevel) {
+      vec2 f = fract(tq);
+      if (min(min(f.x, f.y), min(1.0 - f.x, 1.0 - f.y)) * uTilePx < 1.0) color.rgb *= 0.3;
+    }
+  }
+#endif
+  outColor = vec4(color.rgb, 1.0);
+}

@@ -1,0 +1,8 @@
+// Private: the one place GL headers are included. glvnd's libOpenGL exports
+// every core entry point, so prototypes are enough (no loader).
+#pragma once
+
+#ifndef GL_GLEXT_PROTOTYPES
+#define GL_GLEXT_PROTOTYPES 1
+#endif
+#include <GL/glcorearb.h>

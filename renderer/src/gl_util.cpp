@@ -1,0 +1,92 @@
+#include "gl_util.h"
+
+#include "gl.h"
+#include "shaders.h"
+
+#include <clipstream/renderer/config.h>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+namespace clipstream::gl_util {
+namespace {
+
+Status compile(GLenum kind, const std::string& source, GLuint* out) {
+  GLuint shader = glCreateShader(kind);
+  const char* text = source.c_str();
+  glShaderSource(shader, 1, &text, nullptr);
+  glCompileShader(shader);
+  GLint ok = 0;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    GLint len = 0;
+    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &len);
+    std::string log(size_t(len > 0 ? len : 1), '\0');
+    glGetShaderInfoLog(shader, len, nullptr, log.data());
+    glDeleteShader(shader);
+    return Status::error(ErrorCode::kUnavailable, "shader compile failed: " + log);
+  }
+  *out = shader;
+  return Status::ok();
+}
+
+}  // namespace
+
+Status buildGroundProgram(const char* fragment_body, uint32_t* program,
+                          const std::string& extra_defines) {
+  const std::string header = "#version 450 core\n#define MAX_LEVELS " +
+                             std::to_string(renderer_config::kMaxLevels) + "\n" + extra_defines;
+  GLuint vs = 0, fs = 0;
+  Status s = compile(GL_VERTEX_SHADER, header + shaders::k_fullscreen_vert, &vs);
+  if (!s) return s;
+  s = compile(GL_FRAGMENT_SHADER,
+              header + shaders::k_ground_ray_glsl + "\n" + fragment_body, &fs);
+  if (!s) {
+    glDeleteShader(vs);
+    return s;
+  }
+  GLuint p = glCreateProgram();
+  glAttachShader(p, vs);
+  glAttachShader(p, fs);
+  glLinkProgram(p);
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  GLint ok = 0;
+  glGetProgramiv(p, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    GLint len = 0;
+    glGetProgramiv(p, GL_INFO_LOG_LENGTH, &len);
+    std::string log(size_t(len > 0 ? len : 1), '\0');
+    glGetProgramInfoLog(p, len, nullptr, log.data());
+    glDeleteProgram(p);
+    return Status::error(ErrorCode::kUnavailable, "shader link failed: " + log);
+  }
+  *program = p;
+  return Status::ok();
+}
+
+void setRayUniforms(uint32_t program, const Camera& camera, const Viewport& viewport,
+                    double image_width_px, double image_height_px) {
+  const glm::dvec3 f = camera.forward(), r = camera.right(), u = camera.up();
+  const double tan_half = std::tan(camera.vfov_rad * 0.5);
+  const double aspect = double(viewport.width_px) / double(std::max(viewport.height_px, 1u));
+  glProgramUniform3f(program, glGetUniformLocation(program, "uForward"), float(f.x), float(f.y),
+                     float(f.z));
+  glProgramUniform3f(program, glGetUniformLocation(program, "uRight"), float(r.x), float(r.y),
+                     float(r.z));
+  glProgramUniform3f(program, glGetUniformLocation(program, "uUp"), float(u.x), float(u.y),
+                     float(u.z));
+  glProgramUniform2f(program, glGetUniformLocation(program, "uNdcScale"),
+                     float(tan_half * aspect), float(tan_half));
+  glProgramUniform2f(program, glGetUniformLocation(program, "uViewportPx"),
+                     float(viewport.width_px), float(viewport.height_px));
+  glProgramUniform1f(program, glGetUniformLocation(program, "uHeight"), float(camera.position.y));
+  // Subtracted in double: the rectangle relative to the camera.
+  glProgramUniform4f(program, glGetUniformLocation(program, "uImageRel"),
+                     float(-camera.position.x), float(-camera.position.z),
+                     float(image_width_px - camera.position.x),
+                     float(image_height_px - camera.position.z));
+}
+
+}  // namespace clipstream::gl_util

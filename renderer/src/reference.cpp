@@ -1,0 +1,221 @@
+// CPU reference renderer and image helpers. See reference.h.
+#include <clipstream/renderer/reference.h>
+
+#include <clipstream/renderer/config.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <tuple>
+
+namespace clipstream {
+namespace {
+
+struct Ray {
+  glm::dvec3 forward, right, up;
+  double sx = 0, sy = 0;  // ndc scale
+  double w = 1, h = 1;
+};
+
+// Camera-relative ground point of pixel centre (px, py); false if the ray
+// does not go down. Mirrors groundRel() in ground_ray.glsl.
+bool rel(const Ray& r, const Camera& cam, double px, double py, glm::dvec2* out) {
+  const double nx = 2.0 * px / r.w - 1.0, ny = 1.0 - 2.0 * py / r.h;
+  const glm::dvec3 dir = r.forward + r.right * (nx * r.sx) + r.up * (ny * r.sy);
+  if (-dir.y <= 1e-12 || cam.position.y <= 0.0) return false;
+  const double t = cam.position.y / -dir.y;
+  *out = {dir.x * t, dir.z * t};
+  return true;
+}
+
+void bilinear(const PyramidGeometry& g, const TexelFunction& texel, uint32_t level, double u0,
+              double v0, double out[4]) {
+  const double scale = std::ldexp(1.0, -int(level));
+  const double cx = u0 * scale - 0.5, cy = v0 * scale - 0.5;
+  const double fx = std::floor(cx), fy = std::floor(cy);
+  const double wx = cx - fx, wy = cy - fy;
+  const int64_t max_x = int64_t(g.levels[level].tiles_x) * g.tile_px - 1;
+  const int64_t max_y = int64_t(g.levels[level].tiles_y) * g.tile_px - 1;
+  double acc[4] = {0, 0, 0, 0};
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) {
+      const int64_t x = std::clamp<int64_t>(int64_t(fx) + i, 0, max_x);
+      const int64_t y = std::clamp<int64_t>(int64_t(fy) + j, 0, max_y);
+      uint8_t px[4];
+      texel(level, uint64_t(x), uint64_t(y), px);
+      const double w = (i ? wx : 1.0 - wx) * (j ? wy : 1.0 - wy);
+      for (int c = 0; c < 4; ++c) acc[c] += w * px[c];
+    }
+  }
+  for (int c = 0; c < 4; ++c) out[c] = acc[c];
+}
+
+}  // namespace
+
+void renderReference(const PyramidGeometry& geometry, const TexelFunction& texel,
+                     const Camera& camera, const Viewport& viewport,
+                     const ReferenceOptions& options, std::vector<uint8_t>* rgba) {
+  const uint32_t W = viewport.width_px, H = viewport.height_px;
+  rgba->assign(size_t(W) * H * 4, 0);
+  Ray r;
+  r.forward = camera.forward();
+  r.right = camera.right();
+  r.up = camera.up();
+  r.sy = std::tan(camera.vfov_rad * 0.5);
+  r.sx = r.sy * double(W) / double(std::max(H, 1u));
+  r.w = W;
+  r.h = H;
+  const double max_lod = double(geometry.levelCount() - 1);
+  const double min_lod = std::min(double(options.min_level), max_lod);
+  for (uint32_t py = 0; py < H; ++py) {
+    for (uint32_t px = 0; px < W; ++px) {
+      uint8_t* out = rgba->data() + (size_t(py) * W + px) * 4;
+      std::copy_n(renderer_config::kSkyRgba, 4, out);
+      glm::dvec2 p;
+      if (!rel(r, camera, px + 0.5, py + 0.5, &p)) continue;
+      const double u0 = camera.position.x + p.x, v0 = camera.position.z + p.y;
+      if (u0 < 0 || v0 < 0 || u0 >= double(geometry.width_px) || v0 >= double(geometry.height_px))
+        continue;
+      // Derivatives as a GPU quad forms them: GL rows count from the
+      // bottom, quads pair rows (0,1), (2,3)... of that count.
+      const uint32_t gl_row = H - 1 - py;
+      const uint32_t qx = px & ~1u, q_gl_row = gl_row & ~1u;
+      const double top_py = double(H - 1 - q_gl_row) + 0.5;  // quad's first GL row, top-left coords
+      glm::dvec2 a, b, c, d;
+      double lambda = std::numeric_limits<double>::infinity();
+      if (rel(r, camera, qx + 0.5, py + 0.5, &a) && rel(r, camera, qx + 1.5, py + 0.5, &b) &&
+          rel(r, camera, px + 0.5, top_py, &c) && rel(r, camera, px + 0.5, top_py - 1.0, &d)) {
+        const double rho = std::max(glm::length(b - a), glm::length(d - c));
+        lambda = std::log2(std::max(rho, 1e-30));
+      }
+      const double lod = std::clamp(lambda, min_lod, max_lod);
+      const uint32_t level = uint32_t(std::floor(lod));
+      const double f = lod - level;
+      double ca[4], cb[4] = {0, 0, 0, 0};
+      bilinear(geometry, texel, level, u0, v0, ca);
+      if (f > 0.0 && level + 1 < geometry.levelCount())
+        bilinear(geometry, texel, level + 1, u0, v0, cb);
+      for (int k = 0; k < 3; ++k)
+        out[k] = uint8_t(std::clamp(std::lround(ca[k] * (1.0 - f) + cb[k] * f), 0l, 255l));
+      out[3] = 255;
+    }
+  }
+}
+
+TexelFunction texelsFromSource(std::shared_ptr<TileSource> source) {
+  struct Cache {
+    std::mutex mutex;
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, std::vector<uint8_t>> tiles;
+  };
+  auto cache = std::make_shared<Cache>();
+  return [source, cache](uint32_t level, uint64_t x, uint64_t y, uint8_t rgba[4]) {
+    const uint32_t tp = source->geometry().tile_px;
+    const TileKey key{level, uint32_t(x / tp), uint32_t(y / tp)};
+    std::lock_guard<std::mutex> lock(cache->mutex);
+    auto it = cache->tiles.find({key.level, key.x, key.y});
+    if (it == cache->tiles.end()) {
+      std::vector<uint8_t> px;
+      if (!source->fetch(key, &px)) px.clear();
+      it = cache->tiles.emplace(std::make_tuple(key.level, key.x, key.y), std::move(px)).first;
+    }
+    if (it->second.empty()) {
+      rgba[0] = 255, rgba[1] = 0, rgba[2] = 255, rgba[3] = 255;
+      return;
+    }
+    const uint8_t* p = it->second.data() + ((y % tp) * tp + (x % tp)) * 4;
+    std::copy_n(p, 4, rgba);
+  };
+}
+
+double psnrRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b,
+               const std::vector<uint8_t>* mask) {
+  if (a.size() != b.size() || a.empty()) return 0.0;
+  double sum = 0.0;
+  size_t count = 0;
+  for (size_t i = 0; i < a.size() / 4; ++i) {
+    if (mask != nullptr && (*mask)[i] == 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      const double d = double(a[i * 4 + c]) - double(b[i * 4 + c]);
+      sum += d * d;
+    }
+    count += 3;
+  }
+  if (count == 0 || sum == 0.0) return std::numeric_limits<double>::infinity();
+  return 10.0 * std::log10(255.0 * 255.0 / (sum / double(count)));
+}
+
+int maxAbsDiffRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  int worst = 0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    if (i % 4 != 3) worst = std::max(worst, std::abs(int(a[i]) - int(b[i])));
+  return worst;
+}
+
+namespace {
+
+class ImageSource final : public TileSource {
+ public:
+  ImageSource(std::vector<uint8_t> rgba, uint32_t w, uint32_t h, uint32_t tile_px) {
+    makePyramidGeometry(w, h, tile_px, PixelFormat::kRGBA8, &m_geometry);
+    m_levels.push_back(std::move(rgba));
+    for (uint32_t l = 1; l < m_geometry.levelCount(); ++l) {
+      const LevelInfo& fine = m_geometry.levels[l - 1];
+      const LevelInfo& info = m_geometry.levels[l];
+      const std::vector<uint8_t>& src = m_levels.back();
+      std::vector<uint8_t> dst(size_t(info.width_px) * info.height_px * 4);
+      for (uint64_t y = 0; y < info.height_px; ++y) {
+        for (uint64_t x = 0; x < info.width_px; ++x) {
+          for (int c = 0; c < 4; ++c) {
+            unsigned sum = 0;
+            for (int j = 0; j < 2; ++j)
+              for (int i = 0; i < 2; ++i) {
+                const uint64_t sx = std::min<uint64_t>(2 * x + i, fine.width_px - 1);
+                const uint64_t sy = std::min<uint64_t>(2 * y + j, fine.height_px - 1);
+                sum += src[(sy * fine.width_px + sx) * 4 + c];
+              }
+            dst[(y * info.width_px + x) * 4 + c] = uint8_t((sum + 2) / 4);
+          }
+        }
+      }
+      m_levels.push_back(std::move(dst));
+    }
+  }
+  const PyramidGeometry& geometry() const override { return m_geometry; }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    if (!m_geometry.contains(key))
+      return Status::error(ErrorCode::kOutOfRange, "image source: tile outside the pyramid");
+    const uint32_t tp = m_geometry.tile_px;
+    const LevelInfo& info = m_geometry.levels[key.level];
+    rgba->assign(size_t(tp) * tp * 4, 0);
+    for (uint32_t y = 0; y < tp; ++y) {
+      const uint64_t sy = uint64_t(key.y) * tp + y;
+      if (sy >= info.height_px) break;
+      for (uint32_t x = 0; x < tp; ++x) {
+        const uint64_t sx = uint64_t(key.x) * tp + x;
+        if (sx >= info.width_px) break;
+        std::copy_n(m_levels[key.level].data() + (sy * info.width_px + sx) * 4, 4,
+                    rgba->data() + (size_t(y) * tp + x) * 4);
+      }
+    }
+    return Status::ok();
+  }
+  std::string describe() const override {
+    return "image:" + std::to_string(m_geometry.width_px) + "x" +
+           std::to_string(m_geometry.height_px);
+  }
+
+ private:
+  PyramidGeometry m_geometry;
+  std::vector<std::vector<uint8_t>> m_levels;
+};
+
+}  // namespace
+
+std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t width_px,
+                                            uint32_t height_px, uint32_t tile_px) {
+  return std::make_shared<ImageSource>(std::move(rgba), width_px, height_px, tile_px);
+}
+
+}  // namespace clipstream

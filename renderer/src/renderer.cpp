@@ -1,0 +1,461 @@
+// The clipmap on the GPU. Slot rule, usable map: clipmap.cpp. Shader:
+// shaders/ground_clipmap.frag. Why double-buffering: see docs/renderer.md.
+#include <clipstream/renderer/renderer.h>
+
+#include "gl.h"
+#include "gl_util.h"
+#include "shaders.h"
+
+#include <clipstream/renderer/config.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <utility>
+
+namespace clipstream {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+GLint loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
+
+}  // namespace
+
+const char* bufferingName(Buffering buffering) {
+  switch (buffering) {
+    case Buffering::kSingle: return "single";
+    case Buffering::kDoubleUploadTwice: return "double-upload";
+    case Buffering::kDoubleCopy: return "double-copy";
+  }
+  return "?";
+}
+
+Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererConfig& config,
+                               std::unique_ptr<ClipmapRenderer>* out) {
+  out->reset();
+  if (config.clip_tiles == 0 || geometry.tile_px == 0)
+    return Status::error(ErrorCode::kInvalidArgument, "renderer: clip_tiles and tile_px must be > 0");
+  if (config.pyramid_level >= geometry.levelCount() ||
+      geometry.levelCount() > renderer_config::kMaxLevels)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "renderer: pyramid level " + std::to_string(config.pyramid_level) +
+                             " outside a pyramid of " + std::to_string(geometry.levelCount()) +
+                             " levels (at most " + std::to_string(renderer_config::kMaxLevels) + ")");
+  const LevelInfo& top = geometry.levels[config.pyramid_level];
+  if (top.tiles_x > config.clip_tiles || top.tiles_y > config.clip_tiles)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "renderer: pyramid level does not fit in one clip");
+  std::unique_ptr<ClipmapRenderer> r(new ClipmapRenderer());
+  r->m_geometry = geometry;
+  r->m_config = config;
+  // Slot period: even, so a coarser tile covers whole slot pairs in mip 1,
+  // and 2 more than the window, so the parents of a window that starts on an
+  // odd tile (clip/2 + 1 of them) never share a mip-1 slot.
+  r->m_slots = (config.clip_tiles / 2) * 2 + 2;
+  const uint64_t slots_px = uint64_t(r->m_slots) * geometry.tile_px;
+  GLint max_size = 0, max_layers = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
+  if (slots_px > uint64_t(max_size) || config.pyramid_level + 1 > uint32_t(max_layers))
+    return Status::error(ErrorCode::kUnavailable,
+                         "renderer: clip of " + std::to_string(slots_px) +
+                             " px exceeds GL_MAX_TEXTURE_SIZE " + std::to_string(max_size));
+  // Mips: enough for the pyramid layer's chain, at least 2 (level L + 1),
+  // and only while each mip halves exactly (REPEAT must wrap at the same
+  // ground distance on every mip).
+  r->m_mips = std::max(2u, geometry.levelCount() - config.pyramid_level);
+  while (r->m_mips > 2 && (slots_px % (uint64_t(1) << (r->m_mips - 1))) != 0) --r->m_mips;
+
+  for (int overlay = 0; overlay < 2; ++overlay) {
+    Status s = gl_util::buildGroundProgram(shaders::k_ground_clipmap_frag, &r->m_program[overlay],
+                                           overlay ? "#define OVERLAY 1\n" : "");
+    if (!s) return s;
+  }
+  glCreateVertexArrays(1, &r->m_vao);
+
+  const GLsizei layers = GLsizei(config.pyramid_level + 1);
+  const GLsizei usable_layers = GLsizei(std::max(config.pyramid_level, 1u));
+  const uint32_t c = r->m_slots;
+  for (uint32_t set = 0; set < r->setCount(); ++set) {
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_stack[set]);
+    glTextureStorage3D(r->m_stack[set], GLsizei(r->m_mips), GL_RGBA8, GLsizei(slots_px),
+                       GLsizei(slots_px), layers);
+    glTextureParameteri(r->m_stack[set], GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+    glTextureParameteri(r->m_stack[set], GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    // REPEAT is the toroidal wrap: a bilinear footprint crossing the slot
+    // edge reads the neighbouring tile from the other side, where it lives.
+    glTextureParameteri(r->m_stack[set], GL_TEXTURE_WRAP_S, GL_REPEAT);
+    glTextureParameteri(r->m_stack[set], GL_TEXTURE_WRAP_T, GL_REPEAT);
+    const uint8_t zero[4] = {0, 0, 0, 0};
+    for (uint32_t m = 0; m < r->m_mips; ++m)
+      glClearTexImage(r->m_stack[set], GLint(m), GL_RGBA, GL_UNSIGNED_BYTE, zero);
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_usable_tex[set]);
+    glTextureStorage3D(r->m_usable_tex[set], 1, GL_R8UI, GLsizei(c), GLsizei(c), usable_layers);
+    // Integer textures are incomplete (read as 0) with a mipmap filter.
+    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_BYTE, zero);
+    r->m_texture_bytes += slots_px * slots_px * 4 * uint64_t(layers) * 4 / 3 +
+                          uint64_t(c) * c * uint64_t(usable_layers);
+    r->m_mip0_tile[set].assign(config.pyramid_level, std::vector<uint64_t>(size_t(c) * c, kNoTile));
+    r->m_mip1_tile[set].assign(config.pyramid_level,
+                               std::vector<uint64_t>(size_t(c / 2) * (c / 2), kNoTile));
+  }
+
+  for (uint32_t l = config.pyramid_level; l < geometry.levelCount(); ++l) {
+    r->m_pyramid_first.push_back(r->m_pyramid_have.size());
+    r->m_pyramid_have.resize(r->m_pyramid_have.size() +
+                             size_t(geometry.levels[l].tiles_x) * geometry.levels[l].tiles_y, 0);
+  }
+  r->m_pyramid_missing = uint32_t(r->m_pyramid_have.size());
+  r->m_front_map = computeUsableMap(geometry, c, config.pyramid_level, {});
+  *out = std::move(r);
+  return Status::ok();
+}
+
+ClipmapRenderer::~ClipmapRenderer() {
+  glDeleteProgram(m_program[0]);
+  glDeleteProgram(m_program[1]);
+  glDeleteVertexArrays(1, &m_vao);
+  glDeleteTextures(2, m_stack);
+  glDeleteTextures(2, m_usable_tex);
+}
+
+namespace {
+uint64_t packTile(int64_t x, int64_t y) { return uint64_t(uint32_t(x)) | (uint64_t(uint32_t(y)) << 32); }
+}  // namespace
+
+void ClipmapRenderer::beginFrame() {
+  m_stats = {};
+  m_issue_ms = 0.0;
+  if (setCount() == 1 || m_pending.empty()) return;
+  const auto start = Clock::now();
+  const uint32_t back = 1 - m_front;
+  const GLsizei tp = GLsizei(m_geometry.tile_px);
+  for (const Pending& p : m_pending) {
+    if (m_config.buffering == Buffering::kDoubleCopy) {
+      const uint32_t sx = slot(p.key.x, m_slots), sy = slot(p.key.y, m_slots);
+      glCopyImageSubData(m_stack[m_front], GL_TEXTURE_2D_ARRAY, 0, GLint(sx) * tp, GLint(sy) * tp,
+                         GLint(p.key.level), m_stack[back], GL_TEXTURE_2D_ARRAY, 0,
+                         GLint(sx) * tp, GLint(sy) * tp, GLint(p.key.level), tp, tp, 1);
+      m_mip0_tile[back][p.key.level][size_t(sy) * m_slots + sx] = packTile(p.key.x, p.key.y);
+    } else {
+      uploadStack(back, p.key, p.rgba->data());
+    }
+    ++m_stats.second_copies;
+  }
+  m_pending.clear();
+  m_changed = true;
+  m_issue_ms += msSince(start);
+}
+
+void ClipmapRenderer::uploadStack(uint32_t set, const TileKey& key, const uint8_t* rgba) {
+  const GLsizei tp = GLsizei(m_geometry.tile_px);
+  const uint32_t sx = slot(key.x, m_slots), sy = slot(key.y, m_slots);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  glTextureSubImage3D(m_stack[set], 0, GLint(sx) * tp, GLint(sy) * tp, GLint(key.level), tp, tp, 1,
+                      GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+  if (key.level < m_config.pyramid_level)
+    m_mip0_tile[set][key.level][size_t(sy) * m_slots + sx] = packTile(key.x, key.y);
+}
+
+void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* rgba) {
+  // Level pyramid_level + k is mip k of the pyramid layer. It has fewer
+  // tiles than the slot period, so slot == tile position (unless a test
+  // bias shifts it), and its tiles may overhang the smaller mips: only the
+  // part inside the mip is uploaded (the rest is padding).
+  const uint32_t tp = m_geometry.tile_px;
+  const uint32_t mip = key.level - m_config.pyramid_level;
+  if (mip >= m_mips) return;
+  const uint64_t size = (uint64_t(m_slots) * tp) >> mip;
+  const uint64_t x = uint64_t(slot(key.x, m_slots)) * tp, y = uint64_t(slot(key.y, m_slots)) * tp;
+  if (x >= size || y >= size) return;
+  const uint32_t w = uint32_t(std::min<uint64_t>(tp, size - x));
+  const uint32_t h = uint32_t(std::min<uint64_t>(tp, size - y));
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(tp));
+  for (uint32_t set = 0; set < setCount(); ++set)
+    glTextureSubImage3D(m_stack[set], GLint(mip), GLint(x), GLint(y), GLint(m_config.pyramid_level),
+                        GLsizei(w), GLsizei(h), 1, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+}
+
+void ClipmapRenderer::fillCoarserMips(uint32_t set) {
+  // Mip 1 of layer L holds level L + 1 over level L's window, so a single
+  // trilinear fetch blends L and L + 1. It is copied on the GPU from where
+  // level L + 1 already lives (layer L + 1, mip 0), whenever a parent of
+  // the window is there and the mip-1 slot holds something else.
+  const GLsizei tp = GLsizei(m_geometry.tile_px);
+  const uint32_t half = m_slots / 2;
+  const uint32_t pyramid = m_config.pyramid_level;
+  for (const LevelResidency& r : m_residency) {
+    const uint32_t l = r.level;
+    if (l >= pyramid || r.window.empty()) continue;
+    const int64_t px0 = r.window.x0 / 2, px1 = (r.window.x1 - 1) / 2 + 1;
+    const int64_t py0 = r.window.y0 / 2, py1 = (r.window.y1 - 1) / 2 + 1;
+    for (int64_t py = py0; py < py1; ++py) {
+      for (int64_t px = px0; px < px1; ++px) {
+        const uint32_t dx = slot(px, half), dy = slot(py, half);
+        uint64_t& have = m_mip1_tile[set][l][size_t(dy) * half + dx];
+        if (have == packTile(px, py)) continue;
+        const uint32_t sx = slot(px, m_slots), sy = slot(py, m_slots);
+        bool present = false;
+        if (l + 1 == pyramid) {
+          const LevelInfo& info = m_geometry.levels[pyramid];
+          present = px < int64_t(info.tiles_x) && py < int64_t(info.tiles_y) &&
+                    m_pyramid_have[m_pyramid_first[0] + size_t(py) * info.tiles_x + size_t(px)];
+        } else {
+          present = m_mip0_tile[set][l + 1][size_t(sy) * m_slots + sx] == packTile(px, py);
+        }
+        if (!present) continue;
+        glCopyImageSubData(m_stack[set], GL_TEXTURE_2D_ARRAY, 0, GLint(sx) * tp, GLint(sy) * tp,
+                           GLint(l + 1), m_stack[set], GL_TEXTURE_2D_ARRAY, 1, GLint(dx) * tp,
+                           GLint(dy) * tp, GLint(l), tp, tp, 1);
+        have = packTile(px, py);
+      }
+    }
+  }
+}
+
+void ClipmapRenderer::uploadTile(const TileKey& key,
+                                 std::shared_ptr<const std::vector<uint8_t>> rgba) {
+  const size_t bytes = size_t(m_geometry.tile_px) * m_geometry.tile_px * 4;
+  if (!rgba || rgba->size() != bytes || !m_geometry.contains(key)) {
+    ++m_rejected_tiles;
+    return;
+  }
+  const auto start = Clock::now();
+  if (key.level >= m_config.pyramid_level) {
+    const size_t index = m_pyramid_first[key.level - m_config.pyramid_level] +
+                         size_t(key.y) * m_geometry.levels[key.level].tiles_x + key.x;
+    // The pyramid never changes once loaded: a tile handed over again (the
+    // streamer does not know it was preloaded) is not uploaded again.
+    if (m_pyramid_have[index]) return;
+    m_pyramid_have[index] = 1;
+    --m_pyramid_missing;
+    ++m_stats.tiles;
+    m_changed = true;
+    uploadPyramid(key, rgba->data());
+  } else if (setCount() == 1) {
+    ++m_stats.tiles;
+    m_changed = true;
+    uploadStack(0, key, rgba->data());
+  } else {
+    ++m_stats.tiles;
+    m_changed = true;
+    uploadStack(1 - m_front, key, rgba->data());
+    m_pending.push_back({key, std::move(rgba)});
+  }
+  m_issue_ms += msSince(start);
+}
+
+void ClipmapRenderer::setResidency(const std::vector<LevelResidency>& residency) {
+  m_residency = residency;
+  m_changed = true;
+}
+
+void ClipmapRenderer::endUploads() {
+  if (!m_changed) {
+    m_stats.upload_ms = m_issue_ms;
+    return;
+  }
+  const auto start = Clock::now();
+  const uint32_t target = setCount() == 1 ? 0 : 1 - m_front;
+  fillCoarserMips(target);
+  const auto mips_done = Clock::now();
+  m_stats.coarser_mips_ms = std::chrono::duration<double, std::milli>(mips_done - start).count();
+  UsableMap map = computeUsableMap(m_geometry, m_slots, m_config.pyramid_level, m_residency);
+  const uint32_t c = m_slots;
+  const bool same = map.windows == m_front_map.windows && map.finest == m_front_map.finest;
+  if (!same || setCount() == 2) {
+    // Per slot: usableCode() of the window tile in bits 0-3 and how many
+    // levels coarser its finest usable ancestor is in bits 4-7 (15 = the
+    // pyramid or further). Written for every window tile, usable or not.
+    std::vector<uint8_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
+    for (size_t l = 0; l < map.usable.size(); ++l) {
+      const TileRect& w = map.windows[l];
+      for (int64_t y = w.y0; y < w.y1; ++y)
+        for (int64_t x = w.x0; x < w.x1; ++x) {
+          const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
+          const uint32_t up = std::min<uint32_t>(map.finest[l][i] - uint32_t(l), 15);
+          flat[l * c * c + i] = uint8_t(usableCode(x, y, c) | (up << 4));
+        }
+    }
+    if (!map.usable.empty()) {
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glTextureSubImage3D(m_usable_tex[target], 0, 0, 0, 0, GLsizei(c), GLsizei(c),
+                          GLsizei(map.usable.size()), GL_RED_INTEGER, GL_UNSIGNED_BYTE, flat.data());
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    }
+  }
+  m_front_map = std::move(map);
+  m_stats.usable_ms = msSince(mips_done);
+  if (setCount() == 2) m_front = 1 - m_front;
+  m_changed = false;
+  m_issue_ms += msSince(start);
+  m_stats.upload_ms = m_issue_ms;
+}
+
+void ClipmapRenderer::applyHandoff(const FrameHandoff& handoff) {
+  beginFrame();
+  for (const ReadyTile& t : handoff.tiles) uploadTile(t.key, t.rgba);
+  setResidency(handoff.residency);
+  setMaxTextureLod(handoff.max_texture_lod);
+  endUploads();
+}
+
+void ClipmapRenderer::clearSky() {
+  const uint8_t* s = renderer_config::kSkyRgba;
+  glClearColor(s[0] / 255.0f, s[1] / 255.0f, s[2] / 255.0f, s[3] / 255.0f);
+  glClearDepth(1.0);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+}
+
+void ClipmapRenderer::draw(const Camera& camera, const Viewport& viewport) {
+  const GLuint p = m_program[m_overlay == Overlay::kOff ? 0 : 1];
+  const uint32_t pyramid = m_config.pyramid_level;
+  const double tp = m_geometry.tile_px;
+  const double clip = m_slots;
+  gl_util::setRayUniforms(p, camera, viewport, double(m_geometry.width_px),
+                          double(m_geometry.height_px));
+  // Per level, in double: the camera in tiles relative to the slot cell it
+  // lies in, and that cell's index mod 4 (see slotPosition() in the shader).
+  float cam_cell[renderer_config::kMaxLevels * 4] = {};
+  float inv_tile[renderer_config::kMaxLevels] = {};
+  for (uint32_t l = 0; l <= pyramid; ++l) {
+    const double tile_texels = tp * std::ldexp(1.0, int(l));
+    const double tx = camera.position.x / tile_texels, ty = camera.position.z / tile_texels;
+    const double cell_x = std::floor(tx / clip), cell_y = std::floor(ty / clip);
+    cam_cell[4 * l + 0] = float(tx - cell_x * clip);
+    cam_cell[4 * l + 1] = float(ty - cell_y * clip);
+    cam_cell[4 * l + 2] = float(cell_x - 4.0 * std::floor(cell_x / 4.0));
+    cam_cell[4 * l + 3] = float(cell_y - 4.0 * std::floor(cell_y / 4.0));
+    inv_tile[l] = float(1.0 / tile_texels);
+  }
+  const GLsizei n = GLsizei(pyramid + 1);
+  glProgramUniform4fv(p, loc(p, "uCamCell"), n, cam_cell);
+  glProgramUniform1fv(p, loc(p, "uInvTileTexels"), n, inv_tile);
+  glProgramUniform1i(p, loc(p, "uSlots"), GLint(clip));
+  const uint32_t max_level = std::min(m_geometry.levelCount() - 1, pyramid + m_mips - 1);
+  glProgramUniform1i(p, loc(p, "uPyramidLevel"), GLint(pyramid));
+  glProgramUniform1f(p, loc(p, "uMinLod"), float(std::min(m_max_texture_lod, max_level)));
+  glProgramUniform1f(p, loc(p, "uMaxLod"), float(max_level));
+  glProgramUniform1f(p, loc(p, "uTilePx"), float(tp));
+  glProgramUniform1i(p, loc(p, "uStack"), 0);
+  glProgramUniform1i(p, loc(p, "uUsable"), 1);
+  glBindTextureUnit(0, m_stack[setCount() == 1 ? 0 : m_front]);
+  glBindTextureUnit(1, m_usable_tex[setCount() == 1 ? 0 : m_front]);
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glDisable(GL_DEPTH_TEST);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+// ---------------------------------------------------------------------------
+
+Status OffscreenTarget::create(const Viewport& viewport, std::unique_ptr<OffscreenTarget>* out) {
+  out->reset();
+  if (viewport.width_px == 0 || viewport.height_px == 0)
+    return Status::error(ErrorCode::kInvalidArgument, "offscreen target: empty viewport");
+  std::unique_ptr<OffscreenTarget> t(new OffscreenTarget());
+  t->m_viewport = viewport;
+  glCreateRenderbuffers(1, &t->m_color);
+  glNamedRenderbufferStorage(t->m_color, GL_RGBA8, GLsizei(viewport.width_px),
+                             GLsizei(viewport.height_px));
+  glCreateRenderbuffers(1, &t->m_depth);
+  glNamedRenderbufferStorage(t->m_depth, GL_DEPTH_COMPONENT24, GLsizei(viewport.width_px),
+                             GLsizei(viewport.height_px));
+  glCreateFramebuffers(1, &t->m_fbo);
+  glNamedFramebufferRenderbuffer(t->m_fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t->m_color);
+  glNamedFramebufferRenderbuffer(t->m_fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->m_depth);
+  if (glCheckNamedFramebufferStatus(t->m_fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    return Status::error(ErrorCode::kUnavailable, "offscreen framebuffer incomplete");
+  *out = std::move(t);
+  return Status::ok();
+}
+
+OffscreenTarget::~OffscreenTarget() {
+  glDeleteFramebuffers(1, &m_fbo);
+  glDeleteRenderbuffers(1, &m_color);
+  glDeleteRenderbuffers(1, &m_depth);
+}
+
+void OffscreenTarget::bind() const {
+  glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
+  glViewport(0, 0, GLsizei(m_viewport.width_px), GLsizei(m_viewport.height_px));
+}
+
+void bindWindowFramebuffer(const Viewport& framebuffer) {
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  glViewport(0, 0, GLsizei(framebuffer.width_px), GLsizei(framebuffer.height_px));
+}
+
+void OffscreenTarget::readRgba(std::vector<uint8_t>* rgba) const {
+  const size_t row = size_t(m_viewport.width_px) * 4;
+  std::vector<uint8_t> bottom_up(row * m_viewport.height_px);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  glReadPixels(0, 0, GLsizei(m_viewport.width_px), GLsizei(m_viewport.height_px), GL_RGBA,
+               GL_UNSIGNED_BYTE, bottom_up.data());
+  rgba->resize(bottom_up.size());
+  for (uint32_t y = 0; y < m_viewport.height_px; ++y)
+    std::copy_n(bottom_up.data() + size_t(m_viewport.height_px - 1 - y) * row, row,
+                rgba->data() + size_t(y) * row);
+}
+
+// ---------------------------------------------------------------------------
+
+Status PlainTextureRenderer::create(const uint8_t* rgba, uint32_t width_px, uint32_t height_px,
+                                    std::unique_ptr<PlainTextureRenderer>* out) {
+  out->reset();
+  std::unique_ptr<PlainTextureRenderer> r(new PlainTextureRenderer());
+  Status s = gl_util::buildGroundProgram(shaders::k_ground_plain_frag, &r->m_program);
+  if (!s) return s;
+  glCreateVertexArrays(1, &r->m_vao);
+  uint32_t mips = 1;
+  while ((std::max(width_px, height_px) >> mips) > 0) ++mips;
+  glCreateTextures(GL_TEXTURE_2D, 1, &r->m_texture);
+  glTextureStorage2D(r->m_texture, GLsizei(mips), GL_RGBA8, GLsizei(width_px), GLsizei(height_px));
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glTextureSubImage2D(r->m_texture, 0, 0, 0, GLsizei(width_px), GLsizei(height_px), GL_RGBA,
+                      GL_UNSIGNED_BYTE, rgba);
+  glGenerateTextureMipmap(r->m_texture);
+  glTextureParameteri(r->m_texture, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+  glTextureParameteri(r->m_texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  r->m_width_px = width_px;
+  r->m_height_px = height_px;
+  *out = std::move(r);
+  return Status::ok();
+}
+
+PlainTextureRenderer::~PlainTextureRenderer() {
+  glDeleteProgram(m_program);
+  glDeleteVertexArrays(1, &m_vao);
+  glDeleteTextures(1, &m_texture);
+}
+
+void PlainTextureRenderer::draw(const Camera& camera, const Viewport& viewport) {
+  const GLuint p = m_program;
+  gl_util::setRayUniforms(p, camera, viewport, m_width_px, m_height_px);
+  glProgramUniform2f(p, loc(p, "uCamUv"), float(camera.position.x / m_width_px),
+                     float(camera.position.z / m_height_px));
+  glProgramUniform2f(p, loc(p, "uInvSize"), float(1.0 / m_width_px), float(1.0 / m_height_px));
+  glProgramUniform1i(p, loc(p, "uPlain"), 0);
+  glBindTextureUnit(0, m_texture);
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glDisable(GL_DEPTH_TEST);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+}  // namespace clipstream

@@ -1,0 +1,9 @@
+// Private: GLSL sources embedded at build time from renderer/shaders/.
+#pragma once
+
+namespace clipstream::shaders {
+extern const char* const k_fullscreen_vert;
+extern const char* const k_ground_ray_glsl;
+extern const char* const k_ground_clipmap_frag;
+extern const char* const k_ground_plain_frag;
+}  // namespace clipstream::shaders

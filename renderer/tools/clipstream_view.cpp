@@ -1,0 +1,242 @@
+// clipstream-view: interactive viewer. GLFW window, mouse look + WASD,
+// wheel/shift for speed, O toggles the overlay, R records the flown path to
+// JSON for clipstream-fly. Usage: docs/renderer.md.
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/flight_path.h>
+#include <clipstream/renderer/fly.h>
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <CLI/CLI.hpp>
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <numbers>
+
+using namespace clipstream;
+
+namespace {
+
+struct Input {
+  double speed_texels_s = 200.0;
+  bool overlay_toggled = false;
+  bool record_toggled = false;
+  bool dragging = false;
+  double last_x = 0, last_y = 0;
+  double d_heading = 0, d_pitch = 0;
+};
+
+Input* inputOf(GLFWwindow* w) { return static_cast<Input*>(glfwGetWindowUserPointer(w)); }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Interactive clipmap viewer (GLFW window)."};
+  std::string store_path, size = "1280x720", record_path = "recorded_path.json";
+  uint64_t procedural_px = 0, cache_mb = 512;
+  uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
+  app.add_option("store", store_path, "Tile store file (omit with --procedural)");
+  app.add_option("--procedural", procedural_px, "Procedural texture of this side instead");
+  app.add_option("--size", size, "Window WIDTHxHEIGHT");
+  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB");
+  app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame");
+  app.add_option("--record-out", record_path, "Where R writes the recorded path");
+  app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)");
+  CLI11_PARSE(app, argc, argv);
+
+  Viewport vp;
+  if (Status s = parseViewport(size, &vp); !s) {
+    std::cerr << "clipstream-view: " << s.toString() << "\n";
+    return 2;
+  }
+  std::shared_ptr<TileSource> source;
+  if (procedural_px > 0) {
+    ProceduralSpec spec;
+    spec.width_px = spec.height_px = procedural_px;
+    source = makeProceduralSource(spec);
+  } else if (!store_path.empty()) {
+    Status s;
+    source = openStoreSource(store_path, &s);
+    if (!source) {
+      std::cerr << "clipstream-view: " << s.toString() << "\n";
+      return 1;
+    }
+  }
+  if (!source) {
+    std::cerr << "clipstream-view: give a STORE or --procedural SIDE\n";
+    return 2;
+  }
+  const PyramidGeometry& g = source->geometry();
+
+  if (!glfwInit()) {
+    std::cerr << "clipstream-view: GLFW could not initialise (no display?)\n";
+    return 1;
+  }
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);  // the clip size follows the viewport
+  GLFWwindow* window = glfwCreateWindow(int(vp.width_px), int(vp.height_px), "clipstream-view",
+                                        nullptr, nullptr);
+  if (window == nullptr) {
+    std::cerr << "clipstream-view: no OpenGL 4.5 core window\n";
+    glfwTerminate();
+    return 1;
+  }
+  glfwMakeContextCurrent(window);
+  glfwSwapInterval(1);
+  Input input;
+  glfwSetWindowUserPointer(window, &input);
+  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+    if (action != GLFW_PRESS) return;
+    if (key == GLFW_KEY_O) inputOf(w)->overlay_toggled = true;
+    if (key == GLFW_KEY_R) inputOf(w)->record_toggled = true;
+    if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
+  });
+  glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
+    Input* in = inputOf(w);
+    in->speed_texels_s = std::clamp(in->speed_texels_s * std::pow(1.25, dy), 1.0, 1e9);
+  });
+  glfwSetMouseButtonCallback(window, [](GLFWwindow* w, int button, int action, int) {
+    if (button != GLFW_MOUSE_BUTTON_LEFT) return;
+    Input* in = inputOf(w);
+    in->dragging = action == GLFW_PRESS;
+    glfwGetCursorPos(w, &in->last_x, &in->last_y);
+  });
+  glfwSetCursorPosCallback(window, [](GLFWwindow* w, double x, double y) {
+    Input* in = inputOf(w);
+    if (in->dragging) {
+      in->d_heading += (x - in->last_x) * 0.003;
+      in->d_pitch -= (y - in->last_y) * 0.003;
+    }
+    in->last_x = x;
+    in->last_y = y;
+  });
+
+  Camera camera;
+  camera.position = {double(g.width_px) * 0.5, std::min<double>(std::max(g.width_px, g.height_px) * 0.2, 5000.0),
+                     double(g.height_px) * 0.5};
+  camera.pitch_rad = -0.6;
+  input.speed_texels_s = camera.position.y;
+
+  StreamerConfig sc;
+  sc.ram_budget_bytes = cache_mb << 20;
+  const ClipmapPlan first = planClipmap(g, vp, camera, sc.planner);
+  std::unique_ptr<ClipmapRenderer> renderer;
+  if (Status s = ClipmapRenderer::create(g, {first.clip_tiles, first.pyramid_level}, &renderer); !s) {
+    std::cerr << "clipstream-view: " << s.toString() << "\n";
+    return 1;
+  }
+  // The coarse pyramid first (before any frame), so there is always
+  // something correct to draw.
+  renderer->beginFrame();
+  for (uint32_t l = first.pyramid_level; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
+      }
+  renderer->endUploads();
+  Streamer streamer(source, sc);
+
+  FlightPath recording;
+  bool recording_on = false;
+  double last_key_s = -1.0;
+  const auto start = std::chrono::steady_clock::now();
+  auto last = start;
+  double title_timer = 0.0, frame_ms_avg = 0.0;
+  uint32_t frames = 0;
+  while (!glfwWindowShouldClose(window) && (max_frames == 0 || frames < max_frames)) {
+    glfwPollEvents();
+    const auto now = std::chrono::steady_clock::now();
+    const double dt = std::min(std::chrono::duration<double>(now - last).count(), 0.1);
+    const double t = std::chrono::duration<double>(now - start).count();
+    last = now;
+
+    camera.heading_rad += input.d_heading;
+    camera.pitch_rad = std::clamp(camera.pitch_rad + input.d_pitch, -1.55, 1.2);
+    input.d_heading = input.d_pitch = 0;
+    double speed = input.speed_texels_s;
+    if (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS) speed *= 10.0;
+    const glm::dvec3 fwd{std::sin(camera.heading_rad), 0.0, -std::cos(camera.heading_rad)};
+    const glm::dvec3 right = camera.right();
+    glm::dvec3 move{0.0};
+    if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move += fwd;
+    if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move -= fwd;
+    if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) move += right;
+    if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) move -= right;
+    if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) move.y += 1.0;
+    if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
+    camera.position += move * (speed * dt);
+    camera.position.y = std::max(camera.position.y, 1.0);
+
+    if (input.overlay_toggled) {
+      renderer->setOverlay(renderer->overlay() == Overlay::kOff ? Overlay::kLevels : Overlay::kOff);
+      input.overlay_toggled = false;
+    }
+    if (input.record_toggled) {
+      input.record_toggled = false;
+      recording_on = !recording_on;
+      if (recording_on) {
+        recording = FlightPath{};
+        last_key_s = -1.0;
+      } else {
+        Status s = recording.save(record_path);
+        std::cerr << (s ? "recorded path written to " + record_path : s.toString()) << "\n";
+      }
+    }
+    if (recording_on && (last_key_s < 0 || t - last_key_s >= 0.25)) {
+      // Path time counts from the first keyframe, in real seconds.
+      const double key_s = recording.keyframes.empty()
+                               ? 0.0
+                               : recording.keyframes.back().t_s + (t - last_key_s);
+      recording.keyframes.push_back({key_s, camera.position, camera.heading_rad * 180.0 / std::numbers::pi,
+                                     camera.pitch_rad * 180.0 / std::numbers::pi});
+      last_key_s = t;
+    }
+
+    const auto f0 = std::chrono::steady_clock::now();
+    streamer.update(camera, vp, t);
+    renderer->applyHandoff(streamer.takeReady(upload_tiles));
+    int fb_w = 0, fb_h = 0;
+    glfwGetFramebufferSize(window, &fb_w, &fb_h);
+    bindWindowFramebuffer({uint32_t(fb_w), uint32_t(fb_h)});
+    ClipmapRenderer::clearSky();
+    renderer->draw(camera, vp);
+    const double frame_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - f0).count();
+    frame_ms_avg = frame_ms_avg * 0.9 + frame_ms * 0.1;
+    glfwSwapBuffers(window);
+    ++frames;
+
+    title_timer += dt;
+    if (title_timer > 0.25 || frames == 1) {
+      title_timer = 0.0;
+      const StreamerStats st = streamer.stats();
+      char title[256];
+      std::snprintf(title, sizeof title,
+                    "clipstream-view | %.1f ms | lod %u | queue %llu | RAM %.0f MiB | speed %.0f/s%s%s",
+                    frame_ms_avg, st.max_texture_lod, (unsigned long long)st.queue_depth,
+                    double(st.ram_bytes) / (1 << 20), speed,
+                    renderer->overlay() == Overlay::kOff ? "" : " | overlay",
+                    recording_on ? " | REC" : "");
+      glfwSetWindowTitle(window, title);
+    }
+  }
+  if (recording_on) {
+    Status s = recording.save(record_path);
+    std::cerr << (s ? "recorded path written to " + record_path : s.toString()) << "\n";
+  }
+  streamer.shutdown();
+  renderer.reset();
+  glfwDestroyWindow(window);
+  glfwTerminate();
+  return 0;
+}

@@ -1,0 +1,211 @@
+// Accuracy measurement: frame comparison, run summaries, sampled tiles and
+// the ideal reference. Metric: PSNR over RGB (peak 255) and max abs error;
+// "bit-identical" means max abs error 0.
+#include "test_helpers.h"
+
+#include <clipstream/renderer/accuracy.h>
+#include <clipstream/renderer/reference.h>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <mutex>
+#include <set>
+
+namespace clipstream {
+namespace {
+
+#define REQUIRE_GL()                                               \
+  do {                                                             \
+    std::string why;                                               \
+    if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why; \
+  } while (0)
+
+TEST(CompareFrames, IdenticalFramesScoreTheCapAndZeroError) {
+  std::vector<uint8_t> a(40 * 4, 77);
+  const FrameError e = compareFrames(a, a);
+  EXPECT_EQ(e.psnr_db, kIdenticalPsnrDb);
+  EXPECT_EQ(e.max_abs_error, 0);
+}
+
+TEST(CompareFrames, OneChannelOffGivesTheClosedFormPsnr) {
+  // 100 pixels, one red channel off by 10: MSE = 100 / 300.
+  std::vector<uint8_t> a(100 * 4, 100), b = a;
+  b[4 * 17] = 110;
+  b[4 * 17 + 3] = 0;  // alpha is ignored
+  const FrameError e = compareFrames(a, b);
+  EXPECT_NEAR(e.psnr_db, 10.0 * std::log10(255.0 * 255.0 / (100.0 / 300.0)), 1e-9);
+  EXPECT_EQ(e.max_abs_error, 10);
+}
+
+TEST(CompareFrames, SizeMismatchIsTheWorstScore) {
+  const FrameError e = compareFrames(std::vector<uint8_t>(16, 0), std::vector<uint8_t>(32, 0));
+  EXPECT_EQ(e.psnr_db, 0.0);
+  EXPECT_EQ(e.max_abs_error, 255);
+}
+
+FrameRecord rec(uint32_t i, double psnr, bool cut = false, double ms = 1.0) {
+  FrameRecord f;
+  f.frame = i;
+  f.cut = cut;
+  f.has_error = true;
+  f.psnr_db = psnr;
+  f.max_abs_error = psnr >= kIdenticalPsnrDb ? 0 : 9;
+  f.frame_ms = ms;
+  f.tiles_loaded = 3;
+  f.ram_hits = 1;
+  f.ram_misses = 3;
+  f.gpu_hits = 3;
+  f.gpu_misses = 1;
+  return f;
+}
+
+TEST(SummarizeRun, TimeToSharpCountsFramesFromEachCut) {
+  // Cut at 0: sharp at frame 3 (3 frames). Cut at 5: sharp at once (0).
+  // Cut at 7: never sharp before the end (-1).
+  std::vector<FrameRecord> f = {rec(0, 20, true), rec(1, 25), rec(2, 39.9), rec(3, 41), rec(4, 99),
+                                rec(5, 45, true), rec(6, 99), rec(7, 12, true), rec(8, 29)};
+  const RunSummary s = summarizeRun(f, 9, 1234);
+  ASSERT_EQ(s.time_to_sharp_frames.size(), 3u);
+  EXPECT_EQ(s.time_to_sharp_frames[0], 3);
+  EXPECT_EQ(s.time_to_sharp_frames[1], 0);
+  EXPECT_EQ(s.time_to_sharp_frames[2], -1);
+  EXPECT_EQ(s.time_to_sharp_max, -1);
+  EXPECT_DOUBLE_EQ(s.time_to_sharp_mean, 1.5);
+  EXPECT_EQ(s.frames_below_30db, 4u);
+  EXPECT_EQ(s.identical_frames, 2u);
+  EXPECT_DOUBLE_EQ(s.psnr_min_db, 12.0);
+  EXPECT_NEAR(s.psnr_mean_db, (20 + 25 + 39.9 + 41 + 99 + 45 + 99 + 12 + 29) / 9.0, 1e-9);
+  EXPECT_DOUBLE_EQ(s.ram_hit_rate, 0.25);
+  EXPECT_DOUBLE_EQ(s.gpu_hit_rate, 0.75);
+  EXPECT_DOUBLE_EQ(s.over_fetch_ratio, 27.0 / 9.0);
+  EXPECT_EQ(s.peak_rss_bytes, 1234u);
+  const nlohmann::json j = nlohmann::json::parse(s.toJson(), nullptr, false);
+  ASSERT_FALSE(j.is_discarded());
+  EXPECT_EQ(j["time_to_sharp_frames"].size(), 3u);
+}
+
+TEST(SummarizeRun, FrameTimePercentilesAreNearestRank) {
+  std::vector<FrameRecord> f;
+  for (uint32_t i = 0; i < 100; ++i) f.push_back(rec(i, 50, i == 0, double(i + 1)));
+  const RunSummary s = summarizeRun(f, 0, 0);
+  EXPECT_DOUBLE_EQ(s.frame_ms_p50, 51.0);  // index round(0.5 * 99) = 50
+  EXPECT_DOUBLE_EQ(s.frame_ms_p99, 99.0);  // index round(0.99 * 99) = 98
+  EXPECT_DOUBLE_EQ(s.frame_ms_max, 100.0);
+  EXPECT_EQ(s.over_fetch_ratio, 0.0) << "not measured without sampled tiles";
+}
+
+TEST(IsCut, ContinuousMotionIsNotACutButATeleportIs) {
+  Camera a, b, c;
+  a.position = {100, 50, 100};
+  b.position = {110, 50, 100};  // 10 texels, like the step before
+  c.position = {5000, 50, 100};
+  EXPECT_FALSE(isCut(a, b, 10.0));
+  EXPECT_TRUE(isCut(b, c, 10.0));
+  EXPECT_TRUE(isCut(a, c, 0.0)) << "a jump after standing still";
+}
+
+// Counts the distinct tiles a source is asked for.
+class CountingSource final : public TileSource {
+ public:
+  explicit CountingSource(std::shared_ptr<TileSource> inner) : m_inner(std::move(inner)) {}
+  const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    keys.insert(packTileKey(key));
+    return m_inner->fetch(key, rgba);
+  }
+  std::string describe() const override { return "counting"; }
+  std::set<uint64_t> keys;
+
+ private:
+  std::shared_ptr<TileSource> m_inner;
+  std::mutex m_mutex;
+};
+
+Camera obliqueCamera() {
+  Camera c;
+  c.position = {1000.5, 60.0, 1100.25};
+  c.heading_rad = 0.3;
+  c.pitch_rad = -0.6;
+  return c;
+}
+
+TEST(SampledTiles, AreExactlyTheTilesTheCpuReferenceFetches) {
+  auto counting = std::make_shared<CountingSource>(
+      makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128));
+  const Viewport vp{256, 192};
+  std::vector<uint8_t> rgba;
+  renderReference(counting->geometry(), texelsFromSource(counting), obliqueCamera(), vp, {}, &rgba);
+  std::unordered_set<uint64_t> sampled;
+  sampledTiles(counting->geometry(), obliqueCamera(), vp, &sampled);
+  EXPECT_GT(sampled.size(), 4u);
+  EXPECT_EQ(std::set<uint64_t>(sampled.begin(), sampled.end()), counting->keys);
+}
+
+TEST(IdealReference, IsBitIdenticalToAFullyLoadedClipmap) {
+  REQUIRE_GL();
+  auto source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+  const Viewport vp{256, 192};
+  const Camera cam = obliqueCamera();
+  std::unique_ptr<IdealReference> ideal;
+  Status s = IdealReference::create(source, vp, {}, &ideal);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  std::vector<uint8_t> ref;
+  // Render a different view first, so the second render exercises the
+  // toroidal window update rather than a fresh load.
+  Camera away = cam;
+  away.position.x += 300;
+  ASSERT_TRUE(ideal->render(away, &ref).isOk());
+  ASSERT_TRUE(ideal->render(cam, &ref).isOk());
+
+  const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, {});
+  std::unique_ptr<ClipmapRenderer> full;
+  ASSERT_TRUE(ClipmapRenderer::create(source->geometry(), {plan.clip_tiles, plan.pyramid_level,
+                                                           Buffering::kSingle}, &full).isOk());
+  std::unique_ptr<OffscreenTarget> target;
+  ASSERT_TRUE(OffscreenTarget::create(vp, &target).isOk());
+  test::loadPlan(*full, *source, plan);
+  const auto gpu = test::renderFrame(*full, *target, cam);
+  const FrameError e = compareFrames(ref, gpu);
+  EXPECT_EQ(e.max_abs_error, 0) << "PSNR " << e.psnr_db;
+}
+
+TEST(IdealReference, MatchesTheCpuGroundTruth) {
+  REQUIRE_GL();
+  auto source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+  const Viewport vp{256, 192};
+  std::unique_ptr<IdealReference> ideal;
+  ASSERT_TRUE(IdealReference::create(source, vp, {}, &ideal).isOk());
+  std::vector<uint8_t> ref, truth;
+  ASSERT_TRUE(ideal->render(obliqueCamera(), &ref).isOk());
+  renderReference(source->geometry(), texelsFromSource(source), obliqueCamera(), vp, {}, &truth);
+  const FrameError e = compareFrames(ref, truth);
+  std::printf("  ideal reference vs CPU ground truth: %.2f dB, max abs %d\n", e.psnr_db, e.max_abs_error);
+  EXPECT_GE(e.psnr_db, 35.0);
+}
+
+TEST(Scenario, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
+  REQUIRE_GL();
+  ScenarioOptions o;
+  o.source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
+  o.frames = 20;
+  o.rest_frames = 40;
+  o.viewport = {192, 108};
+  o.speed = 4.0;
+  o.streamer.io_threads = 2;
+  o.reference_every = 5;
+  ScenarioResult r;
+  const Status s = runScenario(o, &r);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_EQ(r.frames.size(), 60u);
+  EXPECT_EQ(r.final_max_abs_error, 0) << "last PSNR " << r.frames.back().psnr_db;
+  EXPECT_EQ(r.render_thread_fetches, 0u);
+  EXPECT_GT(r.summary.tiles_sampled, 0u);
+  EXPECT_GT(r.summary.over_fetch_ratio, 0.0);
+}
+
+}  // namespace
+}  // namespace clipstream

@@ -1,0 +1,285 @@
+// GPU tests of the clipmap renderer against the CPU reference. Headless
+// llvmpipe; each skips when no EGL context can be created. Metric: PSNR over
+// RGB; thresholds: >= 35 dB "matches", >= 50 dB "same frame".
+#include "test_helpers.h"
+
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/frame_writer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+namespace clipstream {
+namespace {
+
+constexpr double kMatchDb = 35.0;
+constexpr double kSameDb = 50.0;
+const Viewport kViewport{256, 192};
+
+#define REQUIRE_GL()                                        \
+  do {                                                      \
+    std::string why;                                        \
+    if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why; \
+  } while (0)
+
+struct Scene {
+  std::shared_ptr<TileSource> source;
+  ClipmapPlan plan;
+  std::unique_ptr<ClipmapRenderer> renderer;
+  std::unique_ptr<OffscreenTarget> target;
+};
+
+Scene makeScene(std::shared_ptr<TileSource> source, const Camera& camera,
+                Buffering buffering = Buffering::kDoubleUploadTwice) {
+  Scene s;
+  s.source = std::move(source);
+  s.plan = planClipmap(s.source->geometry(), kViewport, camera, {});
+  RendererConfig config{s.plan.clip_tiles, s.plan.pyramid_level, buffering};
+  Status st = ClipmapRenderer::create(s.source->geometry(), config, &s.renderer);
+  EXPECT_TRUE(st.isOk()) << st.toString();
+  st = OffscreenTarget::create(kViewport, &s.target);
+  EXPECT_TRUE(st.isOk()) << st.toString();
+  return s;
+}
+
+std::shared_ptr<TileSource> patternSource() {
+  return makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+}
+
+Camera obliqueCamera() {
+  Camera c;
+  c.position = {1000.5, 60.0, 1100.25};
+  c.heading_rad = 0.3;
+  c.pitch_rad = -0.6;
+  return c;
+}
+
+std::vector<uint8_t> reference(const TileSource& source, std::shared_ptr<TileSource> shared,
+                               const Camera& camera, uint32_t min_level = 0) {
+  std::vector<uint8_t> ref;
+  ReferenceOptions options;
+  options.min_level = min_level;
+  renderReference(source.geometry(), texelsFromSource(std::move(shared)), camera, kViewport,
+                  options, &ref);
+  return ref;
+}
+
+// PSNR, printed so the margin to the threshold shows in the test log.
+double psnrLogged(const char* what, const std::vector<uint8_t>& a, const std::vector<uint8_t>& b,
+                  const std::vector<uint8_t>* mask = nullptr) {
+  const double db = psnrRgb(a, b, mask);
+  std::printf("  PSNR %s: %.2f dB\n", what, db);
+  return db;
+}
+
+size_t groundPixels(const std::vector<uint8_t>& rgba) {
+  size_t n = 0;
+  for (size_t i = 0; i < rgba.size(); i += 4)
+    if (!std::equal(rgba.begin() + long(i), rgba.begin() + long(i) + 4, renderer_config::kSkyRgba)) ++n;
+  return n;
+}
+
+TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
+  REQUIRE_GL();
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(patternSource(), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam);
+  test::dumpPpm("match_gpu", gpu, kViewport);
+  test::dumpPpm("match_ref", ref, kViewport);
+  EXPECT_GT(groundPixels(ref), ref.size() / 16) << "a quarter of the view must be ground";
+  EXPECT_GE(psnrLogged("gpu vs reference", gpu, ref), kMatchDb);
+}
+
+TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
+  REQUIRE_GL();
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(patternSource(), cam);
+  ASSERT_TRUE(s.renderer);
+  s.renderer->setTestSlotBias(1);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam);
+  EXPECT_LT(psnrLogged("wrong offset vs reference", gpu, ref), kMatchDb);
+}
+
+TEST(ClipmapRender, FallsBackToThePyramidWhenNoStackTileIsResident) {
+  REQUIRE_GL();
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(patternSource(), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan, /*finest_loaded=*/s.plan.pyramid_level);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam, s.plan.pyramid_level);
+  EXPECT_EQ(groundPixels(gpu), groundPixels(ref)) << "a missing tile must never leave a hole";
+  EXPECT_GE(psnrLogged("pyramid fallback vs reference", gpu, ref), kMatchDb);
+}
+
+TEST(ClipmapRender, MaxTextureLodClampsTheFinestLevel) {
+  REQUIRE_GL();
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(patternSource(), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  s.renderer->setMaxTextureLod(1);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  EXPECT_GE(psnrLogged("lod>=1 vs reference(min 1)", gpu, reference(*s.source, s.source, cam, 1)), kMatchDb);
+  EXPECT_LT(psnrRgb(gpu, reference(*s.source, s.source, cam, 0)),
+            psnrRgb(gpu, reference(*s.source, s.source, cam, 1)));
+}
+
+class ToroidalUpdate : public ::testing::TestWithParam<Buffering> {};
+
+TEST_P(ToroidalUpdate, EqualsAFreshRenderAfterTheCameraMoves) {
+  REQUIRE_GL();
+  Camera a = obliqueCamera();
+  Camera b = a;
+  b.position += glm::dvec3(300.0, 0.0, -260.0);  // several tiles on levels 0 and 1
+  Scene moved = makeScene(patternSource(), a, GetParam());
+  ASSERT_TRUE(moved.renderer);
+  test::loadPlan(*moved.renderer, *moved.source, moved.plan);
+  const ClipmapPlan plan_b = planClipmap(moved.source->geometry(), kViewport, b, {});
+  ASSERT_NE(plan_b.stack[0].window, moved.plan.stack[0].window) << "camera must move the window";
+  // Only the tiles entering each window are uploaded: the toroidal update.
+  moved.renderer->beginFrame();
+  size_t entered = 0;
+  for (size_t l = 0; l < plan_b.stack.size(); ++l) {
+    const TileRect& w = plan_b.stack[l].window;
+    for (int64_t y = w.y0; y < w.y1; ++y)
+      for (int64_t x = w.x0; x < w.x1; ++x) {
+        if (moved.plan.stack[l].window.contains(x, y)) continue;
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        const TileKey key{uint32_t(l), uint32_t(x), uint32_t(y)};
+        ASSERT_TRUE(moved.source->fetch(key, px.get()).isOk());
+        moved.renderer->uploadTile(key, px);
+        ++entered;
+      }
+  }
+  EXPECT_GT(entered, 0u);
+  EXPECT_LT(entered, size_t(plan_b.clip_tiles) * plan_b.clip_tiles * plan_b.stack.size());
+  moved.renderer->setResidency(test::fullResidency(plan_b));
+  moved.renderer->endUploads();
+  const auto updated = test::renderFrame(*moved.renderer, *moved.target, b);
+
+  Scene fresh = makeScene(moved.source, b, GetParam());
+  ASSERT_TRUE(fresh.renderer);
+  test::loadPlan(*fresh.renderer, *fresh.source, plan_b);
+  const auto clean = test::renderFrame(*fresh.renderer, *fresh.target, b);
+  EXPECT_GE(psnrLogged("toroidal update vs fresh", updated, clean), kSameDb);
+  EXPECT_GE(psnrLogged("toroidal update vs reference", updated, reference(*moved.source, moved.source, b)), kMatchDb);
+}
+
+INSTANTIATE_TEST_SUITE_P(AllBufferings, ToroidalUpdate,
+                         ::testing::Values(Buffering::kSingle, Buffering::kDoubleUploadTwice,
+                                           Buffering::kDoubleCopy),
+                         [](const auto& param_info) {
+                           std::string n = bufferingName(param_info.param);
+                           for (char& c : n)
+                             if (c == '-') c = '_';
+                           return n;
+                         });
+
+// Pixels whose ground point lies within `texels` of a tile border of level
+// 0 or 1, or of the level-0 window edge: where a seam would show.
+std::vector<uint8_t> borderMask(const Camera& cam, uint32_t tile_px, double texels) {
+  std::vector<uint8_t> mask(size_t(kViewport.width_px) * kViewport.height_px, 0);
+  for (uint32_t y = 0; y < kViewport.height_px; ++y)
+    for (uint32_t x = 0; x < kViewport.width_px; ++x) {
+      glm::dvec2 hit;
+      if (!groundHit(cam, kViewport, x + 0.5, y + 0.5, &hit)) continue;
+      for (double period : {double(tile_px), 2.0 * tile_px}) {
+        const double dx = std::abs(hit.x - std::round(hit.x / period) * period);
+        const double dy = std::abs(hit.y - std::round(hit.y / period) * period);
+        if (dx < texels || dy < texels) mask[size_t(y) * kViewport.width_px + x] = 1;
+      }
+    }
+  return mask;
+}
+
+TEST(ClipmapRender, NoSeamAtTileAndLevelBorders) {
+  REQUIRE_GL();
+  ProceduralSpec spec;  // dark grid lines on every tile border: seams would break them
+  spec.width_px = spec.height_px = 4096;
+  auto source = makeProceduralSource(spec);
+  ASSERT_TRUE(source);
+  Camera cam;
+  // Over a corner shared by four level-0 tiles and four level-1 tiles, high
+  // enough that levels 0, 1 and 2 all appear.
+  cam.position = {2048.0 + 3.3, 150.0, 2048.0 + 40.7};
+  cam.heading_rad = 0.2;
+  cam.pitch_rad = -0.9;
+  Scene s = makeScene(source, cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam);
+  const auto mask = borderMask(cam, spec.tile_px, 3.0);
+  size_t masked = 0;
+  for (uint8_t m : mask) masked += m;
+  ASSERT_GT(masked, mask.size() / 50) << "the view must straddle tile borders";
+  EXPECT_GE(psnrLogged("borders vs reference", gpu, ref, &mask), kMatchDb);
+  EXPECT_GE(psnrLogged("whole seam view vs reference", gpu, ref), kMatchDb);
+}
+
+TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
+  REQUIRE_GL();
+  ProceduralSpec spec;  // 2^26 x 2^26
+  auto source = makeProceduralSource(spec);
+  ASSERT_TRUE(source);
+  Camera cam;
+  const double side = double(spec.width_px);
+  cam.position = {side - 3000.3, 40.0, side - 2500.7};
+  cam.heading_rad = 0.4;
+  cam.pitch_rad = -0.7;
+  Scene s = makeScene(source, cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam);
+  EXPECT_GT(groundPixels(ref), ref.size() / 16) << "a quarter of the view must be ground";
+  EXPECT_GE(psnrLogged("2^26 far corner vs reference", gpu, ref), kMatchDb);
+}
+
+// Real imagery: a 2048 x 2048 crop of the Autzen orthophoto from the shared
+// test data (skipped when that folder is absent).
+TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
+  REQUIRE_GL();
+  const std::string path = std::string(CLIPSTREAM_TEST_DATA_DIR) + "/autzen.jpg";
+  std::vector<uint8_t> full;
+  uint32_t w = 0, h = 0;
+  if (!readImageRgba(path, &full, &w, &h).isOk()) GTEST_SKIP() << path << " not available";
+  ASSERT_GE(w, 2048u);
+  ASSERT_GE(h, 2048u);
+  std::vector<uint8_t> crop(size_t(2048) * 2048 * 4);
+  for (uint32_t y = 0; y < 2048; ++y)
+    std::copy_n(full.data() + (size_t(y) * w) * 4, size_t(2048) * 4, crop.data() + size_t(y) * 2048 * 4);
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(makeImageSource(std::move(crop), 2048, 2048, 128), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  EXPECT_GE(psnrLogged("autzen vs reference", gpu, reference(*s.source, s.source, cam)), kMatchDb);
+}
+
+TEST(ClipmapRender, OverlayTintsByLevelWithoutHoles) {
+  REQUIRE_GL();
+  const Camera cam = obliqueCamera();
+  Scene s = makeScene(patternSource(), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto plain = test::renderFrame(*s.renderer, *s.target, cam);
+  s.renderer->setOverlay(Overlay::kLevels);
+  const auto tinted = test::renderFrame(*s.renderer, *s.target, cam);
+  test::dumpPpm("overlay", tinted, kViewport);
+  EXPECT_EQ(groundPixels(plain), groundPixels(tinted));
+  EXPECT_LT(psnrLogged("overlay vs plain", plain, tinted), 25.0);
+}
+
+}  // namespace
+}  // namespace clipstream
