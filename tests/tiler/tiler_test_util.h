@@ -1,0 +1,78 @@
+// Helpers shared by the tiler tests: temporary directories, writing test
+// images with OpenImageIO, running clipstream-tile, and a reference pyramid
+// computed straight from the definitions in docs/tiler.md (not from tiler
+// code).
+#pragma once
+
+#include <clipstream/store/tile_store.h>
+
+#include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace clipstream::test {
+
+namespace fs = std::filesystem;
+
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  const fs::path& path() const { return m_path; }
+  std::string file(const std::string& name) const { return (m_path / name).string(); }
+  // Names of everything in the directory (to check nothing was left behind).
+  std::vector<std::string> entries() const;
+
+ private:
+  fs::path m_path;
+};
+
+// An image as plain samples: width * height * channels values, row-major,
+// interleaved; values are in the store's sample range (0..255 or 0..65535).
+struct RefImage {
+  uint64_t width = 0;
+  uint64_t height = 0;
+  uint32_t channels = 0;
+  std::vector<uint32_t> samples;
+  uint32_t at(uint64_t x, uint64_t y, uint32_t c) const {
+    return samples[(y * width + x) * channels + c];
+  }
+};
+
+// Next level by the definition: each output pixel is the rounded mean of
+// the (up to four) input pixels that exist under it: (s+2)/4, (s+1)/2, s.
+RefImage referenceBoxDownsample(const RefImage& in);
+
+// Next level by separable Lanczos-3 at the output scale, in double
+// precision, with edge clamp; `linear_light` decodes sRGB first for the
+// first three channels.
+RefImage referenceLanczosDownsample(const RefImage& in, bool linear_light);
+
+// Writes an image file through OIIO; sample(x, y, c) gives native values.
+// tile_px > 0 writes a tiled file (TIFF) with square tiles of that size.
+bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, OIIO::TypeDesc type,
+                const std::function<double(uint64_t, uint64_t, int)>& sample, int tile_px = 0);
+
+// Compares every tile of level `level` against `ref`, including padding
+// (edge clamp). Returns the largest absolute sample difference.
+uint32_t maxTileError(const TileStoreReader& reader, uint32_t level, const RefImage& ref);
+
+struct RunResult {
+  int exit_code = -1;
+  std::string output;  // stdout + stderr
+};
+// Runs clipstream-tile with `args` (shell-quoted here), capturing output.
+RunResult runTiler(const std::vector<std::string>& args);
+
+// Where the real sample data lives, or "" when absent.
+std::string sharedDataDir();
+
+// Reads a whole image via OIIO as 8-bit samples.
+bool readImage8(const std::string& path, RefImage* out);
+
+}  // namespace clipstream::test

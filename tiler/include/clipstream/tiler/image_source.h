@@ -1,0 +1,70 @@
+// Where the tiler's level-0 pixels come from: an image file read through
+// OpenImageIO, or a procedural image computed on demand. Either way the
+// source hands out rows already converted to the store's pixel format, so
+// the pyramid code never sees input pixel types.
+//
+// Thread rule: one ImageSource is used by one thread at a time (the tiler's
+// reader thread). Different sources are independent.
+#pragma once
+
+#include <clipstream/store/types.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace clipstream::tiler {
+
+// What the input looked like before conversion, for summaries and docs.
+struct SourceInfo {
+  uint64_t width_px = 0;
+  uint64_t height_px = 0;
+  uint32_t input_channels = 0;
+  std::string input_type;        // "uint8", "uint16", "int16", "float", "half", "synthetic"
+  bool tiled = false;            // true when the file stores tiles (region reads are cheap)
+  bool sequential_only = false;  // true when rows must be read top to bottom (e.g. JPEG)
+  uint64_t file_bytes = 0;       // size of the input file, 0 for synthetic input
+  PixelFormat format = PixelFormat::kRGB8;  // format rows are delivered in
+  uint64_t clamped_samples = 0;  // samples clamped by the conversion so far
+};
+
+class ImageSource {
+ public:
+  virtual ~ImageSource() = default;
+
+  // Size, format and provenance; valid after a successful open.
+  virtual const SourceInfo& info() const = 0;
+
+  // Reads rows [y0, y0 + rows) and columns [x0, x0 + width) of the image
+  // into `dst` (row r starts at dst + r * dst_stride bytes), converted to
+  // info().format. The caller owns `dst`. Reading rows in increasing order
+  // is fastest; going back up may re-decode the file from the start.
+  // Errors: kIo / kTruncated / kCorruptTile-like decoder failures, with the
+  // file name and OpenImageIO's message.
+  virtual Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width,
+                          uint8_t* dst, size_t dst_stride) = 0;
+};
+
+// Opens an image file with OpenImageIO and decides its conversion: 1
+// channel -> R8 (8-bit or float input) or R16 (16-bit input), 2 channels
+// (grey + alpha) -> RGBA8, 3 -> RGB8, 4 -> RGBA8. `forced` overrides the
+// target format. Fails with kNotFound, kIo (names the file and OIIO's
+// error), kInvalidArgument (zero size) or kUnsupported (pixel type,
+// channel count).
+Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
+                     std::unique_ptr<ImageSource>* out);
+
+// A deterministic procedural image of width_px x height_px whose pixels are
+// a pure function of (x, y) (see syntheticPixel). No memory beyond the
+// object itself; any region can be read in any order.
+Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat format,
+                           std::unique_ptr<ImageSource>* out);
+
+// The synthetic image's pixel at (x, y) in `format`, written to `out`
+// (bytesPerPixel(format) bytes). Textured noise plus coordinate bits, so it
+// compresses roughly like an orthophoto rather than like a flat colour.
+void syntheticPixel(uint64_t x, uint64_t y, PixelFormat format, uint8_t* out);
+
+}  // namespace clipstream::tiler

@@ -1,0 +1,90 @@
+// Turns one image (a file OpenImageIO reads, or the procedural image) into
+// a tile store holding its full mip pyramid, out of core: rows stream
+// through in strips of one tile row and coarser levels are built as soon as
+// the finer rows they need exist, so memory is bounded by the budget, not by
+// the image. See docs/tiler.md for conversions, filters and the memory model.
+//
+// Thread rule: tileImage() may be called from any thread; it starts and
+// joins its own reader and encoder threads before returning. Concurrent
+// calls are independent (different outputs).
+#pragma once
+
+#include <clipstream/store/tile_store.h>
+#include <clipstream/store/types.h>
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace clipstream::tiler {
+
+// Smallest budget tileImage accepts, and the supported tile sizes.
+constexpr uint64_t kMinMemoryBudgetBytes = uint64_t(16) << 20;
+constexpr uint32_t kMinTilePx = 16;
+constexpr uint32_t kMaxTilePx = 4096;
+constexpr unsigned kMaxThreads = 1024;
+
+struct TilerOptions {
+  std::string input_path;            // image file; empty when synthetic
+  uint64_t synthetic_width_px = 0;   // used when input_path is empty
+  uint64_t synthetic_height_px = 0;
+  std::optional<PixelFormat> format; // force the store's pixel format
+  std::string output_path;
+  uint32_t tile_px = 128;            // power of two in [kMinTilePx, kMaxTilePx]
+  int zstd_level = 1;
+  bool predictor = true;
+  DownsampleFilter filter = DownsampleFilter::kBox;
+  bool linear_light = false;         // Lanczos only; sRGB -> linear -> filter -> sRGB
+  unsigned threads = 0;              // encoder threads; 0 = all cores
+  uint64_t memory_budget_bytes = uint64_t(256) << 20;  // bound on peak RSS
+  bool overwrite = false;            // replace an existing output
+  bool progress = false;             // draw the store's ProgressBar on stderr
+  bool fsync = true;
+  const std::atomic<bool>* cancel = nullptr;  // set from a signal handler to stop
+};
+
+// What a run did, for the one-line summary and --json-summary.
+struct TilerSummary {
+  uint64_t width_px = 0;
+  uint64_t height_px = 0;
+  PixelFormat format = PixelFormat::kRGB8;
+  std::string input_type;        // "uint8", "synthetic", ...
+  uint32_t input_channels = 0;
+  uint32_t levels = 0;
+  uint64_t tiles = 0;
+  uint64_t constant_tiles = 0;
+  uint64_t input_bytes = 0;      // input file size (0 for synthetic)
+  uint64_t raw_bytes = 0;        // level-0 pixels in the store's format
+  uint64_t output_bytes = 0;     // final store file size
+  uint64_t clamped_samples = 0;  // input samples clamped by the conversion
+  uint64_t panel_px = 0;         // width of the vertical panels (== width when one)
+  uint32_t panels = 1;           // number of panel columns
+  uint64_t memory_budget_bytes = 0;
+  uint64_t peak_rss_bytes = 0;   // VmHWM of this process at the end
+  double wall_s = 0.0;
+  double read_s = 0.0;           // reader thread CPU time (decode + convert)
+  double build_s = 0.0;          // building thread CPU time (filter + tile copies)
+  double encode_s = 0.0;         // encoder threads' CPU time, summed (encode + write)
+  GeoReference geo;
+  std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
+};
+
+// Tiles an image into a store at options.output_path. Never leaves a
+// partial output or temporary file behind on failure or cancellation.
+// Errors name the problem: kNotFound/kIo (input, output directory),
+// kInvalidArgument (options, existing output without overwrite, a budget
+// too small for the image), kUnsupported (pixel type), kTruncated (damaged
+// input), kNoSpace (disk full), kCancelled.
+Status tileImage(const TilerOptions& options, TilerSummary* summary);
+
+// Peak resident set size of this process (VmHWM), in bytes; 0 if unknown.
+uint64_t peakRssBytes();
+// Current resident set size (VmRSS), in bytes; 0 if unknown.
+uint64_t currentRssBytes();
+
+// Parses "R8", "R16", "RGB8", "RGBA8" (case-insensitive).
+std::optional<PixelFormat> parsePixelFormat(const std::string& text);
+
+}  // namespace clipstream::tiler

@@ -1,0 +1,254 @@
+// GeoTIFF tags are parsed here directly because the OpenImageIO build this
+// project targets (2.4 on Debian 12) does not report them as metadata. The
+// parser reads only the first IFD's four GeoTIFF tags, with every offset and
+// count checked against the file size.
+#include <clipstream/tiler/georef.h>
+
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+namespace clipstream::tiler {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr uint16_t kTagModelPixelScale = 33550;
+constexpr uint16_t kTagModelTiepoint = 33922;
+constexpr uint16_t kTagModelTransformation = 34264;
+constexpr uint16_t kTagGeoKeyDirectory = 34735;
+constexpr uint16_t kKeyModelType = 1024;
+constexpr uint16_t kKeyRasterType = 1025;
+constexpr uint16_t kKeyGeographicType = 2048;
+constexpr uint16_t kKeyProjectedCsType = 3072;
+constexpr uint16_t kUserDefined = 32767;
+constexpr uint64_t kMaxTagValues = 1u << 16;  // far beyond any real GeoTIFF tag
+
+class TiffBytes {
+ public:
+  TiffBytes(std::ifstream& in, uint64_t size, bool big_endian)
+      : m_in(in), m_size(size), m_be(big_endian) {}
+
+  bool read(uint64_t offset, void* dst, size_t n) {
+    if (offset > m_size || n > m_size - offset) return false;
+    m_in.seekg(std::streamoff(offset));
+    m_in.read(static_cast<char*>(dst), std::streamsize(n));
+    return bool(m_in);
+  }
+  uint64_t decode(const uint8_t* p, int n) const {
+    uint64_t v = 0;
+    for (int i = 0; i < n; ++i) v |= uint64_t(p[m_be ? n - 1 - i : i]) << (8 * i);
+    return v;
+  }
+  double decodeDouble(const uint8_t* p) const {
+    const uint64_t bits = decode(p, 8);
+    double d;
+    std::memcpy(&d, &bits, 8);
+    return d;
+  }
+
+ private:
+  std::ifstream& m_in;
+  uint64_t m_size;
+  bool m_be;
+};
+
+Status bad(const std::string& path, const std::string& what) {
+  return Status::error(ErrorCode::kBadHeader, path + ": malformed GeoTIFF tags: " + what);
+}
+
+}  // namespace
+
+Status readWorldFile(const std::string& path, GeoReference* out) {
+  *out = GeoReference{};
+  std::ifstream in(path);
+  if (!in) return Status::error(ErrorCode::kIo, path + ": cannot open world file");
+  double v[6];
+  for (double& x : v) {
+    std::string token;
+    if (!(in >> token)) {
+      return Status::error(ErrorCode::kBadHeader, path + ": world file needs 6 numbers (A D B E C F)");
+    }
+    try {
+      size_t used = 0;
+      x = std::stod(token, &used);
+      if (used != token.size()) throw std::invalid_argument(token);
+    } catch (const std::exception&) {
+      return Status::error(ErrorCode::kBadHeader, path + ": world file value '" + token + "' is not a number");
+    }
+  }
+  const double a = v[0], d = v[1], b = v[2], e = v[3], c = v[4], f = v[5];
+  if (a * e - b * d == 0.0) {
+    return Status::error(ErrorCode::kBadHeader, path + ": world file transform is singular");
+  }
+  // C, F are the centre of pixel (0, 0); the corner is half a pixel back.
+  out->present = true;
+  out->transform[0] = c - 0.5 * a - 0.5 * b;
+  out->transform[1] = a;
+  out->transform[2] = b;
+  out->transform[3] = f - 0.5 * d - 0.5 * e;
+  out->transform[4] = d;
+  out->transform[5] = e;
+  return Status::ok();
+}
+
+Status readGeoTiffTags(const std::string& path, GeoReference* out) {
+  *out = GeoReference{};
+  std::error_code ec;
+  const uint64_t size = fs::file_size(path, ec);
+  if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::error(ErrorCode::kIo, path + ": cannot open");
+  uint8_t head[16] = {};
+  in.read(reinterpret_cast<char*>(head), 16);
+  if (!in && size >= 8) return Status::error(ErrorCode::kIo, path + ": cannot read header");
+  bool be;
+  if (head[0] == 'I' && head[1] == 'I') {
+    be = false;
+  } else if (head[0] == 'M' && head[1] == 'M') {
+    be = true;
+  } else {
+    return Status::ok();  // not a TIFF: no tags
+  }
+  in.clear();
+  TiffBytes tb(in, size, be);
+  const uint64_t magic = tb.decode(head + 2, 2);
+  const bool big = magic == 43;
+  if (magic != 42 && !big) return Status::ok();
+  const uint64_t ifd = big ? tb.decode(head + 8, 8) : tb.decode(head + 4, 4);
+  uint8_t count_bytes[8];
+  if (!tb.read(ifd, count_bytes, big ? 8 : 2)) return bad(path, "first IFD offset past end of file");
+  const uint64_t entries = tb.decode(count_bytes, big ? 8 : 2);
+  const size_t entry_size = big ? 20 : 12;
+  if (entries > 4096) return bad(path, "IFD entry count " + std::to_string(entries));
+  std::vector<uint8_t> table(entries * entry_size);
+  if (!tb.read(ifd + (big ? 8 : 2), table.data(), table.size())) return bad(path, "IFD truncated");
+
+  std::vector<double> scale, tiepoint, matrix;
+  std::vector<uint16_t> keys;
+  for (uint64_t i = 0; i < entries; ++i) {
+    const uint8_t* e = table.data() + i * entry_size;
+    const uint16_t tag = uint16_t(tb.decode(e, 2));
+    if (tag != kTagModelPixelScale && tag != kTagModelTiepoint && tag != kTagModelTransformation &&
+        tag != kTagGeoKeyDirectory) {
+      continue;
+    }
+    const uint16_t type = uint16_t(tb.decode(e + 2, 2));
+    const uint64_t count = big ? tb.decode(e + 4, 8) : tb.decode(e + 4, 4);
+    const int elem = type == 12 ? 8 : type == 3 ? 2 : 0;  // DOUBLE or SHORT
+    if (elem == 0 || count == 0 || count > kMaxTagValues) {
+      return bad(path, "tag " + std::to_string(tag) + " has type " + std::to_string(type) +
+                           " and count " + std::to_string(count));
+    }
+    std::vector<uint8_t> bytes(count * elem);
+    const size_t inline_bytes = big ? 8 : 4;
+    if (bytes.size() <= inline_bytes) {
+      std::memcpy(bytes.data(), e + (big ? 12 : 8), bytes.size());
+    } else {
+      const uint64_t off = big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4);
+      if (!tb.read(off, bytes.data(), bytes.size())) {
+        return bad(path, "tag " + std::to_string(tag) + " values lie past the end of the file");
+      }
+    }
+    if (tag == kTagGeoKeyDirectory) {
+      if (type != 3) return bad(path, "GeoKeyDirectory is not SHORT");
+      for (uint64_t k = 0; k < count; ++k) keys.push_back(uint16_t(tb.decode(bytes.data() + 2 * k, 2)));
+    } else {
+      if (type != 12) return bad(path, "tag " + std::to_string(tag) + " is not DOUBLE");
+      std::vector<double>& dst =
+          tag == kTagModelPixelScale ? scale : tag == kTagModelTiepoint ? tiepoint : matrix;
+      for (uint64_t k = 0; k < count; ++k) dst.push_back(tb.decodeDouble(bytes.data() + 8 * k));
+    }
+  }
+
+  // GeoKeys: header (version, revision, minor, count) then 4 shorts per key;
+  // only keys stored inline (location 0) are needed here.
+  uint32_t model_type = 0, raster_type = 1, projected = 0, geographic = 0;
+  if (keys.size() >= 4) {
+    const uint64_t nkeys = keys[3];
+    if (4 + nkeys * 4 > keys.size()) return bad(path, "GeoKeyDirectory shorter than its key count");
+    for (uint64_t k = 0; k < nkeys; ++k) {
+      const uint16_t* key = &keys[4 + k * 4];
+      if (key[1] != 0 || key[2] != 1) continue;
+      if (key[0] == kKeyModelType) model_type = key[3];
+      if (key[0] == kKeyRasterType) raster_type = key[3];
+      if (key[0] == kKeyProjectedCsType) projected = key[3];
+      if (key[0] == kKeyGeographicType) geographic = key[3];
+    }
+  }
+
+  double t[6] = {0, 1, 0, 0, 0, 1};
+  if (matrix.size() >= 16) {
+    t[0] = matrix[3], t[1] = matrix[0], t[2] = matrix[1];
+    t[3] = matrix[7], t[4] = matrix[4], t[5] = matrix[5];
+  } else if (scale.size() >= 2 && tiepoint.size() >= 6) {
+    const double i = tiepoint[0], j = tiepoint[1], x = tiepoint[3], y = tiepoint[4];
+    t[1] = scale[0];
+    t[5] = -scale[1];
+    t[0] = x - i * scale[0];
+    t[3] = y + j * scale[1];
+  } else {
+    return Status::ok();  // no transform tags
+  }
+  if (raster_type == 2) {
+    // PixelIsPoint: tie points name pixel centres; move to the corner as GDAL does.
+    t[0] -= 0.5 * t[1] + 0.5 * t[2];
+    t[3] -= 0.5 * t[4] + 0.5 * t[5];
+  }
+  out->present = true;
+  std::memcpy(out->transform, t, sizeof(t));
+  if (model_type == 1 && projected != 0 && projected != kUserDefined) {
+    out->crs = "EPSG:" + std::to_string(projected);
+  } else if (model_type == 2 && geographic != 0 && geographic != kUserDefined) {
+    out->crs = "EPSG:" + std::to_string(geographic);
+  }
+  return Status::ok();
+}
+
+Status findGeoReference(const std::string& path, GeoReference* out) {
+  *out = GeoReference{};
+  Status s = readGeoTiffTags(path, out);
+  if (!s) return s;
+  const fs::path p(path);
+  if (!out->present) {
+    std::string ext = p.extension().string();
+    std::vector<std::string> candidates = {".wld"};
+    if (ext.size() == 4) candidates.push_back(std::string(".") + ext[1] + ext[3] + "w");
+    if (ext.size() >= 2) candidates.push_back(ext + "w");
+    for (const std::string& c : candidates) {
+      for (const std::string& cc : {c, [&] {
+             std::string u = c;
+             for (char& ch : u) ch = char(std::toupper(static_cast<unsigned char>(ch)));
+             return u;
+           }()}) {
+        fs::path wp = p;
+        wp.replace_extension(cc);
+        std::error_code ec;
+        if (fs::is_regular_file(wp, ec)) {
+          s = readWorldFile(wp.string(), out);
+          if (!s) return s;
+          break;
+        }
+      }
+      if (out->present) break;
+    }
+  }
+  if (out->present && out->crs.empty()) {
+    fs::path prj = p;
+    prj.replace_extension(".prj");
+    std::ifstream in(prj);
+    if (in) {
+      std::stringstream ss;
+      ss << in.rdbuf();
+      std::string wkt = ss.str();
+      while (!wkt.empty() && std::isspace(static_cast<unsigned char>(wkt.back()))) wkt.pop_back();
+      out->crs = wkt;
+    }
+  }
+  return Status::ok();
+}
+
+}  // namespace clipstream::tiler

@@ -1,0 +1,169 @@
+// Image sources: the procedural image, and the loader for the OpenImageIO
+// module that reads files (oiio_source.cpp).
+#include <clipstream/tiler/image_source.h>
+
+#include "oiio_module.h"
+
+#include <dlfcn.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <system_error>
+#include <mutex>
+#include <vector>
+
+#ifndef CLIPSTREAM_TILER_OIIO_MODULE_PATH
+#define CLIPSTREAM_TILER_OIIO_MODULE_PATH ""
+#endif
+
+namespace clipstream::tiler {
+namespace {
+
+namespace fs = std::filesystem;
+
+// OpenImageIO and its ~260 dependent libraries cost about 120 MB of
+// resident memory as soon as they are loaded, which alone would break small
+// --memory-mb budgets. They live in a module loaded on the first file open,
+// so procedural inputs never pay for them.
+Status loadOiioModule(OpenImageFileFn* out) {
+  static std::mutex mutex;
+  static OpenImageFileFn cached = nullptr;
+  static std::string failure;
+  std::lock_guard lock(mutex);
+  if (cached != nullptr) {
+    *out = cached;
+    return Status::ok();
+  }
+  std::vector<std::string> candidates;
+  if (const char* env = std::getenv("CLIPSTREAM_TILER_OIIO_MODULE"); env != nullptr && *env) {
+    candidates.push_back(env);
+  }
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    candidates.push_back((exe.parent_path() / kOiioModuleFileName).string());
+    candidates.push_back((exe.parent_path() / ".." / "lib" / kOiioModuleFileName).string());
+  }
+  if (*CLIPSTREAM_TILER_OIIO_MODULE_PATH) candidates.push_back(CLIPSTREAM_TILER_OIIO_MODULE_PATH);
+  candidates.push_back(kOiioModuleFileName);  // the loader's search path
+  std::string errors;
+  for (const std::string& c : candidates) {
+    if (c.find('/') != std::string::npos && !fs::exists(c, ec)) continue;
+    void* handle = dlopen(c.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (handle == nullptr) {
+      errors += std::string(" ") + dlerror() + ";";
+      continue;
+    }
+    auto fn = reinterpret_cast<OpenImageFileFn>(dlsym(handle, kOiioModuleSymbol));
+    if (fn == nullptr) {
+      errors += " " + c + ": no " + kOiioModuleSymbol + ";";
+      continue;
+    }
+    cached = fn;  // the module stays loaded for the life of the process
+    *out = fn;
+    return Status::ok();
+  }
+  return Status::error(ErrorCode::kUnsupported,
+                       std::string("cannot load the image reader module ") + kOiioModuleFileName +
+                           " (set CLIPSTREAM_TILER_OIIO_MODULE):" + errors);
+}
+
+
+inline uint32_t hash32(uint64_t x, uint64_t y) {
+  // A small integer hash (xxhash-style avalanche): cheap and stable.
+  uint64_t h = x * 0x9E3779B185EBCA87ull ^ (y + 0x165667B19E3779F9ull) * 0xC2B2AE3D27D4EB4Full;
+  h ^= h >> 29;
+  h *= 0xBF58476D1CE4E5B9ull;
+  h ^= h >> 32;
+  return uint32_t(h);
+}
+
+class SyntheticSource final : public ImageSource {
+ public:
+  explicit SyntheticSource(SourceInfo info) : m_info(std::move(info)) {}
+  const SourceInfo& info() const override { return m_info; }
+
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
+      return Status::error(ErrorCode::kOutOfRange, "synthetic: row request outside the image");
+    }
+    const uint32_t bpp = bytesPerPixel(m_info.format);
+    for (uint32_t r = 0; r < rows; ++r) {
+      uint8_t* out = dst + size_t(r) * dst_stride;
+      for (uint64_t x = 0; x < width; ++x) syntheticPixel(x0 + x, y0 + r, m_info.format, out + x * bpp);
+    }
+    return Status::ok();
+  }
+
+ private:
+  SourceInfo m_info;
+};
+
+}  // namespace
+
+void syntheticPixel(uint64_t x, uint64_t y, PixelFormat format, uint8_t* out) {
+  const uint32_t h = hash32(x, y);
+  const uint32_t noise = h & 15u;
+  // Smooth fields at a few scales plus a little noise: enough texture that
+  // compression works like it does on photographs, and coordinate bits
+  // (x >> 3 in red, y >> 3 in green) so a misplaced block shows.
+  const uint32_t r = uint32_t((x >> 3) + ((x >> 9) * 7) + noise) & 255u;
+  const uint32_t g = uint32_t((y >> 3) + ((y >> 9) * 13) + (noise >> 1)) & 255u;
+  const uint32_t b = uint32_t(((x ^ y) >> 6) * 29 + ((h >> 4) & 7u)) & 255u;
+  switch (format) {
+    case PixelFormat::kR8:
+      out[0] = uint8_t((r + g) >> 1);
+      break;
+    case PixelFormat::kR16: {
+      const uint32_t v = uint32_t((x + y) * 3 + ((h >> 8) & 63u)) & 0xffffu;
+      out[0] = uint8_t(v & 0xff);
+      out[1] = uint8_t(v >> 8);
+      break;
+    }
+    case PixelFormat::kRGB8:
+      out[0] = uint8_t(r);
+      out[1] = uint8_t(g);
+      out[2] = uint8_t(b);
+      break;
+    case PixelFormat::kRGBA8:
+      out[0] = uint8_t(r);
+      out[1] = uint8_t(g);
+      out[2] = uint8_t(b);
+      out[3] = uint8_t(255u - ((h >> 12) & 3u));
+      break;
+  }
+}
+
+Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat format,
+                           std::unique_ptr<ImageSource>* out) {
+  if (width_px == 0 || height_px == 0) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "synthetic image size " + std::to_string(width_px) + "x" +
+                             std::to_string(height_px) + " is empty");
+  }
+  SourceInfo info;
+  info.width_px = width_px;
+  info.height_px = height_px;
+  info.input_channels = channelCount(format);
+  info.input_type = "synthetic";
+  info.tiled = true;
+  info.format = format;
+  *out = std::make_unique<SyntheticSource>(info);
+  return Status::ok();
+}
+
+Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
+                     std::unique_ptr<ImageSource>* out) {
+  out->reset();
+  OpenImageFileFn fn = nullptr;
+  Status s = loadOiioModule(&fn);
+  if (!s) return s;
+  fn(&path, &forced, out, &s);
+  return s;
+}
+
+}  // namespace clipstream::tiler

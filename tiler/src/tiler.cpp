@@ -1,0 +1,583 @@
+// The tiling pipeline: a reader thread decodes strips of one tile row, the
+// calling thread builds the pyramid from them, and encoder threads compress
+// and store finished tiles. Queues between the stages are bounded, which is
+// what bounds memory (see planLayout and docs/tiler.md).
+#include <clipstream/tiler/tiler.h>
+
+#include <clipstream/store/progress.h>
+#include <clipstream/tiler/downsample.h>
+#include <clipstream/tiler/georef.h>
+#include <clipstream/tiler/image_source.h>
+
+#include "pyramid_builder.h"
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <thread>
+
+#include <time.h>
+#include <unistd.h>
+
+namespace clipstream::tiler {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+// Strip buffers that may exist at once: one being read, one queued, one
+// being built from. Two would stall the reader while the builder works.
+constexpr uint32_t kStripsInFlight = 3;
+// Finished tiles waiting for an encoder, per encoder thread.
+constexpr uint32_t kTileJobsPerThread = 4;
+// Allowance for what the pipeline allocates besides strips and levels:
+// OIIO's decode scratch (capped at 8 MiB in image_source.cpp), zstd
+// contexts, the writer's index, allocator slack.
+constexpr uint64_t kPipelineReserveBytes = uint64_t(16) << 20;
+constexpr uint64_t kPerThreadReserveBytes = uint64_t(1) << 20;
+
+double secondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// CPU time of the calling thread: stage costs that do not count time spent
+// waiting on queues or preempted by other processes.
+double threadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
+}
+
+// A bounded FIFO that producers block on when full. close() lets consumers
+// drain what is queued; abort() wakes everyone and drops the rest.
+template <typename T>
+class BoundedQueue {
+ public:
+  explicit BoundedQueue(size_t capacity) : m_capacity(capacity) {}
+
+  bool push(T&& item) {
+    std::unique_lock lock(m_mutex);
+    m_not_full.wait(lock, [&] { return m_items.size() < m_capacity || m_closed; });
+    if (m_closed) return false;
+    m_items.push_back(std::move(item));
+    m_not_empty.notify_one();
+    return true;
+  }
+  bool pop(T* out) {
+    std::unique_lock lock(m_mutex);
+    m_not_empty.wait(lock, [&] { return !m_items.empty() || m_closed; });
+    if (m_items.empty() || m_aborted) return false;
+    *out = std::move(m_items.front());
+    m_items.pop_front();
+    m_not_full.notify_one();
+    return true;
+  }
+  void close() {
+    std::lock_guard lock(m_mutex);
+    m_closed = true;
+    m_not_empty.notify_all();
+    m_not_full.notify_all();
+  }
+  void abort() {
+    std::lock_guard lock(m_mutex);
+    m_closed = true;
+    m_aborted = true;
+    m_items.clear();
+    m_not_empty.notify_all();
+    m_not_full.notify_all();
+  }
+
+ private:
+  const size_t m_capacity;
+  std::mutex m_mutex;  // guards everything below
+  std::condition_variable m_not_full;
+  std::condition_variable m_not_empty;
+  std::deque<T> m_items;
+  bool m_closed = false;
+  bool m_aborted = false;
+};
+
+// First error wins; later ones are usually consequences of it.
+class ErrorSlot {
+ public:
+  void set(Status s) {
+    std::lock_guard lock(m_mutex);
+    if (m_status.isOk()) m_status = std::move(s);
+    m_failed.store(true, std::memory_order_release);
+  }
+  bool failed() const { return m_failed.load(std::memory_order_acquire); }
+  Status get() {
+    std::lock_guard lock(m_mutex);
+    return m_status;
+  }
+
+ private:
+  std::mutex m_mutex;  // guards m_status
+  Status m_status;
+  std::atomic<bool> m_failed{false};
+};
+
+struct StripItem {
+  uint64_t bx = 0, by = 0;  // panel block
+  uint64_t y0 = 0;          // first row, relative to the block
+  uint32_t rows = 0;
+  uint64_t width_px = 0;
+  std::vector<uint8_t> pixels;
+};
+
+struct TileJob {
+  TileKey key;
+  std::vector<uint8_t> pixels;
+};
+
+// How the image is cut: panels of panel_px columns (and rows), whose first
+// `local_levels` levels are built per block; the rest by one coarse builder
+// over the whole of level local_levels - 1.
+struct Layout {
+  uint32_t local_levels = 1;
+  uint64_t panel_px = 0;  // block size at level 0 (tile_px << (local_levels - 1))
+  uint64_t blocks_x = 1, blocks_y = 1;
+  uint64_t estimate_bytes = 0;
+};
+
+uint64_t readProcStatusKb(const char* field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  const size_t n = std::strlen(field);
+  while (std::getline(in, line)) {
+    if (line.compare(0, n, field) == 0) {
+      return std::strtoull(line.c_str() + n, nullptr, 10);
+    }
+  }
+  return 0;
+}
+
+Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned threads,
+                  uint64_t budget_bytes, uint64_t base_bytes, bool need_single, Layout* out) {
+  const uint32_t levels = g.levelCount();
+  const uint64_t bpp = bytesPerPixel(g.format);
+  const uint64_t jobs = uint64_t(threads) * kTileJobsPerThread * g.tileBytes() * 2;
+  const uint64_t fixed = base_bytes + kPipelineReserveBytes + threads * kPerThreadReserveBytes + jobs;
+  uint64_t smallest = UINT64_MAX;
+  for (int32_t m = int32_t(levels) - 1; m >= 0; --m) {
+    const uint64_t panel = uint64_t(g.tile_px) << m;
+    const uint64_t block_w = std::min<uint64_t>(panel, g.width_px);
+    uint64_t need = fixed;
+    need += PyramidBuilder::bufferBytes(g, ds, block_w, uint32_t(m) + 1);
+    need += kStripsInFlight * uint64_t(g.tile_px) * block_w * bpp;
+    if (uint32_t(m) + 1 < levels) {
+      const uint64_t wm = g.levels[size_t(m)].width_px;
+      need += PyramidBuilder::bufferBytes(g, ds, wm, levels - uint32_t(m));
+      need += uint64_t(g.tile_px) * wm * bpp;  // staging rows of level m
+    }
+    smallest = std::min(smallest, need);
+    if (need <= budget_bytes) {
+      if (need_single && uint32_t(m) + 1 < levels) break;
+      out->local_levels = uint32_t(m) + 1;
+      out->panel_px = panel;
+      out->blocks_x = (g.width_px + panel - 1) / panel;
+      out->blocks_y = (g.height_px + panel - 1) / panel;
+      out->estimate_bytes = need;
+      return Status::ok();
+    }
+    if (need_single) break;
+  }
+  const uint64_t mb = uint64_t(1) << 20;
+  if (need_single) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--memory-mb " + std::to_string(budget_bytes / mb) +
+                             " is too small: the Lanczos filter needs full-width strips of " +
+                             std::to_string(g.width_px) + " px, about " +
+                             std::to_string((smallest + mb - 1) / mb) + " MB in all");
+  }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "--memory-mb " + std::to_string(budget_bytes / mb) +
+                           " is too small for a " + std::to_string(g.width_px) + "x" +
+                           std::to_string(g.height_px) + " " + pixelFormatName(g.format) +
+                           " image with " + std::to_string(threads) + " threads: needs about " +
+                           std::to_string((smallest + mb - 1) / mb) + " MB");
+}
+
+Status validate(const TilerOptions& o) {
+  if (o.tile_px < kMinTilePx || o.tile_px > kMaxTilePx || (o.tile_px & (o.tile_px - 1)) != 0) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "tile size " + std::to_string(o.tile_px) + " must be a power of two from " +
+                             std::to_string(kMinTilePx) + " to " + std::to_string(kMaxTilePx));
+  }
+  if (o.threads > kMaxThreads) {
+    return Status::error(ErrorCode::kInvalidArgument, "--threads " + std::to_string(o.threads) +
+                                                          " is more than the maximum of " +
+                                                          std::to_string(kMaxThreads));
+  }
+  if (o.zstd_level < 1 || o.zstd_level > 22) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--zstd-level " + std::to_string(o.zstd_level) + " must be 1..22");
+  }
+  if (o.memory_budget_bytes < kMinMemoryBudgetBytes) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--memory-mb must be at least " + std::to_string(kMinMemoryBudgetBytes >> 20));
+  }
+  const uint64_t physical = uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGE_SIZE));
+  if (physical > 0 && o.memory_budget_bytes > physical) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--memory-mb " + std::to_string(o.memory_budget_bytes >> 20) +
+                             " is more than this machine's " + std::to_string(physical >> 20) +
+                             " MB of memory");
+  }
+  if (o.input_path.empty() && (o.synthetic_width_px == 0 || o.synthetic_height_px == 0)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "synthetic image size " + std::to_string(o.synthetic_width_px) + "x" +
+                             std::to_string(o.synthetic_height_px) + " is empty");
+  }
+  if (o.output_path.empty()) return Status::error(ErrorCode::kInvalidArgument, "no output path");
+  if (o.linear_light && o.filter != DownsampleFilter::kLanczos3) {
+    return Status::error(ErrorCode::kInvalidArgument, "--linear-light needs --filter lanczos3");
+  }
+  return Status::ok();
+}
+
+Status checkOutput(const TilerOptions& o) {
+  std::error_code ec;
+  const fs::path out(o.output_path);
+  if (fs::exists(out, ec)) {
+    if (fs::is_directory(out, ec)) {
+      return Status::error(ErrorCode::kInvalidArgument, o.output_path + ": is a directory");
+    }
+    if (!o.overwrite) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           o.output_path + ": already exists (use --force to overwrite)");
+    }
+  }
+  fs::path dir = out.parent_path();
+  if (dir.empty()) dir = ".";
+  if (!fs::is_directory(dir, ec)) {
+    return Status::error(ErrorCode::kNotFound,
+                         o.output_path + ": output directory " + dir.string() + " does not exist");
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+uint64_t peakRssBytes() { return readProcStatusKb("VmHWM:") * 1024; }
+uint64_t currentRssBytes() { return readProcStatusKb("VmRSS:") * 1024; }
+
+std::optional<PixelFormat> parsePixelFormat(const std::string& text) {
+  std::string u = text;
+  for (char& c : u) c = char(std::toupper(static_cast<unsigned char>(c)));
+  if (u == "R8") return PixelFormat::kR8;
+  if (u == "R16") return PixelFormat::kR16;
+  if (u == "RGB8") return PixelFormat::kRGB8;
+  if (u == "RGBA8") return PixelFormat::kRGBA8;
+  return std::nullopt;
+}
+
+namespace {
+
+Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
+  const auto start = Clock::now();
+  *summary = TilerSummary{};
+  Status s = validate(o);
+  if (!s) return s;
+  s = checkOutput(o);
+  if (!s) return s;
+
+  std::unique_ptr<ImageSource> source;
+  if (o.input_path.empty()) {
+    s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
+                            o.format.value_or(PixelFormat::kRGB8), &source);
+  } else {
+    s = openImageFile(o.input_path, o.format, &source);
+  }
+  if (!s) return s;
+  const SourceInfo& src = source->info();
+
+  WriterOptions wopt;
+  wopt.encoding.compression = Compression::kZstd;
+  wopt.encoding.zstd_level = o.zstd_level;
+  wopt.encoding.predictor = o.predictor ? Predictor::kLeftDelta : Predictor::kNone;
+  wopt.encoding.filter = o.filter;
+  wopt.encoding.linear_light = o.linear_light;
+  wopt.fsync = o.fsync;
+  if (!o.input_path.empty()) {
+    s = findGeoReference(o.input_path, &wopt.geo);
+    if (!s) return s;
+  }
+
+  PyramidGeometry geometry;
+  if (!makePyramidGeometry(src.width_px, src.height_px, o.tile_px, src.format, &geometry)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "cannot make a pyramid for " + std::to_string(src.width_px) + "x" +
+                             std::to_string(src.height_px) + " with tile size " +
+                             std::to_string(o.tile_px));
+  }
+  const Downsampler downsampler(o.filter, o.linear_light, src.format);
+  const unsigned threads =
+      o.threads != 0 ? o.threads : std::max(1u, std::thread::hardware_concurrency());
+
+  Layout layout;
+  const uint64_t base_bytes = currentRssBytes();
+  s = planLayout(geometry, downsampler, threads, o.memory_budget_bytes, base_bytes,
+                 o.filter != DownsampleFilter::kBox, &layout);
+  if (!s && base_bytes > o.memory_budget_bytes / 2) {
+    // Most of the budget is gone before the first row: the libraries and the
+    // decoder's own state (a progressive JPEG keeps every DCT coefficient, 2
+    // bytes per sample). Nothing the tiler does can undo that, so plan our
+    // part within half the budget on top of it, and say so.
+    Status retry = planLayout(geometry, downsampler, threads,
+                              base_bytes + o.memory_budget_bytes / 2, base_bytes,
+                              o.filter != DownsampleFilter::kBox, &layout);
+    if (retry) {
+      s = retry;
+      summary->warnings.push_back(
+          std::to_string(base_bytes >> 20) +
+          " MB are resident before tiling starts (image libraries and decoder state; a "
+          "progressive JPEG keeps all its coefficients); "
+          "peak memory will exceed --memory-mb " + std::to_string(o.memory_budget_bytes >> 20));
+    }
+  }
+  if (!s) return s;
+
+  std::unique_ptr<TileStoreWriter> writer;
+  s = TileStoreWriter::create(o.output_path, geometry, wopt, &writer);
+  if (!s) return s;
+
+  // ---- pipeline ----
+  const uint32_t tile = geometry.tile_px;
+  const uint32_t bpp = bytesPerPixel(geometry.format);
+  const uint32_t levels = geometry.levelCount();
+  const uint32_t m = layout.local_levels - 1;
+  ErrorSlot error;
+  BoundedQueue<StripItem> filled(kStripsInFlight - 1);
+  BoundedQueue<std::vector<uint8_t>> free_buffers(kStripsInFlight);
+  BoundedQueue<TileJob> jobs(size_t(threads) * kTileJobsPerThread);
+  for (uint32_t i = 0; i < kStripsInFlight; ++i) {
+    std::vector<uint8_t> buffer;
+    (void)free_buffers.push(std::move(buffer));
+  }
+  std::atomic<uint64_t> tiles_done{0};
+  // Tile buffers go back here after encoding, so steady state allocates
+  // (and zero-fills) nothing per tile. Bounded by the job queue's size.
+  std::mutex recycled_mutex;  // guards recycled
+  std::vector<std::vector<uint8_t>> recycled;
+  auto takeBuffer = [&]() -> std::vector<uint8_t> {
+    std::lock_guard lock(recycled_mutex);
+    if (recycled.empty()) return {};
+    std::vector<uint8_t> b = std::move(recycled.back());
+    recycled.pop_back();
+    return b;
+  };
+  double read_s = 0.0;
+  std::mutex encode_time_mutex;  // guards encode_s
+  double encode_s = 0.0;
+  auto cancelled = [&] { return o.cancel != nullptr && o.cancel->load(std::memory_order_relaxed); };
+  auto abortAll = [&] {
+    filled.abort();
+    free_buffers.abort();
+    jobs.abort();
+  };
+
+  std::thread reader([&] {
+    try {
+    const double cpu0 = threadCpuSeconds();
+    for (uint64_t by = 0; by < layout.blocks_y && !error.failed(); ++by) {
+      const uint64_t y_origin = by * layout.panel_px;
+      const uint64_t block_h = std::min(layout.panel_px, src.height_px - y_origin);
+      for (uint64_t bx = 0; bx < layout.blocks_x && !error.failed(); ++bx) {
+        const uint64_t x_origin = bx * layout.panel_px;
+        const uint64_t block_w = std::min(layout.panel_px, src.width_px - x_origin);
+        for (uint64_t y = 0; y < block_h; y += tile) {
+          if (error.failed()) break;
+          if (cancelled()) {
+            error.set(Status::error(ErrorCode::kCancelled, "interrupted"));
+            abortAll();
+            break;
+          }
+          StripItem item;
+          if (!free_buffers.pop(&item.pixels)) break;
+          item.bx = bx, item.by = by, item.y0 = y, item.width_px = block_w;
+          item.rows = uint32_t(std::min<uint64_t>(tile, block_h - y));
+          item.pixels.resize(size_t(item.rows) * block_w * bpp);
+          Status rs = source->readRows(y_origin + y, item.rows, x_origin, block_w,
+                                       item.pixels.data(), size_t(block_w) * bpp);
+          if (!rs) {
+            error.set(std::move(rs));
+            abortAll();
+            break;
+          }
+          if (!filled.push(std::move(item))) break;
+        }
+      }
+    }
+    read_s = threadCpuSeconds() - cpu0;
+    } catch (const std::bad_alloc&) {
+      error.set(Status::error(ErrorCode::kInvalidArgument, "out of memory while reading"));
+      abortAll();
+    }
+    filled.close();
+  });
+
+  std::vector<std::thread> encoders;
+  for (unsigned t = 0; t < threads; ++t) {
+    encoders.emplace_back([&] {
+      const double cpu0 = threadCpuSeconds();
+      TileJob job;
+      EncodedTile encoded;
+      while (jobs.pop(&job)) {
+        Status es;
+        try {
+          es = encodeTile(geometry, wopt.encoding, job.key, job.pixels, &encoded);
+          if (es) es = writer->write(std::move(encoded));
+        } catch (const std::bad_alloc&) {
+          es = Status::error(ErrorCode::kInvalidArgument, "out of memory while encoding");
+        }
+        {
+          std::lock_guard lock(recycled_mutex);
+          if (recycled.size() < size_t(threads) * (kTileJobsPerThread + 2)) {
+            recycled.push_back(std::move(job.pixels));
+          }
+        }
+        if (!es) {
+          error.set(std::move(es));
+          abortAll();
+          break;
+        }
+        tiles_done.fetch_add(1, std::memory_order_relaxed);
+      }
+      std::lock_guard lock(encode_time_mutex);
+      encode_s += threadCpuSeconds() - cpu0;
+    });
+  }
+
+  ProgressBar progress("tiling", src.width_px * src.height_px, o.progress, "px");
+  const double build_cpu0 = threadCpuSeconds();
+  try {
+    auto tile_sink = [&](const TileKey& key, std::vector<uint8_t>&& pixels) {
+      if (!jobs.push(TileJob{key, std::move(pixels)}) && !error.failed()) {
+        error.set(Status::error(ErrorCode::kCancelled, "encoder queue closed"));
+      }
+    };
+    // Coarse builder over level m, fed from the per-block builders' level-m
+    // rows through a staging strip one tile row high.
+    std::unique_ptr<PyramidBuilder> coarse;
+    std::vector<uint8_t> staging;
+    uint64_t staging_rows = 0;
+    const uint64_t wm = geometry.levels[m].width_px;
+    if (m + 1 < levels) {
+      RegionSpec cr;
+      cr.first_level = m;
+      cr.last_level = levels - 1;
+      cr.emit_first = false;
+      coarse = std::make_unique<PyramidBuilder>(geometry, downsampler, cr, tile_sink,
+                                                PyramidBuilder::RowSink{}, takeBuffer);
+      staging.resize(size_t(tile) * wm * bpp);
+    }
+    std::unique_ptr<PyramidBuilder> local;
+    uint64_t cur_bx = UINT64_MAX, cur_by = UINT64_MAX;
+    StripItem item;
+    while (filled.pop(&item)) {
+      if (error.failed()) break;
+      if (cancelled()) {
+        error.set(Status::error(ErrorCode::kCancelled, "interrupted"));
+        break;
+      }
+      if (item.bx != cur_bx || item.by != cur_by) {
+        cur_bx = item.bx, cur_by = item.by;
+        RegionSpec rs;
+        rs.first_level = 0;
+        rs.last_level = m;
+        rs.x0_px = item.bx * layout.panel_px;
+        rs.y0_px = item.by * layout.panel_px;
+        rs.width_px = item.width_px;
+        rs.height_px = std::min(layout.panel_px, src.height_px - rs.y0_px);
+        PyramidBuilder::RowSink row_sink;
+        if (coarse) {
+          const uint64_t col = item.bx * tile;  // block origin at level m
+          row_sink = [&, col](uint64_t row, const uint8_t* px, uint64_t w) {
+            std::memcpy(staging.data() + (row * wm + col) * bpp, px, size_t(w) * bpp);
+            staging_rows = std::max(staging_rows, row + 1);
+          };
+        }
+        local = std::make_unique<PyramidBuilder>(geometry, downsampler, rs, tile_sink, row_sink,
+                                                 takeBuffer);
+      }
+      local->appendRows(item.pixels.data(), size_t(item.width_px) * bpp, item.rows);
+      if (coarse && local->complete() && item.bx + 1 == layout.blocks_x) {
+        coarse->appendRows(staging.data(), size_t(wm) * bpp, staging_rows);
+        staging_rows = 0;
+      }
+      progress.add(uint64_t(item.rows) * item.width_px);
+      if (!free_buffers.push(std::move(item.pixels))) break;
+    }
+  } catch (const std::bad_alloc&) {
+    error.set(Status::error(ErrorCode::kInvalidArgument, "out of memory while building levels"));
+  }
+  if (error.failed() || cancelled()) {
+    if (!error.failed()) error.set(Status::error(ErrorCode::kCancelled, "interrupted"));
+    abortAll();
+  } else {
+    jobs.close();
+  }
+  const double build_s = threadCpuSeconds() - build_cpu0;
+  reader.join();
+  for (std::thread& t : encoders) t.join();
+
+  if (error.failed()) {
+    writer.reset();  // removes the temporary file
+    return error.get();
+  }
+  progress.finish();
+  summary->constant_tiles = writer->constantTiles();
+  s = writer->finish();
+  if (!s) {
+    writer.reset();
+    return s;
+  }
+  writer.reset();
+
+  summary->width_px = src.width_px;
+  summary->height_px = src.height_px;
+  summary->format = src.format;
+  summary->input_type = src.input_type;
+  summary->input_channels = src.input_channels;
+  summary->levels = levels;
+  summary->tiles = tiles_done.load();
+  summary->input_bytes = src.file_bytes;
+  summary->raw_bytes = src.width_px * src.height_px * bpp;
+  std::error_code ec;
+  summary->output_bytes = fs::file_size(o.output_path, ec);
+  summary->clamped_samples = src.clamped_samples;
+  summary->panel_px = std::min<uint64_t>(layout.panel_px, src.width_px);
+  summary->panels = uint32_t(layout.blocks_x);
+  summary->memory_budget_bytes = o.memory_budget_bytes;
+  summary->geo = wopt.geo;
+  summary->read_s = read_s;
+  summary->build_s = build_s;
+  summary->encode_s = encode_s;
+  summary->peak_rss_bytes = peakRssBytes();
+  summary->wall_s = secondsSince(start);
+  return Status::ok();
+}
+
+}  // namespace
+
+Status tileImage(const TilerOptions& options, TilerSummary* summary) {
+  // Allocation failure is the one exception the pipeline can meet (huge
+  // budgets on small machines); every thread turns it into a Status, and
+  // this catches the building thread's. The writer is destroyed on the way
+  // out, removing its temporary files.
+  try {
+    return tileImageImpl(options, summary);
+  } catch (const std::bad_alloc&) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "out of memory (lower --memory-mb, or the image is too large for it)");
+  }
+}
+
+}  // namespace clipstream::tiler

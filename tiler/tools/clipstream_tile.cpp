@@ -1,0 +1,219 @@
+// clipstream-tile: builds a tile store from an image. Thin: argument
+// parsing, signal handling and the summary; the work is in clipstream::tiler.
+#include <clipstream/store/progress.h>
+#include <clipstream/tiler/tiler.h>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+
+namespace {
+
+std::atomic<bool> g_cancel{false};
+
+extern "C" void onSignal(int) { g_cancel.store(true); }
+
+// Parses "WIDTHxHEIGHT" (decimal, at most 12 digits each, 'x' or 'X').
+bool parseSize(const std::string& text, uint64_t* width, uint64_t* height) {
+  const size_t sep = text.find_first_of("xX");
+  if (sep == std::string::npos) return false;
+  auto number = [](const std::string& digits, uint64_t* out) {
+    if (digits.empty() || digits.size() > 12) return false;
+    uint64_t v = 0;
+    for (char c : digits) {
+      if (c < '0' || c > '9') return false;
+      v = v * 10 + uint64_t(c - '0');
+    }
+    *out = v;
+    return true;
+  };
+  return number(text.substr(0, sep), width) && number(text.substr(sep + 1), height);
+}
+
+std::string megabytes(uint64_t bytes) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.1f MB", double(bytes) / (1024.0 * 1024.0));
+  return text;
+}
+
+nlohmann::json toJson(const clipstream::tiler::TilerSummary& s, const std::string& input,
+                      const std::string& output) {
+  nlohmann::json j;
+  j["input"] = input;
+  j["output"] = output;
+  j["width_px"] = s.width_px;
+  j["height_px"] = s.height_px;
+  j["format"] = clipstream::pixelFormatName(s.format);
+  j["input_type"] = s.input_type;
+  j["input_channels"] = s.input_channels;
+  j["levels"] = s.levels;
+  j["tiles"] = s.tiles;
+  j["constant_tiles"] = s.constant_tiles;
+  j["input_bytes"] = s.input_bytes;
+  j["raw_bytes"] = s.raw_bytes;
+  j["output_bytes"] = s.output_bytes;
+  j["clamped_samples"] = s.clamped_samples;
+  j["panel_px"] = s.panel_px;
+  j["panels"] = s.panels;
+  j["memory_budget_bytes"] = s.memory_budget_bytes;
+  j["peak_rss_bytes"] = s.peak_rss_bytes;
+  j["wall_s"] = s.wall_s;
+  j["read_s"] = s.read_s;
+  j["build_s"] = s.build_s;
+  j["encode_s"] = s.encode_s;
+  j["megapixels_per_s"] = s.wall_s > 0 ? double(s.width_px * s.height_px) / 1e6 / s.wall_s : 0.0;
+  nlohmann::json geo;
+  geo["present"] = s.geo.present;
+  geo["transform"] = std::vector<double>(s.geo.transform, s.geo.transform + 6);
+  geo["crs"] = s.geo.crs;
+  j["geo"] = geo;
+  j["warnings"] = s.warnings;
+  return j;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace clipstream;
+  CLI::App app{"Builds a clipstream tile store (full mip pyramid) from an image, out of core."};
+  std::vector<std::string> positional;
+  std::string synthetic, format_text, filter_text = "box", json_path;
+  uint32_t tile_px = 128;
+  int zstd_level = 1;
+  unsigned threads = 0;
+  uint64_t memory_mb = 256;
+  bool no_predictor = false, linear_light = false, quiet = false, force = false, no_fsync = false;
+  app.add_option("INPUT OUTPUT", positional,
+                 "input image and output store (only OUTPUT with --synthetic)")
+      ->required()
+      ->expected(1, 2);
+  app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
+  app.add_option("--format", format_text, "force the store format: R8, R16, RGB8, RGBA8");
+  app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)");
+  app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)");
+  app.add_flag("--no-predictor", no_predictor, "store tiles without the left-delta predictor");
+  app.add_option("--filter", filter_text, "downsampling filter: box (default) or lanczos3");
+  app.add_flag("--linear-light", linear_light, "with lanczos3: filter in linear light (sRGB input)");
+  app.add_option("--threads", threads, "encoder threads (default: all cores)");
+  app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)");
+  app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
+  app.add_flag("--force,-f", force, "overwrite an existing OUTPUT");
+  app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
+  app.add_flag("--no-fsync", no_fsync, "skip the final fsync (faster, for scratch outputs)");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  tiler::TilerOptions options;
+  std::string input_name;
+  if (!synthetic.empty()) {
+    if (positional.size() != 1) {
+      std::cerr << "clipstream-tile: with --synthetic give only OUTPUT\n";
+      return 2;
+    }
+    if (!parseSize(synthetic, &options.synthetic_width_px, &options.synthetic_height_px)) {
+      std::cerr << "clipstream-tile: --synthetic '" << synthetic << "' is not WIDTHxHEIGHT\n";
+      return 2;
+    }
+    options.output_path = positional[0];
+    input_name = "synthetic " + synthetic;
+  } else {
+    if (positional.size() != 2) {
+      std::cerr << "clipstream-tile: need INPUT and OUTPUT (or --synthetic WxH OUTPUT)\n";
+      return 2;
+    }
+    options.input_path = positional[0];
+    options.output_path = positional[1];
+    input_name = positional[0];
+  }
+  if (!format_text.empty()) {
+    options.format = tiler::parsePixelFormat(format_text);
+    if (!options.format) {
+      std::cerr << "clipstream-tile: --format '" << format_text << "' is not R8, R16, RGB8 or RGBA8\n";
+      return 2;
+    }
+  }
+  if (filter_text == "box") {
+    options.filter = DownsampleFilter::kBox;
+  } else if (filter_text == "lanczos3") {
+    options.filter = DownsampleFilter::kLanczos3;
+  } else {
+    std::cerr << "clipstream-tile: --filter '" << filter_text << "' is not box or lanczos3\n";
+    return 2;
+  }
+  if (memory_mb > (uint64_t(1) << 30)) {
+    std::cerr << "clipstream-tile: --memory-mb " << memory_mb << " is absurdly large\n";
+    return 2;
+  }
+  options.tile_px = tile_px;
+  options.zstd_level = zstd_level;
+  options.predictor = !no_predictor;
+  options.linear_light = linear_light;
+  options.threads = threads;
+  options.memory_budget_bytes = memory_mb << 20;
+  options.overwrite = force;
+  options.progress = !quiet && progressEnabledByDefault();
+  options.fsync = !no_fsync;
+  options.cancel = &g_cancel;
+
+  struct sigaction action = {};
+  action.sa_handler = onSignal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  // Past a file-size limit, writes then fail with EFBIG (reported, temporaries
+  // removed) instead of the default SIGXFSZ killing us mid-write.
+  std::signal(SIGXFSZ, SIG_IGN);
+
+  tiler::TilerSummary summary;
+  const Status status = tiler::tileImage(options, &summary);
+  if (!status) {
+    std::cerr << "clipstream-tile: " << status.toString() << "\n";
+    return status.code == ErrorCode::kCancelled ? 130 : 1;
+  }
+
+  for (const std::string& w : summary.warnings) std::cerr << "clipstream-tile: warning: " << w << "\n";
+  if (!quiet) {
+    const double mp = double(summary.width_px * summary.height_px) / 1e6;
+    std::printf(
+        "%s: %llux%llu %s -> %s: %u levels, %llu tiles (%llu constant), %.1f MP/s, input %s, "
+        "output %s, ratio %.2f:1 (raw/output), peak RSS %s, wall %.2f s\n",
+        input_name.c_str(), (unsigned long long)summary.width_px,
+        (unsigned long long)summary.height_px, pixelFormatName(summary.format),
+        options.output_path.c_str(), summary.levels, (unsigned long long)summary.tiles,
+        (unsigned long long)summary.constant_tiles, summary.wall_s > 0 ? mp / summary.wall_s : 0.0,
+        megabytes(summary.input_bytes).c_str(), megabytes(summary.output_bytes).c_str(),
+        summary.output_bytes ? double(summary.raw_bytes) / double(summary.output_bytes) : 0.0,
+        megabytes(summary.peak_rss_bytes).c_str(), summary.wall_s);
+    if (summary.geo.present) {
+      const double* t = summary.geo.transform;
+      std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
+                  t[0], t[3], t[1], t[5], t[2], t[4],
+                  summary.geo.crs.empty() ? "(unknown)" : summary.geo.crs.c_str());
+    }
+    if (summary.clamped_samples > 0) {
+      std::printf("note: %llu input samples were outside the output range and clamped\n",
+                  (unsigned long long)summary.clamped_samples);
+    }
+  }
+  if (!json_path.empty()) {
+    const std::string text = toJson(summary, input_name, options.output_path).dump(2) + "\n";
+    if (json_path == "-") {
+      std::fputs(text.c_str(), stdout);
+    } else {
+      std::ofstream out(json_path);
+      out << text;
+      if (!out) {
+        std::cerr << "clipstream-tile: cannot write " << json_path << "\n";
+        return 1;
+      }
+    }
+  }
+  return 0;
+}
