@@ -11,6 +11,7 @@ if (strstrt(GPVAL_TERMINALS, "pngcairo") > 0) {
 set output png
 set multiplot layout 2,1 title "clipstream-fly: ".csv
 set grid
+set xrange [0:*]
 set xlabel "frame"
 set ylabel "ms"
 plot csv using "frame":"frame_ms" with lines lw 1.5 title "frame ms", \
