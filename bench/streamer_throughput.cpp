@@ -1,6 +1,8 @@
 // Tile pipeline throughput: read + verify + decode + convert through the
 // store source with 1 and 2 workers, against raw single-thread zstd
-// decompression of the same payloads. Builds its own store (synthetic
+// decompression of the same payloads. The separate decode and convert stage
+// rows are the unfused path (decodeTile, then convertToRgba8); the store
+// source uses decodeTileRgba8 (also timed as a stage). Builds its own store (synthetic
 // pixels, store writer) in the temp directory; the file is in the page
 // cache, so "read" is a positional copy from memory.
 //
@@ -94,84 +96,91 @@ int main(int argc, char** argv) {
       }
   const double tile_mb = double(g.tileBytes()) / (1024.0 * 1024.0);
 
-  // Raw zstd: decompress every non-constant payload on one thread.
-  double zstd_best = 1e30;
-  {
-    std::vector<uint8_t> out(g.tileBytes());
-    ZSTD_DCtx* dctx = ZSTD_createDCtx();
-    for (int r = 0; r < repeats; ++r) {
-      const double t0 = nowS();
-      for (const RawTile& raw : raws)
-        ZSTD_decompressDCtx(dctx, out.data(), out.size(), raw.payload.data(), raw.payload.size());
-      zstd_best = std::min(zstd_best, nowS() - t0);
-    }
-    ZSTD_freeDCtx(dctx);
-  }
-  const double zstd_tiles_s = double(raws.size()) / zstd_best;
-
-  // Where a single-thread fetch spends its time: each stage alone.
-  auto bestOf = [&](const std::function<void()>& body) {
-    double best = 1e30;
-    for (int r = 0; r < repeats; ++r) {
-      const double t0 = nowS();
-      body();
-      best = std::min(best, nowS() - t0);
-    }
-    return best;
-  };
-  const double read_s = bestOf([&] {
-    RawTile raw;
-    for (const TileKey& k : keys) (void)reader->readRaw(k, &raw);
-  });
-  std::vector<uint8_t> decoded(g.tileBytes());
-  const double decode_s = bestOf([&] {
-    for (const RawTile& raw : raws) (void)reader->decode(raw, decoded);
-  });
-  std::vector<uint8_t> rgba_out(size_t(g.tile_px) * g.tile_px * 4);
-  const double convert_s = bestOf([&] {
-    for (size_t i = 0; i < raws.size(); ++i)
-      (void)convertToRgba8(g.format, decoded, rgba_out.data(), size_t(g.tile_px) * g.tile_px);
-  });
-
   Status open_status;
   auto source = openStoreSource(path, &open_status);
   if (!source) return 1;
+
+  // Every measurement as a body; the repeats run them interleaved (raw
+  // zstd, each stage, the pipeline, then again) so that load from other
+  // processes drifting during the run hits all of them alike. Best of N each.
+  std::vector<uint8_t> zstd_out(g.tileBytes());
+  ZSTD_DCtx* dctx = ZSTD_createDCtx();
+  std::vector<uint8_t> decoded(g.tileBytes());
+  std::vector<uint8_t> rgba_out(size_t(g.tile_px) * g.tile_px * 4);
+  auto pipeline = [&](unsigned threads) {
+    std::atomic<size_t> next{0};
+    std::atomic<size_t> failures{0};
+    std::vector<std::thread> pool;
+    for (unsigned i = 0; i < threads; ++i)
+      pool.emplace_back([&] {
+        std::vector<uint8_t> rgba;
+        for (size_t k; (k = next.fetch_add(1)) < keys.size();)
+          if (!source->fetch(keys[k], &rgba)) failures++;
+      });
+    for (std::thread& t : pool) t.join();
+    if (failures) std::fprintf(stderr, "%zu fetches failed\n", failures.load());
+  };
+  struct Measure {
+    const char* name;
+    unsigned threads;
+    size_t tiles;
+    std::function<void()> body;
+    double best_s = 1e30;
+  };
+  std::vector<Measure> measures = {
+      // Raw zstd: decompress every non-constant payload on one thread.
+      {"raw_zstd", 1, raws.size(),
+       [&] {
+         for (const RawTile& raw : raws)
+           ZSTD_decompressDCtx(dctx, zstd_out.data(), zstd_out.size(), raw.payload.data(),
+                               raw.payload.size());
+       }},
+      // Where a single-thread fetch spends its time: each stage alone.
+      {"stage:readRaw(pread+xxh3)", 1, keys.size(),
+       [&] {
+         RawTile raw;
+         for (const TileKey& k : keys) (void)reader->readRaw(k, &raw);
+       }},
+      // The unfused path: decodeTile (zstd + in-place predictor inverse) ...
+      {"stage:decode(zstd+predictor)", 1, raws.size(),
+       [&] {
+         for (const RawTile& raw : raws) (void)reader->decode(raw, decoded);
+       }},
+      // ... then the streamer's RGB8 -> RGBA8 conversion.
+      {"stage:convert(RGB8->RGBA8)", 1, raws.size(),
+       [&] {
+         for (size_t i = 0; i < raws.size(); ++i)
+           (void)convertToRgba8(g.format, decoded, rgba_out.data(), size_t(g.tile_px) * g.tile_px);
+       }},
+      // The fused path the store source uses: zstd, then predictor inverse
+      // and RGB8 -> RGBA8 in one pass.
+      {"stage:decodeTileRgba8(zstd+fused_predictor_convert)", 1, raws.size(),
+       [&] {
+         for (const RawTile& raw : raws)
+           (void)decodeTileRgba8(g, reader->info().encoding, raw, rgba_out);
+       }},
+      {"read_verify_decode_rgba8", 1, keys.size(), [&] { pipeline(1); }},
+      {"read_verify_decode_rgba8", 2, keys.size(), [&] { pipeline(2); }},
+  };
+  for (int r = 0; r < repeats; ++r)
+    for (Measure& m : measures) {
+      const double t0 = nowS();
+      m.body();
+      m.best_s = std::min(m.best_s, nowS() - t0);
+    }
+  ZSTD_freeDCtx(dctx);
+
+  const double zstd_tiles_s = double(raws.size()) / measures[0].best_s;
   std::printf("# store %llux%llu RGB8 tile 128: %zu tiles (%zu non-constant), %.1f MiB stored, "
-              "%.2fx compression; best of %d\n",
+              "%.2fx compression; best of %d, interleaved\n",
               (unsigned long long)side, (unsigned long long)side, keys.size(), raws.size(),
               double(stored) / (1024.0 * 1024.0),
               double(raws.size()) * double(g.tileBytes()) / double(stored), repeats);
   std::printf("pipeline\tthreads\ttiles\tbest_s\ttiles_per_s\tdecoded_MiB_per_s\tper_thread_vs_zstd_%%\n");
-  std::printf("raw_zstd\t1\t%zu\t%.4f\t%.0f\t%.1f\t100.0\n", raws.size(), zstd_best, zstd_tiles_s,
-              zstd_tiles_s * tile_mb);
-  auto stageRow = [&](const char* name, double secs, size_t n) {
-    const double tiles_s = double(n) / secs;
-    std::printf("%s\t1\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", name, n, secs, tiles_s, tiles_s * tile_mb,
-                100.0 * tiles_s / zstd_tiles_s);
-  };
-  stageRow("stage:readRaw(pread+xxh3)", read_s, keys.size());
-  stageRow("stage:decode(zstd+predictor)", decode_s, raws.size());
-  stageRow("stage:convert(RGB8->RGBA8)", convert_s, raws.size());
-  for (unsigned threads : {1u, 2u}) {
-    double best = 1e30;
-    for (int r = 0; r < repeats; ++r) {
-      std::atomic<size_t> next{0};
-      std::atomic<size_t> failures{0};
-      const double t0 = nowS();
-      std::vector<std::thread> pool;
-      for (unsigned i = 0; i < threads; ++i)
-        pool.emplace_back([&] {
-          std::vector<uint8_t> rgba;
-          for (size_t k; (k = next.fetch_add(1)) < keys.size();)
-            if (!source->fetch(keys[k], &rgba)) failures++;
-        });
-      for (std::thread& t : pool) t.join();
-      best = std::min(best, nowS() - t0);
-      if (failures) std::fprintf(stderr, "%zu fetches failed\n", failures.load());
-    }
-    const double tiles_s = double(keys.size()) / best;
-    std::printf("read_verify_decode_rgba8\t%u\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", threads, keys.size(),
-                best, tiles_s, tiles_s * tile_mb, 100.0 * tiles_s / threads / zstd_tiles_s);
+  for (const Measure& m : measures) {
+    const double tiles_s = double(m.tiles) / m.best_s;
+    std::printf("%s\t%u\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", m.name, m.threads, m.tiles, m.best_s,
+                tiles_s, tiles_s * tile_mb, 100.0 * tiles_s / m.threads / zstd_tiles_s);
   }
   std::filesystem::remove(path);
   return 0;

@@ -58,8 +58,13 @@ void applyLeftDelta(const uint8_t* in, uint8_t* out, uint32_t tile_px, PixelForm
   }
 }
 
+// Vectorised rows of undoLeftDelta (defined with decodeTileRgba8 below);
+// false when this build or CPU has no fast path for the format.
+bool undoLeftDeltaFast(uint8_t* pixels, uint32_t tile_px, PixelFormat format);
+
 // Inverse of applyLeftDelta, in place.
 void undoLeftDelta(uint8_t* pixels, uint32_t tile_px, PixelFormat format) {
+  if (undoLeftDeltaFast(pixels, tile_px, format)) return;
   const size_t row_bytes = size_t(tile_px) * bytesPerPixel(format);
   if (format == PixelFormat::kR16) {
     for (uint32_t y = 0; y < tile_px; ++y) {
@@ -75,8 +80,9 @@ void undoLeftDelta(uint8_t* pixels, uint32_t tile_px, PixelFormat format) {
     }
     return;
   }
-  // Each byte depends on the one a pixel earlier; measured faster than
-  // keeping per-channel sums in locals (which GCC 12 spills).
+  // Portable fallback. Each byte depends on the one a pixel earlier;
+  // measured faster than keeping per-channel sums in locals (which GCC 12
+  // spills).
   const size_t bpp = bytesPerPixel(format);
   for (uint32_t y = 0; y < tile_px; ++y) {
     uint8_t* row = pixels + y * row_bytes;
@@ -238,10 +244,11 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
 // decodeTileRgba8: decode + predictor inverse + RGBA8 expansion in one pass.
 //
 // The left-delta inverse is a prefix sum along each row. Done byte by byte in
-// place (undoLeftDelta) every byte waits on a store a pixel earlier; here each
-// row is summed in registers, four pixels (SSE2) or one pixel (portable) at a
-// time, and written straight out as RGBA8, so the tile is touched once after
-// zstd instead of twice (undo, then convert).
+// place every byte waits on a store a pixel earlier; here each row is summed
+// in registers, four pixels (SSE) or one pixel (portable) at a time, and
+// written straight out as RGBA8, so the tile is touched once after zstd
+// instead of twice (undo, then convert). The in-place vector rows that
+// undoLeftDelta uses live here too (undoLeftDeltaFast).
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -366,9 +373,55 @@ void rowRgb(const uint8_t* src, uint8_t* dst, uint32_t px) {
   }
 }
 
+#if defined(__SSE2__) && defined(__GNUC__)
+#define CLIPSTREAM_HAVE_SSSE3_PATH 1
+#include <tmmintrin.h>
+// RGB8 rows with one byte shuffle per four pixels (SSSE3, chosen at run
+// time). Reads 4 bytes past the row's last pixel: the caller guarantees
+// them readable (the row after, or the scratch buffer's padding).
+template <bool kDelta>
+__attribute__((target("ssse3"))) void rowRgb8Ssse3(const uint8_t* src, uint8_t* dst, uint32_t px) {
+  const __m128i spread = _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, 9, 10, 11, -1);
+  const __m128i alpha = _mm_set1_epi32(int32_t(0xFF000000u));
+  __m128i carry = _mm_setzero_si128();
+  uint32_t x = 0;
+  for (; x + 4 <= px; x += 4, src += 12, dst += 16) {
+    __m128i v = _mm_shuffle_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src)), spread);
+    if constexpr (kDelta) {
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi8(v, carry);
+      carry = _mm_shuffle_epi32(v, 0xFF);
+    }
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), _mm_or_si128(v, alpha));
+  }
+  uint8_t run[4];
+  const uint32_t last = uint32_t(_mm_cvtsi128_si32(carry));
+  std::memcpy(run, &last, 4);
+  for (; x < px; ++x, src += 3, dst += 4) {
+    for (int c = 0; c < 3; ++c) run[c] = kDelta ? uint8_t(run[c] + src[c]) : src[c];
+    storeRgba(dst, run[0], run[1], run[2], 255);
+  }
+}
+bool haveSsse3() {
+  static const bool have = __builtin_cpu_supports("ssse3");
+  return have;
+}
+#endif
+
+// Bytes the source of tileToRgba8 must have readable past its end.
+constexpr size_t kSourcePadding = 16;
+
 template <bool kDelta>
 void tileToRgba8(const uint8_t* src, uint8_t* dst, uint32_t tile_px, PixelFormat format) {
   const size_t in_row = size_t(tile_px) * bytesPerPixel(format), out_row = size_t(tile_px) * 4;
+#if defined(CLIPSTREAM_HAVE_SSSE3_PATH)
+  if (format == PixelFormat::kRGB8 && haveSsse3()) {
+    for (uint32_t y = 0; y < tile_px; ++y, src += in_row, dst += out_row)
+      rowRgb8Ssse3<kDelta>(src, dst, tile_px);
+    return;
+  }
+#endif
   for (uint32_t y = 0; y < tile_px; ++y, src += in_row, dst += out_row) {
     switch (format) {
       case PixelFormat::kR8: rowR8<kDelta>(src, dst, tile_px); break;
@@ -378,6 +431,110 @@ void tileToRgba8(const uint8_t* src, uint8_t* dst, uint32_t tile_px, PixelFormat
     }
   }
 }
+
+#if defined(__SSE2__)
+// In-place prefix sums per row, the predictor inverse of decodeTile().
+// Never touches a byte outside `pixels`.
+template <int kBytes>
+void undoRowsSse2(uint8_t* pixels, uint32_t tile_px) {
+  const size_t row_bytes = size_t(tile_px) * kBytes;
+  for (uint32_t y = 0; y < tile_px; ++y) {
+    uint8_t* row = pixels + y * row_bytes;
+    __m128i carry = _mm_setzero_si128();
+    size_t i = 0;
+    for (; i + 16 <= row_bytes; i += 16) {
+      __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + i));
+      if constexpr (kBytes == 1) {
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 1));
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 2));
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+        v = _mm_add_epi8(v, carry);
+        carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(_mm_unpackhi_epi8(v, v), 0xFF), 0xFF);
+      } else if constexpr (kBytes == 2) {
+        v = _mm_add_epi16(v, _mm_slli_si128(v, 2));
+        v = _mm_add_epi16(v, _mm_slli_si128(v, 4));
+        v = _mm_add_epi16(v, _mm_slli_si128(v, 8));
+        v = _mm_add_epi16(v, carry);
+        carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(v, 0xFF), 0xFF);
+      } else {
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+        v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+        v = _mm_add_epi8(v, carry);
+        carry = _mm_shuffle_epi32(v, 0xFF);
+      }
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(row + i), v);
+    }
+    // Scalar tail from the last summed sample.
+    if constexpr (kBytes == 2) {
+      uint16_t run = uint16_t(_mm_cvtsi128_si32(carry));
+      for (; i < row_bytes; i += 2) {
+        run = uint16_t(run + (row[i] | (row[i + 1] << 8)));
+        row[i] = uint8_t(run & 0xff);
+        row[i + 1] = uint8_t(run >> 8);
+      }
+    } else {
+      uint8_t run[4];
+      const uint32_t last = uint32_t(_mm_cvtsi128_si32(carry));
+      std::memcpy(run, &last, 4);
+      for (; i < row_bytes; ++i) row[i] = run[i % kBytes] = uint8_t(run[i % kBytes] + row[i]);
+    }
+  }
+}
+
+#if defined(CLIPSTREAM_HAVE_SSSE3_PATH)
+// RGB8 in place: four pixels spread to RGBA lanes, summed, packed back.
+// The 16-byte load covers 4 bytes of the next pixel; blocks stop 4 bytes
+// before the row's end so nothing outside `pixels` is read.
+__attribute__((target("ssse3"))) void undoRowsRgb8Ssse3(uint8_t* pixels, uint32_t tile_px) {
+  const __m128i spread = _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, 9, 10, 11, -1);
+  const __m128i pack = _mm_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1);
+  const size_t row_bytes = size_t(tile_px) * 3;
+  for (uint32_t y = 0; y < tile_px; ++y) {
+    uint8_t* row = pixels + y * row_bytes;
+    __m128i carry = _mm_setzero_si128();
+    size_t i = 0;
+    for (; i + 16 <= row_bytes; i += 12) {
+      const __m128i in = _mm_loadu_si128(reinterpret_cast<const __m128i*>(row + i));
+      __m128i v = _mm_shuffle_epi8(in, spread);
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi8(v, carry);
+      carry = _mm_shuffle_epi32(v, 0xFF);
+      // 12 bytes back (8 + 4): a 16-byte store would overlap the next
+      // load and defeat store-to-load forwarding.
+      const __m128i out = _mm_shuffle_epi8(v, pack);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(row + i), out);
+      const uint32_t tail = uint32_t(_mm_cvtsi128_si32(_mm_srli_si128(out, 8)));
+      std::memcpy(row + i + 8, &tail, 4);
+    }
+    uint8_t run[4];
+    const uint32_t last = uint32_t(_mm_cvtsi128_si32(carry));
+    std::memcpy(run, &last, 4);
+    for (size_t c = 0; i < row_bytes; ++i, c = (c + 1) % 3) row[i] = run[c] = uint8_t(run[c] + row[i]);
+  }
+}
+#endif
+
+bool undoLeftDeltaFast(uint8_t* pixels, uint32_t tile_px, PixelFormat format) {
+  switch (format) {
+    case PixelFormat::kR8: undoRowsSse2<1>(pixels, tile_px); return true;
+    case PixelFormat::kR16: undoRowsSse2<2>(pixels, tile_px); return true;
+    case PixelFormat::kRGBA8: undoRowsSse2<4>(pixels, tile_px); return true;
+    case PixelFormat::kRGB8:
+#if defined(CLIPSTREAM_HAVE_SSSE3_PATH)
+      if (haveSsse3()) {
+        undoRowsRgb8Ssse3(pixels, tile_px);
+        return true;
+      }
+#endif
+      return false;
+  }
+  return false;
+}
+#else
+bool undoLeftDeltaFast(uint8_t*, uint32_t, PixelFormat) { return false; }
+#endif
 
 }  // namespace
 
@@ -399,8 +556,9 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
   if (raw.location.constant) {
     // One pixel, expanded once, repeated; no predictor on constant tiles.
     uint8_t one[4];
-    const uint8_t* p = raw.location.constant_pixel;
-    tileToRgba8<false>(p, one, 1, geometry.format);
+    uint8_t padded[8 + kSourcePadding] = {};
+    std::memcpy(padded, raw.location.constant_pixel, sizeof(raw.location.constant_pixel));
+    tileToRgba8<false>(padded, one, 1, geometry.format);
     for (size_t i = 0; i < pixel_count; ++i) std::memcpy(rgba.data() + 4 * i, one, 4);
     return Status::ok();
   }
@@ -415,8 +573,9 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
     return Status::ok();
   }
   thread_local std::vector<uint8_t> scratch;
-  scratch.resize(geometry.tileBytes());
-  Status status = decodeTile(geometry, stored, raw, scratch);
+  scratch.resize(geometry.tileBytes() + kSourcePadding);
+  Status status =
+      decodeTile(geometry, stored, raw, std::span<uint8_t>(scratch.data(), geometry.tileBytes()));
   if (!status) return status;
   if (delta) {
     tileToRgba8<true>(scratch.data(), rgba.data(), geometry.tile_px, geometry.format);

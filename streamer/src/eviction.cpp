@@ -12,7 +12,7 @@ namespace {
 constexpr double kInsideFirst = 1e15;
 
 double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode) {
-  if (key.level >= w.rects.size()) return 1e30;
+  if (key.level >= w.rects.size()) return kNoPlanScore;
   const TileRect& r = w.rects[key.level];
   const int64_t x = key.x, y = key.y;
   const bool needed = w.kinds[key.level] != PlanWindows::kNotNeeded;

@@ -9,7 +9,13 @@
 // Chebyshev distance to the window (tiles) times 4^level; levels the plan
 // does not need add a clip's width per level away from the finest needed
 // level. The predicted plan counts too (the smaller score wins). Larger
-// score = evicted sooner; ties go least recently wanted first.
+// score = evicted sooner; ties go MOST recently wanted first: tiles the
+// score cannot tell apart (a whole level the plan no longer needs, tiles
+// equally far beside the path) then stay a stable subset instead of cycling
+// through RAM, which is what pays on loops, zoom cycles and returns (LRU is
+// the worst case on a loop larger than the cache). Without any plan
+// (kNoPlanScore) recency is the only locality signal left, so those ties go
+// least recently wanted first.
 // The 4^level weight (coarse outside tiles first) was chosen by replaying
 // the benchmark flight paths: 2^level (pure travel distance) and 4^level
 // agree on passes and orbits, 4^level keeps far more of revisited places
@@ -42,8 +48,19 @@ PlanWindows planWindows(const ClipmapPlan& plan);
 // True for tiles of pyramid levels: always wanted, never scored.
 bool isPyramidTile(const TileKey& key, const PlanWindows& windows);
 
+// Score of tiles no plan covers (no window line for their level yet).
+inline constexpr double kNoPlanScore = 1e30;
+
 // Eviction score (see above). `predicted` may be empty.
 double evictionScore(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
                      EvictionMode mode);
+
+// Victim order shared by the streamer and the replay: true when a tile with
+// (score_a, wanted_a) is evicted before one with (score_b, wanted_b), where
+// wanted_* is when the tile was last wanted (frames or trace positions).
+inline bool evictsBefore(double score_a, uint64_t wanted_a, double score_b, uint64_t wanted_b) {
+  if (score_a != score_b) return score_a > score_b;
+  return score_a >= kNoPlanScore ? wanted_a < wanted_b : wanted_a > wanted_b;
+}
 
 }  // namespace clipstream

@@ -1,5 +1,6 @@
 // TileSource over a tile store file: positional reads through
-// TileStoreReader (no lock around I/O), then conversion to RGBA8.
+// TileStoreReader (no lock around I/O), then decodeTileRgba8 (decode,
+// predictor inverse and conversion to RGBA8 in one pass).
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -29,20 +30,14 @@ class StoreSource final : public TileSource {
     const PyramidGeometry& geo = m_reader->geometry();
     // Scratch buffers are per thread so concurrent fetches share nothing.
     thread_local RawTile raw;
-    thread_local std::vector<uint8_t> pixels;
     Status status = m_reader->readRaw(key, &raw);
     if (!status) return status;
     info->bytes_read = raw.payload.size();
     const auto start = std::chrono::steady_clock::now();
     const size_t tile_px2 = size_t(geo.tile_px) * geo.tile_px;
     rgba->resize(tile_px2 * 4);
-    if (geo.format == PixelFormat::kRGBA8) {
-      status = m_reader->decode(raw, std::span<uint8_t>(*rgba));
-    } else {
-      pixels.resize(geo.tileBytes());
-      status = m_reader->decode(raw, std::span<uint8_t>(pixels));
-      if (status) status = convertToRgba8(geo.format, pixels, rgba->data(), tile_px2);
-    }
+    // Predictor inverse fused with the RGBA8 expansion (one pass after zstd).
+    status = decodeTileRgba8(geo, m_reader->info().encoding, raw, std::span<uint8_t>(*rgba));
     info->decode_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return status;

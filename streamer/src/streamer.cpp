@@ -177,7 +177,7 @@ void Streamer::Impl::buildVictimLists() {
       pinned.emplace_back(r->second, key);
   }
   std::sort(scored_list.begin(), scored_list.end(), [](const Candidate& x, const Candidate& y) {
-    return x.score != y.score ? x.score > y.score : x.stamp < y.stamp;
+    return evictsBefore(x.score, x.stamp, y.score, y.stamp);
   });
   std::sort(pinned.begin(), pinned.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
   victims.clear();

@@ -152,12 +152,12 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
       w->rects[e.key.level] = e.rect;
       w->kinds[e.key.level] = e.kind;
     };
-    // (score, stamp, id): victims are taken from the end (highest score,
-    // then oldest stamp).
+    // (score, stamp, id): victims are taken from the end, in the streamer's
+    // order (evictsBefore).
     using Slot = std::tuple<double, uint64_t, uint32_t>;
     auto order = [](const Slot& a, const Slot& b) {
-      if (std::get<0>(a) != std::get<0>(b)) return std::get<0>(a) < std::get<0>(b);
-      if (std::get<1>(a) != std::get<1>(b)) return std::get<1>(a) > std::get<1>(b);
+      if (std::get<0>(a) != std::get<0>(b) || std::get<1>(a) != std::get<1>(b))
+        return evictsBefore(std::get<0>(b), std::get<1>(b), std::get<0>(a), std::get<1>(a));
       return std::get<2>(a) < std::get<2>(b);
     };
     std::set<Slot, decltype(order)> candidates(order);

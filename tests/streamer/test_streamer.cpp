@@ -1,6 +1,7 @@
 // The streamer: load order, cancellation, prefetch, the hard RAM budget,
 // failures, shutdown, hand-off limits, MaxTextureLOD hysteresis, stats.
 #include "test_helpers.h"
+#include "../../streamer/src/eviction.h"  // private: the victim order under test
 
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
@@ -561,6 +562,42 @@ TEST(Trace, EvictionModesDifferOnTilesInsideTheWindow) {
   EXPECT_EQ(r.hits_gpu_first, 1u);
   EXPECT_EQ(r.hits_plan, 0u);
   EXPECT_EQ(r.hits_lru, 0u);
+}
+
+
+TEST(Trace, EqualScoresEvictTheMostRecentlyWantedTileFirst) {
+  // Window fixed on tile 10. A (x 8) and B (x 12) are both two tiles out:
+  // equal scores. When C arrives in a full cache, the most recently wanted
+  // of the tie (B) goes, so the subset kept is stable and A hits when it
+  // comes back. Least-recently-wanted ties would evict A and miss.
+  TraceEvent w;
+  w.frame = 1;
+  w.window = 'w';
+  w.key.level = 0;
+  w.rect = {10, 0, 11, 1};
+  w.kind = 1;
+  auto tile = [](uint64_t frame, uint32_t x, bool leave) {
+    TraceEvent e;
+    e.frame = frame;
+    e.key = {0, x, 0};
+    e.leave = leave;
+    return e;
+  };
+  const std::vector<TraceEvent> ev = {w,  tile(1, 8, false),  tile(1, 8, true),
+                                      tile(2, 12, false), tile(2, 12, true),
+                                      tile(3, 14, false), tile(3, 14, true),
+                                      tile(4, 8, false)};
+  const ReplayResult r = replayTrace(ev, 2);
+  EXPECT_EQ(r.accesses, 4u);
+  EXPECT_EQ(r.hits_gpu_first, 1u);
+  EXPECT_EQ(r.hits_plan, 1u);
+  EXPECT_EQ(r.hits_lru, 0u);
+  // The streamer sorts with the same rule.
+  EXPECT_TRUE(evictsBefore(2.0, 7, 2.0, 3));
+  EXPECT_FALSE(evictsBefore(2.0, 3, 2.0, 7));
+  EXPECT_TRUE(evictsBefore(3.0, 3, 2.0, 7));
+  // Without a plan, recency is all there is: least recently wanted first.
+  EXPECT_TRUE(evictsBefore(kNoPlanScore, 3, kNoPlanScore, 7));
 }
 
 }  // namespace
