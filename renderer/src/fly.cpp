@@ -3,6 +3,7 @@
 
 #include "gl.h"
 
+#include <clipstream/renderer/accuracy.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight_path.h>
 #include <clipstream/renderer/frame_writer.h>
@@ -19,6 +20,7 @@
 #include <filesystem>
 #include <fstream>
 #include <ostream>
+#include <thread>
 
 namespace clipstream {
 namespace {
@@ -44,7 +46,17 @@ struct FrameRow {
   uint64_t ram_bytes = 0;
   std::vector<LevelFrame> levels;
   LevelFrame total;
+  uint64_t tiles_loaded = 0;   // loader reads into RAM this frame
+  bool cut = false;            // first frame or a jump of the camera (isCut())
+  AccuracyFrame accuracy;      // --reference only
 };
+
+std::string dbText(bool measured, double db) {
+  if (!measured) return "";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f", db);
+  return buf;
+}
 
 Status writeFileAtomically(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";
@@ -89,6 +101,19 @@ Status parseBuffering(const std::string& text, Buffering* out) {
                        "buffering \"" + text + "\" is not single, double-upload or double-copy");
 }
 
+Status parseResize(const std::string& text, uint32_t* frame, Viewport* out) {
+  const size_t colon = text.find(':');
+  unsigned f = 0;
+  char tail = 0;
+  if (colon == std::string::npos ||
+      std::sscanf(text.substr(0, colon).c_str(), "%u%c", &f, &tail) != 1 || f == 0)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "resize \"" + text + "\" is not FRAME:WIDTHxHEIGHT (e.g. 120:640x360)");
+  if (Status s = parseViewport(text.substr(colon + 1), out); !s) return s;
+  *frame = f;
+  return Status::ok();
+}
+
 Status runFly(const FlyOptions& o, std::ostream& log) {
   // Source.
   std::shared_ptr<TileSource> source;
@@ -104,6 +129,13 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     source = openStoreSource(o.store_path, &s);
     if (!source) return s.isOk() ? Status::error(ErrorCode::kIo, "cannot open " + o.store_path) : s;
   }
+  if (o.fault_latency_ms > 0.0 || o.fault_corrupt_fraction > 0.0) {
+    FaultSpec fault;
+    fault.latency_ms = o.fault_latency_ms;
+    fault.fail_fraction = o.fault_corrupt_fraction;
+    fault.fail_code = ErrorCode::kCorruptTile;
+    source = makeFaultySource(source, fault);
+  }
   const PyramidGeometry geometry = source->geometry();
 
   // Path.
@@ -111,7 +143,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   {
     const auto names = FlightPath::builtinNames();
     Status s = std::find(names.begin(), names.end(), o.path) != names.end()
-                   ? FlightPath::builtin(o.path, geometry, &path)
+                   ? FlightPath::builtin(o.path, geometry, &path, std::max(1u, o.teleport_frames))
                    : FlightPath::load(o.path, &path);
     if (!s) return s;
   }
@@ -133,49 +165,108 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   StreamerConfig sc;
   sc.ram_budget_bytes = o.cache_mb << 20;
   sc.io_threads = o.io_threads;
-  const ClipmapPlan first = planClipmap(geometry, o.viewport, path.sample(0.0), sc.planner);
+  sc.throttle = o.throttle;
+  sc.prefetch = o.prefetch;
+  sc.frustum_priority = o.frustum_priority;
+  sc.trace_path = o.trace_path;
+  Viewport viewport = o.viewport;
+  ClipmapPlan first = planClipmap(geometry, viewport, path.sample(0.0), sc.planner);
   std::unique_ptr<ClipmapRenderer> renderer;
-  RendererConfig rc{first.clip_tiles, first.pyramid_level, o.buffering};
-  if (Status s = ClipmapRenderer::create(geometry, rc, &renderer); !s) return s;
-  renderer->setOverlay(o.overlay ? Overlay::kLevels : Overlay::kOff);
 
   // The coarse pyramid is loaded before the first frame, so every frame
   // has something correct to draw. A tile that fails stays black (counted).
-  const auto preload_start = Clock::now();
+  // A viewport resize makes a new renderer (the clip size follows the
+  // viewport) and loads the pyramid again the same way.
   uint32_t preload_failures = 0;
-  renderer->beginFrame();
-  for (uint32_t l = first.pyramid_level; l < geometry.levelCount(); ++l)
-    for (uint32_t y = 0; y < geometry.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < geometry.levels[l].tiles_x; ++x) {
-        auto px = std::make_shared<std::vector<uint8_t>>();
-        if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
-        else ++preload_failures;
-      }
-  renderer->endUploads();
+  auto makeRenderer = [&]() -> Status {
+    renderer.reset();
+    RendererConfig rc{first.clip_tiles, first.pyramid_level, o.buffering};
+    if (Status s = ClipmapRenderer::create(geometry, rc, &renderer); !s) return s;
+    renderer->setOverlay(o.overlay ? Overlay::kLevels : Overlay::kOff);
+    renderer->beginFrame();
+    for (uint32_t l = first.pyramid_level; l < geometry.levelCount(); ++l)
+      for (uint32_t y = 0; y < geometry.levels[l].tiles_y; ++y)
+        for (uint32_t x = 0; x < geometry.levels[l].tiles_x; ++x) {
+          auto px = std::make_shared<std::vector<uint8_t>>();
+          if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
+          else ++preload_failures;
+        }
+    renderer->endUploads();
+    return Status::ok();
+  };
+  const auto preload_start = Clock::now();
+  if (Status s = makeRenderer(); !s) return s;
   const double preload_ms = msBetween(preload_start, Clock::now());
+
+  std::unique_ptr<FlyAccuracy> accuracy;
+  if (o.reference) {
+    AccuracyOptions ao;
+    ao.ground_truth = o.ground_truth_every > 0;
+    if (Status s = FlyAccuracy::create(source, viewport, sc.planner, ao, &accuracy); !s) return s;
+  }
 
   Streamer streamer(source, sc);
   FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
+  const uint32_t total_frames = frames + o.rest_frames;
   std::vector<FrameRow> rows;
-  rows.reserve(frames);
+  rows.reserve(total_frames);
   StreamerStats before = streamer.stats();
   const uint32_t levels = geometry.levelCount();
   const auto run_start = Clock::now();
+  Camera previous = path.sample(0.0);
+  double previous_step = 0.0;
+  uint32_t resizes = 0;
 
-  for (uint32_t i = 0; i < frames; ++i) {
+  for (uint32_t w = 0; w < o.warmup_frames; ++w) {
+    // Start-up excluded from the statistics: the camera holds its first
+    // position while the streamer fills the first windows.
+    const Camera camera = path.sample(0.0);
+    streamer.update(camera, viewport, w * renderer_config::kSimulatedFrameSeconds);
+    renderer->applyHandoff(streamer.takeReady(o.upload_tiles));
+    target->bind();
+    ClipmapRenderer::clearSky();
+    renderer->draw(camera, viewport);
+    glFinish();
+    // Warm-up frames count in the over-fetch ratio (loads and sampled
+    // tiles alike), nowhere else.
+    AccuracyFrame ignored;
+    if (accuracy)
+      if (Status s = accuracy->measure(camera, *target, false, false, &ignored); !s) return s;
+  }
+  const uint64_t warmup_loads = streamer.stats().total.loads - before.total.loads;
+  before = streamer.stats();
+  const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
+
+  for (uint32_t i = 0; i < total_frames; ++i) {
+    if (o.resize_at_frame > 0 && i == o.resize_at_frame && o.resize_to.width_px > 0) {
+      viewport = o.resize_to;
+      first = planClipmap(geometry, viewport, previous, sc.planner);
+      target.reset();
+      if (Status s = OffscreenTarget::create(viewport, &target); !s) return s;
+      if (Status s = makeRenderer(); !s) return s;
+      if (accuracy)
+        if (Status s = accuracy->resize(viewport); !s) return s;
+      streamer.resetGpuResidency();
+      ++resizes;
+    }
     FrameRow row;
     row.frame = i;
-    row.t_s = i * renderer_config::kSimulatedFrameSeconds * speed;
+    row.t_s = std::min(i, frames - 1) * renderer_config::kSimulatedFrameSeconds * speed;
+    if (o.loop && path.durationS() > 0.0) row.t_s = std::fmod(row.t_s, path.durationS());
     const Camera camera = path.sample(row.t_s);
+    const double step = glm::length(camera.position - previous.position);
+    row.cut = (i == 0 && o.warmup_frames == 0) || (i > 0 && isCut(previous, camera, previous_step));
+    previous_step = step;
+    previous = camera;
     const auto t0 = Clock::now();
-    streamer.update(camera, o.viewport, i * renderer_config::kSimulatedFrameSeconds);
+    streamer.update(camera, viewport, clock0_s + i * renderer_config::kSimulatedFrameSeconds);
     const FrameHandoff handoff = streamer.takeReady(o.upload_tiles);
     const auto t_streamer = Clock::now();
     renderer->applyHandoff(handoff);
     const auto t_upload = Clock::now();
     target->bind();
     ClipmapRenderer::clearSky();
-    renderer->draw(camera, o.viewport);
+    renderer->draw(camera, viewport);
     glFinish();  // frame time includes the GPU (llvmpipe) work
     const auto t1 = Clock::now();
     row.frame_ms = msBetween(t0, t1);
@@ -187,20 +278,28 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     row.max_texture_lod = handoff.max_texture_lod;
     row.finest_needed = streamer.plan().finest_level;
 
-    const bool save = o.save_every > 0 && (i % o.save_every == 0 || i + 1 == frames);
+    const bool save = o.save_every > 0 && (i % o.save_every == 0 || i + 1 == total_frames);
     if (save) {
       std::vector<uint8_t> rgba;
       target->readRgba(&rgba);
       char name[64];
       std::snprintf(name, sizeof name, "/frame_%05u.png", i);
-      writer.submit(o.out_dir + name, o.viewport.width_px, o.viewport.height_px, std::move(rgba));
+      writer.submit(o.out_dir + name, viewport.width_px, viewport.height_px, std::move(rgba));
       row.readback_ms = msBetween(t1, Clock::now());
+    }
+    // Measured after the frame is timed: the reference fetches synchronously.
+    if (accuracy) {
+      const uint32_t every = std::max(1u, o.reference_every);
+      const bool compare = i % every == 0 || i >= frames || i + 1 == total_frames;
+      const bool truth = compare && o.ground_truth_every > 0 && i % o.ground_truth_every == 0;
+      if (Status s = accuracy->measure(camera, *target, compare, truth, &row.accuracy); !s) return s;
     }
 
     const StreamerStats now = streamer.stats();
     row.queue_depth = now.queue_depth;
     row.in_flight = now.in_flight;
     row.ram_bytes = now.ram_bytes;
+    row.tiles_loaded = now.total.loads - before.total.loads;
     row.levels.resize(levels);
     for (uint32_t l = 0; l < levels; ++l) {
       const LevelCounters c = l < now.levels.size() ? now.levels[l] : LevelCounters{};
@@ -235,6 +334,11 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     }
     before = now;
     rows.push_back(std::move(row));
+    // Rest frames at display pace: a slow source gets real time to land.
+    if (i >= frames && o.rest_frame_ms > 0.0) {
+      const double left = o.rest_frame_ms - msBetween(t0, Clock::now());
+      if (left > 0.0) std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(left));
+    }
   }
   const double run_ms = msBetween(run_start, Clock::now());
   const StreamerStats final_stats = streamer.stats();
@@ -245,7 +349,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   std::string csv =
       "frame,t_s,frame_ms,streamer_ms,upload_ms,draw_ms,readback_ms,tiles_uploaded,second_copies,max_texture_lod,"
       "finest_needed,queue_depth,in_flight,ram_bytes,bytes_read,ram_hits,ram_misses,gpu_hits,"
-      "gpu_misses";
+      "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error";
   for (uint32_t l = 0; l < levels; ++l)
     for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
       csv += ",L" + std::to_string(l) + "_" + f;
@@ -261,6 +365,13 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
                   (unsigned long long)r.total.ram_hits, (unsigned long long)r.total.ram_misses,
                   r.total.gpu_hits, r.total.gpu_misses);
     csv += buf;
+    const AccuracyFrame& a = r.accuracy;
+    csv += "," + std::to_string(r.tiles_loaded) + "," + (r.cut ? "1" : "0") + "," +
+           dbText(a.measured, a.error.psnr_db) + "," +
+           (a.measured ? std::to_string(a.error.max_abs_error) : "") + "," +
+           (a.measured ? std::to_string(a.hole_pixels) : "") + "," +
+           dbText(a.ground_truth_measured, a.ground_truth.psnr_db) + "," +
+           (a.ground_truth_measured ? std::to_string(a.ground_truth.max_abs_error) : "");
     nlohmann::json jl = nlohmann::json::array();
     for (const LevelFrame& lf : r.levels) {
       csv += "," + std::to_string(lf.ram_hits) + "," + std::to_string(lf.ram_misses) + "," +
@@ -279,7 +390,17 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
                        {"ram_bytes", r.ram_bytes}, {"bytes_read", r.total.bytes_read},
                        {"ram_hits", r.total.ram_hits}, {"ram_misses", r.total.ram_misses},
                        {"gpu_hits", r.total.gpu_hits}, {"gpu_misses", r.total.gpu_misses},
+                       {"tiles_loaded", r.tiles_loaded}, {"cut", r.cut},
                        {"levels", jl}});
+    if (r.accuracy.measured) {
+      jframes.back()["psnr_db"] = r.accuracy.error.psnr_db;
+      jframes.back()["max_abs_error"] = r.accuracy.error.max_abs_error;
+      jframes.back()["hole_pixels"] = r.accuracy.hole_pixels;
+    }
+    if (r.accuracy.ground_truth_measured) {
+      jframes.back()["gt_psnr_db"] = r.accuracy.ground_truth.psnr_db;
+      jframes.back()["gt_max_abs_error"] = r.accuracy.ground_truth.max_abs_error;
+    }
   }
   std::vector<double> frame_ms;
   uint64_t tiles = 0, gpu_hits = 0, gpu_misses = 0;
@@ -297,10 +418,58 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   }
   for (double v : frame_ms) mean += v;
   mean /= std::max<size_t>(frame_ms.size(), 1);
+  // Run summary (docs/accuracy.md): PSNR, time to sharp, over-fetch, RSS.
+  std::vector<FrameRecord> records;
+  records.reserve(rows.size());
+  double gt_sum = 0.0, gt_min = kIdenticalPsnrDb;
+  uint32_t gt_count = 0, holes_frames = 0;
+  for (const FrameRow& r : rows) {
+    FrameRecord f;
+    f.frame = r.frame;
+    f.cut = r.cut;
+    f.has_error = r.accuracy.measured;
+    f.psnr_db = r.accuracy.error.psnr_db;
+    f.max_abs_error = r.accuracy.error.max_abs_error;
+    f.frame_ms = r.frame_ms;
+    f.bytes_read = r.total.bytes_read;
+    f.tiles_uploaded = r.tiles_uploaded;
+    f.tiles_loaded = r.tiles_loaded;
+    f.ram_hits = r.total.ram_hits;
+    f.ram_misses = r.total.ram_misses;
+    f.gpu_hits = r.total.gpu_hits;
+    f.gpu_misses = r.total.gpu_misses;
+    records.push_back(f);
+    if (r.accuracy.measured && r.accuracy.hole_pixels > 0) ++holes_frames;
+    if (r.accuracy.ground_truth_measured) {
+      ++gt_count;
+      gt_sum += r.accuracy.ground_truth.psnr_db;
+      gt_min = std::min(gt_min, r.accuracy.ground_truth.psnr_db);
+    }
+  }
+  RunSummary run = summarizeRun(records, accuracy ? accuracy->tilesSampled() : 0, peakRssBytes());
+  if (run.tiles_sampled > 0)
+    run.over_fetch_ratio = double(run.tiles_loaded + warmup_loads) / double(run.tiles_sampled);
+  nlohmann::json acc = nlohmann::json::parse(run.toJson(), nullptr, false);
+  acc["reference"] = o.reference;
+  acc["frames_with_holes"] = holes_frames;
+  acc["ground_truth_frames"] = gt_count;
+  acc["ground_truth_psnr_mean_db"] = gt_count ? gt_sum / gt_count : 0.0;
+  acc["ground_truth_psnr_min_db"] = gt_count ? gt_min : 0.0;
+  acc["resizes"] = resizes;
+  acc["warmup_frames"] = o.warmup_frames;
+  acc["warmup_tiles_loaded"] = warmup_loads;
+  acc["ram_peak_bytes"] = final_stats.ram_peak_bytes;
+  acc["ram_budget_bytes"] = final_stats.ram_budget_bytes;
+  acc["tile_failures"] = final_stats.total.failures + preload_failures;
+  acc["throttle"] = o.throttle;
+  acc["prefetch"] = o.prefetch;
+  acc["frustum_priority"] = o.frustum_priority;
+  acc["upload_tiles"] = o.upload_tiles;
+  acc["cache_mb"] = o.cache_mb;
   nlohmann::json summary = {
       {"source", source->describe()},
       {"path", o.path},
-      {"frames", frames},
+      {"frames", total_frames},
       {"viewport", std::to_string(o.viewport.width_px) + "x" + std::to_string(o.viewport.height_px)},
       {"speed", speed},
       {"buffering", bufferingName(o.buffering)},
@@ -322,15 +491,58 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
       {"gpu_hit_ratio", gpu_hits + gpu_misses ? double(gpu_hits) / double(gpu_hits + gpu_misses) : 1.0},
       {"pngs_written", writer.written()},
       {"pngs_dropped", writer.dropped()},
-      {"streamer", nlohmann::json::parse(final_stats.toJson(), nullptr, false)}};
+      {"streamer", nlohmann::json::parse(final_stats.toJson(), nullptr, false)},
+      {"accuracy", acc}};
   nlohmann::json doc = {{"summary", summary}, {"frames", jframes}};
   if (Status s = writeFileAtomically(o.out_dir + "/frames.csv", csv); !s) return s;
   if (Status s = writeFileAtomically(o.out_dir + "/frames.json", doc.dump(1) + "\n"); !s) return s;
+  // summary.tsv: one header line, one value line (for scripts/sweep.sh).
+  {
+    std::string keys, values;
+    auto add = [&](const std::string& k, const std::string& v) {
+      keys += (keys.empty() ? "" : "\t") + k;
+      values += (values.empty() ? "" : "\t") + v;
+    };
+    auto num = [](double v) {
+      char b[32];
+      std::snprintf(b, sizeof b, "%.4f", std::isfinite(v) ? v : 0.0);
+      return std::string(b);
+    };
+    add("frames", std::to_string(run.frames));
+    add("speed", num(speed));
+    add("upload_tiles", std::to_string(o.upload_tiles));
+    add("cache_mb", std::to_string(o.cache_mb));
+    add("psnr_mean_db", num(run.psnr_mean_db));
+    add("psnr_min_db", num(run.psnr_min_db));
+    add("frames_below_30db", std::to_string(run.frames_below_30db));
+    add("identical_frames", std::to_string(run.identical_frames));
+    add("time_to_sharp_mean", num(run.time_to_sharp_mean));
+    add("time_to_sharp_max", std::to_string(run.time_to_sharp_max));
+    add("frame_ms_mean", num(run.frame_ms_mean));
+    add("frame_ms_p50", num(run.frame_ms_p50));
+    add("frame_ms_p99", num(run.frame_ms_p99));
+    add("frame_ms_max", num(run.frame_ms_max));
+    add("bytes_read", std::to_string(run.bytes_read));
+    add("tiles_uploaded", std::to_string(run.tiles_uploaded));
+    add("tiles_loaded", std::to_string(run.tiles_loaded));
+    add("tiles_sampled", std::to_string(run.tiles_sampled));
+    add("over_fetch_ratio", num(run.over_fetch_ratio));
+    add("ram_hit_rate", num(run.ram_hit_rate));
+    add("gpu_hit_rate", num(run.gpu_hit_rate));
+    add("peak_rss_mib", num(double(run.peak_rss_bytes) / 1048576.0));
+    add("ram_peak_mib", num(double(final_stats.ram_peak_bytes) / 1048576.0));
+    add("ram_budget_mib", num(double(final_stats.ram_budget_bytes) / 1048576.0));
+    add("frames_with_holes", std::to_string(holes_frames));
+    add("gt_psnr_mean_db", num(gt_count ? gt_sum / gt_count : 0.0));
+    add("tile_failures", std::to_string(final_stats.total.failures + preload_failures));
+    if (Status s = writeFileAtomically(o.out_dir + "/summary.tsv", keys + "\n" + values + "\n"); !s)
+      return s;
+  }
   if (!write_status) return write_status;
 
   if (!o.quiet) {
     char buf[256];
-    log << "clipstream-fly: " << source->describe() << ", path " << o.path << ", " << frames
+    log << "clipstream-fly: " << source->describe() << ", path " << o.path << ", " << total_frames
         << " frames at " << summary["viewport"].get<std::string>() << " on " << context->describe()
         << "\n";
     log << "metric\tvalue\n";
@@ -354,6 +566,19 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     row("tile_failures", double(final_stats.total.failures + preload_failures), "%.0f");
     row("ram_peak_MiB", double(final_stats.ram_peak_bytes) / (1 << 20), "%.1f");
     row("pngs_written", double(writer.written()), "%.0f");
+    row("peak_rss_MiB", double(run.peak_rss_bytes) / 1048576.0, "%.1f");
+    row("tiles_loaded", double(run.tiles_loaded), "%.0f");
+    if (o.reference) {
+      row("psnr_mean_db", run.psnr_mean_db, "%.2f");
+      row("psnr_min_db", run.psnr_min_db, "%.2f");
+      row("frames_below_30db", double(run.frames_below_30db), "%.0f");
+      row("identical_frames", double(run.identical_frames), "%.0f");
+      row("time_to_sharp_mean_frames", run.time_to_sharp_mean, "%.1f");
+      row("time_to_sharp_max_frames", double(run.time_to_sharp_max), "%.0f");
+      row("over_fetch_ratio", run.over_fetch_ratio, "%.3f");
+      row("frames_with_holes", double(holes_frames), "%.0f");
+      if (gt_count > 0) row("ground_truth_psnr_mean_db", gt_sum / gt_count, "%.2f");
+    }
     log << "wrote " << o.out_dir << "/frames.csv, frames.json\n";
   }
   return Status::ok();

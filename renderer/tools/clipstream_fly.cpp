@@ -25,6 +25,29 @@ int main(int argc, char** argv) {
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)");
   app.add_option("--buffering", buffering, "single, double-upload or double-copy");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
+  std::string resize;
+  bool no_throttle = false, no_prefetch = false, no_frustum = false;
+  app.add_flag("--reference", o.reference,
+               "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
+  app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--ground-truth-every", o.ground_truth_every,
+                 "Also compare the reference with the CPU ground truth every Nth frame (0 = never)");
+  app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
+  app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
+  app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
+  app.add_option("--fault-latency-ms", o.fault_latency_ms, "Added latency per tile read (ms)");
+  app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
+  app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames");
+  app.add_option("--warmup-frames", o.warmup_frames,
+                 "First hold the first camera for N frames that are not recorded (start-up excluded)");
+  app.add_option("--rest-frame-ms", o.rest_frame_ms, "Rest frames last at least this wall time (ms)");
+  app.add_flag("--loop", o.loop, "Wrap path time instead of stopping at the path's end");
+  app.add_option("--teleport-frames", o.teleport_frames, "Frames between jumps of the teleport path")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--trace", o.trace_path, "Record the streamer's request trace (clipstream-trace)");
   CLI11_PARSE(app, argc, argv);
 
   if (o.store_path.empty() && o.procedural_px == 0) {
@@ -33,6 +56,14 @@ int main(int argc, char** argv) {
   }
   Status s = parseViewport(size, &o.viewport);
   if (s) s = parseBuffering(buffering, &o.buffering);
+  if (s && !resize.empty()) s = parseResize(resize, &o.resize_at_frame, &o.resize_to);
+  o.throttle = !no_throttle;
+  o.prefetch = !no_prefetch;
+  o.frustum_priority = !no_frustum;
+  if (!s) {
+    std::cerr << "clipstream-fly: " << s.toString() << "\n";
+    return 2;
+  }
   if (s) s = runFly(o, std::cout);
   if (!s) {
     std::cerr << "clipstream-fly: " << s.toString() << "\n";

@@ -10,6 +10,11 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
 #include <mutex>
 #include <set>
 
@@ -205,6 +210,37 @@ TEST(Scenario, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
   EXPECT_EQ(r.render_thread_fetches, 0u);
   EXPECT_GT(r.summary.tiles_sampled, 0u);
   EXPECT_GT(r.summary.over_fetch_ratio, 0.0);
+}
+
+// clipstream-fly --reference: per-frame PSNR in the outputs, and the last
+// rest frame bit-identical to the reference.
+TEST(FlyReference, WritesPsnrAndIsIdenticalAfterResting) {
+  REQUIRE_GL();
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_ref_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  // A child process: runFly() makes and destroys its own GL context, which
+  // would leave this thread's shared test context not current.
+  const std::string cmd = std::string(CLIPSTREAM_FLY_EXE) +
+                          " --procedural 1048576 --path orbit --frames 30 --rest-frames 40 --speed 4"
+                          " --size 192x108 --io-threads 2 --reference --ground-truth-every 35 --out " +
+                          dir.string() + " > /dev/null 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(dir / "frames.json");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const nlohmann::json doc = nlohmann::json::parse(ss.str(), nullptr, false);
+  ASSERT_FALSE(doc.is_discarded());
+  ASSERT_EQ(doc["frames"].size(), 70u);
+  for (const auto& f : doc["frames"]) ASSERT_TRUE(f.contains("psnr_db")) << f["frame"];
+  EXPECT_EQ(doc["frames"].back()["max_abs_error"].get<int>(), 0);
+  EXPECT_TRUE(doc["frames"][35].contains("gt_psnr_db"));
+  const auto& acc = doc["summary"]["accuracy"];
+  EXPECT_EQ(acc["frames_with_holes"].get<int>(), 0);
+  EXPECT_GT(acc["tiles_sampled"].get<int>(), 0);
+  EXPECT_GE(acc["ground_truth_psnr_mean_db"].get<double>(), 35.0);
+  EXPECT_TRUE(fs::exists(dir / "summary.tsv"));
+  fs::remove_all(dir);
 }
 
 }  // namespace

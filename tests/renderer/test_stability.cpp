@@ -227,7 +227,13 @@ TEST(Stability, SoakKeepsRssFlatAndTheBudget) {
   std::printf("  soak: %u frames, RSS %.1f -> %.1f MiB, RAM peak %.1f / %.1f MiB\n", o.frames,
               r.rss_after_warmup_bytes / 1048576.0, r.rss_end_bytes / 1048576.0,
               r.ram_peak_bytes / 1048576.0, r.ram_budget_bytes / 1048576.0);
+#if !defined(__SANITIZE_ADDRESS__)
   EXPECT_LT(growth, int64_t(16) << 20);
+#else
+  // AddressSanitizer's quarantine keeps freed blocks resident: RSS is not
+  // a leak measure there (LeakSanitizer is).
+  (void)growth;
+#endif
   record("soak", o, r, !::testing::Test::HasFailure());
 }
 

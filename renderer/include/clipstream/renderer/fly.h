@@ -32,6 +32,23 @@ struct FlyOptions {
   Buffering buffering = Buffering::kDoubleUploadTwice;
   bool overlay = false;
   bool quiet = false;              // no summary table
+  // Speed against accuracy (docs/accuracy.md).
+  bool reference = false;            // compare frames with the ideal reference
+  uint32_t reference_every = 1;      // ... every Nth frame (and every rest frame)
+  uint32_t ground_truth_every = 0;   // reference vs CPU ground truth every Nth frame; 0 = never
+  bool throttle = true;              // StreamerConfig::throttle
+  bool prefetch = true;              // StreamerConfig::prefetch
+  bool frustum_priority = true;      // StreamerConfig::frustum_priority
+  double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
+  double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
+  uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
+  Viewport resize_to{0, 0};
+  uint32_t warmup_frames = 0;        // first hold the first camera this many frames, unrecorded
+  uint32_t rest_frames = 0;          // then hold the last camera this many frames
+  double rest_frame_ms = 0.0;        // rest frames last at least this wall time
+  bool loop = false;                 // wrap path time instead of clamping at the end
+  uint32_t teleport_frames = 30;     // the built-in teleport path jumps this often
+  std::string trace_path;            // record the streamer's request trace here
 };
 
 // Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
@@ -45,5 +62,7 @@ Status runFly(const FlyOptions& options, std::ostream& log);
 Status parseViewport(const std::string& text, Viewport* out);
 // "single" | "double-upload" | "double-copy".
 Status parseBuffering(const std::string& text, Buffering* out);
+// "F:WxH" -> frame F and viewport (--resize-at). kInvalidArgument otherwise.
+Status parseResize(const std::string& text, uint32_t* frame, Viewport* out);
 
 }  // namespace clipstream

@@ -1,0 +1,303 @@
+#!/usr/bin/env bash
+# Speed against accuracy: the whole sweep in one command.
+#
+#   bash scripts/sweep.sh            # full sweep (about 10 minutes on 2 cores)
+#   bash scripts/sweep.sh --quick    # fewer frames, for a smoke run (CSV/charts still written)
+#   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
+#
+# Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
+# once, runs every experiment with clipstream-fly --reference (each frame's
+# PSNR against the ideal reference), replays a request trace with
+# clipstream-trace, runs the stability scenarios (tests/renderer/
+# test_stability.cpp, with the 10,000-frame soak), writes docs/data/*.csv,
+# draws docs/charts/*.png with gnuplot and regenerates the part of
+# docs/benchmarks.md between <!-- sweep:begin --> and <!-- sweep:end -->.
+# What each metric and chart means: docs/accuracy.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+QUICK=0; CHARTS_ONLY=0
+case "${1:-}" in
+  --quick) QUICK=1 ;;
+  --charts-only) CHARTS_ONLY=1 ;;  # redo data, charts and docs from the last runs in $SWEEP_WORK
+esac
+BUILD=${BUILD_DIR:-build}
+WORK=${SWEEP_WORK:-out/sweep}
+DOCS=${SWEEP_DOCS:-docs}
+DATA=$DOCS/data
+CHARTS=$DOCS/charts
+SIZE=${SWEEP_SIZE:-320x180}
+JOBS=$(nproc)
+FRAMES=240; LONG=300; TRACE_FRAMES=600; SOAK=10000
+if (( QUICK )); then FRAMES=60; LONG=60; TRACE_FRAMES=120; SOAK=600; fi
+mkdir -p "$WORK" "$DATA" "$CHARTS"
+
+# ---- build ------------------------------------------------------------------
+need=()
+for t in tiler/clipstream-tile renderer/clipstream-fly streamer/clipstream-trace tests/renderer/test_renderer; do
+  [[ -x "$BUILD/$t" ]] || need+=("$(basename "$t")")
+done
+if [[ ! -f "$BUILD/build.ninja" ]]; then
+  cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+fi
+echo "sweep: building ${need[*]:-(up to date check)}"
+cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_renderer >/dev/null
+FLY=${SWEEP_FLY:-$BUILD/renderer/clipstream-fly}
+TRACE_TOOL="$BUILD/streamer/clipstream-trace"
+STORE="$WORK/autzen.cstore"
+if [[ ! -f "$STORE" ]]; then
+  "$BUILD/tiler/clipstream-tile" data/autzen.jpg "$STORE" --force >/dev/null
+fi
+GL=$("$FLY" "$STORE" --frames 1 --size 64x64 --out "$WORK/probe" 2>/dev/null | head -1 | sed 's/.* on //')
+
+# ---- the run list -------------------------------------------------------------
+# Motion experiments fly a straight line over a 2^26-texel procedural texture
+# (no revisits, so caching cannot hide speed), 200 texels up, looking 30 deg
+# down, 100 texels/s at speed x1; 60 warm-up frames at the start position
+# are not recorded. Real imagery (autzen) serves the ground-truth, teleport
+# and cache-trace runs.
+LINE="$WORK/line.json"
+cat >"$LINE" <<JSON
+{"interpolation": "smooth", "keyframes": [
+  {"t": 0, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30},
+  {"t": 1000, "x": 33654432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30}]}
+JSON
+RUNS=()
+add() { RUNS+=("$1|$2|$3"); }
+COMMON="--procedural 67108864 --path $LINE --size $SIZE --io-threads 2 --reference --warmup-frames 60"
+for s in 1 2 5 10 20 50 100; do
+  add "speed_$s" 12 "$COMMON --frames $FRAMES --speed $s"
+done
+for u in 1 2 4 8 16 32 64; do
+  add "upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u"
+done
+add "buffering_single" 12 "$COMMON --frames $LONG --speed 20 --buffering single"
+add "buffering_double" 12 "$COMMON --frames $LONG --speed 20 --buffering double-upload"
+add "throttle_on" 12 "$COMMON --frames $LONG --speed 50 --upload-tiles 4"
+add "throttle_off" 12 "$COMMON --frames $LONG --speed 50 --upload-tiles 4 --no-throttle"
+add "prefetch_on" 12 "$COMMON --frames $LONG --speed 20 --fault-latency-ms 20"
+add "prefetch_off" 12 "$COMMON --frames $LONG --speed 20 --fault-latency-ms 20 --no-prefetch"
+for s in 1 10 100; do
+  add "frustum_on_$s" 12 "$COMMON --frames $FRAMES --speed $s --cache-mb 16"
+  add "frustum_off_$s" 12 "$COMMON --frames $FRAMES --speed $s --cache-mb 16 --no-frustum-priority"
+done
+AUTZEN="$STORE --size $SIZE --io-threads 2 --reference --warmup-frames 60"
+add "ground_truth" 20 "$AUTZEN --path orbit --loop --frames $FRAMES --speed 5 --ground-truth-every 10"
+add "teleport" 12 "$AUTZEN --path teleport --teleport-frames 30 --frames $FRAMES --rest-frames 60"
+add "trace" 8 "$STORE --size $SIZE --io-threads 2 --path orbit --loop --speed 5 --frames $TRACE_FRAMES --trace $WORK/orbit.trace"
+STAB_WEIGHT=$(( SOAK / 100 + 40 ))
+
+total_weight=$STAB_WEIGHT
+for r in "${RUNS[@]}"; do IFS='|' read -r _ w _ <<<"$r"; total_weight=$((total_weight + w)); done
+runs_total=$(( ${#RUNS[@]} + 1 ))
+start=$(date +%s)
+done_weight=0
+progress() {  # $1 = runs done, $2 = label
+  local now elapsed pct eta bar
+  now=$(date +%s); elapsed=$((now - start))
+  pct=$(( 100 * done_weight / total_weight ))
+  if (( done_weight > 0 )); then eta=$(( elapsed * (total_weight - done_weight) / done_weight )); else eta=0; fi
+  bar=$(printf '%*s' $((pct / 4)) '' | tr ' ' '#')
+  printf '\r[%-25s] %3d%%  %2d/%d runs  %3ds elapsed  ETA %3ds  %-24s' "$bar" "$pct" "$1" "$runs_total" \
+    "$elapsed" "$eta" "$2"
+}
+
+i=0
+(( CHARTS_ONLY )) && RUN_LIST=() || RUN_LIST=("${RUNS[@]}")
+for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
+  IFS='|' read -r name w args <<<"$r"
+  progress "$i" "$name"
+  rm -rf "${WORK:?}/$name"
+  # shellcheck disable=SC2086
+  if ! "$FLY" $args --out "$WORK/$name" >"$WORK/$name.log" 2>&1; then
+    echo; echo "sweep: run $name failed, see $WORK/$name.log"; tail -5 "$WORK/$name.log"; exit 1
+  fi
+  echo "$FLY $args --out $WORK/$name" >"$WORK/$name.cmd"
+  i=$((i + 1)); done_weight=$((done_weight + w))
+done
+STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/renderer/test_renderer --gtest_filter=Stability.*"
+if (( ! CHARTS_ONLY )); then
+progress "$i" "stability scenarios"
+rm -f "$WORK/stability.jsonl"
+if ! env CLIPSTREAM_STABILITY_OUT="$WORK/stability.jsonl" CLIPSTREAM_SOAK_FRAMES=$SOAK \
+    "$BUILD/tests/renderer/test_renderer" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
+  echo; echo "sweep: a stability scenario failed (see $WORK/stability.log); its row says FAIL"
+fi
+fi
+done_weight=$total_weight
+progress "$runs_total" "done"
+echo
+
+# ---- data --------------------------------------------------------------------
+# field FILE NAME: a value from a run's summary.tsv by column name.
+field() { awk -F'\t' -v k="$2" 'NR==1{for(i=1;i<=NF;i++)if($i==k)c=i} NR==2{print $c}' "$1"; }
+# column DIR NAME...: per-frame columns of a run's frames.csv by name.
+column() {
+  local dir=$1; shift
+  awk -F, -v names="$*" 'BEGIN{n=split(names,want," ")}
+    NR==1{for(i=1;i<=NF;i++)idx[$i]=i; next}
+    {line=""; for(j=1;j<=n;j++){v=$(idx[want[j]]); line=line (j>1?",":"") v}; print line}' "$dir/frames.csv"
+}
+S() { field "$WORK/$1/summary.tsv" "$2"; }
+
+{
+  echo "speed,psnr_mean_db,psnr_min_db,frames_below_30db,frame_ms_p99,over_fetch_ratio,ram_hit_rate"
+  for s in 1 2 5 10 20 50 100; do
+    echo "$s,$(S speed_$s psnr_mean_db),$(S speed_$s psnr_min_db),$(S speed_$s frames_below_30db),$(S speed_$s frame_ms_p99),$(S speed_$s over_fetch_ratio),$(S speed_$s ram_hit_rate)"
+  done
+} >"$DATA/psnr_vs_speed.csv"
+{
+  echo "upload_tiles,psnr_mean_db,psnr_min_db,frame_ms_p50,frame_ms_p99,frame_ms_max"
+  for u in 1 2 4 8 16 32 64; do
+    echo "$u,$(S upload_$u psnr_mean_db),$(S upload_$u psnr_min_db),$(S upload_$u frame_ms_p50),$(S upload_$u frame_ms_p99),$(S upload_$u frame_ms_max)"
+  done
+} >"$DATA/upload_budget.csv"
+{
+  echo "budget_mib,opt_pct,lru_pct,ours_pct"
+  for b in 1 2 4 8 16 32 64 128; do
+    "$TRACE_TOOL" "$WORK/orbit.trace" --budget-mb "$b" >"$WORK/trace_$b.txt"
+    awk -F'\t' -v b="$b" '$1=="opt"{o=$3} $1=="lru"{l=$3} $1=="ours"{u=$3} END{print b","o","l","u}' "$WORK/trace_$b.txt"
+  done
+} >"$DATA/cache_hitrate.csv"
+pair() {  # OUT A B COL...: frame, A's columns, B's columns (prefixed A_ / B_)
+  local out=$1 a=$2 b=$3; shift 3
+  {
+    printf 'frame'
+    for c in "$@"; do printf ',%s_%s' "$a" "$c"; done
+    for c in "$@"; do printf ',%s_%s' "$b" "$c"; done
+    echo
+    paste -d, <(column "$WORK/$a" frame "$@") <(column "$WORK/$b" "$@")
+  } >"$out"
+}
+pair "$DATA/frametime_buffering.csv" buffering_single buffering_double frame_ms psnr_db
+pair "$DATA/frametime_throttle.csv" throttle_on throttle_off frame_ms psnr_db
+pair "$DATA/frametime_prefetch.csv" prefetch_on prefetch_off frame_ms psnr_db
+{
+  echo "speed,over_fetch_on,over_fetch_off,psnr_mean_on,psnr_mean_off,tiles_loaded_on,tiles_loaded_off,tiles_sampled"
+  for s in 1 10 100; do
+    echo "$s,$(S frustum_on_$s over_fetch_ratio),$(S frustum_off_$s over_fetch_ratio),$(S frustum_on_$s psnr_mean_db),$(S frustum_off_$s psnr_mean_db),$(S frustum_on_$s tiles_loaded),$(S frustum_off_$s tiles_loaded),$(S frustum_on_$s tiles_sampled)"
+  done
+} >"$DATA/overfetch.csv"
+{
+  echo "run,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,gt_psnr_mean_db"
+  for r in "${RUNS[@]}"; do
+    IFS='|' read -r name _ _ <<<"$r"
+    [[ "$name" == trace ]] && continue
+    line="$name"
+    for k in frames psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_mean time_to_sharp_max frame_ms_p50 frame_ms_p99 frame_ms_max bytes_read tiles_uploaded tiles_loaded ram_hit_rate gpu_hit_rate peak_rss_mib over_fetch_ratio gt_psnr_mean_db; do
+      line="$line,$(S "$name" "$k")"
+    done
+    echo "$line"
+  done
+} >"$DATA/runs.csv"
+# Stability: one JSON line per scenario -> CSV (no jq needed: fixed keys).
+jget() { sed -n "s/.*\"$2\":\([^,}]*\).*/\1/p" <<<"$1" | tr -d '"'; }
+{
+  echo "scenario,frames,psnr_min_db,psnr_mean_db,time_to_sharp_max,rest_frames_to_identical,frame_ms_p99,ram_peak_mib,ram_budget_mib,render_thread_fetches,result"
+  while IFS= read -r l; do
+    printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$(jget "$l" scenario)" "$(jget "$l" frames)" \
+      "$(jget "$l" psnr_min_db)" "$(jget "$l" psnr_mean_db)" "$(jget "$l" time_to_sharp_max)" \
+      "$(jget "$l" rest_frames_to_identical)" "$(jget "$l" frame_ms_p99)" \
+      "$(awk -v b="$(jget "$l" ram_peak_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
+      "$(awk -v b="$(jget "$l" ram_budget_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
+      "$(jget "$l" render_thread_fetches)" "$(jget "$l" result)"
+  done <"$WORK/stability.jsonl"
+} >"$DATA/stability.csv"
+
+# ---- charts ------------------------------------------------------------------
+if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then TERM_LINE="pngcairo size 800,480 font 'sans,10'"
+else TERM_LINE="png size 800,480"; fi
+plot() {  # name, gnuplot body
+  gnuplot <<EOF
+set terminal $TERM_LINE
+set output '$CHARTS/$1.png'
+set datafile separator ','
+set key top right
+set grid
+$2
+EOF
+}
+plot psnr_vs_speed "
+set title 'PSNR against the ideal reference vs camera speed (straight line over 2^{26} texels, default budgets)'
+set logscale x; set xlabel 'camera speed (x path speed)'; set ylabel 'PSNR, dB (99 = identical)'
+set yrange [0:100]
+plot '$DATA/psnr_vs_speed.csv' u 1:2 skip 1 w lp lw 2 t 'mean PSNR', '' u 1:3 skip 1 w lp lw 2 t 'min PSNR', 30 w l dt 2 t '30 dB'"
+plot upload_budget "
+set title 'PSNR and p99 frame time vs per-frame upload budget (straight line, speed x20)'
+set logscale x 2; set xlabel 'tiles uploaded per frame'; set ylabel 'PSNR, dB'; set y2label 'p99 frame time, ms'
+set ytics nomirror; set y2tics; set y2range [0:*]
+plot '$DATA/upload_budget.csv' u 1:2 skip 1 w lp lw 2 t 'mean PSNR', '' u 1:3 skip 1 w lp lw 2 t 'min PSNR', '' u 1:5 skip 1 axes x1y2 w lp lw 2 t 'p99 frame ms (right)'"
+plot cache_hitrate "
+set title 'RAM hit rate vs cache size (orbit trace replayed)'
+set logscale x 2; set xlabel 'RAM budget, MiB'; set ylabel 'hit rate, %'; set yrange [0:100]; set key bottom right
+plot '$DATA/cache_hitrate.csv' u 1:2 skip 1 w lp lw 2 t 'OPT (Belady)', '' u 1:3 skip 1 w lp lw 2 t 'LRU', '' u 1:4 skip 1 w lp lw 2 t 'ours'"
+for pair_name in buffering:single:double throttle:on:off prefetch:on:off; do
+  IFS=: read -r n a b <<<"$pair_name"
+  plot "frametime_$n" "
+set multiplot layout 2,1 title 'Frame time and PSNR: $n $a vs $b'
+set ylabel 'frame ms'; unset xlabel
+plot '$DATA/frametime_$n.csv' u 1:2 skip 1 w l t '$n $a', '' u 1:4 skip 1 w l t '$n $b'
+set ylabel 'PSNR, dB'; set xlabel 'frame'; set yrange [0:100]
+plot '$DATA/frametime_$n.csv' u 1:3 skip 1 w l t '$n $a', '' u 1:5 skip 1 w l t '$n $b'
+unset multiplot"
+done
+plot overfetch "
+set title 'Over-fetch (tiles loaded / tiles sampled) with and without frustum-aware priorities'
+set logscale x; set xlabel 'camera speed'; set ylabel 'over-fetch ratio'; set yrange [0:*]
+plot '$DATA/overfetch.csv' u 1:2 skip 1 w lp lw 2 t 'frustum priority on', '' u 1:3 skip 1 w lp lw 2 t 'frustum priority off'"
+
+# ---- docs/benchmarks.md -----------------------------------------------------------
+csv2md() {  # CSV -> markdown table
+  awk -F, 'NR==1{h="|";s="|";for(i=1;i<=NF;i++){h=h" "$i" |";s=s"---|"};print h;print s;next}
+           {l="|";for(i=1;i<=NF;i++)l=l" "$i" |";print l}' "$1"
+}
+GEN="$WORK/benchmarks_sweep.md"
+{
+  echo "<!-- sweep:begin -->"
+  echo "## Speed against accuracy"
+  echo
+  echo "Generated by \`bash scripts/sweep.sh\` on $(date -u +%Y-%m-%d) ($(nproc) cores, ${GL:-unknown GL})."
+  echo "Every run: \`clipstream-fly --reference\` (PSNR of each frame against the ideal reference; 99 dB ="
+  echo "bit-identical), viewport $SIZE, 2 loader threads, 60 unrecorded warm-up frames. Motion runs fly a straight"
+  echo "line (\`$LINE\`, written by the script: 200 texels up, 30 deg down, 100 texels/s at x1) over a"
+  echo "2^26-texel procedural texture; ground truth, teleport and the cache trace use \`data/autzen.jpg\`"
+  echo "tiled to \`$STORE\`."
+  echo "How to read each figure: \`docs/accuracy.md\`. Raw data: \`docs/data/\`; per-run commands: \`$WORK/*.cmd\`."
+  echo
+  echo "### PSNR vs camera speed"
+  echo; echo "![PSNR vs speed](charts/psnr_vs_speed.png)"; echo
+  echo "\`$(cat "$WORK/speed_10.cmd" | sed "s/--speed 10/--speed S/; s#$WORK/speed_10#DIR#")\` for S in 1 2 5 10 20 50 100"; echo
+  csv2md "$DATA/psnr_vs_speed.csv"; echo
+  echo "### PSNR and p99 frame time vs upload budget"
+  echo; echo "![upload budget](charts/upload_budget.png)"; echo
+  echo "\`$(sed "s/--upload-tiles 16/--upload-tiles T/; s#$WORK/upload_16#DIR#" "$WORK/upload_16.cmd")\` for T in 1 … 64"; echo
+  csv2md "$DATA/upload_budget.csv"; echo
+  echo "### RAM hit rate vs cache size: ours, LRU, OPT"
+  echo; echo "![cache hit rate](charts/cache_hitrate.png)"; echo
+  echo "\`$(cat "$WORK/trace.cmd")\`, then \`$TRACE_TOOL $WORK/orbit.trace --budget-mb B\`"; echo
+  csv2md "$DATA/cache_hitrate.csv"; echo
+  for n in buffering throttle prefetch; do
+    echo "### Frame-time trace: $n"
+    echo; echo "![$n](charts/frametime_$n.png)"; echo
+    for f in "$WORK/${n}"_*.cmd; do echo "- \`$(cat "$f")\`"; done; echo
+  done
+  echo "### Over-fetch with and without frustum-aware priorities"
+  echo; echo "![over-fetch](charts/overfetch.png)"; echo
+  for f in "$WORK"/frustum_*_10.cmd; do echo "- \`$(cat "$f")\`"; done; echo
+  csv2md "$DATA/overfetch.csv"; echo
+  echo "### Every run"
+  echo; csv2md "$DATA/runs.csv"; echo
+  echo "### Stability scenarios"
+  echo; echo "\`$STAB_CMD\`"; echo
+  csv2md "$DATA/stability.csv"; echo
+  echo "<!-- sweep:end -->"
+} >"$GEN"
+BM=$DOCS/benchmarks.md
+touch "$BM"
+if grep -q '<!-- sweep:begin -->' "$BM"; then
+  awk -v gen="$GEN" '/<!-- sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
+                     /<!-- sweep:end -->/{skip=0; next} !skip' "$BM" >"$BM.tmp" && mv "$BM.tmp" "$BM"
+else
+  { echo; cat "$GEN"; } >>"$BM"
+fi
+echo "sweep: wrote $DATA/*.csv, $CHARTS/*.png and the sweep section of $BM in $(( $(date +%s) - start ))s"
