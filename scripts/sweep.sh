@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Speed against accuracy: the whole sweep in one command.
 #
-#   bash scripts/sweep.sh            # full sweep (about 10 minutes on 2 cores)
+#   bash scripts/sweep.sh            # full sweep (about 6 minutes on 2 cores)
 #   bash scripts/sweep.sh --quick    # fewer frames, for a smoke run (CSV/charts still written)
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #
@@ -18,8 +18,10 @@ cd "$(dirname "$0")/.."
 
 QUICK=0; CHARTS_ONLY=0
 case "${1:-}" in
+  "") ;;
   --quick) QUICK=1 ;;
   --charts-only) CHARTS_ONLY=1 ;;  # redo data, charts and docs from the last runs in $SWEEP_WORK
+  *) echo "usage: scripts/sweep.sh [--quick | --charts-only]" >&2; exit 2 ;;
 esac
 BUILD=${BUILD_DIR:-build}
 WORK=${SWEEP_WORK:-out/sweep}
@@ -33,6 +35,7 @@ if (( QUICK )); then FRAMES=60; LONG=60; TRACE_FRAMES=120; SOAK=600; fi
 mkdir -p "$WORK" "$DATA" "$CHARTS"
 
 # ---- build ------------------------------------------------------------------
+scripts/deps.sh
 need=()
 for t in tiler/clipstream-tile renderer/clipstream-fly streamer/clipstream-trace tests/renderer/test_renderer; do
   [[ -x "$BUILD/$t" ]] || need+=("$(basename "$t")")
