@@ -21,12 +21,6 @@
 namespace clipstream {
 namespace {
 
-#define REQUIRE_GL()                                               \
-  do {                                                             \
-    std::string why;                                               \
-    if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why; \
-  } while (0)
-
 TEST(CompareFrames, IdenticalFramesScoreTheCapAndZeroError) {
   std::vector<uint8_t> a(40 * 4, 77);
   const FrameError e = compareFrames(a, a);
@@ -150,7 +144,7 @@ TEST(SampledTiles, AreExactlyTheTilesTheCpuReferenceFetches) {
 }
 
 TEST(IdealReference, IsBitIdenticalToAFullyLoadedClipmap) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   auto source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
   const Viewport vp{256, 192};
   const Camera cam = obliqueCamera();
@@ -178,7 +172,7 @@ TEST(IdealReference, IsBitIdenticalToAFullyLoadedClipmap) {
 }
 
 TEST(IdealReference, MatchesTheCpuGroundTruth) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   auto source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
   const Viewport vp{256, 192};
   std::unique_ptr<IdealReference> ideal;
@@ -192,7 +186,7 @@ TEST(IdealReference, MatchesTheCpuGroundTruth) {
 }
 
 TEST(Scenario, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o;
   o.source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
   ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
@@ -215,7 +209,7 @@ TEST(Scenario, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
 // clipstream-fly --reference: per-frame PSNR in the outputs, and the last
 // rest frame bit-identical to the reference.
 TEST(FlyReference, WritesPsnrAndIsIdenticalAfterResting) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_ref_" + std::to_string(::getpid()));
   fs::remove_all(dir);

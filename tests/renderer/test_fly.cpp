@@ -45,8 +45,7 @@ Status writeTinyStore(const std::string& path) {
 }
 
 TEST(ClipstreamFly, WritesCsvJsonAndPngForATinyStore) {
-  std::string why;
-  if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why;
+  CLIPSTREAM_REQUIRE_GL();
   const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_smoke_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);

@@ -20,12 +20,6 @@ constexpr double kMatchDb = 35.0;
 constexpr double kSameDb = 50.0;
 const Viewport kViewport{256, 192};
 
-#define REQUIRE_GL()                                        \
-  do {                                                      \
-    std::string why;                                        \
-    if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why; \
-  } while (0)
-
 struct Scene {
   std::shared_ptr<TileSource> source;
   ClipmapPlan plan;
@@ -84,7 +78,7 @@ size_t groundPixels(const std::vector<uint8_t>& rgba) {
 }
 
 TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const Camera cam = obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
@@ -98,7 +92,7 @@ TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
 }
 
 TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const Camera cam = obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
@@ -110,7 +104,7 @@ TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
 }
 
 TEST(ClipmapRender, FallsBackToThePyramidWhenNoStackTileIsResident) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const Camera cam = obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
@@ -122,7 +116,7 @@ TEST(ClipmapRender, FallsBackToThePyramidWhenNoStackTileIsResident) {
 }
 
 TEST(ClipmapRender, MaxTextureLodClampsTheFinestLevel) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const Camera cam = obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
@@ -137,7 +131,7 @@ TEST(ClipmapRender, MaxTextureLodClampsTheFinestLevel) {
 class ToroidalUpdate : public ::testing::TestWithParam<Buffering> {};
 
 TEST_P(ToroidalUpdate, EqualsAFreshRenderAfterTheCameraMoves) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   Camera a = obliqueCamera();
   Camera b = a;
   b.position += glm::dvec3(300.0, 0.0, -260.0);  // several tiles on levels 0 and 1
@@ -203,7 +197,7 @@ std::vector<uint8_t> borderMask(const Camera& cam, uint32_t tile_px, double texe
 }
 
 TEST(ClipmapRender, NoSeamAtTileAndLevelBorders) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ProceduralSpec spec;  // dark grid lines on every tile border: seams would break them
   spec.width_px = spec.height_px = 4096;
   auto source = makeProceduralSource(spec);
@@ -228,7 +222,7 @@ TEST(ClipmapRender, NoSeamAtTileAndLevelBorders) {
 }
 
 TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ProceduralSpec spec;  // 2^26 x 2^26
   auto source = makeProceduralSource(spec);
   ASSERT_TRUE(source);
@@ -249,7 +243,7 @@ TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
 // Real imagery: a 2048 x 2048 crop of the Autzen orthophoto from the shared
 // test data (skipped when that folder is absent).
 TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const std::string path = std::string(CLIPSTREAM_TEST_DATA_DIR) + "/autzen.jpg";
   std::vector<uint8_t> full;
   uint32_t w = 0, h = 0;
@@ -268,7 +262,7 @@ TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
 }
 
 TEST(ClipmapRender, OverlayTintsByLevelWithoutHoles) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   const Camera cam = obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);

@@ -8,12 +8,21 @@
 #include <clipstream/streamer/planner.h>
 
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace clipstream::test {
 
 // The process-wide headless context, or null (with the reason in *why).
 HeadlessContext* sharedContext(std::string* why);
+
+// Skips the calling test (GTEST_SKIP) when no headless GL context exists.
+#define CLIPSTREAM_REQUIRE_GL()                                               \
+  do {                                                                        \
+    std::string require_gl_why;                                               \
+    if (::clipstream::test::sharedContext(&require_gl_why) == nullptr)        \
+      GTEST_SKIP() << require_gl_why;                                         \
+  } while (0)
 
 // A w x h RGBA image whose texels encode their position: smooth waves plus
 // an 8-texel checker, so any misplaced tile or texel shows.

@@ -28,12 +28,6 @@
 namespace clipstream {
 namespace {
 
-#define REQUIRE_GL()                                               \
-  do {                                                             \
-    std::string why;                                               \
-    if (test::sharedContext(&why) == nullptr) GTEST_SKIP() << why; \
-  } while (0)
-
 // PSNR floor against the reference. The procedural texture is busy at
 // every scale, so even a correct fallback to the coarse pyramid right after
 // a teleport scores only about 14 dB; the floor therefore only catches
@@ -121,14 +115,14 @@ void checkScenario(const char* name, const ScenarioOptions& o, bool expect_ident
 }
 
 TEST(Stability, TeleportEveryTenFrames) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   ASSERT_TRUE(FlightPath::builtin("teleport", o.source->geometry(), &o.path, 10).isOk());
   checkScenario("teleport every 10 frames", o);
 }
 
 TEST(Stability, SpeedTimesHundred) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "pass");
   o.speed = 100.0;
   checkScenario("speed x100", o);
@@ -138,7 +132,7 @@ TEST(Stability, SpeedTimesHundred) {
 // budget here is the pyramid plus half of one level's window: every stack
 // level must stream through RAM a part at a time.
 TEST(Stability, RamCacheSmallerThanOneLevelWindow) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   const ClipmapPlan plan = planClipmap(o.source->geometry(), o.viewport, o.path.sample(0), {});
   const uint64_t tile_bytes =
@@ -152,14 +146,14 @@ TEST(Stability, RamCacheSmallerThanOneLevelWindow) {
 // Below the pyramid's size the stack never gets room: the image stays at
 // the pyramid's levels (degraded, no holes) and cannot become identical.
 TEST(Stability, RamCacheSmallerThanThePyramidDegradesWithoutHoles) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   o.streamer.ram_budget_bytes = uint64_t(512) << 10;
   checkScenario("RAM cache < pyramid (512 KiB)", o, /*expect_identical=*/false);
 }
 
 TEST(Stability, UploadBudgetOfOneTilePerFrame) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   o.upload_tiles = 1;
   o.rest_frames = 200;
@@ -168,7 +162,7 @@ TEST(Stability, UploadBudgetOfOneTilePerFrame) {
 }
 
 TEST(Stability, FiftyMillisecondsLatencyOnEveryRead) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   FaultSpec fault;
   fault.latency_ms = 50.0;
   ScenarioOptions o = baseOptions(makeFaultySource(procedural(1 << 20), fault), "orbit");
@@ -180,7 +174,7 @@ TEST(Stability, FiftyMillisecondsLatencyOnEveryRead) {
 }
 
 TEST(Stability, StoreWithCorruptTiles) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   FaultSpec fault;
   fault.fail_fraction = 0.1;
   fault.fail_code = ErrorCode::kCorruptTile;
@@ -189,13 +183,13 @@ TEST(Stability, StoreWithCorruptTiles) {
 }
 
 TEST(Stability, ProceduralTextureOf2To26Texels) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(uint64_t(1) << 26), "pass");
   checkScenario("procedural 2^26", o);
 }
 
 TEST(Stability, ViewportResize) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   o.resize_at_frame = 30;
   o.resize_to = {224, 128};
@@ -205,7 +199,7 @@ TEST(Stability, ViewportResize) {
 // Shortened soak (the sweep runs 10,000 frames): default settings, no
 // reference, RSS flat and the RAM budget respected throughout.
 TEST(Stability, SoakKeepsRssFlatAndTheBudget) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   ScenarioOptions o = baseOptions(procedural(1 << 20), "orbit");
   o.frames = 600;
   o.rest_frames = 0;
@@ -240,7 +234,7 @@ TEST(Stability, SoakKeepsRssFlatAndTheBudget) {
 // Control: the floor and the hole check must catch real garbage. A renderer
 // whose tiles sit one slot off draws the wrong ground.
 TEST(Stability, WrongTilesAreCaughtAsGarbage) {
-  REQUIRE_GL();
+  CLIPSTREAM_REQUIRE_GL();
   auto source = procedural(1 << 20);
   Camera cam;
   cam.position = {500000.5, 40.0, 520000.25};
