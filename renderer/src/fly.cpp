@@ -71,13 +71,6 @@ Status writeFileAtomically(const std::string& path, const std::string& text) {
   return Status::ok();
 }
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const size_t i = size_t(std::clamp(p, 0.0, 1.0) * double(v.size() - 1) + 0.5);
-  return v[i];
-}
-
 }  // namespace
 
 Status parseViewport(const std::string& text, Viewport* out) {
@@ -484,9 +477,9 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
       {"streamer_ms_mean", streamer_mean},
       {"upload_ms_mean", upload_mean},
       {"draw_ms_mean", draw_mean},
-      {"frame_ms_p50", percentile(frame_ms, 0.5)},
-      {"frame_ms_p99", percentile(frame_ms, 0.99)},
-      {"frame_ms_max", percentile(frame_ms, 1.0)},
+      {"frame_ms_p50", percentileOf(frame_ms, 0.5)},
+      {"frame_ms_p99", percentileOf(frame_ms, 0.99)},
+      {"frame_ms_max", percentileOf(frame_ms, 1.0)},
       {"tiles_uploaded", tiles},
       {"gpu_hit_ratio", gpu_hits + gpu_misses ? double(gpu_hits) / double(gpu_hits + gpu_misses) : 1.0},
       {"pngs_written", writer.written()},
@@ -554,9 +547,9 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     row("streamer_ms_mean", streamer_mean, "%.2f");
     row("upload_ms_mean", upload_mean, "%.2f");
     row("draw_ms_mean", draw_mean, "%.2f");
-    row("frame_ms_p50", percentile(frame_ms, 0.5), "%.2f");
-    row("frame_ms_p99", percentile(frame_ms, 0.99), "%.2f");
-    row("frame_ms_max", percentile(frame_ms, 1.0), "%.2f");
+    row("frame_ms_p50", percentileOf(frame_ms, 0.5), "%.2f");
+    row("frame_ms_p99", percentileOf(frame_ms, 0.99), "%.2f");
+    row("frame_ms_max", percentileOf(frame_ms, 1.0), "%.2f");
     row("preload_ms", preload_ms, "%.1f");
     row("tiles_uploaded", double(tiles), "%.0f");
     row("gpu_hit_ratio", summary["gpu_hit_ratio"].get<double>(), "%.4f");
