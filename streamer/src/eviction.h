@@ -2,24 +2,32 @@
 // replay so both run the same policy. Pure functions; thread-safe.
 //
 // Policy (plan distance): the cost of evicting a tile is a read when it is
-// next wanted. Tiles inside a needed window are on the GPU (or about to be)
-// and come back only after leaving, so they go last: every outside tile
-// scores higher than every inside one ("protected as long as possible");
-// among inside tiles the deepest go first. An outside tile scores its
-// Chebyshev distance to the window (tiles) times 4^level; levels the plan
-// does not need add a clip's width per level away from the finest needed
-// level. The predicted plan counts too (the smaller score wins). Larger
-// score = evicted sooner; ties go MOST recently wanted first: tiles the
-// score cannot tell apart (a whole level the plan no longer needs, tiles
-// equally far beside the path) then stay a stable subset instead of cycling
-// through RAM, which is what pays on loops, zoom cycles and returns (LRU is
-// the worst case on a loop larger than the cache). Without any plan
-// (kNoPlanScore) recency is the only locality signal left, so those ties go
-// least recently wanted first.
+// next wanted. A tile is wanted again only after it has left every window,
+// so a RAM copy of a tile the GPU already holds pays only once that tile
+// has left. With the default EvictionMode::kGpuFirst:
+//  1. pyramid tiles already on the GPU go first: their window is the whole
+//     level, they never leave it, so their RAM copy can only serve a
+//     renderer reset (and the renderer reloads the pyramid itself then);
+//  2. then stack tiles inside a needed window that are on the GPU, deepest
+//     first (deeper takes longer to leave and come back);
+//  3. then tiles outside every window, by score: Chebyshev distance to the
+//     window (tiles) times 4^level; levels the plan does not need add a
+//     clip's width per level away from the finest needed level. The
+//     predicted plan counts too (the smaller score wins).
+// With kProtectGpu, inside tiles go after every outside tile and pyramid
+// tiles are never scored (only a better-ranked newcomer may take their
+// room). Larger score = evicted sooner; ties go MOST recently wanted first:
+// tiles the score cannot tell apart (a whole level the plan no longer
+// needs, tiles equally far beside the path) then stay a stable subset
+// instead of cycling through RAM, which is what pays on loops, zoom cycles
+// and returns (LRU is the worst case on a loop larger than the cache).
+// Without any plan (kNoPlanScore) recency is the only locality signal left,
+// so those ties go least recently wanted first.
 // The 4^level weight (coarse outside tiles first) was chosen by replaying
 // the benchmark flight paths: 2^level (pure travel distance) and 4^level
 // agree on passes and orbits, 4^level keeps far more of revisited places
-// (docs/decisions.md, Streamer).
+// (docs/decisions.md, Streamer). Every alternative measured, with its
+// figures, is listed there too.
 #pragma once
 
 #include <clipstream/streamer/planner.h>
@@ -45,8 +53,15 @@ struct PlanWindows {
 
 PlanWindows planWindows(const ClipmapPlan& plan);
 
-// True for tiles of pyramid levels: always wanted, never scored.
+// True for tiles of pyramid levels: always wanted.
 bool isPyramidTile(const TileKey& key, const PlanWindows& windows);
+
+// True when a wanted tile already handed to the GPU is an eviction
+// candidate by score: every such tile with kGpuFirst; with kProtectGpu
+// pyramid tiles stay out of the scored list.
+inline bool scoredOnGpu(const TileKey& key, const PlanWindows& windows, EvictionMode mode) {
+  return mode == EvictionMode::kGpuFirst || !isPyramidTile(key, windows);
+}
 
 // Score of tiles no plan covers (no window line for their level yet).
 inline constexpr double kNoPlanScore = 1e30;

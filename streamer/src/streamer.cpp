@@ -170,7 +170,7 @@ void Streamer::Impl::buildVictimLists() {
   for (const auto& [key, e] : cache) {
     if (e.state != EntryState::kReady) continue;  // placeholders are never evicted
     const auto r = rank.find(key);
-    if (r == rank.end() || (e.gpu && !isPyramidTile(key, windows)))
+    if (r == rank.end() || (e.gpu && scoredOnGpu(key, windows, config.eviction)))
       scored_list.push_back(
           {evictionScore(key, windows, predicted_windows, config.eviction), e.last_wanted_frame, key});
     else
@@ -188,12 +188,12 @@ void Streamer::Impl::buildVictimLists() {
 }
 
 // Makes room for one entry. Candidates, in order:
-//  1. tiles that are not wanted, or wanted and already on the GPU (but not
-//     pyramid tiles), by plan-distance score (eviction.h);
-//  2. wanted tiles still waiting for the GPU, and pyramid tiles, only for a
-//     better-ranked newcomer, worst rank first, so a budget below the needed
-//     set keeps the coarse levels and the finest levels stay missing
-//     instead of thrashing.
+//  1. tiles that are not wanted, or wanted and already on the GPU (pyramid
+//     tiles only with kGpuFirst), by plan-distance score (eviction.h);
+//  2. wanted tiles still waiting for the GPU (and, with kProtectGpu,
+//     pyramid tiles), only for a better-ranked newcomer, worst rank first,
+//     so a budget below the needed set keeps the coarse levels and the
+//     finest levels stay missing instead of thrashing.
 // Placeholders are never evicted. Lists are re-checked as they are consumed
 // (an entry may have been handed off, evicted or re-ranked since). Caller
 // holds the mutex.
@@ -211,7 +211,8 @@ bool Streamer::Impl::reserveRoom(uint32_t incoming_rank) {
       auto it = cache.find(key);
       if (it == cache.end() || it->second.state != EntryState::kReady) continue;
       const auto r = rank.find(key);
-      if (r != rank.end() && (!it->second.gpu || isPyramidTile(key, windows))) continue;  // pinned now
+      if (r != rank.end() && (!it->second.gpu || !scoredOnGpu(key, windows, config.eviction)))
+        continue;  // pinned now
       evict(it);
       evicted = true;
     }
@@ -405,10 +406,15 @@ void Streamer::Impl::rebuild() {
   prefetch.swap(new_prefetch);
 }
 
-// Finest level whose visible window tiles are all on the GPU, with every
-// coarser level also complete (pyramid levels need all their tiles). Tiles
-// that failed for good count as complete: the renderer shows their ancestor,
-// and one bad tile must not pin the whole view to the coarsest level.
+// Finest level l such that every level from the coarsest down to l is
+// ready: a pyramid level with all its tiles on the GPU, a stack level with
+// at least lod_min_coverage of its visible tiles. The missing tiles of a
+// ready level are drawn from their finest usable ancestor (the renderer's
+// usable map), so no tile that is not loaded is ever sampled; demanding
+// every visible tile (coverage 1) kept the whole view several levels too
+// coarse at speed (docs/accuracy.md, "Throttling"). Tiles that failed for
+// good count as done: the renderer shows their ancestor, and one bad tile
+// must not pin the whole view to the coarsest level.
 uint32_t Streamer::Impl::computeLod() const {
   const uint32_t levels = geometry.levelCount();
   if (levels == 0) return 0;
@@ -428,11 +434,15 @@ uint32_t Streamer::Impl::computeLod() const {
       if (!lp.needed) break;
       rect = lp.visible;
     }
-    bool all = true;
-    for (int64_t y = rect.y0; y < rect.y1 && all; ++y)
-      for (int64_t x = rect.x0; x < rect.x1 && all; ++x)
-        all = done({l, uint32_t(x), uint32_t(y)});
-    if (!all) break;
+    // Pyramid levels need every tile (they are loaded first and kept);
+    // a stack level is ready with lod_min_coverage of its visible tiles.
+    uint64_t total = 0, ready = 0;
+    for (int64_t y = rect.y0; y < rect.y1; ++y)
+      for (int64_t x = rect.x0; x < rect.x1; ++x, ++total)
+        if (done({l, uint32_t(x), uint32_t(y)})) ++ready;
+    const double need =
+        l >= plan.pyramid_level ? 1.0 : std::clamp(config.lod_min_coverage, 0.0, 1.0);
+    if (double(ready) < need * double(total)) break;
     finest = l;
   }
   return std::min(finest, levels - 1);

@@ -167,8 +167,12 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     std::vector<uint32_t> cached_ids;
     uint64_t cached = 0;
     auto slotOf = [&](uint32_t id) { return Slot{score[id], stamp[id], id}; };
+    // Every access is handed to the GPU at once, so a cached tile is either
+    // on the GPU (wanted) or not wanted: all are scored but pyramid tiles
+    // under kProtectGpu (streamer.cpp, buildVictimLists).
+    auto scored = [&](uint32_t id) { return scoredOnGpu(key_of[id], current, mode); };
     auto enroll = [&](uint32_t id) {
-      if (isPyramidTile(key_of[id], current)) return;
+      if (!scored(id)) return;
       score[id] = evictionScore(key_of[id], current, predicted, mode);
       candidates.insert(slotOf(id));
     };
@@ -205,7 +209,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
       }
       const uint32_t id = id_of[i];
       if (e.leave) {
-        if (in_cache[id] && !isPyramidTile(key_of[id], current)) {
+        if (in_cache[id] && scored(id)) {
           candidates.erase(slotOf(id));
           stamp[id] = i;
           candidates.insert(slotOf(id));
@@ -218,14 +222,14 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
       wanted[id] = 1;
       if (in_cache[id]) {
         hits++;
-        if (!isPyramidTile(key_of[id], current)) candidates.erase(slotOf(id));
+        if (scored(id)) candidates.erase(slotOf(id));
         stamp[id] = i;
         enroll(id);
         continue;
       }
       stamp[id] = i;
       if (cached >= capacity_tiles) {
-        if (candidates.empty()) continue;  // only pyramid tiles cached: bypass
+        if (candidates.empty()) continue;  // only unscored pyramid tiles cached: bypass
         auto victim = std::prev(candidates.end());
         in_cache[std::get<2>(*victim)] = 0;
         candidates.erase(victim);

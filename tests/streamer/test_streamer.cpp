@@ -372,6 +372,83 @@ TEST(Streamer, MaxTextureLodGoesFinerAfterHysteresisAndCoarserAtOnce) {
   EXPECT_EQ(s.takeReady(100000).tiles.size(), rankPlanTiles(s.geometry(), s.plan()).size());
 }
 
+// A source whose tiles in `missing` are unavailable (kUnavailable: retried
+// only after a back-off, so missing while the clock stands still).
+class MissingTilesSource final : public TileSource {
+ public:
+  MissingTilesSource(std::shared_ptr<TileSource> inner, KeySet missing)
+      : m_inner(std::move(inner)), m_missing(std::move(missing)) {}
+  const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    if (m_missing.count(key)) return Status::error(ErrorCode::kUnavailable, "test: tile missing");
+    return m_inner->fetch(key, rgba);
+  }
+  std::string describe() const override { return "missing:" + m_inner->describe(); }
+
+ private:
+  std::shared_ptr<TileSource> m_inner;
+  KeySet m_missing;
+};
+
+// MaxTextureLOD the rule's way: the finest level with every coarser level
+// ready, a pyramid level with all its tiles, a stack level with `coverage`
+// of its visible tiles.
+uint32_t expectedLod(const PyramidGeometry& g, const ClipmapPlan& plan, const KeySet& missing,
+                     double coverage) {
+  uint32_t finest = g.levelCount();
+  for (uint32_t l = g.levelCount(); l-- > 0;) {
+    const bool pyramid = l >= plan.pyramid_level;
+    if (!pyramid && !plan.stack[l].needed) break;
+    const TileRect rect = pyramid ? plan.pyramid[l - plan.pyramid_level] : plan.stack[l].visible;
+    uint64_t total = 0, ready = 0;
+    for (int64_t y = rect.y0; y < rect.y1; ++y)
+      for (int64_t x = rect.x0; x < rect.x1; ++x, ++total)
+        if (missing.count({l, uint32_t(x), uint32_t(y)}) == 0) ++ready;
+    if (double(ready) < (pyramid ? 1.0 : coverage) * double(total)) break;
+    finest = l;
+  }
+  return std::min(finest, g.levelCount() - 1);
+}
+
+// Visible tiles that stay missing hold a level back only while they are
+// more than 1 - lod_min_coverage of its visible tiles: the renderer draws
+// them from their ancestors. Coverage 1 is the strict rule.
+TEST(Streamer, MaxTextureLodNeedsOnlyTheCoverageOfVisibleTiles) {
+  const Viewport vp{800, 600};
+  const Camera cam = lookingDown(4000.0, 4000.0, 60.0);
+  auto source = procedural(8192);
+  const StreamerConfig base = baseConfig(2, 8);
+  const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, base.planner);
+  // Every third visible tile of every needed stack level is missing (not
+  // where a level sees only one tile).
+  KeySet missing;
+  for (const ClipLevelPlan& lp : plan.stack) {
+    if (!lp.needed || lp.visible.width() * lp.visible.height() < 2) continue;
+    for (int64_t y = lp.visible.y0; y < lp.visible.y1; ++y)
+      for (int64_t x = lp.visible.x0; x < lp.visible.x1; ++x)
+        if ((x + 2 * y) % 3 == 0) missing.insert({lp.level, uint32_t(x), uint32_t(y)});
+  }
+  ASSERT_FALSE(missing.empty());
+  const uint32_t strict = expectedLod(source->geometry(), plan, missing, 1.0);
+  const uint32_t half = expectedLod(source->geometry(), plan, missing, 0.5);
+  ASSERT_EQ(half, plan.finest_level);
+  ASSERT_GT(strict, half);
+  for (double coverage : {1.0, 0.75, 0.5}) {
+    StreamerConfig cfg = base;
+    cfg.lod_hysteresis_frames = 1;
+    cfg.lod_min_coverage = coverage;
+    Streamer s(std::make_shared<MissingTilesSource>(source, missing), cfg);
+    s.update(cam, vp, 0.0);
+    ASSERT_TRUE(waitIdle(s));
+    EXPECT_EQ(s.stats().total.failures, missing.size());
+    EXPECT_EQ(s.takeReady(100000).max_texture_lod,
+              expectedLod(s.geometry(), s.plan(), missing, coverage))
+        << "coverage " << coverage;
+  }
+  // The default is the measured choice (docs/decisions.md).
+  EXPECT_EQ(StreamerConfig{}.lod_min_coverage, 0.5);
+}
+
 TEST(Streamer, BudgetBelowTheNeededSetKeepsCoarseLevelsAndDoesNotThrash) {
   const uint64_t entry = 128 * 128 * 4 + kCacheEntryOverheadBytes;
   StreamerConfig cfg = baseConfig(2, 8);

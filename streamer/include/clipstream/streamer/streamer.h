@@ -29,8 +29,8 @@ namespace clipstream {
 // its window; kProtectGpu trades that for re-uploading from RAM after a
 // renderer resize (resetGpuResidency()).
 enum class EvictionMode : uint8_t {
-  kGpuFirst,     // evict them first: RAM is a victim cache behind the GPU
-  kProtectGpu,   // keep them longest, after every tile outside the windows
+  kGpuFirst,     // evict them first (pyramid tiles before all): RAM is a victim cache behind the GPU
+  kProtectGpu,   // keep them longest, after every tile outside the windows; pyramid tiles kept
 };
 
 struct StreamerConfig {
@@ -40,6 +40,11 @@ struct StreamerConfig {
   bool frustum_priority = true;  // visible tiles before hidden ones
   bool throttle = true;          // compute MaxTextureLOD from residency
   uint32_t lod_hysteresis_frames = 8;  // frames a finer LOD must be ready before use
+  // A stack level is ready for MaxTextureLOD when at least this fraction of
+  // its visible tiles is on the GPU (or failed for good); the rest are drawn
+  // from their ancestors per tile. 1 = every visible tile (strict). 0.5 was
+  // measured best (docs/decisions.md, Streamer).
+  double lod_min_coverage = 0.5;
   PlannerConfig planner;
   std::string trace_path;        // non-empty: record the request stream here
   double prefetch_ahead_s = 0.5; // how far ahead the predicted camera is placed

@@ -56,10 +56,11 @@ struct ReplayResult {
 
 // Replays accesses against a cache of capacity_tiles tiles under each policy.
 // The plan-aware policy is the streamer's (eviction.h): it sees the window
-// lines as the streamer sees its plans, never evicts pyramid tiles, evicts
-// the highest plan-distance score first (ties as in eviction.h), and
-// bypasses when only pyramid tiles are cached. Every access is taken to be
-// handed to the GPU at once.
+// lines as the streamer sees its plans and evicts the highest plan-distance
+// score first (ties as in eviction.h). Every access is taken to be handed to
+// the GPU at once, so with kGpuFirst pyramid tiles are candidates (first);
+// with kProtectGpu they are never evicted, and a newcomer is dropped when
+// only pyramid tiles are cached.
 ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles);
 
 }  // namespace clipstream
