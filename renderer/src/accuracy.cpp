@@ -221,6 +221,8 @@ Status IdealReference::resize(const Viewport& viewport) {
     for (uint32_t y = 0; y < m_geometry.levels[l].tiles_y; ++y)
       for (uint32_t x = 0; x < m_geometry.levels[l].tiles_x; ++x)
         if (auto px = tile({l, x, y})) m_renderer->uploadTile({l, x, y}, px);
+  // Tiles that failed show their ancestor, as in the streamed renderer.
+  m_renderer->fillMissingPyramidTiles();
   m_renderer->endUploads();
   return Status::ok();
 }
@@ -436,6 +438,7 @@ Status runScenario(const ScenarioOptions& o, ScenarioResult* result) {
           }
           if (it->second) renderer->uploadTile(key, it->second);
         }
+    renderer->fillMissingPyramidTiles();
     renderer->endUploads();
     return Status::ok();
   };
@@ -539,7 +542,7 @@ Status runScenario(const ScenarioOptions& o, ScenarioResult* result) {
   }
   watched->arm(false);
   if (!candidates.empty()) {
-    const TexelFunction texels = texelsFromSource(o.source);
+    const TexelFunction texels = o.garbage_texels ? o.garbage_texels : texelsFromSource(o.source);
     for (const Candidate& c : candidates) {
       ++result->garbage_checked_frames;
       result->garbage_pixels_max = std::max(

@@ -167,7 +167,8 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   std::unique_ptr<ClipmapRenderer> renderer;
 
   // The coarse pyramid is loaded before the first frame, so every frame
-  // has something correct to draw. A tile that fails stays black (counted).
+  // has something correct to draw. A tile that fails is filled from its
+  // ancestor (counted).
   // A viewport resize makes a new renderer (the clip size follows the
   // viewport) and loads the pyramid again the same way.
   uint32_t preload_failures = 0;
@@ -184,6 +185,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
           if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
           else ++preload_failures;
         }
+    renderer->fillMissingPyramidTiles();  // a tile that failed shows its ancestor
     renderer->endUploads();
     return Status::ok();
   };
@@ -526,7 +528,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     add("ram_peak_mib", num(double(final_stats.ram_peak_bytes) / 1048576.0));
     add("ram_budget_mib", num(double(final_stats.ram_budget_bytes) / 1048576.0));
     add("frames_with_holes", std::to_string(holes_frames));
-    add("gt_psnr_mean_db", num(gt_count ? gt_sum / gt_count : 0.0));
+    add("gt_psnr_mean_db", gt_count ? num(gt_sum / gt_count) : std::string());  // empty: not measured
     add("tile_failures", std::to_string(final_stats.total.failures + preload_failures));
     if (Status s = writeFileAtomically(o.out_dir + "/summary.tsv", keys + "\n" + values + "\n"); !s)
       return s;

@@ -186,6 +186,77 @@ void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* rgba) {
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 }
 
+uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
+  if (m_pyramid_missing == 0) return 0;
+  const uint32_t pyramid = m_config.pyramid_level;
+  const uint64_t tp = m_geometry.tile_px;
+  // Levels past the stored mips are never sampled (draw() clamps to them).
+  const uint32_t levels = std::min(m_geometry.levelCount() - pyramid, m_mips);
+  auto have = [&](uint32_t mip, int64_t x, int64_t y) -> uint8_t* {
+    const LevelInfo& info = m_geometry.levels[pyramid + mip];
+    if (x < 0 || y < 0 || x >= int64_t(info.tiles_x) || y >= int64_t(info.tiles_y)) return nullptr;
+    return &m_pyramid_have[m_pyramid_first[mip] + size_t(y) * info.tiles_x + size_t(x)];
+  };
+  GLuint fbo[2] = {0, 0};
+  glCreateFramebuffers(2, fbo);
+  glNamedFramebufferReadBuffer(fbo[0], GL_COLOR_ATTACHMENT0);
+  const GLint layer = GLint(pyramid);
+  auto blit = [&](uint32_t src_mip, const GLint src[4], uint32_t dst_mip, const GLint dst[4]) {
+    for (uint32_t set = 0; set < setCount(); ++set) {
+      glNamedFramebufferTextureLayer(fbo[0], GL_COLOR_ATTACHMENT0, m_stack[set], GLint(src_mip),
+                                     layer);
+      glNamedFramebufferTextureLayer(fbo[1], GL_COLOR_ATTACHMENT0, m_stack[set], GLint(dst_mip),
+                                     layer);
+      glBlitNamedFramebuffer(fbo[0], fbo[1], src[0], src[1], src[2], src[3], dst[0], dst[1], dst[2],
+                             dst[3], GL_COLOR_BUFFER_BIT, GL_LINEAR);
+    }
+  };
+  uint32_t filled = 0;
+  for (uint32_t mip = levels; mip-- > 0;) {
+    const LevelInfo& info = m_geometry.levels[pyramid + mip];
+    const uint64_t size = (uint64_t(m_slots) * tp) >> mip;
+    for (uint32_t y = 0; y < info.tiles_y; ++y) {
+      for (uint32_t x = 0; x < info.tiles_x; ++x) {
+        uint8_t* mine = have(mip, x, y);
+        if (*mine) continue;
+        *mine = 1;
+        --m_pyramid_missing;
+        const uint64_t x0 = uint64_t(slot(x, m_slots)) * tp, y0 = uint64_t(slot(y, m_slots)) * tp;
+        if (x0 >= size || y0 >= size) continue;  // beyond the mip: padding only
+        const GLint dst[4] = {GLint(x0), GLint(y0), GLint(std::min(x0 + tp, size)),
+                              GLint(std::min(y0 + tp, size))};
+        ++filled;
+        const uint8_t* parent = mip + 1 < levels ? have(mip + 1, x / 2, y / 2) : nullptr;
+        bool children = mip > 0;
+        for (int64_t j = 0; j < 2 && children; ++j)
+          for (int64_t i = 0; i < 2 && children; ++i) {
+            const uint8_t* c = have(mip - 1, 2 * int64_t(x) + i, 2 * int64_t(y) + j);
+            children = c == nullptr || *c != 0;
+          }
+        if (parent != nullptr && *parent) {
+          const GLint src[4] = {dst[0] / 2, dst[1] / 2, dst[2] / 2, dst[3] / 2};
+          blit(mip + 1, src, mip, dst);
+        } else if (children) {
+          // The coarsest stored level has no parent: average its children.
+          const uint64_t below = size * 2;
+          auto twice = [below](uint64_t v) { return GLint(std::min<uint64_t>(2 * v, below)); };
+          const GLint src[4] = {twice(x0), twice(y0), twice(uint64_t(dst[2])),
+                                twice(uint64_t(dst[3]))};
+          blit(mip - 1, src, mip, dst);
+        } else {
+          const uint8_t grey[4] = {128, 128, 128, 255};
+          for (uint32_t set = 0; set < setCount(); ++set)
+            glClearTexSubImage(m_stack[set], GLint(mip), dst[0], dst[1], layer, dst[2] - dst[0],
+                               dst[3] - dst[1], 1, GL_RGBA, GL_UNSIGNED_BYTE, grey);
+        }
+      }
+    }
+  }
+  glDeleteFramebuffers(2, fbo);
+  m_changed = true;
+  return filled;
+}
+
 void ClipmapRenderer::fillCoarserMips(uint32_t set) {
   // Mip 1 of layer L holds level L + 1 over level L's window, so a single
   // trilinear fetch blends L and L + 1. It is copied on the GPU from where

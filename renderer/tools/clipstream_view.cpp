@@ -143,6 +143,7 @@ int main(int argc, char** argv) {
         auto px = std::make_shared<std::vector<uint8_t>>();
         if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
       }
+  renderer->fillMissingPyramidTiles();  // a tile that failed shows its ancestor
   renderer->endUploads();
   Streamer streamer(source, sc);
 

@@ -1,8 +1,13 @@
 #include "test_helpers.h"
 
+#include <clipstream/store/tile_store.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
 #include <string>
 
 namespace clipstream::test {
@@ -89,4 +94,102 @@ void dumpPpm(const std::string& name, const std::vector<uint8_t>& rgba, const Vi
   for (size_t i = 0; i < rgba.size(); i += 4) std::fwrite(&rgba[i], 1, 3, f);
   std::fclose(f);
 }
+}  // namespace clipstream::test
+
+namespace clipstream::test {
+
+TempDir::TempDir(const std::string& name) {
+  static int counter = 0;
+  path = (std::filesystem::temp_directory_path() /
+          ("clipstream_renderer_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) +
+           "_" + name))
+             .string();
+  std::error_code ec;
+  std::filesystem::remove_all(path, ec);
+  std::filesystem::create_directories(path, ec);
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path, ec);
+}
+
+Status writeStoreFromSource(TileSource& source, const std::string& path) {
+  const PyramidGeometry& g = source.geometry();
+  if (g.format != PixelFormat::kRGBA8)
+    return Status::error(ErrorCode::kInvalidArgument, "writeStoreFromSource: source is not RGBA8");
+  WriterOptions options;
+  options.fsync = false;
+  std::unique_ptr<TileStoreWriter> writer;
+  if (Status s = TileStoreWriter::create(path, g, options, &writer); !s) return s;
+  std::vector<uint8_t> pixels;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        const TileKey key{l, x, y};
+        if (Status s = source.fetch(key, &pixels); !s) return s;
+        EncodedTile encoded;
+        if (Status s = encodeTile(g, options.encoding, key, pixels, &encoded); !s) return s;
+        if (Status s = writer->write(std::move(encoded)); !s) return s;
+      }
+  return writer->finish();
+}
+
+Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDamage damage) {
+  std::unique_ptr<TileStoreReader> reader;
+  if (Status s = TileStoreReader::open(path, &reader); !s) return s;
+  TileLocation where;
+  if (Status s = reader->locate(key, &where); !s) return s;
+  if (where.constant || where.stored_bytes < 16)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "damageTilePayload: tile has no payload to damage");
+  const PyramidGeometry geometry = reader->geometry();
+  const StoreEncoding encoding = reader->info().encoding;
+  std::vector<uint8_t> clean_pixels;
+  if (Status s = reader->readTile(key, &clean_pixels); !s) return s;
+  reader.reset();
+
+  RawTile raw;
+  raw.key = key;
+  raw.location = where;
+  raw.payload.resize(where.stored_bytes);
+  {
+    std::ifstream in(path, std::ios::binary);
+    in.seekg(std::streamoff(where.offset));
+    in.read(reinterpret_cast<char*>(raw.payload.data()), std::streamsize(raw.payload.size()));
+    if (!in) return Status::error(ErrorCode::kIo, "damageTilePayload: cannot read the payload");
+  }
+  // Decodes without the checksum: what a reader that trusted the bytes
+  // would get.
+  std::vector<uint8_t> pixels(geometry.tileBytes());
+  auto decodes = [&]() {
+    return decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).isOk() &&
+           pixels != clean_pixels;
+  };
+  if (damage == PayloadDamage::kBreakFrame) {
+    for (size_t i = 0; i < 4; ++i) raw.payload[i] ^= 0xFF;  // the zstd magic number
+    if (decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).isOk())
+      return Status::error(ErrorCode::kInvalidArgument, "damageTilePayload: frame still decodes");
+  } else {
+    // Entropy-coded bytes usually break the frame when flipped; search from
+    // the middle for one whose flip still decodes (literals, raw blocks).
+    bool found = false;
+    for (size_t i = raw.payload.size() / 2; i < raw.payload.size() && !found; ++i) {
+      raw.payload[i] ^= 0x04;
+      found = decodes();
+      if (!found) raw.payload[i] ^= 0x04;
+    }
+    if (!found)
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "damageTilePayload: no flip keeps the frame decodable");
+  }
+  std::fstream out(path, std::ios::binary | std::ios::in | std::ios::out);
+  out.seekp(std::streamoff(where.offset));
+  out.write(reinterpret_cast<const char*>(raw.payload.data()), std::streamsize(raw.payload.size()));
+  out.flush();
+  if (!out)
+    return Status::error(ErrorCode::kIo, "damageTilePayload: cannot write the payload back");
+  return Status::ok();
+}
+
 }  // namespace clipstream::test

@@ -257,6 +257,9 @@ struct ScenarioOptions {
   // frames below kSharpPsnrDb, at most this many (CPU-heavy).
   uint32_t garbage_checks = 6;
   int garbage_tolerance = 6;
+  // The ground those frames are checked against; empty: texelsFromSource()
+  // of the source (a tile that fails has no texels there).
+  TexelFunction garbage_texels;
   // Rest frames take at least this wall time (a display's refresh), so a
   // slow source gets real time to catch up; moving frames never wait.
   double rest_frame_ms = 0.0;

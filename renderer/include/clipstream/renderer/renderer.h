@@ -92,6 +92,16 @@ class ClipmapRenderer {
   // (toroidalSlot(x + bias)), a deliberately wrong toroidal offset.
   void setTestSlotBias(int64_t bias) { m_test_slot_bias = bias; }
 
+  // Fills every pyramid tile that was never uploaded (the source failed it
+  // for good: a damaged or missing tile) so the pyramid, the fallback of
+  // every other level, has no hole: the tile is magnified from its parent
+  // (bilinear GPU blit, coarse levels first, so a filled parent serves its
+  // children); a tile with no parent in the chain is averaged down from its
+  // children, or else cleared to mid grey. Filled tiles count as uploaded
+  // (a later upload of the tile is skipped). Call once after the pyramid
+  // preload, before endUploads(). Returns the number of tiles filled.
+  uint32_t fillMissingPyramidTiles();
+
   // True once every tile of every level >= pyramid_level was uploaded.
   bool pyramidComplete() const { return m_pyramid_missing == 0; }
   uint32_t pyramidTilesMissing() const { return m_pyramid_missing; }
