@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Speed against accuracy: the whole sweep in one command.
 #
-#   bash scripts/sweep.sh            # full sweep (about 6 minutes on 2 cores)
+#   bash scripts/sweep.sh            # full sweep (about 12 minutes on 2 cores)
 #   bash scripts/sweep.sh --quick    # fewer frames, for a smoke run (CSV/charts still written)
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #
@@ -9,7 +9,9 @@
 # once, runs every experiment with clipstream-fly --reference (each frame's
 # PSNR against the ideal reference), replays a request trace with
 # clipstream-trace, runs the stability scenarios (tests/renderer/
-# test_stability.cpp, with the 10,000-frame soak), writes docs/data/*.csv,
+# test_stability.cpp, with the 10,000-frame soak at default settings), runs
+# the soak again under AddressSanitizer + UBSan with leak checking (built in
+# $ASAN_BUILD_DIR, default build-asan, when missing), writes docs/data/*.csv,
 # draws docs/charts/*.png with gnuplot and regenerates the part of
 # docs/benchmarks.md between <!-- sweep:begin --> and <!-- sweep:end -->.
 # What each metric and chart means: docs/accuracy.md.
@@ -24,6 +26,7 @@ case "${1:-}" in
   *) echo "usage: scripts/sweep.sh [--quick | --charts-only]" >&2; exit 2 ;;
 esac
 BUILD=${BUILD_DIR:-build}
+ASAN_BUILD=${ASAN_BUILD_DIR:-build-asan}
 WORK=${SWEEP_WORK:-out/sweep}
 DOCS=${SWEEP_DOCS:-docs}
 DATA=$DOCS/data
@@ -45,6 +48,16 @@ if [[ ! -f "$BUILD/build.ninja" ]]; then
 fi
 echo "sweep: building ${need[*]:-(up to date check)}"
 cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_renderer >/dev/null
+# The soak also runs under ASan + UBSan: reuse $ASAN_BUILD, configure it if
+# missing; building brings it up to date (a no-op when it is).
+if (( ! CHARTS_ONLY )); then
+  if [[ ! -f "$ASAN_BUILD/build.ninja" ]]; then
+    cmake -S . -B "$ASAN_BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+      -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF >/dev/null
+  fi
+  echo "sweep: building test_renderer under ASan in $ASAN_BUILD (minutes when it is new)"
+  cmake --build "$ASAN_BUILD" -j "$JOBS" --target test_renderer >/dev/null
+fi
 FLY=${SWEEP_FLY:-$BUILD/renderer/clipstream-fly}
 TRACE_TOOL="$BUILD/streamer/clipstream-trace"
 STORE="$WORK/autzen.cstore"
@@ -88,11 +101,15 @@ AUTZEN="$STORE --size $SIZE --io-threads 2 --reference --warmup-frames 60"
 add "ground_truth" 20 "$AUTZEN --path orbit --loop --frames $FRAMES --speed 5 --ground-truth-every 10"
 add "teleport" 12 "$AUTZEN --path teleport --teleport-frames 30 --frames $FRAMES --rest-frames 60"
 add "trace" 8 "$STORE --size $SIZE --io-threads 2 --path orbit --loop --speed 5 --frames $TRACE_FRAMES --trace $WORK/orbit.trace"
-STAB_WEIGHT=$(( SOAK / 100 + 40 ))
+# Weights are about 0.75 s each on 2 cores; the soak at 1280x720 costs
+# about 17 ms a frame in the release build and 24 ms under ASan (most of it
+# llvmpipe drawing).
+STAB_WEIGHT=$(( 50 + SOAK * 17 / 750 ))
+ASAN_WEIGHT=$(( SOAK * 24 / 750 ))
 
-total_weight=$STAB_WEIGHT
+total_weight=$((STAB_WEIGHT + ASAN_WEIGHT))
 for r in "${RUNS[@]}"; do IFS='|' read -r _ w _ <<<"$r"; total_weight=$((total_weight + w)); done
-runs_total=$(( ${#RUNS[@]} + 1 ))
+runs_total=$(( ${#RUNS[@]} + 2 ))
 start=$(date +%s)
 done_weight=0
 progress() {  # $1 = runs done, $2 = label
@@ -118,13 +135,30 @@ for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
   echo "$FLY $args --out $WORK/$name" >"$WORK/$name.cmd"
   i=$((i + 1)); done_weight=$((done_weight + w))
 done
-STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/renderer/test_renderer --gtest_filter=Stability.*"
+STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/renderer/test_renderer --gtest_filter=Stability.*"
+# The soak once more under ASan + UBSan: LeakSanitizer checks at exit, with
+# the driver kept mapped (tests/renderer/lsan_keep_gl_driver.cpp) and
+# tests/lsan.supp; any report makes the process fail (docs/accuracy.md).
+ASAN_ENV=(ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp"
+          UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1")
+ASAN_SOAK_CMD="ASAN_OPTIONS='detect_leaks=1 halt_on_error=1' LSAN_OPTIONS=suppressions=tests/lsan.supp UBSAN_OPTIONS='halt_on_error=1 print_stacktrace=1' CLIPSTREAM_STABILITY_OUT=$WORK/soak_asan.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $ASAN_BUILD/tests/renderer/test_renderer --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget"
 if (( ! CHARTS_ONLY )); then
 progress "$i" "stability scenarios"
 rm -f "$WORK/stability.jsonl"
-if ! env CLIPSTREAM_STABILITY_OUT="$WORK/stability.jsonl" CLIPSTREAM_SOAK_FRAMES=$SOAK \
+if ! env CLIPSTREAM_STABILITY_OUT="$WORK/stability.jsonl" CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK \
     "$BUILD/tests/renderer/test_renderer" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
   echo; echo "sweep: a stability scenario failed (see $WORK/stability.log); its row says FAIL"
+fi
+done_weight=$((done_weight + STAB_WEIGHT))
+progress "$((i + 1))" "soak under ASan"
+rm -f "$WORK/soak_asan.jsonl"
+if ! env "${ASAN_ENV[@]}" CLIPSTREAM_STABILITY_OUT="$WORK/soak_asan.jsonl" CLIPSTREAM_SOAK=full \
+    CLIPSTREAM_SOAK_FRAMES=$SOAK "$ASAN_BUILD/tests/renderer/test_renderer" \
+    --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget >"$WORK/soak_asan.log" 2>&1; then
+  echo "1" >"$WORK/soak_asan.rc"
+  echo; echo "sweep: the soak under ASan failed or reported (see $WORK/soak_asan.log); its row says FAIL"
+else
+  echo "0" >"$WORK/soak_asan.rc"
 fi
 fi
 done_weight=$total_weight
@@ -206,6 +240,34 @@ jget() { sed -n "s/.*\"$2\":\([^,}]*\).*/\1/p" <<<"$1" | tr -d '"'; }
       "$(jget "$l" render_thread_fetches)" "$(jget "$l" result)"
   done <"$WORK/stability.jsonl"
 } >"$DATA/stability.csv"
+# Soak: the release run (RSS, budget) and the ASan + UBSan run (leaks).
+soak_row() {  # NAME JSONL LOG SANITIZED
+  local l loaded leaks bytes suppressed reports result
+  l=$(grep '"scenario":"soak (default settings)"' "$2" 2>/dev/null | tail -1 || true)
+  loaded=$(sed -n 's/.* inserts, \([0-9.]*\) MiB loaded.*/\1/p' "$3" | tail -1)
+  result=$(jget "$l" result)
+  if (( $4 )); then
+    leaks=$(grep -cE '^(Direct|Indirect) leak of' "$3" || true)
+    bytes=$(sed -n 's/^SUMMARY: AddressSanitizer: \([0-9]*\) byte(s) leaked.*/\1/p' "$3" | tail -1)
+    bytes=${bytes:-0}
+    suppressed=$(awk '/^Suppressions used:/{on=1; next} on && $1 ~ /^[0-9]+$/ {n += $1} END{print n+0}' "$3")
+    reports=$(grep -cE 'runtime error:|ERROR: AddressSanitizer' "$3" || true)
+    [[ "$(cat "$WORK/soak_asan.rc" 2>/dev/null)" == 0 && $leaks == 0 && $reports == 0 ]] || result=FAIL
+  else
+    leaks="not checked"; bytes=""; suppressed=""; reports=""
+  fi
+  printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$1" "$(jget "$l" frames)" \
+    "$(awk -v b="$(jget "$l" ram_peak_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
+    "$(awk -v b="$(jget "$l" ram_budget_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" "$loaded" \
+    "$(awk -v b="$(jget "$l" rss_after_warmup_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
+    "$(awk -v b="$(jget "$l" rss_end_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
+    "$leaks" "$bytes" "$suppressed" "$reports" "${result:-FAIL}"
+}
+{
+  echo "build,frames,ram_peak_mib,ram_budget_mib,loaded_mib,rss_after_quarter_mib,rss_end_mib,leaks_reported,leaked_bytes,suppressed_allocations,sanitizer_reports,result"
+  soak_row release "$WORK/stability.jsonl" "$WORK/stability.log" 0
+  soak_row asan+ubsan "$WORK/soak_asan.jsonl" "$WORK/soak_asan.log" 1
+} >"$DATA/soak.csv"
 
 # ---- charts ------------------------------------------------------------------
 if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then TERM_LINE="pngcairo size 800,480 font 'sans,10'"
@@ -293,6 +355,16 @@ GEN="$WORK/benchmarks_sweep.md"
   echo "### Stability scenarios"
   echo; echo "\`$STAB_CMD\`"; echo
   csv2md "$DATA/stability.csv"; echo
+  echo "### Soak: $SOAK frames at default settings, release and under ASan + UBSan"
+  echo
+  echo "Defaults: 1280x720 (clipstream-fly's), 256 MiB RAM budget, a loader thread per core, 16 uploads per"
+  echo "frame, double-buffered uploads, throttling, prefetch and frustum priority on; the straight line"
+  echo "above at x3 (300 texels/s) over the 2^26-texel procedural texture, never revisiting a tile, so the"
+  echo "cache turns over many times (loaded ÷ budget). Release run (RSS at a quarter of the frames and at the"
+  echo "end): the soak row of the table above. ASan + UBSan run with LeakSanitizer at exit (leaks reported,"
+  echo "leaked bytes, allocations matched by \`tests/lsan.supp\`; RSS there includes ASan's quarantine):"
+  echo "\`$ASAN_SOAK_CMD\`"; echo
+  csv2md "$DATA/soak.csv"; echo
   echo "<!-- sweep:end -->"
 } >"$GEN"
 BM=$DOCS/benchmarks.md

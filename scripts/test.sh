@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh Debian 12 machine: installs what is
 # missing, builds, runs every test, then builds the concurrent components
-# (store, streamer) under ThreadSanitizer and runs their tests again.
+# (store, streamer) under ThreadSanitizer and runs their tests again, then
+# builds the renderer tests under AddressSanitizer + UBSan and runs the
+# stability scenarios (with the shortened soak) with leak checking.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -17,3 +19,16 @@ cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 cmake --build build-tsan -j "$jobs" --target test_store test_streamer
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
   ctest --test-dir build-tsan -L 'store|streamer' --output-on-failure -j "$jobs" --timeout 900
+
+# Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
+# Mesa's driver mapped until the check, tests/lsan.supp names the
+# third-party code that may leak (docs/accuracy.md, "Leak checking"). Any
+# ASan, UBSan or leak report fails the test and this command. Without a GL
+# context these tests skip; on the CI machine llvmpipe provides one.
+echo "== AddressSanitizer + UBSan build of the renderer's stability scenarios and soak, leak-checked =="
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF
+cmake --build build-asan -j "$jobs" --target test_renderer
+ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
+  UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
+  ctest --test-dir build-asan -R '^Stability\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
