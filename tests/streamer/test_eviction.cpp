@@ -14,7 +14,9 @@
 namespace clipstream {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using test::lookingDown;
+using test::procedural;
+using test::waitIdle;
 
 TraceEvent windowLine(uint64_t frame, uint32_t level, TileRect rect, uint8_t kind) {
   TraceEvent e;
@@ -68,30 +70,6 @@ TEST(Eviction, PyramidTilesOnTheGpuGoBeforeATileThatWillReturn) {
   EXPECT_TRUE(scoredOnGpu(p, w, EvictionMode::kGpuFirst));
   EXPECT_FALSE(scoredOnGpu(p, w, EvictionMode::kProtectGpu));
   EXPECT_TRUE(scoredOnGpu(a, w, EvictionMode::kProtectGpu));
-}
-
-std::shared_ptr<TileSource> procedural(uint64_t side) {
-  ProceduralSpec spec;
-  spec.width_px = spec.height_px = side;
-  spec.tile_px = 128;
-  return makeProceduralSource(spec);
-}
-
-Camera lookingDown(double x, double z, double height) {
-  Camera c;
-  c.position = {x, height, z};
-  c.pitch_rad = -kPi / 2;
-  return c;
-}
-
-bool waitIdle(const Streamer& s, double timeout_s = 30.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (std::chrono::steady_clock::now() < end) {
-    const StreamerStats st = s.stats();
-    if (st.queue_depth == 0 && st.in_flight == 0) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  return false;
 }
 
 // Budget = exactly the wanted set, everything handed to the GPU, then one

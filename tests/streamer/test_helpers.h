@@ -3,6 +3,8 @@
 #pragma once
 
 #include <clipstream/store/tile_store.h>
+#include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <atomic>
@@ -16,6 +18,36 @@
 #include <vector>
 
 namespace clipstream::test {
+
+inline constexpr double kPi = 3.14159265358979323846;
+
+// A camera straight above (x, z), looking down.
+inline Camera lookingDown(double x, double z, double height) {
+  Camera c;
+  c.position = {x, height, z};
+  c.pitch_rad = -kPi / 2;
+  return c;
+}
+
+// A procedural square texture of `side` texels.
+inline std::shared_ptr<TileSource> procedural(uint64_t side, uint32_t tile_px = 128) {
+  ProceduralSpec spec;
+  spec.width_px = spec.height_px = side;
+  spec.tile_px = tile_px;
+  return makeProceduralSource(spec);
+}
+
+// Polls until nothing is queued or in flight. Sleeps in short steps; the
+// timeout only turns a hang into a failure.
+inline bool waitIdle(const Streamer& s, double timeout_s = 30.0) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < end) {
+    const StreamerStats st = s.stats();
+    if (st.queue_depth == 0 && st.in_flight == 0) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return false;
+}
 
 // Records every fetch (key, thread) in call order; optional extra latency.
 class RecordingSource final : public TileSource {

@@ -18,34 +18,11 @@
 namespace clipstream {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 using KeySet = std::unordered_set<TileKey, TileKeyHash>;
-
-Camera lookingDown(double x, double z, double height) {
-  Camera c;
-  c.position = {x, height, z};
-  c.pitch_rad = -kPi / 2;
-  return c;
-}
-
-std::shared_ptr<TileSource> procedural(uint64_t side, uint32_t tile_px = 128) {
-  ProceduralSpec spec;
-  spec.width_px = spec.height_px = side;
-  spec.tile_px = tile_px;
-  return makeProceduralSource(spec);
-}
-
-// Polls until nothing is queued or in flight. Sleeps in short steps; the
-// timeout only turns a hang into a failure.
-bool waitIdle(const Streamer& s, double timeout_s = 30.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (std::chrono::steady_clock::now() < end) {
-    const StreamerStats st = s.stats();
-    if (st.queue_depth == 0 && st.in_flight == 0) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  return false;
-}
+using test::kPi;
+using test::lookingDown;
+using test::procedural;
+using test::waitIdle;
 
 void expectCountersAddUp(const StreamerStats& st) {
   LevelCounters sum;
