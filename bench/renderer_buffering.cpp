@@ -77,12 +77,11 @@ Result runOnce(Buffering buffering, TileSource& source, const Viewport& vp, uint
   if (!ClipmapRenderer::create(g, {first.clip_tiles, first.pyramid_level, buffering}, &r).isOk())
     return {};
   r->beginFrame();
-  for (uint32_t l = first.pyramid_level; l < g.levelCount(); ++l)
-    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
-        auto px = std::make_shared<std::vector<uint8_t>>();
-        if (source.fetch({l, x, y}, px.get()).isOk()) r->uploadTile({l, x, y}, px);
-      }
+  r->loadPyramid([&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+    auto px = std::make_shared<std::vector<uint8_t>>();
+    if (!source.fetch(key, px.get()).isOk()) return nullptr;
+    return px;
+  });
   r->endUploads();
   glFinish();
 

@@ -217,12 +217,8 @@ Status IdealReference::resize(const Viewport& viewport) {
   m_loaded.assign(plan.pyramid_level, TileRect{});
   // The pyramid: every tile of every level that fits one clip, once.
   m_renderer->beginFrame();
-  for (uint32_t l = plan.pyramid_level; l < m_geometry.levelCount(); ++l)
-    for (uint32_t y = 0; y < m_geometry.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < m_geometry.levels[l].tiles_x; ++x)
-        if (auto px = tile({l, x, y})) m_renderer->uploadTile({l, x, y}, px);
   // Tiles that failed show their ancestor, as in the streamed renderer.
-  m_renderer->fillMissingPyramidTiles();
+  m_renderer->loadPyramid([this](const TileKey& key) { return tile(key); });
   m_renderer->endUploads();
   return Status::ok();
 }
@@ -424,21 +420,17 @@ Status runScenario(const ScenarioOptions& o, ScenarioResult* result) {
     if (Status s = ClipmapRenderer::create(geometry, rc, &renderer); !s) return s;
     if (Status s = OffscreenTarget::create(viewport, &target); !s) return s;
     renderer->beginFrame();
-    for (uint32_t l = first.pyramid_level; l < geometry.levelCount(); ++l)
-      for (uint32_t y = 0; y < geometry.levels[l].tiles_y; ++y)
-        for (uint32_t x = 0; x < geometry.levels[l].tiles_x; ++x) {
-          const TileKey key{l, x, y};
-          auto it = pyramid.find(packTileKey(key));
-          if (it == pyramid.end()) {
-            auto px = std::make_shared<std::vector<uint8_t>>();
-            std::shared_ptr<const std::vector<uint8_t>> value;
-            if (o.source->fetch(key, px.get()).isOk()) value = std::move(px);
-            else ++result->tile_failures;
-            it = pyramid.emplace(packTileKey(key), value).first;
-          }
-          if (it->second) renderer->uploadTile(key, it->second);
-        }
-    renderer->fillMissingPyramidTiles();
+    renderer->loadPyramid([&](const TileKey& key) {
+      auto it = pyramid.find(packTileKey(key));
+      if (it == pyramid.end()) {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        std::shared_ptr<const std::vector<uint8_t>> value;
+        if (o.source->fetch(key, px.get()).isOk()) value = std::move(px);
+        else ++result->tile_failures;
+        it = pyramid.emplace(packTileKey(key), value).first;
+      }
+      return it->second;
+    });
     renderer->endUploads();
     return Status::ok();
   };

@@ -178,14 +178,13 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     if (Status s = ClipmapRenderer::create(geometry, rc, &renderer); !s) return s;
     renderer->setOverlay(o.overlay ? Overlay::kLevels : Overlay::kOff);
     renderer->beginFrame();
-    for (uint32_t l = first.pyramid_level; l < geometry.levelCount(); ++l)
-      for (uint32_t y = 0; y < geometry.levels[l].tiles_y; ++y)
-        for (uint32_t x = 0; x < geometry.levels[l].tiles_x; ++x) {
+    // A tile that fails is filled from its ancestor (and counted).
+    preload_failures += renderer->loadPyramid(
+        [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
           auto px = std::make_shared<std::vector<uint8_t>>();
-          if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
-          else ++preload_failures;
-        }
-    renderer->fillMissingPyramidTiles();  // a tile that failed shows its ancestor
+          if (!source->fetch(key, px.get()).isOk()) return nullptr;
+          return px;
+        });
     renderer->endUploads();
     return Status::ok();
   };

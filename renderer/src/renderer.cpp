@@ -186,6 +186,19 @@ void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* rgba) {
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 }
 
+uint32_t ClipmapRenderer::loadPyramid(const PyramidTileFn& tile) {
+  uint32_t failed = 0;
+  for (uint32_t l = m_config.pyramid_level; l < m_geometry.levelCount(); ++l)
+    for (uint32_t y = 0; y < m_geometry.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < m_geometry.levels[l].tiles_x; ++x) {
+        const TileKey key{l, x, y};
+        if (auto px = tile(key)) uploadTile(key, std::move(px));
+        else ++failed;
+      }
+  fillMissingPyramidTiles();
+  return failed;
+}
+
 uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
   if (m_pyramid_missing == 0) return 0;
   const uint32_t pyramid = m_config.pyramid_level;

@@ -137,13 +137,11 @@ int main(int argc, char** argv) {
   // The coarse pyramid first (before any frame), so there is always
   // something correct to draw.
   renderer->beginFrame();
-  for (uint32_t l = first.pyramid_level; l < g.levelCount(); ++l)
-    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
-        auto px = std::make_shared<std::vector<uint8_t>>();
-        if (source->fetch({l, x, y}, px.get()).isOk()) renderer->uploadTile({l, x, y}, px);
-      }
-  renderer->fillMissingPyramidTiles();  // a tile that failed shows its ancestor
+  renderer->loadPyramid([&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+    auto px = std::make_shared<std::vector<uint8_t>>();
+    if (!source->fetch(key, px.get()).isOk()) return nullptr;  // filled from its ancestor
+    return px;
+  });
   renderer->endUploads();
   Streamer streamer(source, sc);
 

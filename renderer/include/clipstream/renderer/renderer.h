@@ -12,6 +12,7 @@
 #include <clipstream/streamer/streamer.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -92,15 +93,15 @@ class ClipmapRenderer {
   // (toroidalSlot(x + bias)), a deliberately wrong toroidal offset.
   void setTestSlotBias(int64_t bias) { m_test_slot_bias = bias; }
 
-  // Fills every pyramid tile that was never uploaded (the source failed it
-  // for good: a damaged or missing tile) so the pyramid, the fallback of
-  // every other level, has no hole: the tile is magnified from its parent
-  // (bilinear GPU blit, coarse levels first, so a filled parent serves its
-  // children); a tile with no parent in the chain is averaged down from its
-  // children, or else cleared to mid grey. Filled tiles count as uploaded
-  // (a later upload of the tile is skipped). Call once after the pyramid
-  // preload, before endUploads(). Returns the number of tiles filled.
-  uint32_t fillMissingPyramidTiles();
+  // Loads the coarse pyramid: every tile of every level >= pyramid_level,
+  // each asked of `tile` once (nullptr = the tile cannot be had: damaged or
+  // missing). A tile `tile` cannot give is filled from its ancestor, so the
+  // pyramid, the fallback of every other level, has no hole (see
+  // fillMissingPyramidTiles()). Call between beginFrame() and endUploads().
+  // Returns the number of tiles `tile` could not give.
+  using PyramidTileFn =
+      std::function<std::shared_ptr<const std::vector<uint8_t>>(const TileKey& key)>;
+  uint32_t loadPyramid(const PyramidTileFn& tile);
 
   // True once every tile of every level >= pyramid_level was uploaded.
   bool pyramidComplete() const { return m_pyramid_missing == 0; }
@@ -113,6 +114,13 @@ class ClipmapRenderer {
   const RendererConfig& config() const { return m_config; }
 
  private:
+  // Fills every pyramid tile that was never uploaded: the tile is
+  // magnified from its parent (bilinear GPU blit, coarse levels first, so a
+  // filled parent serves its children); a tile with no parent in the chain
+  // is averaged down from its children, or else cleared to mid grey. Filled
+  // tiles count as uploaded (a later upload of the tile is skipped).
+  // Returns the number of tiles filled.
+  uint32_t fillMissingPyramidTiles();
   ClipmapRenderer() = default;
   struct Pending {
     TileKey key;
