@@ -9,10 +9,9 @@ namespace {
 
 // Outside tiles score >= 1; inside tiles of needed windows score in (0, 1)
 // when protected, or above kInsideFirst when evicted first; pyramid tiles
-// score kPyramidFirst with kGpuFirst, above every stack tile (all below
+// score kPyramidFirstScore with kGpuFirst, above every stack tile (all below
 // kNoPlanScore).
 constexpr double kInsideFirst = 1e15;
-constexpr double kPyramidFirst = 1e25;
 
 double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode) {
   if (key.level >= w.rects.size()) return kNoPlanScore;
@@ -21,7 +20,7 @@ double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode) {
   const bool needed = w.kinds[key.level] != PlanWindows::kNotNeeded;
   const double level_weight = std::ldexp(1.0, 2 * int(key.level));  // 4^level
   if (w.kinds[key.level] == PlanWindows::kPyramid && mode == EvictionMode::kGpuFirst && r.contains(x, y))
-    return kPyramidFirst;  // never leaves its window
+    return kPyramidFirstScore;  // never leaves its window
   if (needed && !r.empty() && r.contains(x, y)) {
     // Deeper inside takes longer to leave and come back: goes first.
     const int64_t d_in = std::min({x - r.x0, r.x1 - 1 - x, y - r.y0, r.y1 - 1 - y}) + 1;

@@ -65,6 +65,9 @@ inline bool scoredOnGpu(const TileKey& key, const PlanWindows& windows, Eviction
 
 // Score of tiles no plan covers (no window line for their level yet).
 inline constexpr double kNoPlanScore = 1e30;
+// Score of pyramid tiles already on the GPU with kGpuFirst: above every
+// stack tile, below kNoPlanScore.
+inline constexpr double kPyramidFirstScore = 1e25;
 
 // Eviction score (see above). `predicted` may be empty.
 double evictionScore(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,

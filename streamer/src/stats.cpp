@@ -37,6 +37,8 @@ std::string StreamerStats::toJson() const {
   j["queue_latency_p50_ms"] = finite(queue_latency_p50_ms);
   j["queue_latency_p99_ms"] = finite(queue_latency_p99_ms);
   j["max_texture_lod"] = max_texture_lod;
+  j["path_hint_frames"] = path_hint_frames;
+  j["path_hint_ignored_frames"] = path_hint_ignored_frames;
   return j.dump();
 }
 

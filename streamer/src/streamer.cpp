@@ -11,6 +11,7 @@
 #include <clipstream/streamer/trace.h>
 
 #include "eviction.h"
+#include "lookahead.h"
 
 #include <algorithm>
 #include <chrono>
@@ -76,6 +77,21 @@ struct Request {
   Clock::time_point queued_at;
 };
 
+// True when a plan made from the path hint matches the real one: the same
+// levels needed, and each needed window within a tile of the real one.
+bool hintAgrees(const ClipmapPlan& hinted, const ClipmapPlan& real) {
+  if (hinted.pyramid_level != real.pyramid_level || hinted.clip_tiles != real.clip_tiles ||
+      hinted.stack.size() != real.stack.size())
+    return false;
+  for (size_t i = 0; i < real.stack.size(); ++i) {
+    const ClipLevelPlan &h = hinted.stack[i], &r = real.stack[i];
+    if (h.needed != r.needed) return false;
+    if (r.needed && (std::abs(h.window.x0 - r.window.x0) > 1 || std::abs(h.window.y0 - r.window.y0) > 1))
+      return false;
+  }
+  return true;
+}
+
 bool sameWindows(const ClipmapPlan& a, const ClipmapPlan& b) {
   if (a.pyramid_level != b.pyramid_level || a.clip_tiles != b.clip_tiles ||
       a.stack.size() != b.stack.size() || a.pyramid != b.pyramid)
@@ -104,6 +120,10 @@ struct Streamer::Impl {
   double now_s = 0.0;
   bool force_rebuild = false;
   std::deque<std::pair<double, glm::dvec3>> history;
+  PathHint hint;               // camera_at empty: none
+  PathLookahead lookahead;     // windows along the hint
+  bool hint_used = false;      // this frame's plan came with a trusted hint
+  bool hint_used_by_plan = false;  // the last rebuild's
   std::vector<TileKey> wanted;                         // plan tiles, rank order
   std::unordered_set<TileKey, FastKeyHash> wanted_set; // same, for lookups
   std::vector<TileKey> prefetch;                       // predicted tiles, after wanted
@@ -131,6 +151,9 @@ struct Streamer::Impl {
   uint32_t logged_failures = 0;
   PlanWindows windows;            // current plan, for eviction scores
   PlanWindows predicted_windows;  // predicted plan (empty without prefetch)
+  std::shared_ptr<const LookaheadSnapshot> ahead;  // hinted path's windows, or null
+  uint64_t hint_frames = 0;
+  uint64_t hint_ignored_frames = 0;
   // Eviction candidates sorted best victim first, rebuilt lazily after a
   // plan change or when exhausted; entries are re-checked when popped.
   std::vector<TileKey> victims;
@@ -172,7 +195,8 @@ void Streamer::Impl::buildVictimLists() {
     const auto r = rank.find(key);
     if (r == rank.end() || (e.gpu && scoredOnGpu(key, windows, config.eviction)))
       scored_list.push_back(
-          {evictionScore(key, windows, predicted_windows, config.eviction), e.last_wanted_frame, key});
+          {evictionScoreAhead(key, windows, predicted_windows, config.eviction, ahead.get()),
+           e.last_wanted_frame, key});
     else
       pinned.emplace_back(r->second, key);
   }
@@ -340,7 +364,12 @@ void Streamer::Impl::rebuild() {
   PlanWindows new_windows = planWindows(plan);
   PlanWindows new_predicted;
   if (config.prefetch && have_plan) new_predicted = planWindows(predicted_plan);
+  std::shared_ptr<const LookaheadSnapshot> new_ahead = hint_used ? lookahead.snapshot() : nullptr;
+  hint_used_by_plan = hint_used;
   if (trace.is_open()) {
+    char time_text[32];
+    std::snprintf(time_text, sizeof time_text, "%.17g", now_s);  // exact: the replay re-plans the hint at it
+    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << '\n';
     auto windowLines = [&](char tag, const PlanWindows& w) {
       for (size_t l = 0; l < w.rects.size(); ++l)
         trace << tag << ' ' << frame << ' ' << l << ' ' << w.rects[l].x0 << ' ' << w.rects[l].y0 << ' '
@@ -398,6 +427,7 @@ void Streamer::Impl::rebuild() {
     rank.swap(new_rank);
     windows = std::move(new_windows);
     predicted_windows = std::move(new_predicted);
+    ahead = std::move(new_ahead);
     victims_dirty = true;
   }
   work_cv.notify_all();
@@ -480,12 +510,23 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   s.now_s = time_s;
   ClipmapPlan next = planClipmap(s.geometry, viewport, camera, s.config.planner);
 
+  // The path hint counts only while it agrees with the real camera.
+  s.hint_used = false;
+  if (s.hint.camera_at) {
+    s.hint_used = hintAgrees(planClipmap(s.geometry, viewport, s.hint.camera_at(time_s), s.config.planner), next);
+    if (s.hint_used) s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
+  }
+
   // Velocity from the camera history; the predicted camera keeps today's
-  // orientation and moves on at that velocity for prefetch_ahead_s.
+  // orientation and moves on at that velocity for prefetch_ahead_s. With a
+  // trusted hint the predicted camera is the hinted one instead.
   s.history.emplace_back(time_s, camera.position);
   while (s.history.size() > 2 && time_s - s.history.front().first > kHistoryS) s.history.pop_front();
   ClipmapPlan predicted = next;
-  if (s.config.prefetch && s.history.size() >= 2) {
+  if (s.config.prefetch && s.hint_used) {
+    predicted = planClipmap(s.geometry, viewport, s.hint.camera_at(time_s + s.config.prefetch_ahead_s),
+                            s.config.planner);
+  } else if (s.config.prefetch && s.history.size() >= 2) {
     const double dt = s.history.back().first - s.history.front().first;
     if (dt >= kMinHistoryS) {
       const glm::dvec3 velocity = (s.history.back().second - s.history.front().second) / dt;
@@ -511,6 +552,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   {
     std::lock_guard<std::mutex> lock(s.mutex);
     s.shared_now_s = time_s;
+    if (s.hint.camera_at) (s.hint_used ? s.hint_frames : s.hint_ignored_frames)++;
     for (const auto& [key, f] : s.failed) {
       if (f.code == ErrorCode::kUnavailable && time_s >= f.retry_at_s && s.wanted_set.count(key)) {
         retry_due = true;
@@ -519,7 +561,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
     }
   }
   const bool changed = !s.have_plan || s.force_rebuild || retry_due || !sameWindows(s.plan, next) ||
-                       !sameWindows(s.predicted_plan, predicted);
+                       !sameWindows(s.predicted_plan, predicted) || s.hint_used != s.hint_used_by_plan;
   s.plan = std::move(next);
   s.predicted_plan = std::move(predicted);
   if (changed) {
@@ -586,6 +628,13 @@ FrameHandoff Streamer::takeReady(size_t max_tiles, size_t max_bytes) {
   return out;
 }
 
+void Streamer::setPathHint(PathHint hint) {
+  Impl& s = *m_impl;
+  s.hint = std::move(hint);
+  s.lookahead.reset();
+  s.force_rebuild = true;  // rescore with (or without) the new hint
+}
+
 void Streamer::resetGpuResidency() {
   Impl& s = *m_impl;
   s.gpu.clear();
@@ -626,6 +675,8 @@ StreamerStats Streamer::stats() const {
     out.decode_ms_total = s.decode_ms_total;
     out.max_texture_lod = s.published_lod;
     out.ram_entries = s.cache.size();
+    out.path_hint_frames = s.hint_frames;
+    out.path_hint_ignored_frames = s.hint_ignored_frames;
     lat = s.latency_ms;
   }
   out.ram_budget_bytes = s.config.ram_budget_bytes;

@@ -2,8 +2,10 @@
 #include <clipstream/streamer/trace.h>
 
 #include "eviction.h"
+#include "lookahead.h"
 
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <list>
@@ -44,6 +46,19 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
       events->push_back(e);
       continue;
     }
+    if (line[0] == 't') {
+      e.window = 't';
+      fields.get();
+      int used = 0;
+      if (!(fields >> e.frame >> e.time_s >> used) || !std::isfinite(e.time_s) || used < 0 || used > 1) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             path + ":" + std::to_string(line_no) + ": expected 't frame seconds 0|1', got '" +
+                                 line.substr(0, 80) + "'");
+      }
+      e.kind = uint8_t(used);
+      events->push_back(e);
+      continue;
+    }
     if (line[0] == '-') {
       e.leave = true;
       fields.get();
@@ -61,7 +76,8 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   return Status::ok();
 }
 
-ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles) {
+ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles,
+                         const ReplayHint* hint) {
   ReplayResult result;
   result.capacity_tiles = capacity_tiles;
   // Dense ids for keys.
@@ -136,14 +152,24 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     }
   }
 
-  // Plan-aware: the streamer's policy over the recorded windows, both modes.
-  for (EvictionMode mode : {EvictionMode::kProtectGpu, EvictionMode::kGpuFirst}) {
-    uint64_t& hits = mode == EvictionMode::kProtectGpu ? result.hits_plan : result.hits_gpu_first;
+  // Plan-aware: the streamer's policy over the recorded windows, both modes,
+  // and kGpuFirst with the path hint when there is one.
+  enum class Run { kProtectGpu, kGpuFirst, kHinted };
+  for (Run run : {Run::kProtectGpu, Run::kGpuFirst, Run::kHinted}) {
+    if (run == Run::kHinted && (!hint || !hint->path.camera_at)) continue;
+    const EvictionMode mode = run == Run::kProtectGpu ? EvictionMode::kProtectGpu : EvictionMode::kGpuFirst;
+    uint64_t& hits = run == Run::kProtectGpu ? result.hits_plan
+                     : run == Run::kGpuFirst ? result.hits_gpu_first
+                                             : result.hits_hinted;
     std::vector<TileKey> key_of(n_ids);
     for (const auto& [key, id] : ids) key_of[id] = key;
     PlanWindows current, predicted, building_w, building_p;
     uint64_t building_frame = UINT64_MAX;
     bool dirty = false;
+    PathLookahead lookahead;
+    std::shared_ptr<const LookaheadSnapshot> ahead;
+    double building_time = 0.0;
+    bool building_hint_used = false;
     auto placeWindow = [](PlanWindows* w, const TraceEvent& e) {
       if (w->rects.size() <= e.key.level) {
         w->rects.resize(e.key.level + 1);
@@ -173,7 +199,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     auto scored = [&](uint32_t id) { return scoredOnGpu(key_of[id], current, mode); };
     auto enroll = [&](uint32_t id) {
       if (!scored(id)) return;
-      score[id] = evictionScore(key_of[id], current, predicted, mode);
+      score[id] = evictionScoreAhead(key_of[id], current, predicted, mode, ahead.get());
       candidates.insert(slotOf(id));
     };
     auto rescore = [&](uint64_t seq) {
@@ -194,6 +220,12 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
           building_frame = e.frame;
           building_w = {};
           building_p = {};
+          building_hint_used = false;
+        }
+        if (e.window == 't') {
+          building_time = e.time_s;
+          building_hint_used = e.kind != 0;
+          continue;
         }
         placeWindow(e.window == 'w' ? &building_w : &building_p, e);
         dirty = true;
@@ -204,6 +236,11 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
         current.finish();
         predicted = building_p;
         if (!predicted.empty()) predicted.finish();
+        ahead = nullptr;
+        if (run == Run::kHinted && building_hint_used) {
+          lookahead.advance(hint->geometry, hint->viewport, hint->planner, hint->path, building_time);
+          ahead = lookahead.snapshot();
+        }
         rescore(i);
         dirty = false;
       }

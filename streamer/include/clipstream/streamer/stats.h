@@ -39,6 +39,8 @@ struct StreamerStats {
   uint32_t max_texture_lod = 0;
   uint64_t ram_entries = 0;           // decoded tiles (and placeholders) in RAM
   uint64_t entry_overhead_bytes = 0;  // per-entry overhead counted with each payload
+  uint64_t path_hint_frames = 0;          // update() calls that used the path hint
+  uint64_t path_hint_ignored_frames = 0;  // update() calls whose hint disagreed with the camera
 
   // One JSON object: {"total": {...}, "levels": [{...}, ...], "ram_bytes": ...}
   // with the field names above. Always valid JSON (non-finite numbers as 0).

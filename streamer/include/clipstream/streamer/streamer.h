@@ -2,9 +2,10 @@
 // into a RAM cache with a hard byte budget, and hands ready tiles to the
 // renderer under a per-frame budget. No GL here.
 //
-// Thread rule: update(), takeReady(), resetGpuResidency(), plan() and
-// settled() are for the render thread only and never block on I/O (no
-// source call ever runs on it). stats() and queuedTiles() are thread-safe.
+// Thread rule: update(), takeReady(), setPathHint(), resetGpuResidency(),
+// plan() and settled() are for the render thread only and never block on
+// I/O (no source call ever runs on it; nor does PathHint::camera_at run
+// anywhere else). stats() and queuedTiles() are thread-safe.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
@@ -55,6 +56,26 @@ struct StreamerConfig {
   std::function<void(uint64_t ram_bytes, uint64_t budget_bytes)> on_ram_insert;
 };
 
+// The camera's future, for applications that know it: a scripted flight, a
+// camera spline, a guided tour. Optional; without it the streamer predicts
+// from the camera's recent motion only. While the hinted camera agrees with
+// the one passed to update() (the same clip windows, within a tile per
+// level), the streamer uses it
+//  - for eviction: tiles are kept by when the hinted path next needs them
+//    (EvictionMode::kGpuFirst only), and
+//  - for prefetch: the predicted plan is the hinted camera's at
+//    time_s + prefetch_ahead_s, so a jump in the path is prefetched too.
+// When they disagree the hint is ignored for that frame (counted in
+// StreamerStats::path_hint_ignored_frames) and the streamer behaves as if
+// it had none.
+struct PathHint {
+  // The camera at time t_s, on the clock of update()'s time_s. Called on the
+  // render thread only, from update(), for times up to horizon_s ahead.
+  std::function<Camera(double t_s)> camera_at;
+  double horizon_s = 5.0;       // how far ahead eviction looks
+  double step_s = 1.0 / 15.0;   // spacing of the planned poses
+};
+
 // Bytes counted per RAM cache entry on top of its RGBA payload: the map
 // node, key, shared_ptr control block and vector header, rounded up.
 constexpr uint64_t kCacheEntryOverheadBytes = 256;
@@ -90,6 +111,9 @@ class Streamer {
   // Render thread. Plans for this camera, queues what is missing, cancels
   // what the plan no longer needs, and queues predicted tiles at low priority.
   void update(const Camera& camera, const Viewport& viewport, double time_s);
+
+  // Render thread. Sets (or, with an empty camera_at, clears) the path hint.
+  void setPathHint(PathHint hint);
 
   // Render thread. Up to max_tiles tiles and max_bytes bytes (0 = no byte
   // limit) that are decoded and needed, in priority order; marks them as

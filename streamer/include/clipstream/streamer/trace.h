@@ -9,7 +9,11 @@
 //   "w F L X0 Y0 X1 Y1 K"  level L's window [X0,X1) x [Y0,Y1) from frame F on;
 //                K = 0 not needed, 1 needed, 2 pyramid (whole level)
 //   "p F L X0 Y0 X1 Y1 K"  the same for the predicted (prefetch) plan
-// Window lines of a plan change come before its tile lines.
+//   "t F T H"    the plan change at frame F happened at update() time T
+//                (seconds); H = 1 when the streamer used its path hint
+// The time line and window lines of a plan change come before its tile
+// lines. Traces without time lines (older ones) replay the same, without
+// the hinted policy.
 // An access is a hit when the tile is decoded in RAM at that moment; tiles
 // that stay wanted are on the GPU and cost nothing more, so only entries
 // are accesses.
@@ -27,15 +31,16 @@ namespace clipstream {
 
 inline constexpr const char* kTraceHeader =
     "# clipstream trace v1: 'frame level x y' = tile entered the wanted set, "
-    "'- frame level x y' = it left";
+    "'- frame level x y' = it left; 'w'/'p' window and 't' time lines as in trace.h";
 
 struct TraceEvent {
   uint64_t frame = 0;
   TileKey key;         // tile events; window events use key.level only
   bool leave = false;
-  char window = 0;     // 0: tile event; 'w': current window; 'p': predicted window
+  char window = 0;     // 0: tile event; 'w': current window; 'p': predicted window; 't': time
   TileRect rect;       // window events
-  uint8_t kind = 0;    // window events: 0 not needed, 1 needed, 2 pyramid
+  uint8_t kind = 0;    // window events: 0 not needed, 1 needed, 2 pyramid; time events: hint used
+  double time_s = 0.0; // time events
 
   bool isAccess() const { return window == 0 && !leave; }
 };
@@ -52,6 +57,17 @@ struct ReplayResult {
   uint64_t hits_lru = 0;   // least recently used
   uint64_t hits_plan = 0;       // the streamer's policy, EvictionMode::kProtectGpu
   uint64_t hits_gpu_first = 0;  // the streamer's policy, EvictionMode::kGpuFirst (default)
+  uint64_t hits_hinted = 0;     // kGpuFirst with the path hint (only when replayed with one)
+};
+
+// What the streamer that recorded a trace knew of the camera's future: its
+// path hint and the inputs of its planner. The replay plans the hinted
+// path exactly as the streamer did, at the recorded times.
+struct ReplayHint {
+  PathHint path;
+  PyramidGeometry geometry;
+  Viewport viewport{0, 0};
+  PlannerConfig planner;
 };
 
 // Replays accesses against a cache of capacity_tiles tiles under each policy.
@@ -60,7 +76,10 @@ struct ReplayResult {
 // score first (ties as in eviction.h). Every access is taken to be handed to
 // the GPU at once, so with kGpuFirst pyramid tiles are candidates (first);
 // with kProtectGpu they are never evicted, and a newcomer is dropped when
-// only pyramid tiles are cached.
-ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles);
+// only pyramid tiles are cached. With a hint, hits_hinted replays kGpuFirst
+// with the hinted path's predicted returns at every plan change whose time
+// line says the streamer used the hint (lookahead.h).
+ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles,
+                         const ReplayHint* hint = nullptr);
 
 }  // namespace clipstream

@@ -1,0 +1,89 @@
+// Clip windows along a hinted camera path; see lookahead.h.
+#include "lookahead.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace clipstream {
+namespace {
+
+// Tiles without a predicted return are scored above every return time
+// (seconds) and below kPyramidFirstScore.
+constexpr double kNoReturnBase = 1e9;
+
+bool neededContains(const PlanWindows& w, const TileKey& k) {
+  return k.level < w.rects.size() && w.kinds[k.level] == PlanWindows::kNeeded &&
+         w.rects[k.level].contains(k.x, k.y);
+}
+
+}  // namespace
+
+void PathLookahead::reset() {
+  m_steps.clear();
+  m_windows.clear();
+}
+
+void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& viewport,
+                            const PlannerConfig& planner, const PathHint& hint, double time_s) {
+  if (viewport.width_px != m_viewport.width_px || viewport.height_px != m_viewport.height_px) {
+    reset();
+    m_viewport = viewport;
+  }
+  m_now_s = time_s;
+  const double step = hint.step_s > 0.0 ? hint.step_s : 1.0 / 15.0;
+  if (step != m_step_s) {
+    reset();
+    m_step_s = step;
+  }
+  // At most this many samples, whatever the horizon: bounds the planning
+  // and the per-tile scan.
+  constexpr int64_t kMaxSamples = 1024;
+  const int64_t first = int64_t(std::floor(time_s / step)) + 1;
+  const int64_t last =
+      std::min(first + kMaxSamples - 1, int64_t(std::floor((time_s + std::max(0.0, hint.horizon_s)) / step)));
+  // Drop samples now in the past; keep the rest (same grid, same poses).
+  size_t keep_from = 0;
+  while (keep_from < m_steps.size() && m_steps[keep_from] < first) ++keep_from;
+  m_steps.erase(m_steps.begin(), m_steps.begin() + ptrdiff_t(keep_from));
+  m_windows.erase(m_windows.begin(), m_windows.begin() + ptrdiff_t(keep_from));
+  if (!m_steps.empty() && m_steps.front() != first) reset();  // time went backwards or jumped
+  while (!m_steps.empty() && m_steps.back() > last) {
+    m_steps.pop_back();
+    m_windows.pop_back();
+  }
+  for (int64_t k = m_steps.empty() ? first : m_steps.back() + 1; k <= last; ++k) {
+    m_steps.push_back(k);
+    m_windows.push_back(planWindows(planClipmap(geometry, viewport, hint.camera_at(double(k) * step), planner)));
+    ++m_planner_calls;
+  }
+}
+
+std::shared_ptr<const LookaheadSnapshot> PathLookahead::snapshot() const {
+  auto s = std::make_shared<LookaheadSnapshot>();
+  s->now_s = m_now_s;
+  s->windows = m_windows;
+  s->times_s.reserve(m_steps.size());
+  for (int64_t k : m_steps) s->times_s.push_back(double(k) * m_step_s);
+  return s;
+}
+
+double predictedReturnS(const TileKey& key, const PlanWindows& current, const LookaheadSnapshot& ahead) {
+  const size_t n = ahead.windows.size();
+  size_t j = 0;
+  if (neededContains(current, key))
+    while (j < n && neededContains(ahead.windows[j], key)) ++j;  // still inside: it must leave first
+  for (; j < n; ++j)
+    if (neededContains(ahead.windows[j], key)) return ahead.times_s[j] - ahead.now_s;
+  return kNoReturn;
+}
+
+double evictionScoreAhead(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
+                          EvictionMode mode, const LookaheadSnapshot* ahead) {
+  const double score = evictionScore(key, current, predicted, mode);
+  if (!ahead || ahead->windows.empty() || mode != EvictionMode::kGpuFirst || score >= kPyramidFirstScore)
+    return score;
+  const double back = predictedReturnS(key, current, *ahead);
+  return back == kNoReturn ? kNoReturnBase + score : back;
+}
+
+}  // namespace clipstream

@@ -1,0 +1,248 @@
+// The path hint (Streamer::setPathHint): eviction by the hinted path's
+// predicted returns, prefetch from the hinted camera, a hint that does not
+// match the camera being ignored, and the trace replay of the hinted policy.
+#include "test_helpers.h"
+#include "../../streamer/src/lookahead.h"  // private: the return prediction under test
+
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/trace.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace clipstream {
+namespace {
+
+using test::kPi;
+using test::procedural;
+using test::TempFile;
+using test::waitIdle;
+
+constexpr double kSide = 1 << 20;
+constexpr double kFps = 30.0;
+
+// Two laps of radius 3000 texels in 5 s each, looking at the centre.
+Camera orbitAt(double t) {
+  const double a = 2.0 * kPi * t / 5.0;
+  Camera c;
+  c.position = {kSide / 2 + 3000.0 * std::sin(a), 800.0, kSide / 2 + 3000.0 * std::cos(a)};
+  c.heading_rad = a + kPi;
+  c.pitch_rad = -std::atan2(800.0, 3000.0);
+  return c;
+}
+
+StreamerConfig orbitConfig(uint64_t budget_tiles, const std::string& trace_path) {
+  StreamerConfig cfg;
+  cfg.io_threads = 1;
+  cfg.prefetch = false;  // hits then come from eviction alone, as in the replay
+  cfg.planner.clip_tiles = 8;
+  cfg.ram_budget_bytes = budget_tiles * (128 * 128 * 4 + kCacheEntryOverheadBytes);
+  cfg.trace_path = trace_path;
+  return cfg;
+}
+
+// Flies `frames` frames of `path`, each loaded completely and handed off
+// before the next, so hits depend only on the policy. Returns the stats.
+StreamerStats flySettled(Streamer& s, const std::function<Camera(double)>& path, int frames, const Viewport& vp) {
+  for (int f = 0; f < frames; ++f) {
+    s.update(path(f / kFps), vp, f / kFps);
+    EXPECT_TRUE(waitIdle(s));
+    (void)s.takeReady(100000);
+  }
+  return s.stats();
+}
+
+TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
+  const Viewport vp{800, 600};
+  auto source = procedural(uint64_t(kSide));
+  // A lap wants about 1,700 distinct tiles; 600 hold a third of them and
+  // still fit every frame's wanted set (at 300 the budget, not the policy,
+  // decides: the streamer drops requests it has no room for).
+  const uint64_t budget_tiles = 600;
+  TempFile plain_trace("plain.trace"), hinted_trace("hinted.trace");
+  StreamerStats plain, hinted;
+  {
+    Streamer s(source, orbitConfig(budget_tiles, plain_trace.path));
+    plain = flySettled(s, orbitAt, 300, vp);
+  }
+  PathHint hint;
+  hint.camera_at = orbitAt;
+  {
+    Streamer s(source, orbitConfig(budget_tiles, hinted_trace.path));
+    s.setPathHint(hint);
+    hinted = flySettled(s, orbitAt, 300, vp);
+  }
+  EXPECT_EQ(hinted.path_hint_frames, 300u);
+  EXPECT_EQ(hinted.path_hint_ignored_frames, 0u);
+  EXPECT_EQ(plain.path_hint_frames, 0u);
+  EXPECT_LE(hinted.ram_peak_bytes, hinted.ram_budget_bytes);
+  // Both flights want the same tiles at the same frames.
+  const uint64_t accesses = plain.total.ram_hits + plain.total.ram_misses;
+  EXPECT_EQ(hinted.total.ram_hits + hinted.total.ram_misses, accesses);
+
+  std::vector<TraceEvent> plain_events, hinted_events;
+  ASSERT_TRUE(readTrace(plain_trace.path, &plain_events).isOk());
+  ASSERT_TRUE(readTrace(hinted_trace.path, &hinted_events).isOk());
+  ReplayHint replay_hint;
+  replay_hint.path = hint;
+  replay_hint.geometry = source->geometry();
+  replay_hint.viewport = vp;
+  replay_hint.planner = orbitConfig(budget_tiles, "").planner;
+  const ReplayResult r = replayTrace(hinted_events, budget_tiles, &replay_hint);
+  const ReplayResult r_plain = replayTrace(plain_events, budget_tiles);
+  std::printf("orbit, %llu tiles of RAM: %llu accesses, %llu distinct, OPT %llu, streamer hits plain %llu / hinted %llu, "
+              "replay plain %llu / hinted %llu; skips %llu %llu\n",
+              (unsigned long long)budget_tiles, (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles, (unsigned long long)r.hits_opt,
+              (unsigned long long)plain.total.ram_hits, (unsigned long long)hinted.total.ram_hits,
+              (unsigned long long)r_plain.hits_gpu_first, (unsigned long long)r.hits_hinted,
+              (unsigned long long)plain.total.budget_skips, (unsigned long long)hinted.total.budget_skips);
+  EXPECT_EQ(r.accesses, accesses);
+  // The replay reproduces what the streamer did with and without the hint.
+  // (Within 4 % of OPT: the streamer breaks score ties by frame, the replay
+  // by trace position, and drops the few requests it has no room for.)
+  EXPECT_NEAR(double(r.hits_hinted), double(hinted.total.ram_hits), 0.04 * double(r.hits_opt));
+  EXPECT_NEAR(double(r_plain.hits_gpu_first), double(plain.total.ram_hits), 0.04 * double(r.hits_opt));
+  // The hinted policy is close to OPT; without the hint it is not.
+  EXPECT_GE(double(hinted.total.ram_hits), 0.95 * double(r.hits_opt));
+  EXPECT_LT(double(plain.total.ram_hits), 0.9 * double(r.hits_opt));
+}
+
+// A hint that is somewhere else than the camera is not used: the flight
+// behaves exactly as without one, and the trace says so.
+TEST(PathHint, AHintThatDisagreesWithTheCameraIsIgnored) {
+  const Viewport vp{800, 600};
+  auto source = procedural(uint64_t(kSide));
+  TempFile plain_trace("plain.trace"), wrong_trace("wrong.trace");
+  StreamerStats plain, wrong;
+  {
+    Streamer s(source, orbitConfig(600, plain_trace.path));
+    plain = flySettled(s, orbitAt, 150, vp);
+  }
+  PathHint hint;
+  hint.camera_at = [](double t) {
+    Camera c = orbitAt(t);
+    c.position.x += 20000.0;  // the same orbit, far to the east
+    return c;
+  };
+  {
+    Streamer s(source, orbitConfig(600, wrong_trace.path));
+    s.setPathHint(hint);
+    wrong = flySettled(s, orbitAt, 150, vp);
+  }
+  EXPECT_EQ(wrong.path_hint_frames, 0u);
+  EXPECT_EQ(wrong.path_hint_ignored_frames, 150u);
+  EXPECT_EQ(wrong.total.ram_hits, plain.total.ram_hits);
+  EXPECT_EQ(wrong.total.ram_misses, plain.total.ram_misses);
+  std::vector<TraceEvent> events;
+  ASSERT_TRUE(readTrace(wrong_trace.path, &events).isOk());
+  size_t time_lines = 0;
+  for (const TraceEvent& e : events) {
+    if (e.window != 't') continue;
+    ++time_lines;
+    EXPECT_EQ(e.kind, 0u) << "frame " << e.frame << " claims the hint was used";
+  }
+  EXPECT_GT(time_lines, 100u);
+  // The streamer's JSON carries the counters.
+  EXPECT_NE(wrong.toJson().find("\"path_hint_ignored_frames\":150"), std::string::npos);
+}
+
+// A scripted jump: the hinted streamer prefetches the destination before
+// the camera gets there; without the hint nothing of it is in RAM.
+TEST(PathHint, PrefetchLoadsTheDestinationOfAScriptedJumpBeforeIt) {
+  const Viewport vp{800, 600};
+  auto jump = [](double t) {
+    return test::lookingDown(t < 1.0 ? 100000.0 : 700000.0, t < 1.0 ? 100000.0 : 600000.0, 300.0);
+  };
+  auto hitsAtTheJump = [&](bool with_hint) {
+    StreamerConfig cfg = orbitConfig(4000, "");
+    cfg.prefetch = true;
+    Streamer s(procedural(uint64_t(kSide)), cfg);
+    if (with_hint) {
+      PathHint hint;
+      hint.camera_at = jump;
+      s.setPathHint(hint);
+    }
+    for (int f = 0; f < 30; ++f) {  // 0 .. 0.97 s: at the start
+      s.update(jump(f / kFps), vp, f / kFps);
+      EXPECT_TRUE(waitIdle(s));
+      (void)s.takeReady(100000);
+    }
+    const StreamerStats before = s.stats();
+    s.update(jump(1.0), vp, 1.0);  // the jump
+    const StreamerStats after = s.stats();
+    EXPECT_GT(after.total.ram_hits + after.total.ram_misses, before.total.ram_hits + before.total.ram_misses);
+    return std::pair{after.total.ram_hits - before.total.ram_hits, after.total.ram_misses - before.total.ram_misses};
+  };
+  const auto [hinted_hits, hinted_misses] = hitsAtTheJump(true);
+  const auto [plain_hits, plain_misses] = hitsAtTheJump(false);
+  EXPECT_EQ(plain_hits, 0u);
+  EXPECT_GT(plain_misses, 0u);
+  // Every tile the destination wants was prefetched (the pyramid is shared
+  // and stays wanted, so it is not among them).
+  EXPECT_EQ(hinted_misses, 0u);
+  EXPECT_EQ(hinted_hits, plain_misses);
+}
+
+// The prediction behind the hinted eviction, on hand-made windows.
+TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
+  auto windows = [](TileRect level0) {
+    PlanWindows w;
+    w.rects = {level0, TileRect{0, 0, 1, 1}};
+    w.kinds = {PlanWindows::kNeeded, PlanWindows::kPyramid};
+    w.finish();
+    return w;
+  };
+  const PlanWindows current = windows({0, 0, 2, 1});  // tiles (0,0) and (1,0)
+  LookaheadSnapshot ahead;
+  ahead.now_s = 10.0;
+  ahead.times_s = {10.5, 11.0, 11.5, 12.0};
+  ahead.windows = {windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}), windows({5, 0, 6, 1})};
+  const TileKey inside_left{0, 0, 0}, inside_right{0, 1, 0}, ahead_tile{0, 3, 0}, never{0, 9, 0};
+  // (0,0) leaves at once and is back at 11.5; (1,0) stays until 11.0 and is
+  // back at 11.5; (3,0) is entered at 11.0; (9,0) never within the horizon.
+  EXPECT_DOUBLE_EQ(predictedReturnS(inside_left, current, ahead), 1.5);
+  EXPECT_DOUBLE_EQ(predictedReturnS(inside_right, current, ahead), 1.5);
+  EXPECT_DOUBLE_EQ(predictedReturnS(ahead_tile, current, ahead), 1.0);
+  EXPECT_EQ(predictedReturnS(never, current, ahead), kNoReturn);
+  // Scores: the pyramid tile first, then no return, then the latest return.
+  const PlanWindows none;
+  const double pyramid = evictionScoreAhead({1, 0, 0}, current, none, EvictionMode::kGpuFirst, &ahead);
+  const double no_return = evictionScoreAhead(never, current, none, EvictionMode::kGpuFirst, &ahead);
+  const double late = evictionScoreAhead(inside_left, current, none, EvictionMode::kGpuFirst, &ahead);
+  const double soon = evictionScoreAhead(ahead_tile, current, none, EvictionMode::kGpuFirst, &ahead);
+  EXPECT_TRUE(evictsBefore(pyramid, 0, no_return, 0));
+  EXPECT_TRUE(evictsBefore(no_return, 0, late, 0));
+  EXPECT_TRUE(evictsBefore(late, 0, soon, 0));
+  // kProtectGpu and an empty lookahead keep the plan-distance score.
+  EXPECT_EQ(evictionScoreAhead(never, current, none, EvictionMode::kProtectGpu, &ahead),
+            evictionScore(never, current, none, EvictionMode::kProtectGpu));
+  EXPECT_EQ(evictionScoreAhead(never, current, none, EvictionMode::kGpuFirst, nullptr),
+            evictionScore(never, current, none, EvictionMode::kGpuFirst));
+}
+
+TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
+  TempFile file("times.trace");
+  auto readText = [&](const std::string& text, std::vector<TraceEvent>* events) {
+    std::ofstream(file.path) << text;
+    return readTrace(file.path, events);
+  };
+  std::vector<TraceEvent> events;
+  ASSERT_TRUE(readText("t 3 0.10000000000000001 1\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).isOk());
+  ASSERT_EQ(events.size(), 3u);
+  EXPECT_EQ(events[0].window, 't');
+  EXPECT_EQ(events[0].frame, 3u);
+  EXPECT_DOUBLE_EQ(events[0].time_s, 0.1);
+  EXPECT_EQ(events[0].kind, 1u);
+  EXPECT_FALSE(events[0].isAccess());
+  for (const char* bad : {"t 3 0.1 2\n", "t 3 nan 1\n", "t 3\n", "t x 0.1 0\n"}) {
+    const Status st = readText(bad, &events);
+    EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << bad;
+    EXPECT_NE(st.message.find(":1: expected 't frame seconds 0|1'"), std::string::npos) << st.message;
+  }
+}
+
+}  // namespace
+}  // namespace clipstream
