@@ -1,7 +1,11 @@
 // RAM hit rate of the streamer's plan-aware eviction against LRU and
 // Belady's OPT. Drives a Streamer over a procedural 2^22-texel texture along
 // scripted camera paths (pass, dive, orbit, teleport, zoom), records each
-// request trace, then replays it at several budgets.
+// request trace, then replays it at several budgets. Each path is flown
+// twice: as an interactive camera (the streamer knows only the poses so
+// far: "ours") and as a scripted one whose path the streamer is given
+// (Streamer::setPathHint: "hinted"). Both flights request the same tiles at
+// the same frames; OPT and LRU are the same for both.
 //
 // Usage: bench_streamer_hitrate [frames_per_path=600] [trace_dir=/tmp]
 #include <clipstream/streamer/streamer.h>
@@ -104,53 +108,78 @@ int main(int argc, char** argv) {
 
   std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
               kSide, kSide, frames);
-  std::printf("path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\n");
+  std::printf("path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
   struct FrameCost {
-    const char* path;
+    std::string path;
     double mean_ms, p99_ms, max_ms;
+    uint64_t hint_frames, hint_ignored_frames;
   };
   std::vector<FrameCost> costs;
-  for (const Path& p : paths()) {
+  // Flies one path, recording its trace; the render-thread cost of update()
+  // + takeReady(64) per frame (plan, hint lookahead, ranking, queue rebuild
+  // on plan changes, hand-off, residency bitmaps).
+  auto fly = [&](const Path& p, const StreamerConfig& cfg, const PathHint* hint, const std::string& label) {
     std::vector<double> frame_ms;
-    StreamerConfig cfg;
-    cfg.io_threads = 1;
-    cfg.ram_budget_bytes = uint64_t(64) << 20;
-    cfg.trace_path = dir + "/clipstream_" + p.name + ".trace";
+    StreamerStats stats;
     {
       Streamer s(source, cfg);
+      if (hint) s.setPathHint(*hint);
       for (int f = 0; f < frames; ++f) {
         const auto t0 = std::chrono::steady_clock::now();
         s.update(p.at(f / kFps), vp, f / kFps);
         (void)s.takeReady(64);
-        const double ms =
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-        frame_ms.push_back(ms);
+        frame_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       }
+      stats = s.stats();
     }
     std::sort(frame_ms.begin(), frame_ms.end());
     double sum = 0.0;
     for (double v : frame_ms) sum += v;
-    costs.push_back({p.name, sum / double(frame_ms.size()),
-                     frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)], frame_ms.back()});
-    std::vector<TraceEvent> events;
-    if (Status st = readTrace(cfg.trace_path, &events); !st) {
-      std::fprintf(stderr, "%s\n", st.toString().c_str());
-      return 1;
+    costs.push_back({label, sum / double(frame_ms.size()), frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)],
+                     frame_ms.back(), stats.path_hint_frames, stats.path_hint_ignored_frames});
+  };
+  for (const Path& p : paths()) {
+    StreamerConfig cfg;
+    cfg.io_threads = 1;
+    cfg.ram_budget_bytes = uint64_t(64) << 20;
+    cfg.trace_path = dir + "/clipstream_" + p.name + ".trace";
+    fly(p, cfg, nullptr, p.name);
+    // The same flight with its path given to the streamer.
+    ReplayHint hint;
+    hint.path.camera_at = p.at;
+    hint.geometry = geometry;
+    hint.viewport = vp;
+    hint.planner = cfg.planner;
+    StreamerConfig hinted_cfg = cfg;
+    hinted_cfg.trace_path = dir + "/clipstream_" + p.name + "_hinted.trace";
+    fly(p, hinted_cfg, &hint.path, std::string(p.name) + " hinted");
+    std::vector<TraceEvent> events, hinted_events;
+    for (auto [path, out] : {std::pair{&cfg.trace_path, &events}, std::pair{&hinted_cfg.trace_path, &hinted_events}}) {
+      if (Status st = readTrace(*path, out); !st) {
+        std::fprintf(stderr, "%s\n", st.toString().c_str());
+        return 1;
+      }
     }
     for (double mb : budgets_mb) {
-      const ReplayResult r = replayTrace(events, uint64_t(mb * 1048576.0) / entry_bytes);
-      auto pct = [&](uint64_t h) { return r.accesses ? 100.0 * double(h) / double(r.accesses) : 0.0; };
-      auto ofOpt = [&](uint64_t h) { return r.hits_opt ? 100.0 * double(h) / double(r.hits_opt) : 100.0; };
-      std::printf("%s\t%.0f\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
+      const uint64_t capacity = uint64_t(mb * 1048576.0) / entry_bytes;
+      const ReplayResult r = replayTrace(events, capacity);
+      const ReplayResult h = replayTrace(hinted_events, capacity, &hint);
+      if (h.accesses != r.accesses || h.hits_opt != r.hits_opt) {
+        std::fprintf(stderr, "%s: the hinted flight requested other tiles (%llu accesses, not %llu)\n", p.name,
+                     (unsigned long long)h.accesses, (unsigned long long)r.accesses);
+        return 1;
+      }
+      auto pct = [&](uint64_t hits) { return r.accesses ? 100.0 * double(hits) / double(r.accesses) : 0.0; };
+      auto ofOpt = [&](uint64_t hits) { return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0; };
+      std::printf("%s\t%.0f\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
                   (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles,
                   pct(r.hits_opt), pct(r.hits_lru), pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
-                  pct(r.hits_plan), ofOpt(r.hits_plan));
+                  pct(r.hits_plan), ofOpt(r.hits_plan), pct(h.hits_hinted), ofOpt(h.hits_hinted));
     }
   }
-  // Render-thread cost of update() + takeReady(64) per frame (plan, ranking,
-  // queue rebuild on plan changes, hand-off, residency bitmaps).
-  std::printf("\npath\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\n");
+  std::printf("\nflight\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\thint_frames\thint_ignored_frames\n");
   for (const FrameCost& c : costs)
-    std::printf("%s\t%.3f\t%.3f\t%.3f\n", c.path, c.mean_ms, c.p99_ms, c.max_ms);
+    std::printf("%s\t%.3f\t%.3f\t%.3f\t%llu\t%llu\n", c.path.c_str(), c.mean_ms, c.p99_ms, c.max_ms,
+                (unsigned long long)c.hint_frames, (unsigned long long)c.hint_ignored_frames);
   return 0;
 }
