@@ -199,7 +199,22 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     if (Status s = FlyAccuracy::create(source, viewport, sc.planner, ao, &accuracy); !s) return s;
   }
 
+  // The streamer's clock runs at kSimulatedFrameSeconds per frame, warm-up
+  // included; path time runs `speed` times faster from the first recorded
+  // frame and holds the last pose through the rest frames.
+  const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
+  auto pathTimeAt = [&](double clock_s) {
+    const double last_s = double(frames - 1) * renderer_config::kSimulatedFrameSeconds;
+    double t = std::clamp(clock_s - clock0_s, 0.0, last_s) * speed;
+    if (o.loop && path.durationS() > 0.0) t = std::fmod(t, path.durationS());
+    return t;
+  };
   Streamer streamer(source, sc);
+  if (o.path_hint) {
+    PathHint hint;
+    hint.camera_at = [&](double clock_s) { return path.sample(pathTimeAt(clock_s)); };
+    streamer.setPathHint(std::move(hint));
+  }
   FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
   const uint32_t total_frames = frames + o.rest_frames;
   std::vector<FrameRow> rows;
@@ -229,7 +244,6 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   }
   const uint64_t warmup_loads = streamer.stats().total.loads - before.total.loads;
   before = streamer.stats();
-  const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
 
   for (uint32_t i = 0; i < total_frames; ++i) {
     if (o.resize_at_frame > 0 && i == o.resize_at_frame && o.resize_to.width_px > 0) {
@@ -458,6 +472,9 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   acc["throttle"] = o.throttle;
   acc["prefetch"] = o.prefetch;
   acc["frustum_priority"] = o.frustum_priority;
+  acc["path_hint"] = o.path_hint;
+  acc["path_hint_frames"] = final_stats.path_hint_frames;
+  acc["path_hint_ignored_frames"] = final_stats.path_hint_ignored_frames;
   acc["upload_tiles"] = o.upload_tiles;
   acc["cache_mb"] = o.cache_mb;
   nlohmann::json summary = {
@@ -558,6 +575,10 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     row("ram_misses", double(final_stats.total.ram_misses), "%.0f");
     row("bytes_read_MiB", double(final_stats.total.bytes_read) / (1 << 20), "%.1f");
     row("tile_failures", double(final_stats.total.failures + preload_failures), "%.0f");
+    if (o.path_hint) {
+      row("path_hint_frames", double(final_stats.path_hint_frames), "%.0f");
+      row("path_hint_ignored_frames", double(final_stats.path_hint_ignored_frames), "%.0f");
+    }
     row("ram_peak_MiB", double(final_stats.ram_peak_bytes) / (1 << 20), "%.1f");
     row("pngs_written", double(writer.written()), "%.0f");
     row("peak_rss_MiB", double(run.peak_rss_bytes) / 1048576.0, "%.1f");

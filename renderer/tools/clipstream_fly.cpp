@@ -36,6 +36,10 @@ int main(int argc, char** argv) {
   app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
   app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
   app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
+  app.add_flag("--path-hint", o.path_hint,
+               "Tell the streamer the scripted path: eviction keeps what the path comes back to, and "
+               "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
+               "an interactive flight");
   app.add_option("--fault-latency-ms", o.fault_latency_ms, "Added latency per tile read (ms)");
   app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")
       ->check(CLI::Range(0.0, 1.0));

@@ -74,6 +74,41 @@ TEST(ClipstreamFly, WritesCsvJsonAndPngForATinyStore) {
   fs::remove_all(dir);
 }
 
+// --path-hint: the hinted camera must be the flown one in every frame
+// (warm-up, speed, looping and rest frames included), or the streamer
+// ignores the hint.
+TEST(ClipstreamFly, PathHintMatchesTheFlownCameraInEveryFrame) {
+  CLIPSTREAM_REQUIRE_GL();
+  const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_hint_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  auto fly = [&](const std::string& args) {
+    const fs::path out = dir / "out";
+    fs::remove_all(out);
+    // A texture large enough for clip windows that move every frame.
+    const std::string cmd = std::string(CLIPSTREAM_FLY_EXE) + " --procedural 1048576" +
+                            " --size 256x192 --io-threads 2 --out " + out.string() + " " + args + " > " +
+                            (dir / "log.txt").string() + " 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    std::ifstream json_in(out / "frames.json");
+    std::stringstream ss;
+    ss << json_in.rdbuf();
+    return nlohmann::json::parse(ss.str(), nullptr, false);
+  };
+  const nlohmann::json hinted =
+      fly("--path pass --path-hint --warmup-frames 5 --frames 40 --rest-frames 3 --speed 7 --loop");
+  ASSERT_FALSE(hinted.is_discarded());
+  const nlohmann::json& acc = hinted["summary"]["accuracy"];
+  EXPECT_TRUE(acc["path_hint"].get<bool>());
+  EXPECT_EQ(acc["path_hint_frames"].get<int>(), 5 + 40 + 3);
+  EXPECT_EQ(acc["path_hint_ignored_frames"].get<int>(), 0);
+  const nlohmann::json plain = fly("--path pass --warmup-frames 5 --frames 40 --speed 7 --loop");
+  ASSERT_FALSE(plain.is_discarded());
+  EXPECT_FALSE(plain["summary"]["accuracy"]["path_hint"].get<bool>());
+  EXPECT_EQ(plain["summary"]["accuracy"]["path_hint_frames"].get<int>(), 0);
+  fs::remove_all(dir);
+}
+
 TEST(ClipstreamFly, FailsWithAMessageForACorruptStore) {
   const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_bad_" + std::to_string(::getpid()));
   fs::create_directories(dir);

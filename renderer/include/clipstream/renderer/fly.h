@@ -39,6 +39,7 @@ struct FlyOptions {
   bool throttle = true;              // StreamerConfig::throttle
   bool prefetch = true;              // StreamerConfig::prefetch
   bool frustum_priority = true;      // StreamerConfig::frustum_priority
+  bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
   uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
