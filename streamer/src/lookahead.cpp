@@ -18,6 +18,12 @@ bool neededContains(const PlanWindows& w, const TileKey& k) {
 
 }  // namespace
 
+bool finiteCamera(const Camera& c) {
+  return std::isfinite(c.position.x) && std::isfinite(c.position.y) && std::isfinite(c.position.z) &&
+         std::isfinite(c.heading_rad) && std::isfinite(c.pitch_rad) && std::isfinite(c.vfov_rad) &&
+         std::isfinite(c.near_dist);
+}
+
 void PathLookahead::reset() {
   m_steps.clear();
   m_windows.clear();
@@ -30,17 +36,23 @@ void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& vie
     m_viewport = viewport;
   }
   m_now_s = time_s;
-  const double step = hint.step_s > 0.0 ? hint.step_s : 1.0 / 15.0;
+  // Absurd settings fall back to the defaults instead of planning forever.
+  const double step = std::isfinite(hint.step_s) && hint.step_s >= 1e-3 ? hint.step_s : PathHint{}.step_s;
+  const double horizon = std::isfinite(hint.horizon_s) ? std::clamp(hint.horizon_s, 0.0, 3600.0) : PathHint{}.horizon_s;
   if (step != m_step_s) {
     reset();
     m_step_s = step;
+  }
+  // Grid indices must fit comfortably in int64 (times up to ~10^12 s).
+  if (!std::isfinite(time_s) || std::abs(time_s / step) > 1e15) {
+    reset();
+    return;
   }
   // At most this many samples, whatever the horizon: bounds the planning
   // and the per-tile scan.
   constexpr int64_t kMaxSamples = 1024;
   const int64_t first = int64_t(std::floor(time_s / step)) + 1;
-  const int64_t last =
-      std::min(first + kMaxSamples - 1, int64_t(std::floor((time_s + std::max(0.0, hint.horizon_s)) / step)));
+  const int64_t last = std::min(first + kMaxSamples - 1, int64_t(std::floor((time_s + horizon) / step)));
   // Drop samples now in the past; keep the rest (same grid, same poses).
   size_t keep_from = 0;
   while (keep_from < m_steps.size() && m_steps[keep_from] < first) ++keep_from;
@@ -52,8 +64,10 @@ void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& vie
     m_windows.pop_back();
   }
   for (int64_t k = m_steps.empty() ? first : m_steps.back() + 1; k <= last; ++k) {
+    const Camera camera = hint.camera_at(double(k) * step);
+    if (!finiteCamera(camera)) break;  // the hinted path ends here for now
     m_steps.push_back(k);
-    m_windows.push_back(planWindows(planClipmap(geometry, viewport, hint.camera_at(double(k) * step), planner)));
+    m_windows.push_back(planWindows(planClipmap(geometry, viewport, camera, planner)));
     ++m_planner_calls;
   }
 }

@@ -48,6 +48,9 @@ class PathLookahead {
 
 inline constexpr double kNoReturn = std::numeric_limits<double>::infinity();
 
+// True when every field of the camera is finite: a hint may return anything.
+bool finiteCamera(const Camera& camera);
+
 // Seconds from the snapshot's time until `key` is next inside a needed
 // window along the hinted path: for a tile inside a needed window of
 // `current`, the first time after it has left; kNoReturn when that is

@@ -513,7 +513,9 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   // The path hint counts only while it agrees with the real camera.
   s.hint_used = false;
   if (s.hint.camera_at) {
-    s.hint_used = hintAgrees(planClipmap(s.geometry, viewport, s.hint.camera_at(time_s), s.config.planner), next);
+    const Camera hinted = s.hint.camera_at(time_s);
+    s.hint_used = finiteCamera(hinted) && std::isfinite(time_s) &&
+                  hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
     if (s.hint_used) s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
   }
 
@@ -523,9 +525,9 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   s.history.emplace_back(time_s, camera.position);
   while (s.history.size() > 2 && time_s - s.history.front().first > kHistoryS) s.history.pop_front();
   ClipmapPlan predicted = next;
-  if (s.config.prefetch && s.hint_used) {
-    predicted = planClipmap(s.geometry, viewport, s.hint.camera_at(time_s + s.config.prefetch_ahead_s),
-                            s.config.planner);
+  const Camera hinted_ahead = s.config.prefetch && s.hint_used ? s.hint.camera_at(time_s + s.config.prefetch_ahead_s) : camera;
+  if (s.config.prefetch && s.hint_used && finiteCamera(hinted_ahead)) {
+    predicted = planClipmap(s.geometry, viewport, hinted_ahead, s.config.planner);
   } else if (s.config.prefetch && s.history.size() >= 2) {
     const double dt = s.history.back().first - s.history.front().first;
     if (dt >= kMinHistoryS) {

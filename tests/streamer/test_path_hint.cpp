@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <fstream>
 #include <sstream>
 
@@ -186,7 +187,54 @@ TEST(PathHint, PrefetchLoadsTheDestinationOfAScriptedJumpBeforeIt) {
   EXPECT_EQ(hinted_hits, plain_misses);
 }
 
-// The prediction behind the hinted eviction, on hand-made windows.
+// A hint may return anything and carry any settings: a non-finite camera
+// is a disagreement, absurd steps and horizons fall back to the defaults,
+// and none of it hangs or crashes.
+TEST(PathHint, AbsurdHintsAreSurvived) {
+  const Viewport vp{800, 600};
+  auto source = procedural(uint64_t(kSide));
+  auto fly = [&](PathHint hint) {
+    StreamerConfig cfg = orbitConfig(600, "");
+    cfg.prefetch = true;
+    Streamer s(source, cfg);
+    s.setPathHint(std::move(hint));
+    for (int f = 0; f < 20; ++f) {
+      s.update(orbitAt(f / kFps), vp, f / kFps);
+      (void)s.takeReady(64);
+    }
+    return s.stats();
+  };
+  PathHint nan_camera;
+  nan_camera.camera_at = [](double) {
+    Camera c;
+    c.position.x = std::nan("");
+    return c;
+  };
+  StreamerStats st = fly(nan_camera);
+  EXPECT_EQ(st.path_hint_frames, 0u);
+  EXPECT_EQ(st.path_hint_ignored_frames, 20u);
+  // Right now, NaN from a second ahead: used, with a shorter lookahead.
+  PathHint nan_later;
+  nan_later.camera_at = [](double t) {
+    Camera c = orbitAt(t);
+    if (t > 1.0) c.heading_rad = std::nan("");
+    return c;
+  };
+  st = fly(nan_later);
+  EXPECT_EQ(st.path_hint_frames, 20u);
+  for (double step : {0.0, -1.0, std::nan(""), 1e-9, std::numeric_limits<double>::infinity()}) {
+    for (double horizon : {-5.0, std::nan(""), std::numeric_limits<double>::infinity(), 1e300}) {
+      PathHint odd;
+      odd.camera_at = orbitAt;
+      odd.step_s = step;
+      odd.horizon_s = horizon;
+      st = fly(odd);
+      EXPECT_EQ(st.path_hint_frames, 20u) << "step " << step << ", horizon " << horizon;
+    }
+  }
+}
+
+// The prediction behind the hinted eviction, on hand-made windows.// The prediction behind the hinted eviction, on hand-made windows.
 TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
   auto windows = [](TileRect level0) {
     PlanWindows w;
