@@ -78,16 +78,32 @@ std::shared_ptr<const LookaheadSnapshot> PathLookahead::snapshot() const {
   s->windows = m_windows;
   s->times_s.reserve(m_steps.size());
   for (int64_t k : m_steps) s->times_s.push_back(double(k) * m_step_s);
+  s->index();
   return s;
 }
 
+void LookaheadSnapshot::index() {
+  runs.clear();
+  for (size_t j = 0; j < windows.size(); ++j) {
+    const PlanWindows& w = windows[j];
+    if (runs.size() < w.rects.size()) runs.resize(w.rects.size());
+    for (size_t l = 0; l < runs.size(); ++l) {
+      const bool needed = l < w.rects.size() && w.kinds[l] == PlanWindows::kNeeded;
+      const TileRect rect = needed ? w.rects[l] : TileRect{};
+      if (runs[l].empty() || runs[l].back().rect != rect) runs[l].push_back({times_s[j], rect});
+    }
+  }
+}
+
 double predictedReturnS(const TileKey& key, const PlanWindows& current, const LookaheadSnapshot& ahead) {
-  const size_t n = ahead.windows.size();
+  if (key.level >= ahead.runs.size()) return kNoReturn;
+  const std::vector<LookaheadSnapshot::Run>& runs = ahead.runs[key.level];
+  const size_t n = runs.size();
   size_t j = 0;
   if (neededContains(current, key))
-    while (j < n && neededContains(ahead.windows[j], key)) ++j;  // still inside: it must leave first
+    while (j < n && runs[j].rect.contains(key.x, key.y)) ++j;  // still inside: it must leave first
   for (; j < n; ++j)
-    if (neededContains(ahead.windows[j], key)) return ahead.times_s[j] - ahead.now_s;
+    if (runs[j].rect.contains(key.x, key.y)) return runs[j].t_s - ahead.now_s;
   return kNoReturn;
 }
 

@@ -20,9 +20,21 @@ namespace clipstream {
 // Windows planned for the hinted camera at times k * step_s, for every k
 // with now_s < k * step_s <= now_s + horizon_s.
 struct LookaheadSnapshot {
+  // A level's needed window over a stretch of samples: from t_s until the
+  // next run's t_s. Consecutive samples with the same window share a run, so
+  // scoring a tile scans only the moves of its own level's window.
+  struct Run {
+    double t_s = 0.0;
+    TileRect rect;  // empty when the level is not needed
+  };
+
   double now_s = 0.0;
   std::vector<double> times_s;        // ascending
   std::vector<PlanWindows> windows;   // one per time
+  std::vector<std::vector<Run>> runs; // per level, from index()
+
+  // Builds `runs` from times_s and windows.
+  void index();
 };
 
 class PathLookahead {

@@ -120,6 +120,7 @@ struct Streamer::Impl {
   double now_s = 0.0;
   bool force_rebuild = false;
   std::deque<std::pair<double, glm::dvec3>> history;
+  Viewport viewport{0, 0};     // of the last update()
   PathHint hint;               // camera_at empty: none
   PathLookahead lookahead;     // windows along the hint
   bool hint_used = false;      // this frame's plan came with a trusted hint
@@ -364,12 +365,16 @@ void Streamer::Impl::rebuild() {
   PlanWindows new_windows = planWindows(plan);
   PlanWindows new_predicted;
   if (config.prefetch && have_plan) new_predicted = planWindows(predicted_plan);
-  std::shared_ptr<const LookaheadSnapshot> new_ahead = hint_used ? lookahead.snapshot() : nullptr;
+  std::shared_ptr<const LookaheadSnapshot> new_ahead =
+      hint_used && config.eviction == EvictionMode::kGpuFirst ? lookahead.snapshot() : nullptr;
   hint_used_by_plan = hint_used;
   if (trace.is_open()) {
+    // Exact time and the viewport: the replay re-plans the hint with them. A
+    // non-finite time (the hint is never used then) is written as 0.
     char time_text[32];
-    std::snprintf(time_text, sizeof time_text, "%.17g", now_s);  // exact: the replay re-plans the hint at it
-    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << '\n';
+    std::snprintf(time_text, sizeof time_text, "%.17g", std::isfinite(now_s) ? now_s : 0.0);
+    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << ' ' << viewport.width_px << ' '
+          << viewport.height_px << '\n';
     auto windowLines = [&](char tag, const PlanWindows& w) {
       for (size_t l = 0; l < w.rects.size(); ++l)
         trace << tag << ' ' << frame << ' ' << l << ' ' << w.rects[l].x0 << ' ' << w.rects[l].y0 << ' '
@@ -512,11 +517,13 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
 
   // The path hint counts only while it agrees with the real camera.
   s.hint_used = false;
-  if (s.hint.camera_at) {
+  s.viewport = viewport;
+  if (s.hint.camera_at && std::isfinite(time_s)) {
     const Camera hinted = s.hint.camera_at(time_s);
-    s.hint_used = finiteCamera(hinted) && std::isfinite(time_s) &&
-                  hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
-    if (s.hint_used) s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
+    s.hint_used = finiteCamera(hinted) && hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
+    // The lookahead serves eviction by return time, which only kGpuFirst does.
+    if (s.hint_used && s.config.eviction == EvictionMode::kGpuFirst)
+      s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
   }
 
   // Velocity from the camera history; the predicted camera keeps today's
@@ -634,7 +641,11 @@ void Streamer::setPathHint(PathHint hint) {
   Impl& s = *m_impl;
   s.hint = std::move(hint);
   s.lookahead.reset();
-  s.force_rebuild = true;  // rescore with (or without) the new hint
+  s.hint_used = false;
+  s.force_rebuild = true;  // the next update() plans with (or without) the new hint
+  std::lock_guard<std::mutex> lock(s.mutex);
+  s.ahead = nullptr;  // no eviction by the old path meanwhile
+  s.victims_dirty = true;
 }
 
 void Streamer::resetGpuResidency() {

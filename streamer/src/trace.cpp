@@ -50,12 +50,15 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
       e.window = 't';
       fields.get();
       int used = 0;
-      if (!(fields >> e.frame >> e.time_s >> used) || !std::isfinite(e.time_s) || used < 0 || used > 1) {
+      uint64_t width = 0, height = 0;
+      if (!(fields >> e.frame >> e.time_s >> used >> width >> height) || !std::isfinite(e.time_s) || used < 0 ||
+          used > 1 || width > UINT32_MAX || height > UINT32_MAX) {
         return Status::error(ErrorCode::kInvalidArgument,
-                             path + ":" + std::to_string(line_no) + ": expected 't frame seconds 0|1', got '" +
-                                 line.substr(0, 80) + "'");
+                             path + ":" + std::to_string(line_no) +
+                                 ": expected 't frame seconds 0|1 width height', got '" + line.substr(0, 80) + "'");
       }
       e.kind = uint8_t(used);
+      e.viewport = {uint32_t(width), uint32_t(height)};
       events->push_back(e);
       continue;
     }
@@ -169,6 +172,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     PathLookahead lookahead;
     std::shared_ptr<const LookaheadSnapshot> ahead;
     double building_time = 0.0;
+    Viewport building_viewport{0, 0};
     bool building_hint_used = false;
     auto placeWindow = [](PlanWindows* w, const TraceEvent& e) {
       if (w->rects.size() <= e.key.level) {
@@ -224,6 +228,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
         }
         if (e.window == 't') {
           building_time = e.time_s;
+          building_viewport = e.viewport;
           building_hint_used = e.kind != 0;
           continue;
         }
@@ -238,7 +243,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
         if (!predicted.empty()) predicted.finish();
         ahead = nullptr;
         if (run == Run::kHinted && building_hint_used) {
-          lookahead.advance(hint->geometry, hint->viewport, hint->planner, hint->path, building_time);
+          lookahead.advance(hint->geometry, building_viewport, hint->planner, hint->path, building_time);
           ahead = lookahead.snapshot();
         }
         rescore(i);

@@ -90,7 +90,6 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
   ReplayHint replay_hint;
   replay_hint.path = hint;
   replay_hint.geometry = source->geometry();
-  replay_hint.viewport = vp;
   replay_hint.planner = orbitConfig(budget_tiles, "").planner;
   const ReplayResult r = replayTrace(hinted_events, budget_tiles, &replay_hint);
   const ReplayResult r_plain = replayTrace(plain_events, budget_tiles);
@@ -232,9 +231,68 @@ TEST(PathHint, AbsurdHintsAreSurvived) {
       EXPECT_EQ(st.path_hint_frames, 20u) << "step " << step << ", horizon " << horizon;
     }
   }
+  // What the lookahead makes of them: the default step for a bad one, the
+  // default horizon for a non-finite one, nothing for a negative one, and
+  // never more than 1024 samples.
+  const PyramidGeometry& g = source->geometry();
+  auto samples = [&](double step, double horizon) {
+    PathHint h;
+    h.camera_at = orbitAt;
+    h.step_s = step;
+    h.horizon_s = horizon;
+    PathLookahead ahead;
+    ahead.advance(g, vp, PlannerConfig{}, h, 2.0);
+    return *ahead.snapshot();
+  };
+  LookaheadSnapshot snap = samples(0.0, std::numeric_limits<double>::infinity());
+  ASSERT_EQ(snap.times_s.size(), 75u);  // 5 s at 1/15 s
+  EXPECT_NEAR(snap.times_s[1] - snap.times_s[0], 1.0 / 15.0, 1e-12);
+  EXPECT_NEAR(snap.times_s.back(), 7.0, 1e-9);
+  EXPECT_EQ(samples(0.5, -5.0).times_s.size(), 0u);
+  EXPECT_EQ(samples(std::nan(""), 1e300).times_s.size(), 1024u);
+  snap = samples(0.5, 2.0);  // 2.5, 3.0, 3.5, 4.0
+  ASSERT_EQ(snap.times_s.size(), 4u);
+  EXPECT_DOUBLE_EQ(snap.times_s.front(), 2.5);
+  EXPECT_DOUBLE_EQ(snap.now_s, 2.0);
 }
 
-// The prediction behind the hinted eviction, on hand-made windows.// The prediction behind the hinted eviction, on hand-made windows.
+// A hint can be set, replaced and cleared between frames; only frames with
+// a hint count, and the cache keeps its budget throughout.
+TEST(PathHint, SetReplacedAndClearedMidFlight) {
+  const Viewport vp{800, 600};
+  StreamerConfig cfg = orbitConfig(300, "");
+  cfg.prefetch = true;
+  Streamer s(procedural(uint64_t(kSide)), cfg);
+  int f = 0;
+  auto fly = [&](int frames) {
+    for (int i = 0; i < frames; ++i, ++f) {
+      s.update(orbitAt(f / kFps), vp, f / kFps);
+      ASSERT_TRUE(waitIdle(s));
+      (void)s.takeReady(100000);
+    }
+  };
+  fly(10);
+  EXPECT_EQ(s.stats().path_hint_frames + s.stats().path_hint_ignored_frames, 0u);
+  PathHint hint;
+  hint.camera_at = orbitAt;
+  s.setPathHint(hint);
+  fly(10);
+  EXPECT_EQ(s.stats().path_hint_frames, 10u);
+  hint.camera_at = [](double t) { return orbitAt(t + 2.5); };  // half a lap off
+  s.setPathHint(hint);
+  fly(10);
+  EXPECT_EQ(s.stats().path_hint_frames, 10u);
+  EXPECT_EQ(s.stats().path_hint_ignored_frames, 10u);
+  s.setPathHint({});
+  fly(10);
+  const StreamerStats st = s.stats();
+  EXPECT_EQ(st.path_hint_frames, 10u);
+  EXPECT_EQ(st.path_hint_ignored_frames, 10u);
+  EXPECT_LE(st.ram_peak_bytes, st.ram_budget_bytes);
+  EXPECT_TRUE(s.settled());
+}
+
+// The prediction behind the hinted eviction, on hand-made windows.
 TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
   auto windows = [](TileRect level0) {
     PlanWindows w;
@@ -248,6 +306,10 @@ TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
   ahead.now_s = 10.0;
   ahead.times_s = {10.5, 11.0, 11.5, 12.0};
   ahead.windows = {windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}), windows({5, 0, 6, 1})};
+  ahead.index();
+  ASSERT_EQ(ahead.runs.size(), 2u);
+  EXPECT_EQ(ahead.runs[0].size(), 4u);  // level 0 moves at every sample
+  EXPECT_EQ(ahead.runs[1].size(), 1u);  // level 1 is the pyramid: never a needed window
   const TileKey inside_left{0, 0, 0}, inside_right{0, 1, 0}, ahead_tile{0, 3, 0}, never{0, 9, 0};
   // (0,0) leaves at once and is back at 11.5; (1,0) stays until 11.0 and is
   // back at 11.5; (3,0) is entered at 11.0; (9,0) never within the horizon.
@@ -278,17 +340,21 @@ TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
     return readTrace(file.path, events);
   };
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readText("t 3 0.10000000000000001 1\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).isOk());
+  ASSERT_TRUE(readText("t 3 0.10000000000000001 1 800 600\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).isOk());
   ASSERT_EQ(events.size(), 3u);
   EXPECT_EQ(events[0].window, 't');
   EXPECT_EQ(events[0].frame, 3u);
   EXPECT_DOUBLE_EQ(events[0].time_s, 0.1);
   EXPECT_EQ(events[0].kind, 1u);
+  EXPECT_EQ(events[0].viewport.width_px, 800u);
+  EXPECT_EQ(events[0].viewport.height_px, 600u);
   EXPECT_FALSE(events[0].isAccess());
-  for (const char* bad : {"t 3 0.1 2\n", "t 3 nan 1\n", "t 3\n", "t x 0.1 0\n"}) {
+  for (const char* bad : {"t 3 0.1 2 800 600\n", "t 3 nan 1 800 600\n", "t 3 0.1 1\n", "t 3\n",
+                          "t x 0.1 0 800 600\n", "t 3 0.1 0 -1 600\n"}) {
     const Status st = readText(bad, &events);
     EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << bad;
-    EXPECT_NE(st.message.find(":1: expected 't frame seconds 0|1'"), std::string::npos) << st.message;
+    EXPECT_NE(st.message.find(":1: expected 't frame seconds 0|1 width height'"), std::string::npos)
+        << st.message;
   }
 }
 

@@ -70,10 +70,16 @@ struct StreamerConfig {
 // it had none.
 struct PathHint {
   // The camera at time t_s, on the clock of update()'s time_s. Called on the
-  // render thread only, from update(), for times up to horizon_s ahead.
+  // render thread only, from update(): at time_s, at time_s +
+  // prefetch_ahead_s, and on the sample grid up to horizon_s ahead. It must
+  // not call back into the streamer. A pose with a non-finite field ends the
+  // hinted path there (at time_s: the hint is not used that frame).
   std::function<Camera(double t_s)> camera_at;
-  double horizon_s = 5.0;       // how far ahead eviction looks
-  double step_s = 1.0 / 15.0;   // spacing of the planned poses
+  // How far ahead eviction looks: at most 1024 samples (68 s at the default
+  // step); a non-finite value means the default, a negative one 0.
+  double horizon_s = 5.0;
+  // Spacing of the planned poses; below 1 ms or non-finite: the default.
+  double step_s = 1.0 / 15.0;
 };
 
 // Bytes counted per RAM cache entry on top of its RGBA payload: the map

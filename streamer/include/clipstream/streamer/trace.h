@@ -9,8 +9,9 @@
 //   "w F L X0 Y0 X1 Y1 K"  level L's window [X0,X1) x [Y0,Y1) from frame F on;
 //                K = 0 not needed, 1 needed, 2 pyramid (whole level)
 //   "p F L X0 Y0 X1 Y1 K"  the same for the predicted (prefetch) plan
-//   "t F T H"    the plan change at frame F happened at update() time T
-//                (seconds); H = 1 when the streamer used its path hint
+//   "t F T H W V"  the plan change at frame F happened at update() time T
+//                (seconds) with a W x V viewport; H = 1 when the streamer
+//                used its path hint
 // The time line and window lines of a plan change come before its tile
 // lines. Traces without time lines (older ones) replay the same, without
 // the hinted policy.
@@ -30,7 +31,7 @@
 namespace clipstream {
 
 inline constexpr const char* kTraceHeader =
-    "# clipstream trace v1: 'frame level x y' = tile entered the wanted set, "
+"# clipstream trace v2: 'frame level x y' = tile entered the wanted set, "
     "'- frame level x y' = it left; 'w'/'p' window and 't' time lines as in trace.h";
 
 struct TraceEvent {
@@ -41,6 +42,7 @@ struct TraceEvent {
   TileRect rect;       // window events
   uint8_t kind = 0;    // window events: 0 not needed, 1 needed, 2 pyramid; time events: hint used
   double time_s = 0.0; // time events
+  Viewport viewport{0, 0};  // time events
 
   bool isAccess() const { return window == 0 && !leave; }
 };
@@ -61,12 +63,12 @@ struct ReplayResult {
 };
 
 // What the streamer that recorded a trace knew of the camera's future: its
-// path hint and the inputs of its planner. The replay plans the hinted
-// path exactly as the streamer did, at the recorded times.
+// path hint (one for the whole trace) and the inputs of its planner. The
+// replay plans the hinted path as the streamer did, at the recorded times
+// and viewports.
 struct ReplayHint {
   PathHint path;
   PyramidGeometry geometry;
-  Viewport viewport{0, 0};
   PlannerConfig planner;
 };
 
