@@ -108,7 +108,9 @@ int main(int argc, char** argv) {
 
   std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
               kSide, kSide, frames);
-  std::printf("path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
+  std::printf(
+      "path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%"
+      "\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
   struct FrameCost {
     std::string path;
     double mean_ms, p99_ms, max_ms;
@@ -128,15 +130,17 @@ int main(int argc, char** argv) {
         const auto t0 = std::chrono::steady_clock::now();
         s.update(p.at(f / kFps), vp, f / kFps);
         (void)s.takeReady(64);
-        frame_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        frame_ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       }
       stats = s.stats();
     }
     std::sort(frame_ms.begin(), frame_ms.end());
     double sum = 0.0;
     for (double v : frame_ms) sum += v;
-    costs.push_back({label, sum / double(frame_ms.size()), frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)],
-                     frame_ms.back(), stats.path_hint_frames, stats.path_hint_ignored_frames});
+    costs.push_back({label, sum / double(frame_ms.size()),
+                     frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)], frame_ms.back(),
+                     stats.path_hint_frames, stats.path_hint_ignored_frames});
   };
   for (const Path& p : paths()) {
     StreamerConfig cfg;
@@ -153,7 +157,8 @@ int main(int argc, char** argv) {
     hinted_cfg.trace_path = dir + "/clipstream_" + p.name + "_hinted.trace";
     fly(p, hinted_cfg, &hint.path, std::string(p.name) + " hinted");
     std::vector<TraceEvent> events, hinted_events;
-    for (auto [path, out] : {std::pair{&cfg.trace_path, &events}, std::pair{&hinted_cfg.trace_path, &hinted_events}}) {
+    for (auto [path, out] :
+         {std::pair{&cfg.trace_path, &events}, std::pair{&hinted_cfg.trace_path, &hinted_events}}) {
       if (Status st = readTrace(*path, out); !st) {
         std::fprintf(stderr, "%s\n", st.toString().c_str());
         return 1;
@@ -175,7 +180,9 @@ int main(int argc, char** argv) {
       const ReplayResult r = replayTrace(events, capacity);
       const ReplayResult h = replayTrace(hinted_events, capacity, &hint);
       auto pct = [&](uint64_t hits) { return r.accesses ? 100.0 * double(hits) / double(r.accesses) : 0.0; };
-      auto ofOpt = [&](uint64_t hits) { return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0; };
+      auto ofOpt = [&](uint64_t hits) {
+        return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0;
+      };
       std::printf("%s\t%.0f\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
                   (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles,
                   pct(r.hits_opt), pct(r.hits_lru), pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),

@@ -38,7 +38,8 @@ void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& vie
   m_now_s = time_s;
   // Absurd settings fall back to the defaults instead of planning forever.
   const double step = std::isfinite(hint.step_s) && hint.step_s >= 1e-3 ? hint.step_s : PathHint{}.step_s;
-  const double horizon = std::isfinite(hint.horizon_s) ? std::clamp(hint.horizon_s, 0.0, 3600.0) : PathHint{}.horizon_s;
+  const double horizon =
+      std::isfinite(hint.horizon_s) ? std::clamp(hint.horizon_s, 0.0, 3600.0) : PathHint{}.horizon_s;
   if (step != m_step_s) {
     reset();
     m_step_s = step;

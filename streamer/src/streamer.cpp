@@ -373,8 +373,8 @@ void Streamer::Impl::rebuild() {
     // non-finite time (the hint is never used then) is written as 0.
     char time_text[32];
     std::snprintf(time_text, sizeof time_text, "%.17g", std::isfinite(now_s) ? now_s : 0.0);
-    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << ' ' << viewport.width_px << ' '
-          << viewport.height_px << '\n';
+    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << ' ' << viewport.width_px
+          << ' ' << viewport.height_px << '\n';
     auto windowLines = [&](char tag, const PlanWindows& w) {
       for (size_t l = 0; l < w.rects.size(); ++l)
         trace << tag << ' ' << frame << ' ' << l << ' ' << w.rects[l].x0 << ' ' << w.rects[l].y0 << ' '
@@ -520,7 +520,8 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   s.viewport = viewport;
   if (s.hint.camera_at && std::isfinite(time_s)) {
     const Camera hinted = s.hint.camera_at(time_s);
-    s.hint_used = finiteCamera(hinted) && hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
+    s.hint_used =
+        finiteCamera(hinted) && hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
     // The lookahead serves eviction by return time, which only kGpuFirst does.
     if (s.hint_used && s.config.eviction == EvictionMode::kGpuFirst)
       s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
@@ -532,7 +533,8 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   s.history.emplace_back(time_s, camera.position);
   while (s.history.size() > 2 && time_s - s.history.front().first > kHistoryS) s.history.pop_front();
   ClipmapPlan predicted = next;
-  const Camera hinted_ahead = s.config.prefetch && s.hint_used ? s.hint.camera_at(time_s + s.config.prefetch_ahead_s) : camera;
+  const Camera hinted_ahead =
+      s.config.prefetch && s.hint_used ? s.hint.camera_at(time_s + s.config.prefetch_ahead_s) : camera;
   if (s.config.prefetch && s.hint_used && finiteCamera(hinted_ahead)) {
     predicted = planClipmap(s.geometry, viewport, hinted_ahead, s.config.planner);
   } else if (s.config.prefetch && s.history.size() >= 2) {

@@ -51,11 +51,12 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
       fields.get();
       int used = 0;
       uint64_t width = 0, height = 0;
-      if (!(fields >> e.frame >> e.time_s >> used >> width >> height) || !std::isfinite(e.time_s) || used < 0 ||
-          used > 1 || width > UINT32_MAX || height > UINT32_MAX) {
+      if (!(fields >> e.frame >> e.time_s >> used >> width >> height) || !std::isfinite(e.time_s) ||
+          used < 0 || used > 1 || width > UINT32_MAX || height > UINT32_MAX) {
         return Status::error(ErrorCode::kInvalidArgument,
                              path + ":" + std::to_string(line_no) +
-                                 ": expected 't frame seconds 0|1 width height', got '" + line.substr(0, 80) + "'");
+                                 ": expected 't frame seconds 0|1 width height', got '" + line.substr(0, 80) +
+                                 "'");
       }
       e.kind = uint8_t(used);
       e.viewport = {uint32_t(width), uint32_t(height)};

@@ -47,7 +47,8 @@ StreamerConfig orbitConfig(uint64_t budget_tiles, const std::string& trace_path)
 
 // Flies `frames` frames of `path`, each loaded completely and handed off
 // before the next, so hits depend only on the policy. Returns the stats.
-StreamerStats flySettled(Streamer& s, const std::function<Camera(double)>& path, int frames, const Viewport& vp) {
+StreamerStats flySettled(Streamer& s, const std::function<Camera(double)>& path, int frames,
+                         const Viewport& vp) {
   for (int f = 0; f < frames; ++f) {
     s.update(path(f / kFps), vp, f / kFps);
     EXPECT_TRUE(waitIdle(s));
@@ -93,12 +94,14 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
   replay_hint.planner = orbitConfig(budget_tiles, "").planner;
   const ReplayResult r = replayTrace(hinted_events, budget_tiles, &replay_hint);
   const ReplayResult r_plain = replayTrace(plain_events, budget_tiles);
-  std::printf("orbit, %llu tiles of RAM: %llu accesses, %llu distinct, OPT %llu, streamer hits plain %llu / hinted %llu, "
-              "replay plain %llu / hinted %llu; skips %llu %llu\n",
-              (unsigned long long)budget_tiles, (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles, (unsigned long long)r.hits_opt,
-              (unsigned long long)plain.total.ram_hits, (unsigned long long)hinted.total.ram_hits,
-              (unsigned long long)r_plain.hits_gpu_first, (unsigned long long)r.hits_hinted,
-              (unsigned long long)plain.total.budget_skips, (unsigned long long)hinted.total.budget_skips);
+  std::printf(
+      "orbit, %llu tiles of RAM: %llu accesses, %llu distinct, OPT %llu, "
+      "streamer hits plain %llu / hinted %llu, replay plain %llu / hinted %llu; skips %llu %llu\n",
+      (unsigned long long)budget_tiles, (unsigned long long)r.accesses, (unsigned long long)r.distinct_tiles,
+      (unsigned long long)r.hits_opt, (unsigned long long)plain.total.ram_hits,
+      (unsigned long long)hinted.total.ram_hits, (unsigned long long)r_plain.hits_gpu_first,
+      (unsigned long long)r.hits_hinted, (unsigned long long)plain.total.budget_skips,
+      (unsigned long long)hinted.total.budget_skips);
   EXPECT_EQ(r.accesses, accesses);
   // The replay reproduces what the streamer did with and without the hint.
   // (Within 4 % of OPT: the streamer breaks score ties by frame, the replay
@@ -174,7 +177,8 @@ TEST(PathHint, PrefetchLoadsTheDestinationOfAScriptedJumpBeforeIt) {
     s.update(jump(1.0), vp, 1.0);  // the jump
     const StreamerStats after = s.stats();
     EXPECT_GT(after.total.ram_hits + after.total.ram_misses, before.total.ram_hits + before.total.ram_misses);
-    return std::pair{after.total.ram_hits - before.total.ram_hits, after.total.ram_misses - before.total.ram_misses};
+    return std::pair{after.total.ram_hits - before.total.ram_hits,
+                     after.total.ram_misses - before.total.ram_misses};
   };
   const auto [hinted_hits, hinted_misses] = hitsAtTheJump(true);
   const auto [plain_hits, plain_misses] = hitsAtTheJump(false);
@@ -305,7 +309,8 @@ TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
   LookaheadSnapshot ahead;
   ahead.now_s = 10.0;
   ahead.times_s = {10.5, 11.0, 11.5, 12.0};
-  ahead.windows = {windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}), windows({5, 0, 6, 1})};
+  ahead.windows = {windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}),
+                   windows({5, 0, 6, 1})};
   ahead.index();
   ASSERT_EQ(ahead.runs.size(), 2u);
   EXPECT_EQ(ahead.runs[0].size(), 4u);  // level 0 moves at every sample
