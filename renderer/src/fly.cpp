@@ -199,20 +199,22 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     if (Status s = FlyAccuracy::create(source, viewport, sc.planner, ao, &accuracy); !s) return s;
   }
 
-  // The streamer's clock runs at kSimulatedFrameSeconds per frame, warm-up
-  // included; path time runs `speed` times faster from the first recorded
-  // frame and holds the last pose through the rest frames.
-  const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
-  auto pathTimeAt = [&](double clock_s) {
-    const double last_s = double(frames - 1) * renderer_config::kSimulatedFrameSeconds;
-    double t = std::clamp(clock_s - clock0_s, 0.0, last_s) * speed;
+  // Path time of recorded frame `frame` (fractional for the hint): `speed`
+  // times the simulated time, held at the last pose through the rest frames.
+  // The streamer's clock runs at kSimulatedFrameSeconds per frame from the
+  // first warm-up frame, so recorded frame 0 is at clock0_s.
+  auto pathTimeOfFrame = [&](double frame) {
+    double t = std::clamp(frame, 0.0, double(frames - 1)) * renderer_config::kSimulatedFrameSeconds * speed;
     if (o.loop && path.durationS() > 0.0) t = std::fmod(t, path.durationS());
     return t;
   };
+  const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
   Streamer streamer(source, sc);
   if (o.path_hint) {
     PathHint hint;
-    hint.camera_at = [&](double clock_s) { return path.sample(pathTimeAt(clock_s)); };
+    hint.camera_at = [&](double clock_s) {
+      return path.sample(pathTimeOfFrame((clock_s - clock0_s) / renderer_config::kSimulatedFrameSeconds));
+    };
     streamer.setPathHint(std::move(hint));
   }
   FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
@@ -259,8 +261,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     }
     FrameRow row;
     row.frame = i;
-    row.t_s = std::min(i, frames - 1) * renderer_config::kSimulatedFrameSeconds * speed;
-    if (o.loop && path.durationS() > 0.0) row.t_s = std::fmod(row.t_s, path.durationS());
+    row.t_s = pathTimeOfFrame(double(i));
     const Camera camera = path.sample(row.t_s);
     const double step = glm::length(camera.position - previous.position);
     row.cut = (i == 0 && o.warmup_frames == 0) || (i > 0 && isCut(previous, camera, previous_step));
