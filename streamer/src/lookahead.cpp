@@ -76,14 +76,13 @@ void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& vie
 std::shared_ptr<const LookaheadSnapshot> PathLookahead::snapshot() const {
   auto s = std::make_shared<LookaheadSnapshot>();
   s->now_s = m_now_s;
-  s->windows = m_windows;
   s->times_s.reserve(m_steps.size());
   for (int64_t k : m_steps) s->times_s.push_back(double(k) * m_step_s);
-  s->index();
+  s->index(m_windows);
   return s;
 }
 
-void LookaheadSnapshot::index() {
+void LookaheadSnapshot::index(const std::vector<PlanWindows>& windows) {
   runs.clear();
   for (size_t j = 0; j < windows.size(); ++j) {
     const PlanWindows& w = windows[j];
@@ -111,7 +110,7 @@ double predictedReturnS(const TileKey& key, const PlanWindows& current, const Lo
 double evictionScoreAhead(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
                           EvictionMode mode, const LookaheadSnapshot* ahead) {
   const double score = evictionScore(key, current, predicted, mode);
-  if (!ahead || ahead->windows.empty() || mode != EvictionMode::kGpuFirst || score >= kPyramidFirstScore)
+  if (!ahead || ahead->times_s.empty() || mode != EvictionMode::kGpuFirst || score >= kPyramidFirstScore)
     return score;
   const double back = predictedReturnS(key, current, *ahead);
   return back == kNoReturn ? kNoReturnBase + score : back;

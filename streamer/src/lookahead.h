@@ -17,8 +17,8 @@
 
 namespace clipstream {
 
-// Windows planned for the hinted camera at times k * step_s, for every k
-// with now_s < k * step_s <= now_s + horizon_s.
+// The windows planned for the hinted camera at times k * step_s, for every k
+// with now_s < k * step_s <= now_s + horizon_s, kept per level as runs.
 struct LookaheadSnapshot {
   // A level's needed window over a stretch of samples: from t_s until the
   // next run's t_s. Consecutive samples with the same window share a run, so
@@ -29,12 +29,11 @@ struct LookaheadSnapshot {
   };
 
   double now_s = 0.0;
-  std::vector<double> times_s;        // ascending
-  std::vector<PlanWindows> windows;   // one per time
+  std::vector<double> times_s;        // ascending, one per sample
   std::vector<std::vector<Run>> runs; // per level, from index()
 
-  // Builds `runs` from times_s and windows.
-  void index();
+  // Builds `runs` from the samples' windows, one per entry of times_s.
+  void index(const std::vector<PlanWindows>& windows);
 };
 
 class PathLookahead {

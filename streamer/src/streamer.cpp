@@ -120,7 +120,6 @@ struct Streamer::Impl {
   double now_s = 0.0;
   bool force_rebuild = false;
   std::deque<std::pair<double, glm::dvec3>> history;
-  Viewport viewport{0, 0};     // of the last update()
   PathHint hint;               // camera_at empty: none
   PathLookahead lookahead;     // windows along the hint
   bool hint_used = false;      // this frame's plan came with a trusted hint
@@ -173,7 +172,7 @@ struct Streamer::Impl {
   void workerLoop();
   bool reserveRoom(uint32_t incoming_rank);
   void buildVictimLists();
-  void rebuild();
+  void rebuild(const Viewport& viewport);
   uint32_t computeLod() const;
 };
 
@@ -336,7 +335,7 @@ void Streamer::Impl::workerLoop() {
 // Recomputes the wanted list, ranks, pending hand-offs and the queue after
 // the plan (or the prediction) changed. Cancels queued requests that are no
 // longer wanted; counts RAM hits/misses for tiles that became wanted.
-void Streamer::Impl::rebuild() {
+void Streamer::Impl::rebuild(const Viewport& viewport) {
   std::vector<TileKey> new_wanted = rankPlanTiles(geometry, plan, config.frustum_priority);
   std::unordered_set<TileKey, FastKeyHash> new_set(new_wanted.begin(), new_wanted.end());
   std::vector<TileKey> new_prefetch;
@@ -517,7 +516,6 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
 
   // The path hint counts only while it agrees with the real camera.
   s.hint_used = false;
-  s.viewport = viewport;
   if (s.hint.camera_at && std::isfinite(time_s)) {
     const Camera hinted = s.hint.camera_at(time_s);
     s.hint_used =
@@ -578,7 +576,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   if (changed) {
     s.have_plan = true;
     s.force_rebuild = false;
-    s.rebuild();
+    s.rebuild(viewport);
   }
 }
 

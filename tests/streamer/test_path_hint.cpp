@@ -309,9 +309,7 @@ TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
   LookaheadSnapshot ahead;
   ahead.now_s = 10.0;
   ahead.times_s = {10.5, 11.0, 11.5, 12.0};
-  ahead.windows = {windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}),
-                   windows({5, 0, 6, 1})};
-  ahead.index();
+  ahead.index({windows({1, 0, 3, 1}), windows({2, 0, 4, 1}), windows({0, 0, 2, 1}), windows({5, 0, 6, 1})});
   ASSERT_EQ(ahead.runs.size(), 2u);
   EXPECT_EQ(ahead.runs[0].size(), 4u);  // level 0 moves at every sample
   EXPECT_EQ(ahead.runs[1].size(), 1u);  // level 1 is the pyramid: never a needed window
