@@ -24,5 +24,8 @@ build/renderer/clipstream-fly "$store" --path pass --frames 600 --size 1280x720 
   --out "$out/fly" --save-frames 150
 
 echo "== Charts =="
-gnuplot -e "csv='$out/fly/frames.csv'; png='$out/fly/frame_time.png'" scripts/plot_frames.gp
+# Written under a temporary name and renamed when whole (docs/cli.md).
+trap 'rm -f "$out/fly/frame_time.png.tmp"' EXIT
+gnuplot -e "csv='$out/fly/frames.csv'; png='$out/fly/frame_time.png.tmp'" scripts/plot_frames.gp
+mv -f "$out/fly/frame_time.png.tmp" "$out/fly/frame_time.png"
 echo "Wrote $out/fly/ (stats CSV/JSON, frames PNG, frame_time.png)"

@@ -11,6 +11,7 @@ packages=(
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox xvfb xauth
+  clang libclang-rt-dev
 )
 if [[ "${1:-}" == "--bench" ]]; then
   packages+=(gdal-bin libvips-tools time)

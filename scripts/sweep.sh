@@ -167,6 +167,13 @@ echo
 
 # ---- data --------------------------------------------------------------------
 # field FILE NAME: a value from a run's summary.tsv by column name.
+# Outputs follow the programs' rule (docs/cli.md): each is written under
+# NAME.tmp.PID and renamed by publish NAME when whole; an interrupted or
+# failed sweep removes its temporaries and leaves the previous outputs.
+publish() { mv -f "$1.tmp.$$" "$1"; }
+cleanup_temporaries() { rm -f "$DATA"/*.tmp.$$ "$CHARTS"/*.tmp.$$ "$DOCS"/*.tmp.$$; }
+trap cleanup_temporaries EXIT
+trap 'exit 130' INT; trap 'exit 143' TERM; trap 'exit 129' HUP
 field() { awk -F'\t' -v k="$2" 'NR==1{for(i=1;i<=NF;i++)if($i==k)c=i} NR==2{print $c}' "$1"; }
 # column DIR NAME...: per-frame columns of a run's frames.csv by name.
 column() {
@@ -182,20 +189,23 @@ S() { field "$WORK/$1/summary.tsv" "$2"; }
   for s in 1 2 5 10 20 50 100; do
     echo "$s,$(S speed_$s psnr_mean_db),$(S speed_$s psnr_min_db),$(S speed_$s frames_below_30db),$(S speed_$s frame_ms_p99),$(S speed_$s over_fetch_ratio),$(S speed_$s ram_hit_rate)"
   done
-} >"$DATA/psnr_vs_speed.csv"
+} >"$DATA/psnr_vs_speed.csv.tmp.$$"
+publish "$DATA/psnr_vs_speed.csv"
 {
   echo "upload_tiles,psnr_mean_db,psnr_min_db,frame_ms_p50,frame_ms_p99,frame_ms_max"
   for u in 1 2 4 8 16 32 64; do
     echo "$u,$(S upload_$u psnr_mean_db),$(S upload_$u psnr_min_db),$(S upload_$u frame_ms_p50),$(S upload_$u frame_ms_p99),$(S upload_$u frame_ms_max)"
   done
-} >"$DATA/upload_budget.csv"
+} >"$DATA/upload_budget.csv.tmp.$$"
+publish "$DATA/upload_budget.csv"
 {
   echo "budget_mib,opt_pct,lru_pct,ours_pct"
   for b in 1 2 4 8 16 32 64 128; do
     "$TRACE_TOOL" "$WORK/orbit.trace" --budget-mb "$b" >"$WORK/trace_$b.txt"
     awk -F'\t' -v b="$b" '$1=="opt"{o=$3} $1=="lru"{l=$3} $1=="ours"{u=$3} END{print b","o","l","u}' "$WORK/trace_$b.txt"
   done
-} >"$DATA/cache_hitrate.csv"
+} >"$DATA/cache_hitrate.csv.tmp.$$"
+publish "$DATA/cache_hitrate.csv"
 pair() {  # OUT A B COL...: frame, A's columns, B's columns (prefixed A_ / B_)
   local out=$1 a=$2 b=$3; shift 3
   {
@@ -204,7 +214,8 @@ pair() {  # OUT A B COL...: frame, A's columns, B's columns (prefixed A_ / B_)
     for c in "$@"; do printf ',%s_%s' "$b" "$c"; done
     echo
     paste -d, <(column "$WORK/$a" frame "$@") <(column "$WORK/$b" "$@")
-  } >"$out"
+  } >"$out.tmp.$$"
+  publish "$out"
 }
 pair "$DATA/frametime_buffering.csv" buffering_single buffering_double frame_ms psnr_db
 pair "$DATA/frametime_throttle.csv" throttle_on throttle_off frame_ms psnr_db
@@ -214,7 +225,8 @@ pair "$DATA/frametime_prefetch.csv" prefetch_on prefetch_off frame_ms psnr_db
   for s in 1 10 100; do
     echo "$s,$(S frustum_on_$s over_fetch_ratio),$(S frustum_off_$s over_fetch_ratio),$(S frustum_on_$s psnr_mean_db),$(S frustum_off_$s psnr_mean_db),$(S frustum_on_$s tiles_loaded),$(S frustum_off_$s tiles_loaded),$(S frustum_on_$s tiles_sampled)"
   done
-} >"$DATA/overfetch.csv"
+} >"$DATA/overfetch.csv.tmp.$$"
+publish "$DATA/overfetch.csv"
 {
   echo "run,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,gt_psnr_mean_db"
   for r in "${RUNS[@]}"; do
@@ -226,7 +238,8 @@ pair "$DATA/frametime_prefetch.csv" prefetch_on prefetch_off frame_ms psnr_db
     done
     echo "$line"
   done
-} >"$DATA/runs.csv"
+} >"$DATA/runs.csv.tmp.$$"
+publish "$DATA/runs.csv"
 # Stability: one JSON line per scenario -> CSV (no jq needed: fixed keys).
 jget() { sed -n "s/.*\"$2\":\([^,}]*\).*/\1/p" <<<"$1" | tr -d '"'; }
 {
@@ -239,7 +252,8 @@ jget() { sed -n "s/.*\"$2\":\([^,}]*\).*/\1/p" <<<"$1" | tr -d '"'; }
       "$(awk -v b="$(jget "$l" ram_budget_bytes)" 'BEGIN{printf "%.1f", b/1048576}')" \
       "$(jget "$l" render_thread_fetches)" "$(jget "$l" result)"
   done <"$WORK/stability.jsonl"
-} >"$DATA/stability.csv"
+} >"$DATA/stability.csv.tmp.$$"
+publish "$DATA/stability.csv"
 # Soak: the release run (RSS, budget) and the ASan + UBSan run (leaks).
 soak_row() {  # NAME JSONL LOG SANITIZED
   local l loaded leaks bytes suppressed reports result
@@ -267,7 +281,8 @@ soak_row() {  # NAME JSONL LOG SANITIZED
   echo "build,frames,ram_peak_mib,ram_budget_mib,loaded_mib,rss_after_quarter_mib,rss_end_mib,leaks_reported,leaked_bytes,suppressed_allocations,sanitizer_reports,result"
   soak_row release "$WORK/stability.jsonl" "$WORK/stability.log" 0
   soak_row asan+ubsan "$WORK/soak_asan.jsonl" "$WORK/soak_asan.log" 1
-} >"$DATA/soak.csv"
+} >"$DATA/soak.csv.tmp.$$"
+publish "$DATA/soak.csv"
 
 # ---- charts ------------------------------------------------------------------
 if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then TERM_LINE="pngcairo size 800,480 font 'sans,10'"
@@ -275,12 +290,13 @@ else TERM_LINE="png size 800,480"; fi
 plot() {  # name, gnuplot body
   gnuplot <<EOF
 set terminal $TERM_LINE
-set output '$CHARTS/$1.png'
+set output '$CHARTS/$1.png.tmp.$$'
 set datafile separator ','
 set key top right
 set grid
 $2
 EOF
+  publish "$CHARTS/$1.png"
 }
 plot psnr_vs_speed "
 set title 'PSNR against the ideal reference vs camera speed (straight line over 2^{26} texels, default budgets)'
@@ -371,7 +387,8 @@ BM=$DOCS/benchmarks.md
 touch "$BM"
 if grep -q '<!-- sweep:begin -->' "$BM"; then
   awk -v gen="$GEN" '/<!-- sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
-                     /<!-- sweep:end -->/{skip=0; next} !skip' "$BM" >"$BM.tmp" && mv "$BM.tmp" "$BM"
+                     /<!-- sweep:end -->/{skip=0; next} !skip' "$BM" >"$BM.tmp.$$"
+  publish "$BM"
 else
   { echo; cat "$GEN"; } >>"$BM"
 fi

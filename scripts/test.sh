@@ -3,7 +3,8 @@
 # missing, builds, runs every test, then builds the concurrent components
 # (store, streamer) under ThreadSanitizer and runs their tests again, then
 # builds the renderer tests under AddressSanitizer + UBSan and runs the
-# stability scenarios (with the shortened soak) with leak checking.
+# stability scenarios (with the shortened soak) with leak checking, then
+# fuzzes the store reader (clang, libFuzzer, ASan + UBSan) for a fixed minute.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -32,3 +33,20 @@ cmake --build build-asan -j "$jobs" --target test_renderer
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
   UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
   ctest --test-dir build-asan -R '^Stability\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
+
+# A regression guard, not a campaign: the reader's libFuzzer driver for a
+# fixed 60 s with a fixed seed, from the seed stores it writes itself. Any
+# crash, sanitizer report, leak or 10 s hang fails the suite (docs/cli.md,
+# "Fuzzing").
+echo "== Fuzzing the store reader for 60 s (clang, libFuzzer, ASan + UBSan) =="
+cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ -DCLIPSTREAM_FUZZ=ON \
+  -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
+cmake --build build-fuzz -j "$jobs" --target store_fuzz
+corpus=$(mktemp -d)
+trap 'rm -rf "$corpus"' EXIT
+CLIPSTREAM_FUZZ_SEEDS="$corpus" build-fuzz/tests/store/store_fuzz -runs=0 "$corpus"
+UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
+  build-fuzz/tests/store/store_fuzz -max_total_time=60 -timeout=10 -rss_limit_mb=2048 -seed=1 \
+  -print_final_stats=1 "$corpus" 2>&1 | tail -n 8
+echo "store reader fuzzing: no crash, hang, leak or sanitizer report in 60 s"

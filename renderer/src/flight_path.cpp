@@ -1,6 +1,8 @@
 // Flight paths: parsing, built-ins and interpolation. See flight_path.h.
 #include <clipstream/renderer/flight_path.h>
 
+#include <clipstream/store/output_file.h>
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -112,18 +114,9 @@ std::string FlightPath::toJson() const {
 }
 
 Status FlightPath::save(const std::string& path) const {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return Status::error(ErrorCode::kIo, "cannot write " + tmp);
-    out << toJson();
-    if (!out.flush()) return Status::error(ErrorCode::kIo, "cannot write " + tmp);
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return Status::error(ErrorCode::kIo, "cannot rename " + tmp + " to " + path);
-  }
-  return Status::ok();
+  OutputOptions options;
+  options.existing = ExistingOutput::kReplaceRegular;
+  return writeOutputFile(path, toJson(), options);
 }
 
 double FlightPath::durationS() const {

@@ -8,6 +8,7 @@
 #include <clipstream/renderer/flight_path.h>
 #include <clipstream/renderer/frame_writer.h>
 #include <clipstream/renderer/gl_context.h>
+#include <clipstream/store/output_file.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -15,12 +16,16 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
 #include <thread>
+
+#include <unistd.h>
 
 namespace clipstream {
 namespace {
@@ -58,29 +63,108 @@ std::string dbText(bool measured, double db) {
   return buf;
 }
 
-Status writeFileAtomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return Status::error(ErrorCode::kIo, "cannot write " + tmp);
-    out << text;
-    if (!out.flush()) return Status::error(ErrorCode::kIo, "cannot write " + tmp);
+// The run's statistics files, under OutputFile's rule, published together
+// and only when every one was written (and the frames before them): a failed
+// run leaves no statistics that look complete. --out was emptied of an
+// earlier run's files first (prepareOutDir), so nothing is replaced.
+Status writeRunFiles(const std::vector<std::pair<std::string, std::string>>& files) {
+  OutputOptions options;
+  options.fsync = false;  // measurements a rerun remakes; atomicity is what matters
+  std::vector<std::unique_ptr<OutputFile>> outputs(files.size());
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (Status s = OutputFile::create(files[i].first, options, &outputs[i]); !s) return s;
+    if (Status s = outputs[i]->append(files[i].second); !s) return s;
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0)
-    return Status::error(ErrorCode::kIo, "cannot rename " + tmp);
+  for (std::unique_ptr<OutputFile>& output : outputs)
+    if (Status s = output->commit(); !s) return s;
+  return Status::ok();
+}
+
+bool isFrameName(const std::string& name) {
+  if (name.size() < 11 || name.compare(0, 6, "frame_") != 0 ||
+      name.compare(name.size() - 4, 4, ".png") != 0)
+    return false;
+  for (size_t i = 6; i + 4 < name.size(); ++i)
+    if (name[i] < '0' || name[i] > '9') return false;
+  return true;
+}
+
+// --out holds one run: creates it if needed, then removes what an earlier run
+// wrote there (frame_NNNNN.png, frames.csv, frames.json, summary.tsv; regular
+// files only) and the temporaries of killed runs, so a reader never mixes
+// two runs. Appends what it swept to *swept.
+Status prepareOutDir(const std::string& dir, std::vector<std::string>* swept) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::error(ErrorCode::kIo, "cannot create --out " + dir + ": " + ec.message());
+  if (!fs::is_directory(dir, ec))
+    return Status::error(ErrorCode::kInvalidArgument, "--out " + dir + " is not a directory");
+  static const char* const kRunFiles[] = {"frames.csv", "frames.json", "summary.tsv"};
+  std::vector<std::string> stale;
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    bool ours = isFrameName(name);
+    for (const char* run_file : kRunFiles) ours = ours || name == run_file;
+    if (ours && entry.is_regular_file(ec) && !entry.is_symlink(ec)) stale.push_back(entry.path().string());
+    // ".NAME.tmp-..." of one of our names: its writer may be dead.
+    const size_t tmp = name.find(".tmp-");
+    if (name.size() > 1 && name[0] == '.' && tmp != std::string::npos) {
+      const std::string final_name = name.substr(1, tmp - 1);
+      bool our_temp = isFrameName(final_name);
+      for (const char* run_file : kRunFiles) our_temp = our_temp || final_name == run_file;
+      if (our_temp) sweepOutputTemporaries(dir + "/" + final_name, swept);
+    }
+  }
+  if (ec) return Status::error(ErrorCode::kIo, "cannot list --out " + dir + ": " + ec.message());
+  for (const std::string& path : stale) {
+    if (::unlink(path.c_str()) != 0 && errno != ENOENT)
+      return Status::error(ErrorCode::kIo, "cannot remove " + path + " of an earlier run: " +
+                                               std::strerror(errno));
+  }
+  return Status::ok();
+}
+
+// Library-side guard for values a program's command line already bounds
+// (docs/cli.md): non-finite or absurd numbers would hang or mislead.
+Status checkFlyOptions(const FlyOptions& o) {
+  auto bad = [](const std::string& what) { return Status::error(ErrorCode::kInvalidArgument, what); };
+  if (!std::isfinite(o.speed) || o.speed <= 0.0 || o.speed > kMaxFlySpeed)
+    return bad("speed must be a number from 0.001 to " + std::to_string(int(kMaxFlySpeed)));
+  if (o.cache_mb == 0) return bad("the RAM budget (cache MiB) must be at least 1");
+  if (o.upload_tiles == 0) return bad("uploads per frame must be at least 1");
+  if (o.io_threads > kMaxIoThreads)
+    return bad("io threads must be at most " + std::to_string(kMaxIoThreads));
+  if (!std::isfinite(o.fault_latency_ms) || o.fault_latency_ms < 0.0 || o.fault_latency_ms > kMaxFlyDelayMs)
+    return bad("fault latency must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
+  if (!std::isfinite(o.rest_frame_ms) || o.rest_frame_ms < 0.0 || o.rest_frame_ms > kMaxFlyDelayMs)
+    return bad("rest frame time must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
+  if (!(o.fault_corrupt_fraction >= 0.0 && o.fault_corrupt_fraction <= 1.0))
+    return bad("fault corrupt fraction must be from 0 to 1");
   return Status::ok();
 }
 
 }  // namespace
 
 Status parseViewport(const std::string& text, Viewport* out) {
-  unsigned w = 0, h = 0;
-  char tail = 0;
-  if (std::sscanf(text.c_str(), "%ux%u%c", &w, &h, &tail) != 2 || w == 0 || h == 0 ||
-      w > 16384 || h > 16384)
+  constexpr uint64_t kMaxSidePx = 16384;  // GL_MAX_RENDERBUFFER_SIZE of common drivers
+  const size_t sep = text.find('x');
+  uint64_t side[2] = {0, 0};
+  bool digits = sep != std::string::npos && sep > 0 && sep + 1 < text.size();
+  for (size_t i = 0; digits && i < text.size(); ++i) {
+    if (i == sep) continue;
+    if (text[i] < '0' || text[i] > '9') digits = false;
+    uint64_t& v = side[i < sep ? 0 : 1];
+    if (digits && v <= kMaxSidePx) v = v * 10 + uint64_t(text[i] - '0');
+  }
+  if (!digits)
     return Status::error(ErrorCode::kInvalidArgument,
-                         "size \"" + text + "\" is not WIDTHxHEIGHT (e.g. 1280x720)");
-  *out = {w, h};
+                         "size \"" + printableText(text, 40) + "\" is not WIDTHxHEIGHT (e.g. 1280x720)");
+  if (side[0] == 0 || side[1] == 0 || side[0] > kMaxSidePx || side[1] > kMaxSidePx)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "size \"" + printableText(text, 40) + "\": each side must be from 1 to " +
+                             std::to_string(kMaxSidePx) + " px");
+  *out = {uint32_t(side[0]), uint32_t(side[1])};
   return Status::ok();
 }
 
@@ -108,6 +192,7 @@ Status parseResize(const std::string& text, uint32_t* frame, Viewport* out) {
 }
 
 Status runFly(const FlyOptions& o, std::ostream& log) {
+  if (Status s = checkFlyOptions(o); !s) return s;
   // Source.
   std::shared_ptr<TileSource> source;
   if (o.procedural_px > 0) {
@@ -145,9 +230,14 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
       o.frames > 0 ? o.frames
                    : uint32_t(std::ceil(path.durationS() / (speed * renderer_config::kSimulatedFrameSeconds))) + 1;
 
-  std::error_code ec;
-  std::filesystem::create_directories(o.out_dir, ec);
-  if (ec) return Status::error(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
+  // Outputs are checked before any work: --out, then the trace's path.
+  std::vector<std::string> swept;
+  if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
+  if (!o.trace_path.empty()) {
+    OutputOptions trace_options;
+    trace_options.existing = ExistingOutput::kReplaceRegular;
+    if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
+  }
 
   // GL.
   std::unique_ptr<HeadlessContext> context;
@@ -353,6 +443,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   const StreamerStats final_stats = streamer.stats();
   streamer.shutdown();
   Status write_status = writer.close();
+  if (write_status) write_status = streamer.traceStatus();
 
   // CSV: one row per frame; per-level columns after the totals.
   std::string csv =
@@ -506,8 +597,9 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
       {"streamer", nlohmann::json::parse(final_stats.toJson(), nullptr, false)},
       {"accuracy", acc}};
   nlohmann::json doc = {{"summary", summary}, {"frames", jframes}};
-  if (Status s = writeFileAtomically(o.out_dir + "/frames.csv", csv); !s) return s;
-  if (Status s = writeFileAtomically(o.out_dir + "/frames.json", doc.dump(1) + "\n"); !s) return s;
+  if (!write_status) return write_status;  // a frame or the trace failed: no statistics
+  std::vector<std::pair<std::string, std::string>> run_files = {
+      {o.out_dir + "/frames.csv", csv}, {o.out_dir + "/frames.json", doc.dump(1) + "\n"}};
   // summary.tsv: one header line, one value line (for scripts/sweep.sh).
   {
     std::string keys, values;
@@ -547,11 +639,12 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     add("frames_with_holes", std::to_string(holes_frames));
     add("gt_psnr_mean_db", gt_count ? num(gt_sum / gt_count) : std::string());  // empty: not measured
     add("tile_failures", std::to_string(final_stats.total.failures + preload_failures));
-    if (Status s = writeFileAtomically(o.out_dir + "/summary.tsv", keys + "\n" + values + "\n"); !s)
-      return s;
+    run_files.push_back({o.out_dir + "/summary.tsv", keys + "\n" + values + "\n"});
   }
-  if (!write_status) return write_status;
+  if (Status s = writeRunFiles(run_files); !s) return s;
 
+  for (const std::string& line : swept)
+    log << "clipstream-fly: removed a temporary file left by an interrupted earlier run: " << line << "\n";
   if (!o.quiet) {
     char buf[256];
     log << "clipstream-fly: " << source->describe() << ", path " << o.path << ", " << total_frames

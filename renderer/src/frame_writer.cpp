@@ -1,6 +1,9 @@
 // PNG writer thread. See frame_writer.h.
 #include <clipstream/renderer/frame_writer.h>
 
+#include <clipstream/store/output_file.h>
+
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
 #include <cstdio>
@@ -9,21 +12,22 @@ namespace clipstream {
 
 Status writePng(const std::string& path, uint32_t width_px, uint32_t height_px,
                 const uint8_t* rgba) {
-  // Written under a temporary name and renamed, so no reader ever sees half a PNG.
-  const std::string tmp = path + ".tmp.png";
-  auto out = OIIO::ImageOutput::create(tmp);
+  // Encoded in memory, then written and published by OutputFile: every
+  // write, the close and the rename are checked (a PNG writer writing to a
+  // file would not report a failed write), and no reader sees half a PNG.
+  std::vector<unsigned char> png;
+  OIIO::Filesystem::IOVecOutput memory(png);
+  auto out = OIIO::ImageOutput::create("png", &memory);
   if (!out) return Status::error(ErrorCode::kIo, "cannot create PNG writer for " + path);
   OIIO::ImageSpec spec(int(width_px), int(height_px), 4, OIIO::TypeDesc::UINT8);
-  if (!out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgba) || !out->close()) {
-    const std::string err = out->geterror();
-    std::remove(tmp.c_str());
-    return Status::error(ErrorCode::kIo, "cannot write " + path + ": " + err);
+  if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgba) || !out->close()) {
+    return Status::error(ErrorCode::kIo, "cannot encode PNG " + path + ": " + out->geterror());
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return Status::error(ErrorCode::kIo, "cannot rename " + tmp + " to " + path);
-  }
-  return Status::ok();
+  OutputOptions options;
+  options.existing = ExistingOutput::kReplaceRegular;
+  options.fsync = false;  // frames are measurements a rerun remakes; atomicity is what matters
+  return writeOutputFile(path, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()),
+                         options);
 }
 
 Status readImageRgba(const std::string& path, std::vector<uint8_t>* rgba, uint32_t* width_px,

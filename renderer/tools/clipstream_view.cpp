@@ -1,14 +1,14 @@
 // clipstream-view: interactive viewer. GLFW window, mouse look + WASD,
 // wheel/shift for speed, O toggles the overlay, R records the flown path to
 // JSON for clipstream-fly. Usage: docs/renderer.md.
+#include <clipstream/cli/cli.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight_path.h>
 #include <clipstream/renderer/fly.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
-
-#include <CLI/CLI.hpp>
+#include <clipstream/store/output_file.h>
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -38,24 +38,37 @@ Input* inputOf(GLFWwindow* w) { return static_cast<Input*>(glfwGetWindowUserPoin
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Interactive clipmap viewer (GLFW window)."};
+  CLI::App app{"Interactive clipmap viewer (GLFW window).", "clipstream-view"};
   std::string store_path, size = "1280x720", record_path = "recorded_path.json";
   uint64_t procedural_px = 0, cache_mb = 512;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
   app.add_option("store", store_path, "Tile store file (omit with --procedural)");
-  app.add_option("--procedural", procedural_px, "Procedural texture of this side instead");
+  app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
+      ->check(cli::wholeInRange(1, int64_t(1) << 40));
   app.add_option("--size", size, "Window WIDTHxHEIGHT");
-  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB");
-  app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame");
+  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
+      ->check(cli::wholeInRange(1, int64_t(1) << 30));
+  app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame")
+      ->check(cli::wholeInRange(1, 1000000));
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
-  app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)");
-  CLI11_PARSE(app, argc, argv);
+  app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
+      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+  app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
   Viewport vp;
-  if (Status s = parseViewport(size, &vp); !s) {
-    std::cerr << "clipstream-view: " << s.toString() << "\n";
-    return 2;
+  if (Status s = parseViewport(size, &vp); !s) return cli::usageError(app, s.message);
+  if (!store_path.empty() && procedural_px > 0)
+    return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
+  {
+    OutputOptions record_options;
+    record_options.existing = ExistingOutput::kReplaceRegular;
+    if (Status s = checkOutputPath(record_path, record_options); !s) {
+      std::cerr << "clipstream-view: --record-out: " << s.toString() << "\n";
+      return cli::kExitFailure;
+    }
   }
+  cli::installSignalHandlers();
   std::shared_ptr<TileSource> source;
   if (procedural_px > 0) {
     ProceduralSpec spec;
@@ -70,8 +83,7 @@ int main(int argc, char** argv) {
     }
   }
   if (!source) {
-    std::cerr << "clipstream-view: give a STORE or --procedural SIDE\n";
-    return 2;
+    return cli::usageError(app, "give a STORE or --procedural SIDE");
   }
   const PyramidGeometry& g = source->geometry();
 
@@ -229,13 +241,15 @@ int main(int argc, char** argv) {
       glfwSetWindowTitle(window, title);
     }
   }
+  int code = cli::kExitOk;
   if (recording_on) {
     Status s = recording.save(record_path);
     std::cerr << (s ? "recorded path written to " + record_path : s.toString()) << "\n";
+    if (!s) code = cli::kExitFailure;
   }
   streamer.shutdown();
   renderer.reset();
   glfwDestroyWindow(window);
   glfwTerminate();
-  return 0;
+  return cli::finish(app, code);
 }

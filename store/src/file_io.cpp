@@ -47,6 +47,10 @@ Status pwriteAll(int fd, const void* data, size_t bytes, uint64_t offset,
                                                       " (" + std::to_string(bytes - done) +
                                                       " more bytes needed)");
       }
+      if (err == EFBIG) {
+        return Status::error(ErrorCode::kNoSpace, "writing " + path + ": " + errnoText(err) +
+                                                      " (the file-size limit, ulimit -f)");
+      }
       return Status::error(ErrorCode::kIo, "writing " + path + ": " + errnoText(err));
     }
     done += static_cast<size_t>(put);

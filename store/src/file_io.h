@@ -11,7 +11,7 @@ namespace clipstream::fileio {
 
 // Reads exactly `bytes` at `offset`; kTruncated if the file ends first.
 Status preadAll(int fd, void* data, size_t bytes, uint64_t offset, const std::string& path);
-// Writes exactly `bytes` at `offset`; kNoSpace on ENOSPC/EDQUOT, else kIo.
+// Writes exactly `bytes` at `offset`; kNoSpace on ENOSPC/EDQUOT/EFBIG, else kIo.
 Status pwriteAll(int fd, const void* data, size_t bytes, uint64_t offset,
                  const std::string& path);
 // Copies `bytes` from the start of `from_fd` to `to_fd` at `to_offset`.

@@ -101,7 +101,9 @@ struct TileStoreReader::Impl {
 };
 
 Status TileStoreReader::Impl::openImpl() {
-  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a
+  // writer forever; the regular-file check below comes before any read.
+  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) {
     const int err = errno;
     return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
@@ -112,7 +114,15 @@ Status TileStoreReader::Impl::openImpl() {
     return bad(ErrorCode::kIo, std::string("fstat: ") + fileio::errnoText(errno));
   }
   if (S_ISDIR(file_stat.st_mode)) return bad(ErrorCode::kIo, "is a directory, not a tile store");
-  if (!S_ISREG(file_stat.st_mode)) return bad(ErrorCode::kIo, "not a regular file");
+  if (!S_ISREG(file_stat.st_mode)) {
+    return bad(ErrorCode::kIo, std::string(S_ISFIFO(file_stat.st_mode)   ? "is a FIFO"
+                                           : S_ISCHR(file_stat.st_mode) ? "is a character device"
+                                           : S_ISBLK(file_stat.st_mode) ? "is a block device"
+                                           : S_ISSOCK(file_stat.st_mode) ? "is a socket"
+                                                                          : "is not a regular file") +
+                                   ", not a tile store (only regular files are read)");
+  }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
 
   // Header.

@@ -110,6 +110,7 @@ const char* errorCodeName(ErrorCode code) {
     case ErrorCode::kNoSpace: return "no space";
     case ErrorCode::kCancelled: return "cancelled";
     case ErrorCode::kUnavailable: return "unavailable";
+    case ErrorCode::kAlreadyExists: return "already exists";
   }
   return "unknown error";
 }
@@ -122,6 +123,16 @@ std::string Status::toString() const {
     text += message;
   }
   return text;
+}
+
+std::string printableText(const std::string& text, size_t max_bytes) {
+  std::string out = text.substr(0, max_bytes);
+  for (char& c : out) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte < 0x20 || byte == 0x7f) c = '?';
+  }
+  if (text.size() > max_bytes) out += "...";
+  return out;
 }
 
 }  // namespace clipstream

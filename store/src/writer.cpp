@@ -7,6 +7,7 @@
 #include "file_io.h"
 #include "format.h"
 
+#include <clipstream/store/output_file.h>
 #include <clipstream/store/tile_store.h>
 
 #include <fcntl.h>
@@ -65,13 +66,14 @@ uint64_t packValue(const uint8_t* pixel, size_t bpp) {
 
 struct TileStoreWriter::Impl {
   std::string path;
-  std::string directory;
-  std::string temp_prefix;  // ".NAME.tmp-PID-RANDOM" joined to the directory
-  std::string main_temp;
+  // The store under its temporary name; the index and the coarser levels'
+  // payloads spill to its scratch files until finish() lays them out.
+  std::unique_ptr<OutputFile> output;
+  std::string main_temp;  // output->tempPath(), for error messages
   std::string index_temp;
   PyramidGeometry geometry;
   WriterOptions options;
-  int main_fd = -1;
+  int main_fd = -1;  // output->fd()
   int index_fd = -1;
 
   std::mutex mutex;  // guards everything below
@@ -84,45 +86,26 @@ struct TileStoreWriter::Impl {
 
   ~Impl() { removeTemps(); }
 
+  // Closes the scratch files; destroying `output` removes every temporary
+  // (after a successful commit() only the scratch files remain to remove).
   void removeTemps() {
-    if (main_fd >= 0) ::close(main_fd);
-    main_fd = -1;
     if (index_fd >= 0) ::close(index_fd);
     index_fd = -1;
     for (LevelBuild& level : levels) {
       if (level.fd >= 0 && !level.temp_path.empty()) ::close(level.fd);
-      if (!level.temp_path.empty()) ::unlink(level.temp_path.c_str());
       level.fd = -1;
     }
-    if (!main_temp.empty()) ::unlink(main_temp.c_str());
-    if (!index_temp.empty()) ::unlink(index_temp.c_str());
-    main_temp.clear();
-    index_temp.clear();
-  }
-
-  Status openTemp(const std::string& temp_path, int* fd) {
-    *fd = ::open(temp_path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (*fd < 0) {
-      const int err = errno;
-      if (err == ENOSPC || err == EDQUOT) {
-        return Status::error(ErrorCode::kNoSpace, "no space left on device creating " + temp_path);
-      }
-      return Status::error(ErrorCode::kIo, "cannot create " + temp_path + ": " +
-                                               fileio::errnoText(err));
-    }
-    return Status::ok();
+    main_fd = -1;
+    output.reset();
   }
 
   // Called with the mutex held.
   Status levelFd(uint32_t level_index, int* fd) {
     LevelBuild& level = levels[level_index];
     if (level.fd < 0) {
-      level.temp_path = temp_prefix + ".L" + std::to_string(level_index);
-      Status status = openTemp(level.temp_path, &level.fd);
-      if (!status) {
-        level.temp_path.clear();
-        return status;
-      }
+      Status status = output->createScratch("L" + std::to_string(level_index), &level.fd,
+                                            &level.temp_path);
+      if (!status) return status;
     }
     *fd = level.fd;
     return Status::ok();
@@ -272,47 +255,20 @@ Status TileStoreWriter::create(const std::string& path, const PyramidGeometry& g
     return Status::error(ErrorCode::kInvalidArgument, "CRS text longer than 1 MiB");
   }
 
-  const std::filesystem::path fs_path(path);
-  std::string directory = fs_path.parent_path().string();
-  if (directory.empty()) directory = ".";
-  const std::string name = fs_path.filename().string();
-  if (name.empty() || name == "." || name == "..") {
-    return Status::error(ErrorCode::kInvalidArgument, "output path " + path + " names no file");
-  }
-  struct stat dir_stat {};
-  if (::stat(directory.c_str(), &dir_stat) != 0) {
-    const int err = errno;
-    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
-                         "output directory " + directory + ": " + fileio::errnoText(err));
-  }
-  if (!S_ISDIR(dir_stat.st_mode)) {
-    return Status::error(ErrorCode::kNotFound, "output directory " + directory +
-                                                   " is not a directory");
-  }
-
   std::unique_ptr<TileStoreWriter> writer(new TileStoreWriter());
   Impl& impl = *writer->m_impl;
   impl.path = path;
-  impl.directory = directory;
   impl.geometry = geometry;
   impl.options = options;
-  std::random_device random;
-  char suffix[64];
-  std::snprintf(suffix, sizeof(suffix), ".tmp-%ld-%08x", static_cast<long>(::getpid()),
-                static_cast<unsigned>(random()));
-  impl.temp_prefix = directory + "/." + name + suffix;
-  impl.main_temp = impl.temp_prefix;
-  Status status = impl.openTemp(impl.main_temp, &impl.main_fd);
-  if (!status) {
-    impl.main_temp.clear();
-    return status;
-  }
-  impl.index_temp = impl.temp_prefix + ".idx";
-  status = impl.openTemp(impl.index_temp, &impl.index_fd);
-  if (!status) {
-    impl.index_temp.clear();
-    return status;
-  }
+  OutputOptions output_options;
+  output_options.existing = options.replace ? ExistingOutput::kReplaceRegular : ExistingOutput::kRefuse;
+  output_options.fsync = options.fsync;
+  Status status = OutputFile::create(path, output_options, &impl.output);
+  if (!status) return status;
+  impl.main_temp = impl.output->tempPath();
+  impl.main_fd = impl.output->fd();
+  status = impl.output->createScratch("idx", &impl.index_fd, &impl.index_temp);
+  if (!status) return status;
   impl.levels.resize(geometry.levels.size());
   for (size_t i = 0; i < geometry.levels.size(); ++i) {
     LevelBuild& level = impl.levels[i];
@@ -459,6 +415,11 @@ Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, ui
 
 uint64_t TileStoreWriter::bytesWritten() const {
   return m_impl->bytes_written.load(std::memory_order_relaxed);
+}
+
+const std::vector<std::string>& TileStoreWriter::sweptTemporaries() const {
+  static const std::vector<std::string> kNone;
+  return m_impl->output ? m_impl->output->swept() : kNone;
 }
 
 uint64_t TileStoreWriter::constantTiles() const {
@@ -628,25 +589,7 @@ Status TileStoreWriter::Impl::finishLocked() {
   status = fileio::pwriteAll(main_fd, header, sizeof(header), 0, main_temp);
   if (!status) return status;
 
-  if (options.fsync && ::fsync(main_fd) != 0) {
-    const int err = errno;
-    return Status::error(err == ENOSPC || err == EDQUOT ? ErrorCode::kNoSpace : ErrorCode::kIo,
-                         "fsync " + main_temp + ": " + fileio::errnoText(err));
-  }
-  if (::rename(main_temp.c_str(), path.c_str()) != 0) {
-    return Status::error(ErrorCode::kIo, "renaming " + main_temp + " to " + path + ": " +
-                                             fileio::errnoText(errno));
-  }
-  main_temp.clear();  // now the final file: removeTemps() must leave it
-  if (options.fsync) {
-    // Make the rename itself durable.
-    const int dir_fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (dir_fd >= 0) {
-      ::fsync(dir_fd);
-      ::close(dir_fd);
-    }
-  }
-  return Status::ok();
+  return output->commit();
 }
 
 }  // namespace clipstream

@@ -1,9 +1,9 @@
 // clipstream-info: prints what a tile store holds and, with --verify,
 // decodes every tile. Thin: all format knowledge lives in clipstream_store.
+#include <clipstream/cli/cli.h>
 #include <clipstream/store/progress.h>
 #include <clipstream/store/tile_store.h>
 
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <cinttypes>
@@ -14,11 +14,10 @@ namespace {
 
 using namespace clipstream;
 
-// Exit codes, also listed in --help.
-constexpr int kExitOk = 0;
-constexpr int kExitUsage = 1;
-constexpr int kExitOpenFailed = 2;
-constexpr int kExitCorrupt = 3;
+// Exit codes: the programs' shared table (clipstream/cli/cli.h, docs/cli.md).
+constexpr int kExitOk = cli::kExitOk;
+constexpr int kExitOpenFailed = cli::kExitFailure;
+constexpr int kExitCorrupt = cli::kExitCorrupt;
 
 const char* compressionName(Compression compression) {
   return compression == Compression::kZstd ? "zstd" : "none";
@@ -62,17 +61,6 @@ std::string problemLine(const TileStoreReader::Problem& problem) {
   std::string message = problem.status.message;
   if (message.rfind(key + ": ", 0) == 0) message = message.substr(key.size() + 2);
   return key + ": " + errorCodeName(problem.status.code) + ": " + message;
-}
-
-// Text from the file shown on a terminal: control bytes (newlines, escape
-// sequences, NUL) become '?' so the CRS stays on its one line.
-std::string printableText(const std::string& text) {
-  std::string out = text;
-  for (char& c : out) {
-    const auto byte = static_cast<unsigned char>(c);
-    if (byte < 0x20 || byte == 0x7f) c = '?';
-  }
-  return out;
 }
 
 void printText(const std::string& path, const StoreInfo& info,
@@ -171,7 +159,8 @@ nlohmann::json toJson(const std::string& path, const StoreInfo& info,
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Describe a clipstream tile store and optionally verify every tile."};
+  CLI::App app{"Describe a clipstream tile store and optionally verify every tile.",
+               "clipstream-info"};
   std::string path;
   bool verify = false;
   bool json = false;
@@ -180,20 +169,17 @@ int main(int argc, char** argv) {
   app.add_flag("--verify", verify, "read, check and decode every tile");
   app.add_flag("--json", json, "print JSON on stdout instead of text");
   app.add_option("--threads", threads, "verification threads (0 = all cores)")
-      ->check(CLI::Range(0u, 1024u));
+      ->check(cli::wholeInRange(0, 1024));
   app.footer(
       "Exit codes:\n"
       "  0  success (and, with --verify, every tile verified)\n"
-      "  1  bad command line\n"
-      "  2  the store could not be opened (missing, unreadable, bad header)\n"
+      "  1  the store could not be opened (missing, not a regular file, unreadable, bad header),\n"
+      "     or standard output could not be written\n"
+      "  2  command-line mistake\n"
       "  3  corruption found (an index page or a tile failed its checks)\n"
       "Progress is drawn on stderr when it is a terminal; CLIPSTREAM_PROGRESS=0/1 overrides.");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& error) {
-    const int code = app.exit(error);
-    return code == 0 ? kExitOk : kExitUsage;
-  }
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  cli::installSignalHandlers();
 
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(path, &reader);
@@ -255,5 +241,7 @@ int main(int argc, char** argv) {
     std::printf("%s\n",
                 json_out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
   }
-  return exit_code;
+  // A failed write of the report (a full disk, /dev/full) is a failure.
+  const int code = cli::finish(app, exit_code);
+  return code == cli::kExitFailure && exit_code == kExitCorrupt ? kExitCorrupt : code;
 }

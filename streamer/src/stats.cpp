@@ -39,6 +39,7 @@ std::string StreamerStats::toJson() const {
   j["max_texture_lod"] = max_texture_lod;
   j["path_hint_frames"] = path_hint_frames;
   j["path_hint_ignored_frames"] = path_hint_ignored_frames;
+  j["loader_threads"] = loader_threads;
   return j.dump();
 }
 

@@ -10,6 +10,8 @@
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
 
+#include <clipstream/store/output_file.h>
+
 #include "eviction.h"
 #include "lookahead.h"
 
@@ -18,7 +20,8 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
-#include <fstream>
+#include <sstream>
+#include <system_error>
 #include <mutex>
 #include <thread>
 #include <unordered_map>
@@ -131,7 +134,15 @@ struct Streamer::Impl {
   std::vector<TileKey> pending;                        // wanted, not yet handed off (rank order)
   uint32_t lod = 0;
   uint32_t lod_ready_frames = 0;
-  std::ofstream trace;
+  // The trace: text buffered here, appended to trace_file in blocks and
+  // published at shutdown(). `tracing` is false without a trace or after a
+  // failure (trace_status says which).
+  uint32_t loader_threads = 0;  // set once by the constructor
+  bool tracing = false;
+  std::ostringstream trace;
+  std::unique_ptr<OutputFile> trace_file;
+  Status trace_status;
+  void flushTrace(bool publish);
 
   // Shared; guarded by mutex.
   mutable std::mutex mutex;
@@ -367,7 +378,7 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
   std::shared_ptr<const LookaheadSnapshot> new_ahead =
       hint_used && config.eviction == EvictionMode::kGpuFirst ? lookahead.snapshot() : nullptr;
   hint_used_by_plan = hint_used;
-  if (trace.is_open()) {
+  if (tracing) {
     // Exact time and the viewport: the replay re-plans the hint with them. A
     // non-finite time (the hint is never used then) is written as 0.
     char time_text[32];
@@ -385,6 +396,8 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
       if (wanted_set.count(k) == 0) trace << frame << ' ' << k.level << ' ' << k.x << ' ' << k.y << '\n';
     for (const TileKey& k : wanted)
       if (new_set.count(k) == 0) trace << "- " << frame << ' ' << k.level << ' ' << k.x << ' ' << k.y << '\n';
+    constexpr std::streamoff kTraceBlockBytes = std::streamoff(1) << 20;
+    if (trace.tellp() >= kTraceBlockBytes) flushTrace(false);
   }
 
   const auto now = Clock::now();
@@ -493,15 +506,42 @@ Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& con
   s.lod = s.geometry.levelCount() ? s.geometry.levelCount() - 1 : 0;
   s.published_lod = s.lod;
   if (!config.trace_path.empty()) {
-    s.trace.open(config.trace_path, std::ios::out | std::ios::trunc);
-    if (!s.trace) std::fprintf(stderr, "clipstream: cannot write trace %s\n", config.trace_path.c_str());
-    else s.trace << kTraceHeader << '\n';
+    OutputOptions trace_options;
+    trace_options.existing = ExistingOutput::kReplaceRegular;
+    s.trace_status = OutputFile::create(config.trace_path, trace_options, &s.trace_file);
+    s.tracing = s.trace_status.isOk();
+    if (s.tracing) s.trace << kTraceHeader << '\n';
   }
   if (!s.source) return;  // nothing to load; update() plans nothing
   unsigned threads = config.io_threads ? config.io_threads : std::thread::hardware_concurrency();
-  threads = std::max(1u, threads);
-  for (unsigned i = 0; i < threads; ++i) s.workers.emplace_back([this] { m_impl->workerLoop(); });
+  threads = std::clamp(threads, 1u, kMaxIoThreads);
+  for (unsigned i = 0; i < threads; ++i) {
+    try {
+      s.workers.emplace_back([this] { m_impl->workerLoop(); });
+    } catch (const std::system_error&) {
+      break;  // the system's thread limit: run with the loaders that started
+    }
+  }
+  s.loader_threads = uint32_t(s.workers.size());
 }
+
+void Streamer::Impl::flushTrace(bool publish) {
+  if (!tracing) return;
+  const std::string text = trace.str();
+  trace.str({});
+  Status status = trace_file->append(text);
+  if (status && publish) status = trace_file->commit();
+  if (!status) {
+    trace_status = status;
+    tracing = false;
+    trace_file.reset();  // removes the temporary
+  } else if (publish) {
+    tracing = false;
+    trace_file.reset();
+  }
+}
+
+Status Streamer::traceStatus() const { return m_impl->trace_status; }
 
 Streamer::~Streamer() { shutdown(); }
 
@@ -690,6 +730,7 @@ StreamerStats Streamer::stats() const {
     out.ram_entries = s.cache.size();
     out.path_hint_frames = s.hint_frames;
     out.path_hint_ignored_frames = s.hint_ignored_frames;
+    out.loader_threads = s.loader_threads;
     lat = s.latency_ms;
   }
   out.ram_budget_bytes = s.config.ram_budget_bytes;
@@ -739,7 +780,7 @@ void Streamer::shutdown() {
   for (std::thread& t : s.workers)
     if (t.joinable()) t.join();
   s.workers.clear();
-  if (s.trace.is_open()) s.trace.close();
+  s.flushTrace(true);
 }
 
 }  // namespace clipstream

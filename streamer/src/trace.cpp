@@ -4,6 +4,8 @@
 #include "eviction.h"
 #include "lookahead.h"
 
+#include <sys/stat.h>
+
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -17,15 +19,46 @@ namespace clipstream {
 
 Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   events->clear();
-  std::ifstream in(path);
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    return Status::error(ErrorCode::kIo, "trace " + path + " is not a regular file");
+  }
+  std::ifstream in(path, std::ios::binary);
   if (!in) {
     return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
                          "cannot open trace " + path + ": " + std::strerror(errno));
   }
+  // Shown in messages: at most 80 bytes of the line, control bytes as '?'.
+  auto bad = [&](uint64_t line_no, const std::string& expected, const std::string& line) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ":" + std::to_string(line_no) +
+                                                          ": expected " + expected + ", got '" +
+                                                          printableText(line, 80) + "'");
+  };
   std::string line;
   uint64_t line_no = 0;
+  // The first line names the format: an empty file or another file is not a trace.
+  if (!std::getline(in, line)) {
+    if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);
+    return Status::error(ErrorCode::kInvalidArgument, path + " is empty, not a clipstream trace");
+  }
+  ++line_no;
+  const std::string kMagic = "# clipstream trace v";
+  if (line.compare(0, kMagic.size(), kMagic) != 0) {
+    return bad(line_no, "the header '" + kMagic + "2...'", line);
+  }
+  if (line.compare(0, kMagic.size() + 2, kMagic + "2:") != 0) {
+    return Status::error(ErrorCode::kUnsupported,
+                         path + ": trace format '" + printableText(line, 24) + "' is not v2");
+  }
   while (std::getline(in, line)) {
     ++line_no;
+    // Every line the streamer writes ends in a newline: a last line without
+    // one is a trace cut short (a crash, a full disk).
+    if (in.eof()) {
+      return Status::error(ErrorCode::kTruncated,
+                           path + ":" + std::to_string(line_no) +
+                               ": the trace ends in the middle of a line (truncated)");
+    }
     if (line.empty() || line[0] == '#') continue;
     std::istringstream fields(line);
     TraceEvent e;
@@ -36,10 +69,7 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
       int kind = 0;
       if (!(fields >> e.frame >> level >> e.rect.x0 >> e.rect.y0 >> e.rect.x1 >> e.rect.y1 >> kind) ||
           level > 63 || kind < 0 || kind > 2) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             path + ":" + std::to_string(line_no) +
-                                 ": expected 'w|p frame level x0 y0 x1 y1 kind', got '" +
-                                 line.substr(0, 80) + "'");
+        return bad(line_no, "'w|p frame level x0 y0 x1 y1 kind'", line);
       }
       e.key.level = uint32_t(level);
       e.kind = uint8_t(kind);
@@ -53,10 +83,7 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
       uint64_t width = 0, height = 0;
       if (!(fields >> e.frame >> e.time_s >> used >> width >> height) || !std::isfinite(e.time_s) ||
           used < 0 || used > 1 || width > UINT32_MAX || height > UINT32_MAX) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             path + ":" + std::to_string(line_no) +
-                                 ": expected 't frame seconds 0|1 width height', got '" + line.substr(0, 80) +
-                                 "'");
+        return bad(line_no, "'t frame seconds 0|1 width height'", line);
       }
       e.kind = uint8_t(used);
       e.viewport = {uint32_t(width), uint32_t(height)};
@@ -69,9 +96,7 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
     }
     uint64_t level = 0, x = 0, y = 0;
     if (!(fields >> e.frame >> level >> x >> y) || level > 63 || x > UINT32_MAX || y > UINT32_MAX) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           path + ":" + std::to_string(line_no) + ": expected 'frame level x y', got '" +
-                               line.substr(0, 80) + "'");
+      return bad(line_no, "'frame level x y'", line);
     }
     e.key = {uint32_t(level), uint32_t(x), uint32_t(y)};
     events->push_back(e);

@@ -4,26 +4,31 @@
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
 
-#include <CLI/CLI.hpp>
+#include <clipstream/cli/cli.h>
 
 #include <cstdio>
 
 int main(int argc, char** argv) {
-  CLI::App app{"Replay a clipstream request trace against cache policies"};
+  namespace cli = clipstream::cli;
+  CLI::App app{"Replay a clipstream request trace against cache policies", "clipstream-trace"};
   std::string trace_path;
   double budget_mb = 256.0;
   uint64_t tile_bytes = 128 * 128 * 4;
   app.add_option("trace", trace_path, "trace file written by the streamer")->required();
-  app.add_option("--budget-mb", budget_mb, "RAM budget in MiB")->required()->check(CLI::PositiveNumber);
+  app.add_option("--budget-mb", budget_mb, "RAM budget in MiB")
+      ->required()
+      ->check(cli::inRange(0.001, 16.0 * 1024 * 1024));
   app.add_option("--tile-bytes", tile_bytes, "decoded bytes per tile (default 128*128*4)")
-      ->check(CLI::PositiveNumber);
-  CLI11_PARSE(app, argc, argv);
+      ->check(cli::wholeInRange(1, int64_t(1) << 30));
+  app.footer("Exit codes: 0 success, 1 the trace cannot be read or is damaged, 2 command-line mistake.");
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  cli::installSignalHandlers();
 
   std::vector<clipstream::TraceEvent> events;
   const clipstream::Status status = clipstream::readTrace(trace_path, &events);
   if (!status) {
     std::fprintf(stderr, "clipstream-trace: %s\n", status.toString().c_str());
-    return 1;
+    return cli::kExitFailure;
   }
   // Same accounting as the streamer: payload plus a fixed per-entry overhead.
   const uint64_t entry_bytes = tile_bytes + clipstream::kCacheEntryOverheadBytes;
@@ -43,5 +48,5 @@ int main(int argc, char** argv) {
   row("lru", r.hits_lru);
   row("ours", r.hits_gpu_first);           // default: EvictionMode::kGpuFirst
   row("ours_protect_gpu", r.hits_plan);    // EvictionMode::kProtectGpu
-  return 0;
+  return cli::finish(app, cli::kExitOk);
 }

@@ -178,7 +178,12 @@ TEST(TileStoreWriter, FinishReplacesAnExistingFileAtomically) {
   testutil::writeFile(path, std::vector<uint8_t>(10, 'x'), 10);
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(40, 40, 16, PixelFormat::kR8, &g));
-  ASSERT_TRUE(testutil::writeStore(path, g).isOk());
+  // Without `replace` an existing file is never touched.
+  EXPECT_EQ(testutil::writeStore(path, g).code, ErrorCode::kAlreadyExists);
+  EXPECT_EQ(testutil::readFile(path), std::vector<uint8_t>(10, 'x'));
+  WriterOptions options;
+  options.replace = true;
+  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
   std::unique_ptr<TileStoreReader> reader;
   EXPECT_TRUE(TileStoreReader::open(path, &reader).isOk());
   EXPECT_EQ(testutil::listDir(dir).size(), 1u);

@@ -339,7 +339,7 @@ TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
 TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
   TempFile file("times.trace");
   auto readText = [&](const std::string& text, std::vector<TraceEvent>* events) {
-    std::ofstream(file.path) << text;
+    std::ofstream(file.path) << kTraceHeader << '\n' << text;
     return readTrace(file.path, events);
   };
   std::vector<TraceEvent> events;
@@ -356,7 +356,7 @@ TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
                           "t x 0.1 0 800 600\n", "t 3 0.1 0 -1 600\n"}) {
     const Status st = readText(bad, &events);
     EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << bad;
-    EXPECT_NE(st.message.find(":1: expected 't frame seconds 0|1 width height'"), std::string::npos)
+    EXPECT_NE(st.message.find(":2: expected 't frame seconds 0|1 width height'"), std::string::npos)
         << st.message;
   }
 }

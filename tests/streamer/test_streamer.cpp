@@ -6,6 +6,10 @@
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -577,13 +581,116 @@ TEST(Trace, ReplayMatchesHandComputedHitCounts) {
   test::TempFile bad("bad_trace.txt");
   {
     std::ofstream f(bad.path);
-    f << "# header\n1 0 2 3\nnot a line\n";
+    f << kTraceHeader << "\n1 0 2 3\nnot a line\n";
   }
   std::vector<TraceEvent> parsed;
   const Status st = readTrace(bad.path, &parsed);
   EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(st.message.find(":3:"), std::string::npos) << st.message;
   EXPECT_EQ(readTrace("/nonexistent/trace", &parsed).code, ErrorCode::kNotFound);
+}
+
+// clipstream-trace accepted an empty or truncated trace and echoed raw bytes
+// (terminal escapes included) in its error.
+TEST(Trace, EmptyTruncatedForeignOrNonRegularTracesAreRefused) {
+  test::TempFile file("hostile.trace");
+  auto readText = [&](const std::string& text) {
+    std::ofstream(file.path, std::ios::binary) << text;
+    std::vector<TraceEvent> events;
+    return readTrace(file.path, &events);
+  };
+  const std::string header = std::string(kTraceHeader) + "\n";
+  EXPECT_TRUE(readText(header).isOk()) << "a header alone is a trace of no frames";
+  EXPECT_TRUE(readText(header + "1 0 2 3\n").isOk());
+  Status st = readText("");
+  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(st.message.find("empty"), std::string::npos) << st.message;
+  st = readText(header + "1 0 2 3\n2 0 2");
+  EXPECT_EQ(st.code, ErrorCode::kTruncated) << st.toString();
+  EXPECT_NE(st.message.find(":3:"), std::string::npos) << st.message;
+  st = readText("1 0 2 3\n");
+  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << "no header";
+  st = readText("# clipstream trace v9: from the future\n");
+  EXPECT_EQ(st.code, ErrorCode::kUnsupported) << st.toString();
+  st = readText(header + "1 0 \x1b[31mred\x07\n");
+  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
+  for (char c : st.message) EXPECT_GE(static_cast<unsigned char>(c), 0x20) << st.message;
+  EXPECT_NE(st.message.find("?[31mred?"), std::string::npos) << st.message;
+  const std::string fifo = file.path + ".fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  std::vector<TraceEvent> events;
+  EXPECT_EQ(readTrace(fifo, &events).code, ErrorCode::kIo);
+  ::unlink(fifo.c_str());
+}
+
+// clipstream-trace: NaN and other absurd numbers, and a bad trace, exit
+// with the documented codes and one plain line.
+TEST(Trace, ClipstreamTraceRejectsAbsurdArgumentsAndBadTraces) {
+  test::TempFile file("cli.trace");
+  std::ofstream(file.path) << kTraceHeader << "\n1 0 2 3\n2 0 2 3\n1 0 2 3\n";
+  auto run = [&](const std::string& args, std::string* output) {
+    const std::string cmd = std::string("{ '") + CLIPSTREAM_TRACE_EXE + "' " + args + "; } 2>&1";
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    char buffer[4096];
+    size_t got;
+    output->clear();
+    while ((got = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) output->append(buffer, got);
+    const int status = ::pclose(pipe);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  };
+  std::string out;
+  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "'", &out), 0) << out;
+  EXPECT_NE(out.find("opt\t"), std::string::npos) << out;
+  for (const char* bad : {"--budget-mb nan", "--budget-mb 0", "--budget-mb -5", "--budget-mb 1e999",
+                          "--budget-mb 1 --tile-bytes 0", "--budget-mb 1 --no-such-flag"}) {
+    EXPECT_EQ(run(std::string(bad) + " '" + file.path + "'", &out), 2) << bad << ": " << out;
+    EXPECT_LT(out.size(), 300u) << out;
+  }
+  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "' >/dev/full", &out), 1) << out;
+  EXPECT_NE(out.find("cannot write standard output"), std::string::npos) << out;
+  std::ofstream(file.path, std::ios::trunc);  // empty
+  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "'", &out), 1) << out;
+  EXPECT_NE(out.find("empty"), std::string::npos) << out;
+}
+
+// The trace is written under OutputFile's rule: nothing under its name until
+// shutdown(), then the whole trace; an unwritable path is reported, not
+// printed and ignored.
+TEST(Trace, TheTraceAppearsWholeAtShutdownAndFailuresAreReported) {
+  test::TempFile file("streamer.trace");
+  {
+    StreamerConfig cfg;
+    cfg.io_threads = 1;
+    cfg.trace_path = file.path;
+    Streamer streamer(test::procedural(4096), cfg);
+    const Viewport vp{320, 240};
+    for (int f = 0; f < 5; ++f) streamer.update(test::lookingDown(2048, 2048, 300.0 + f), vp, f / 60.0);
+    EXPECT_FALSE(std::filesystem::exists(file.path)) << "visible before shutdown";
+    streamer.shutdown();
+    EXPECT_TRUE(streamer.traceStatus().isOk()) << streamer.traceStatus().toString();
+  }
+  std::vector<TraceEvent> events;
+  ASSERT_TRUE(readTrace(file.path, &events).isOk());
+  EXPECT_GT(events.size(), 5u);
+  StreamerConfig cfg;
+  cfg.trace_path = "/nonexistent-dir/streamer.trace";
+  Streamer streamer(test::procedural(4096), cfg);
+  streamer.shutdown();
+  EXPECT_EQ(streamer.traceStatus().code, ErrorCode::kNotFound) << streamer.traceStatus().toString();
+}
+
+// --io-threads 100000 aborted clipstream-fly: the streamer starts at most
+// kMaxIoThreads loaders and never throws when the system refuses more.
+TEST(Streamer, AnAbsurdLoaderCountIsCappedNotFatal) {
+  StreamerConfig cfg;
+  cfg.io_threads = 100000;
+  Streamer streamer(test::procedural(4096), cfg);
+  const Viewport vp{320, 240};
+  for (int f = 0; f < 3; ++f) streamer.update(test::lookingDown(2048, 2048, 300.0), vp, f / 60.0);
+  EXPECT_TRUE(test::waitIdle(streamer));
+  EXPECT_GT(streamer.stats().total.loads, 0u);
+  EXPECT_EQ(streamer.stats().loader_threads, kMaxIoThreads);
+  streamer.shutdown();
 }
 
 TEST(Trace, EvictionModesDifferOnTilesInsideTheWindow) {

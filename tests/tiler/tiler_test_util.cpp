@@ -181,14 +181,14 @@ uint32_t maxTileError(const TileStoreReader& reader, uint32_t level, const RefIm
   return worst;
 }
 
-RunResult runTiler(const std::vector<std::string>& args) {
+RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect) {
   std::string cmd = std::string("'") + CLIPSTREAM_TILE_EXE + "'";
   for (const std::string& a : args) {
     std::string q = "'";
     for (char c : a) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
     cmd += " " + q + "'";
   }
-  cmd += " 2>&1";
+  cmd = stdout_redirect.empty() ? cmd + " 2>&1" : "{ " + cmd + " " + stdout_redirect + "; } 2>&1";
   RunResult r;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (pipe == nullptr) return r;

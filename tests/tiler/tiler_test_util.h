@@ -66,8 +66,9 @@ struct RunResult {
   int exit_code = -1;
   std::string output;  // stdout + stderr
 };
-// Runs clipstream-tile with `args` (shell-quoted here), capturing output.
-RunResult runTiler(const std::vector<std::string>& args);
+// Runs clipstream-tile with `args` (shell-quoted here), capturing output;
+// `stdout_redirect` (e.g. ">/dev/full") redirects standard output alone.
+RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect = "");
 
 // Where the real sample data lives, or "" when absent.
 std::string sharedDataDir();

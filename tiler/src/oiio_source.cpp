@@ -19,6 +19,22 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A decoder's error text for one message line: libtiff and libjpeg report a
+// damaged file once per strip or scanline, which would flood the terminal
+// under our one error. Keeps the first line, control bytes shown as '?'.
+std::string decoderMessage(const std::string& text, const char* fallback) {
+  if (text.empty()) return fallback;
+  const size_t end = text.find('\n');
+  // (This module is loaded on its own: no clipstream::printableText here.)
+  std::string first = text.substr(0, std::min<size_t>(end, 300));
+  for (char& c : first)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  size_t more = 0;
+  for (size_t at = end; at != std::string::npos && at + 1 < text.size(); at = text.find('\n', at + 1)) ++more;
+  if (more > 0) first += " (and " + std::to_string(more) + " more messages like it)";
+  return first;
+}
+
 uint32_t formatChannels(PixelFormat f) {
   switch (f) {
     case PixelFormat::kR8:
@@ -203,8 +219,7 @@ class OiioSource final : public ImageSource {
   }
 
   Status readError(int yb, int ye) {
-    std::string why = m_input->geterror();
-    if (why.empty()) why = "decoder failed";
+    const std::string why = decoderMessage(m_input->geterror(), "decoder failed");
     return Status::error(ErrorCode::kIo, m_path + ": cannot read rows " + std::to_string(yb) + "-" +
                                              std::to_string(ye - 1) + ": " + why);
   }
@@ -213,7 +228,8 @@ class OiioSource final : public ImageSource {
   // that still leave an error message behind; treat them as failures rather
   // than tile the decoder's grey padding.
   Status damaged() {
-    return Status::error(ErrorCode::kTruncated, m_path + ": damaged image data: " + m_input->geterror());
+    return Status::error(ErrorCode::kTruncated,
+                         m_path + ": damaged image data: " + decoderMessage(m_input->geterror(), "decoder failed"));
   }
 
   // Tiled files are read one band of tile rows at a time, only the tile
@@ -235,8 +251,7 @@ class OiioSource final : public ImageSource {
         m_band_y0 = UINT64_MAX;
         if (!m_input->read_tiles(0, 0, int(ax0), int(ax1), int(band_y0), int(band_y1), 0, 1, 0,
                                  int(m_info.input_channels), m_read_type, m_scratch.data())) {
-          std::string why = m_input->geterror();
-          if (why.empty()) why = "decoder failed";
+          const std::string why = decoderMessage(m_input->geterror(), "decoder failed");
           return Status::error(ErrorCode::kIo, m_path + ": cannot read tiles at rows " +
                                                    std::to_string(band_y0) + "-" +
                                                    std::to_string(band_y1 - 1) + ": " + why);
@@ -281,8 +296,7 @@ Status openOiio(const std::string& path, std::optional<PixelFormat> forced,
   config.attribute("oiio:UnassociatedAlpha", 1);
   auto input = OIIO::ImageInput::open(path, &config);
   if (!input) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "not an image OpenImageIO can read";
+    const std::string why = decoderMessage(OIIO::geterror(), "not an image OpenImageIO can read");
     return Status::error(ErrorCode::kIo, path + ": cannot open image: " + why);
   }
   // One decode thread per input: the tiler's own pipeline already keeps
@@ -300,6 +314,13 @@ Status openOiio(const std::string& path, std::optional<PixelFormat> forced,
   info.input_channels = uint32_t(spec.nchannels);
   info.tiled = spec.tile_width > 0;
   info.file_bytes = fs::file_size(path, ec);
+  // The store keeps pixels as the file stores them; a viewer that honours
+  // the orientation tag would show the image turned or mirrored.
+  const int orientation = spec.get_int_attribute("Orientation", 1);
+  if (orientation != 1) {
+    info.warnings.push_back(path + ": orientation tag " + std::to_string(orientation) +
+                            " ignored: tiled as stored (not turned or mirrored as a viewer would show it)");
+  }
   if (spec.nchannels < 1 || spec.nchannels > 4) {
     return Status::error(ErrorCode::kUnsupported,
                          path + ": " + std::to_string(spec.nchannels) +

@@ -4,6 +4,7 @@
 // what bounds memory (see planLayout and docs/tiler.md).
 #include <clipstream/tiler/tiler.h>
 
+#include <clipstream/store/output_file.h>
 #include <clipstream/store/progress.h>
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/georef.h>
@@ -204,7 +205,9 @@ Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned thre
                            std::to_string((smallest + mb - 1) / mb) + " MB");
 }
 
-Status validate(const TilerOptions& o) {
+}  // namespace
+
+Status validateOptions(const TilerOptions& o) {
   if (o.tile_px < kMinTilePx || o.tile_px > kMaxTilePx || (o.tile_px & (o.tile_px - 1)) != 0) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "tile size " + std::to_string(o.tile_px) + " must be a power of two from " +
@@ -235,6 +238,13 @@ Status validate(const TilerOptions& o) {
                          "synthetic image size " + std::to_string(o.synthetic_width_px) + "x" +
                              std::to_string(o.synthetic_height_px) + " is empty");
   }
+  if (o.input_path.empty() &&
+      (o.synthetic_width_px > kMaxSyntheticSidePx || o.synthetic_height_px > kMaxSyntheticSidePx)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "synthetic image size " + std::to_string(o.synthetic_width_px) + "x" +
+                             std::to_string(o.synthetic_height_px) + " is larger than " +
+                             std::to_string(kMaxSyntheticSidePx) + " px on a side");
+  }
   if (o.output_path.empty()) return Status::error(ErrorCode::kInvalidArgument, "no output path");
   if (o.linear_light && o.filter != DownsampleFilter::kLanczos3) {
     return Status::error(ErrorCode::kInvalidArgument, "--linear-light needs --filter lanczos3");
@@ -242,25 +252,25 @@ Status validate(const TilerOptions& o) {
   return Status::ok();
 }
 
+namespace {
+
+// The output rule of OutputFile (only regular files replaced, and only with
+// overwrite), checked before any work; the writer checks again at the end.
+// An output that is the input itself (also through a link) is refused even
+// with overwrite: replacing it would destroy the input.
 Status checkOutput(const TilerOptions& o) {
-  std::error_code ec;
-  const fs::path out(o.output_path);
-  if (fs::exists(out, ec)) {
-    if (fs::is_directory(out, ec)) {
-      return Status::error(ErrorCode::kInvalidArgument, o.output_path + ": is a directory");
-    }
-    if (!o.overwrite) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           o.output_path + ": already exists (use --force to overwrite)");
-    }
+  if (!o.input_path.empty() && sameFile(o.input_path, o.output_path)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         o.output_path + " is the input file " + o.input_path +
+                             " (the same file, maybe through a link); refusing to overwrite it");
   }
-  fs::path dir = out.parent_path();
-  if (dir.empty()) dir = ".";
-  if (!fs::is_directory(dir, ec)) {
-    return Status::error(ErrorCode::kNotFound,
-                         o.output_path + ": output directory " + dir.string() + " does not exist");
+  OutputOptions options;
+  options.existing = o.overwrite ? ExistingOutput::kReplaceRegular : ExistingOutput::kRefuse;
+  Status s = checkOutputPath(o.output_path, options);
+  if (s.code == ErrorCode::kAlreadyExists) {
+    s.message = o.output_path + " (use --force to overwrite)";
   }
-  return Status::ok();
+  return s;
 }
 
 }  // namespace
@@ -283,7 +293,7 @@ namespace {
 Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   const auto start = Clock::now();
   *summary = TilerSummary{};
-  Status s = validate(o);
+  Status s = validateOptions(o);
   if (!s) return s;
   s = checkOutput(o);
   if (!s) return s;
@@ -297,6 +307,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   }
   if (!s) return s;
   const SourceInfo& src = source->info();
+  for (const std::string& w : src.warnings) summary->warnings.push_back(w);
 
   WriterOptions wopt;
   wopt.encoding.compression = Compression::kZstd;
@@ -305,6 +316,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   wopt.encoding.filter = o.filter;
   wopt.encoding.linear_light = o.linear_light;
   wopt.fsync = o.fsync;
+  wopt.replace = o.overwrite;
   if (!o.input_path.empty()) {
     s = findGeoReference(o.input_path, &wopt.geo);
     if (!s) return s;
@@ -346,6 +358,11 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
 
   std::unique_ptr<TileStoreWriter> writer;
   s = TileStoreWriter::create(o.output_path, geometry, wopt, &writer);
+  if (s) {
+    for (const std::string& swept : writer->sweptTemporaries()) {
+      summary->warnings.push_back("removed a temporary file left by an interrupted earlier run: " + swept);
+    }
+  }
   if (!s) return s;
 
   // ---- pipeline ----
@@ -376,7 +393,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   double read_s = 0.0;
   std::mutex encode_time_mutex;  // guards encode_s
   double encode_s = 0.0;
-  auto cancelled = [&] { return o.cancel != nullptr && o.cancel->load(std::memory_order_relaxed); };
+  auto cancelled = [&] { return o.cancel != nullptr && o.cancel->load(std::memory_order_relaxed) != 0; };
   auto abortAll = [&] {
     filled.abort();
     free_buffers.abort();

@@ -1,37 +1,44 @@
 // clipstream-tile: builds a tile store from an image. Thin: argument
 // parsing, signal handling and the summary; the work is in clipstream::tiler.
+#include <clipstream/cli/cli.h>
+#include <clipstream/store/output_file.h>
 #include <clipstream/store/progress.h>
 #include <clipstream/tiler/tiler.h>
 
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include <csignal>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
 
 namespace {
 
-std::atomic<bool> g_cancel{false};
+std::atomic<int> g_cancel{0};
 
-extern "C" void onSignal(int) { g_cancel.store(true); }
-
-// Parses "WIDTHxHEIGHT" (decimal, at most 12 digits each, 'x' or 'X').
-bool parseSize(const std::string& text, uint64_t* width, uint64_t* height) {
+// Parses "WIDTHxHEIGHT" (decimal digits, 'x' or 'X'). Returns "" or what is wrong.
+std::string parseSize(const std::string& text, uint64_t* width, uint64_t* height) {
   const size_t sep = text.find_first_of("xX");
-  if (sep == std::string::npos) return false;
-  auto number = [](const std::string& digits, uint64_t* out) {
-    if (digits.empty() || digits.size() > 12) return false;
+  bool too_large = false;
+  auto number = [&](const std::string& digits, uint64_t* out) {
+    if (digits.empty()) return false;
     uint64_t v = 0;
     for (char c : digits) {
       if (c < '0' || c > '9') return false;
-      v = v * 10 + uint64_t(c - '0');
+      if (v > clipstream::tiler::kMaxSyntheticSidePx) too_large = true;
+      else v = v * 10 + uint64_t(c - '0');
     }
     *out = v;
+    if (v > clipstream::tiler::kMaxSyntheticSidePx) too_large = true;
     return true;
   };
-  return number(text.substr(0, sep), width) && number(text.substr(sep + 1), height);
+  if (sep == std::string::npos || !number(text.substr(0, sep), width) ||
+      !number(text.substr(sep + 1), height)) {
+    return "is not WIDTHxHEIGHT (e.g. 8192x4096)";
+  }
+  if (too_large) {
+    return "is too large: at most " + std::to_string(clipstream::tiler::kMaxSyntheticSidePx) +
+           " px on a side";
+  }
+  return {};
 }
 
 std::string megabytes(uint64_t bytes) {
@@ -79,7 +86,8 @@ nlohmann::json toJson(const clipstream::tiler::TilerSummary& s, const std::strin
 
 int main(int argc, char** argv) {
   using namespace clipstream;
-  CLI::App app{"Builds a clipstream tile store (full mip pyramid) from an image, out of core."};
+  CLI::App app{"Builds a clipstream tile store (full mip pyramid) from an image, out of core.",
+               "clipstream-tile"};
   std::vector<std::string> positional;
   std::string synthetic, format_text, filter_text = "box", json_path;
   uint32_t tile_px = 128;
@@ -93,40 +101,38 @@ int main(int argc, char** argv) {
       ->expected(1, 2);
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
   app.add_option("--format", format_text, "force the store format: R8, R16, RGB8, RGBA8");
-  app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)");
-  app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)");
+  app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
+      ->check(cli::wholeInRange(tiler::kMinTilePx, tiler::kMaxTilePx));
+  app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)")
+      ->check(cli::wholeInRange(1, 22));
   app.add_flag("--no-predictor", no_predictor, "store tiles without the left-delta predictor");
   app.add_option("--filter", filter_text, "downsampling filter: box (default) or lanczos3");
   app.add_flag("--linear-light", linear_light, "with lanczos3: filter in linear light (sRGB input)");
-  app.add_option("--threads", threads, "encoder threads (default: all cores)");
-  app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)");
+  app.add_option("--threads", threads, "encoder threads (default: all cores)")
+      ->check(cli::wholeInRange(0, tiler::kMaxThreads));
+  app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)")
+      ->check(cli::wholeInRange(int64_t(tiler::kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
   app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
-  app.add_flag("--force,-f", force, "overwrite an existing OUTPUT");
+  app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
   app.add_flag("--no-fsync", no_fsync, "skip the final fsync (faster, for scratch outputs)");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
+  app.footer(
+      "Exit codes: 0 success, 1 failure (nothing left behind), 2 command-line mistake,\n"
+      "128+N stopped by signal N (INT, TERM, HUP; temporaries removed). docs/cli.md.");
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
   tiler::TilerOptions options;
   std::string input_name;
   if (!synthetic.empty()) {
-    if (positional.size() != 1) {
-      std::cerr << "clipstream-tile: with --synthetic give only OUTPUT\n";
-      return 2;
-    }
-    if (!parseSize(synthetic, &options.synthetic_width_px, &options.synthetic_height_px)) {
-      std::cerr << "clipstream-tile: --synthetic '" << synthetic << "' is not WIDTHxHEIGHT\n";
-      return 2;
-    }
+    if (positional.size() != 1) return cli::usageError(app, "with --synthetic give only OUTPUT");
+    const std::string problem =
+        parseSize(synthetic, &options.synthetic_width_px, &options.synthetic_height_px);
+    if (!problem.empty()) return cli::usageError(app, "--synthetic '" + synthetic + "' " + problem);
     options.output_path = positional[0];
     input_name = "synthetic " + synthetic;
   } else {
     if (positional.size() != 2) {
-      std::cerr << "clipstream-tile: need INPUT and OUTPUT (or --synthetic WxH OUTPUT)\n";
-      return 2;
+      return cli::usageError(app, "need INPUT and OUTPUT (or --synthetic WxH OUTPUT)");
     }
     options.input_path = positional[0];
     options.output_path = positional[1];
@@ -135,8 +141,7 @@ int main(int argc, char** argv) {
   if (!format_text.empty()) {
     options.format = tiler::parsePixelFormat(format_text);
     if (!options.format) {
-      std::cerr << "clipstream-tile: --format '" << format_text << "' is not R8, R16, RGB8 or RGBA8\n";
-      return 2;
+      return cli::usageError(app, "--format '" + format_text + "' is not R8, R16, RGB8 or RGBA8");
     }
   }
   if (filter_text == "box") {
@@ -144,12 +149,7 @@ int main(int argc, char** argv) {
   } else if (filter_text == "lanczos3") {
     options.filter = DownsampleFilter::kLanczos3;
   } else {
-    std::cerr << "clipstream-tile: --filter '" << filter_text << "' is not box or lanczos3\n";
-    return 2;
-  }
-  if (memory_mb > (uint64_t(1) << 30)) {
-    std::cerr << "clipstream-tile: --memory-mb " << memory_mb << " is absurdly large\n";
-    return 2;
+    return cli::usageError(app, "--filter '" + filter_text + "' is not box or lanczos3");
   }
   options.tile_px = tile_px;
   options.zstd_level = zstd_level;
@@ -161,21 +161,34 @@ int main(int argc, char** argv) {
   options.progress = !quiet && progressEnabledByDefault();
   options.fsync = !no_fsync;
   options.cancel = &g_cancel;
+  if (Status s = tiler::validateOptions(options); !s) return cli::usageError(app, s.message);
+  // The summary file follows the output rule too (a regular file named by
+  // the user may be replaced); checked now, not after the work.
+  OutputOptions json_options;
+  json_options.existing = ExistingOutput::kReplaceRegular;
+  json_options.fsync = options.fsync;
+  if (!json_path.empty() && json_path != "-") {
+    if (sameFile(json_path, options.output_path) ||
+        (!options.input_path.empty() && sameFile(json_path, options.input_path))) {
+      return cli::usageError(app, "--json-summary " + json_path + " is the input or the output");
+    }
+    if (Status s = checkOutputPath(json_path, json_options); !s) {
+      std::cerr << "clipstream-tile: --json-summary: " << s.toString() << "\n";
+      return cli::kExitFailure;
+    }
+  }
 
-  struct sigaction action = {};
-  action.sa_handler = onSignal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
-  // Past a file-size limit, writes then fail with EFBIG (reported, temporaries
-  // removed) instead of the default SIGXFSZ killing us mid-write.
-  std::signal(SIGXFSZ, SIG_IGN);
+  cli::installSignalHandlers(&g_cancel);
 
   tiler::TilerSummary summary;
   const Status status = tiler::tileImage(options, &summary);
   if (!status) {
+    if (status.code == ErrorCode::kCancelled) {
+      std::cerr << "clipstream-tile: stopped by signal " << g_cancel.load() << "; nothing was written\n";
+      return cli::kExitSignalBase + g_cancel.load();
+    }
     std::cerr << "clipstream-tile: " << status.toString() << "\n";
-    return status.code == ErrorCode::kCancelled ? 130 : 1;
+    return cli::kExitFailure;
   }
 
   for (const std::string& w : summary.warnings) std::cerr << "clipstream-tile: warning: " << w << "\n";
@@ -206,14 +219,11 @@ int main(int argc, char** argv) {
     const std::string text = toJson(summary, input_name, options.output_path).dump(2) + "\n";
     if (json_path == "-") {
       std::fputs(text.c_str(), stdout);
-    } else {
-      std::ofstream out(json_path);
-      out << text;
-      if (!out) {
-        std::cerr << "clipstream-tile: cannot write " << json_path << "\n";
-        return 1;
-      }
+    } else if (Status s = writeOutputFile(json_path, text, json_options); !s) {
+      std::cerr << "clipstream-tile: --json-summary: " << s.toString()
+                << " (the store " << options.output_path << " was written)\n";
+      return cli::kExitFailure;
     }
   }
-  return 0;
+  return cli::finish(app, cli::kExitOk);
 }

@@ -34,7 +34,8 @@ class FlightPath {
   static Status fromJson(const std::string& text, FlightPath* out);
   static Status load(const std::string& path, FlightPath* out);
   std::string toJson() const;
-  // Writes toJson() to `path` (temporary name, then rename). kIo on failure.
+  // Writes toJson() to `path` under OutputFile's rule (temporary name, checked,
+  // renamed; a regular file there is replaced). kIo / kNoSpace / kInvalidArgument.
   Status save(const std::string& path) const;
 
   // Built-in paths scaled to the texture: "pass" (low and fast across),

@@ -17,11 +17,17 @@
 
 namespace clipstream {
 
+// Bounds of FlyOptions that runFly() and clipstream-fly check: beyond them a
+// run would hang (a delay of hours per read) or mean nothing.
+inline constexpr double kMaxFlySpeed = 10000.0;     // path seconds per simulated second
+inline constexpr double kMaxFlyDelayMs = 10000.0;   // fault latency per read, rest-frame time
+inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up frames
+
 struct FlyOptions {
   std::string store_path;          // tile store; empty when procedural_px > 0
   uint64_t procedural_px = 0;      // > 0: procedural texture of this side instead
   std::string path = "orbit";      // built-in name or JSON file
-  uint32_t frames = 0;             // 0 = the whole path at --speed
+  uint32_t frames = 0;             // 0 = the whole path at `speed`
   Viewport viewport{1280, 720};
   double speed = 1.0;              // path seconds per simulated second
   uint64_t cache_mb = 256;         // streamer RAM budget
@@ -54,9 +60,12 @@ struct FlyOptions {
 
 // Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
 // the real render time (simulated pacing: results are deterministic).
-// Writes OUT/frames.csv, OUT/frames.json, OUT/frame_NNNNN.png and prints a
-// summary table to `log`. Returns the first error (bad store, no GL
-// context, unwritable output); per-tile failures are counted, not errors.
+// Writes OUT/frames.csv, OUT/frames.json, OUT/summary.tsv and
+// OUT/frame_NNNNN.png, each under OutputFile's rule, after removing what an
+// earlier run wrote in OUT (the statistics files appear only when the run
+// succeeds), and prints a summary table to `log`. Returns the first error
+// (options out of bounds, bad store, no GL context, unwritable output or
+// trace); per-tile failures are counted, not errors.
 Status runFly(const FlyOptions& options, std::ostream& log);
 
 // "1280x720" -> viewport. kInvalidArgument otherwise.

@@ -128,7 +128,8 @@ class TileStoreReader {
 struct WriterOptions {
   StoreEncoding encoding;
   GeoReference geo;
-  bool fsync = true;  // flush to disk before the final rename
+  bool fsync = true;     // flush to disk before the final rename
+  bool replace = false;  // a regular file at the path may be replaced (OutputFile's rule)
 };
 
 // Encodes one tile: constant detection, predictor, compression, checksum.
@@ -158,8 +159,9 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
 Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& encoding,
                        const RawTile& raw, std::span<uint8_t> rgba);
 
-// Writes a store atomically: everything goes to a temporary file next to the
-// final path, which appears (fsync + rename) only in finish(). Destroying an
+// Writes a store atomically through an OutputFile (output_file.h): everything
+// goes to a temporary file next to the final path, which appears (fsync +
+// rename, replacing nothing it did not own) only in finish(). Destroying an
 // unfinished writer, or a failed finish(), removes every temporary file.
 //
 // Thread-safe: write() and writeConstantTiles() may be called from several
@@ -172,7 +174,9 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
 class TileStoreWriter {
  public:
   // Fails (kIo / kNotFound / kInvalidArgument) if the directory of `path`
-  // does not exist or is not writable, or the geometry is invalid.
+  // does not exist or is not writable, or the geometry is invalid;
+  // kAlreadyExists / kInvalidArgument as OutputFile::create() for what is
+  // already at `path`.
   static Status create(const std::string& path, const PyramidGeometry& geometry,
                        const WriterOptions& options, std::unique_ptr<TileStoreWriter>* out);
   ~TileStoreWriter();
@@ -200,6 +204,10 @@ class TileStoreWriter {
   // Bytes written so far (payloads), for progress and summaries.
   uint64_t bytesWritten() const;
   uint64_t constantTiles() const;
+
+  // Temporaries of an earlier, killed run for the same path that create()
+  // removed (OutputFile::swept()), for the program to report.
+  const std::vector<std::string>& sweptTemporaries() const;
 
  private:
   TileStoreWriter();

@@ -100,6 +100,7 @@ enum class ErrorCode : uint32_t {
   kNoSpace,        // disk full
   kCancelled,
   kUnavailable,    // transient source failure (e.g. injected), may be retried
+  kAlreadyExists,  // an output path is taken by a file this program may not replace
 };
 const char* errorCodeName(ErrorCode code);
 
@@ -115,5 +116,10 @@ struct [[nodiscard]] Status {
   explicit operator bool() const { return isOk(); }
   std::string toString() const;  // "corrupt tile: level 3 tile (4, 7): checksum mismatch"
 };
+
+// Untrusted text (from a file, a command line) made safe to show on a
+// terminal or in a message: control bytes (newlines, escape sequences, NUL)
+// become '?'; longer than max_bytes is cut and marked with "...".
+std::string printableText(const std::string& text, size_t max_bytes = SIZE_MAX);
 
 }  // namespace clipstream

@@ -41,6 +41,7 @@ struct StreamerStats {
   uint64_t entry_overhead_bytes = 0;  // per-entry overhead counted with each payload
   uint64_t path_hint_frames = 0;          // update() calls that used the path hint
   uint64_t path_hint_ignored_frames = 0;  // update() calls whose hint disagreed with the camera
+  uint32_t loader_threads = 0;  // loader threads started (at most kMaxIoThreads)
 
   // One JSON object: {"total": {...}, "levels": [{...}, ...], "ram_bytes": ...}
   // with the field names above. Always valid JSON (non-finite numbers as 0).

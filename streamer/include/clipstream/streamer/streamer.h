@@ -34,9 +34,13 @@ enum class EvictionMode : uint8_t {
   kProtectGpu,   // keep them longest, after every tile outside the windows; pyramid tiles kept
 };
 
+// Most loader threads a streamer starts: reads in flight beyond this gain
+// nothing even on a slow network disk, and each thread costs a stack.
+inline constexpr unsigned kMaxIoThreads = 256;
+
 struct StreamerConfig {
   uint64_t ram_budget_bytes = uint64_t(256) << 20;  // hard: never exceeded
-  unsigned io_threads = 0;       // 0 = number of cores
+  unsigned io_threads = 0;       // 0 = number of cores; at most kMaxIoThreads
   bool prefetch = true;          // velocity-predictive prefetch
   bool frustum_priority = true;  // visible tiles before hidden ones
   bool throttle = true;          // compute MaxTextureLOD from residency
@@ -47,7 +51,10 @@ struct StreamerConfig {
   // measured best (docs/decisions.md, Streamer).
   double lod_min_coverage = 0.5;
   PlannerConfig planner;
-  std::string trace_path;        // non-empty: record the request stream here
+  // Non-empty: record the request stream here (written under OutputFile's
+  // rule: a temporary name, published at shutdown(); a regular file there
+  // is replaced). See traceStatus().
+  std::string trace_path;
   double prefetch_ahead_s = 0.5; // how far ahead the predicted camera is placed
   EvictionMode eviction = EvictionMode::kGpuFirst;
   // Test hook: called after every RAM insert (placeholder reservation) with
@@ -141,7 +148,14 @@ class Streamer {
   // Thread-safe. Snapshot of the load queue, front (next to load) first:
   // for diagnostics overlays and tests of priority and prefetch.
   std::vector<TileKey> queuedTiles() const;
+  // Render thread. Stops and joins the loader threads, then publishes the
+  // trace (if any). Idempotent; the destructor calls it.
   void shutdown();
+
+  // Render thread. Ok without a trace; else why the trace could not be
+  // created or, after shutdown(), written and published (kIo / kNoSpace /
+  // kAlreadyExists naming the path).
+  Status traceStatus() const;
 
  private:
   struct Impl;

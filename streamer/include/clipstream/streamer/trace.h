@@ -47,8 +47,12 @@ struct TraceEvent {
   bool isAccess() const { return window == 0 && !leave; }
 };
 
-// Reads a trace file. kNotFound / kIo if it cannot be read, kInvalidArgument
-// naming the line if a line does not parse.
+// Reads a trace file (a regular file starting with the v2 header line).
+// kNotFound / kIo if it cannot be read or is not a regular file;
+// kInvalidArgument if it is empty, has no header, or a line does not parse
+// (naming the line; its text shown with control bytes as '?');
+// kUnsupported for another trace version; kTruncated if the last line has no
+// newline (a trace cut short).
 Status readTrace(const std::string& path, std::vector<TraceEvent>* events);
 
 struct ReplayResult {

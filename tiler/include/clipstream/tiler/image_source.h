@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace clipstream::tiler {
 
@@ -28,6 +29,7 @@ struct SourceInfo {
   uint64_t file_bytes = 0;       // size of the input file, 0 for synthetic input
   PixelFormat format = PixelFormat::kRGB8;  // format rows are delivered in
   uint64_t clamped_samples = 0;  // samples clamped by the conversion so far
+  std::vector<std::string> warnings;  // what the user should know about the input
 };
 
 class ImageSource {

@@ -25,6 +25,8 @@ constexpr uint64_t kMinMemoryBudgetBytes = uint64_t(16) << 20;
 constexpr uint32_t kMinTilePx = 16;
 constexpr uint32_t kMaxTilePx = 4096;
 constexpr unsigned kMaxThreads = 1024;
+// Largest --synthetic side: 2^32 px keeps every level's tile count in 32 bits.
+constexpr uint64_t kMaxSyntheticSidePx = uint64_t(1) << 32;
 
 struct TilerOptions {
   std::string input_path;            // image file; empty when synthetic
@@ -42,7 +44,7 @@ struct TilerOptions {
   bool overwrite = false;            // replace an existing output
   bool progress = false;             // draw the store's ProgressBar on stderr
   bool fsync = true;
-  const std::atomic<bool>* cancel = nullptr;  // set from a signal handler to stop
+  const std::atomic<int>* cancel = nullptr;  // non-zero (e.g. a signal number) stops the run
 };
 
 // What a run did, for the one-line summary and --json-summary.
@@ -78,6 +80,12 @@ struct TilerSummary {
 // too small for the image), kUnsupported (pixel type), kTruncated (damaged
 // input), kNoSpace (disk full), kCancelled.
 Status tileImage(const TilerOptions& options, TilerSummary* summary);
+
+// The checks tileImage() makes of the options alone (sizes, tile size,
+// threads, zstd level, memory budget against this machine), without touching
+// any file: kInvalidArgument naming the option. Programs call it first so
+// that a mistake on the command line is told apart from a failed run.
+Status validateOptions(const TilerOptions& options);
 
 // Peak resident set size of this process (VmHWM), in bytes; 0 if unknown.
 uint64_t peakRssBytes();

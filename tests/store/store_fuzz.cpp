@@ -1,6 +1,7 @@
 // libFuzzer driver for TileStoreReader: opens a mutated store and reads,
 // locates, verifies and decodes every tile. Built only with
-// -DCLIPSTREAM_FUZZ=ON (clang); see docs/tile-store.md for the format.
+// -DCLIPSTREAM_FUZZ=ON (clang); scripts/test.sh runs it for a fixed time as
+// a regression guard; see docs/tile-store.md for the format.
 //
 // Input: one control byte, then the store bytes. Control bit 0 re-seals the
 // mutated bytes (recomputes every checksum it can find and the file size
@@ -114,6 +115,7 @@ void writeSeeds(const std::string& dir) {
     if (!makePyramidGeometry(s.w, s.h, s.tile, s.format, &g)) std::abort();
     WriterOptions options;
     options.fsync = false;
+    options.replace = true;
     options.encoding.compression = s.compression;
     options.encoding.predictor = s.predictor;
     options.geo.present = (n % 2) == 0;

@@ -1,0 +1,58 @@
+// What the clipstream programs share on the command line: one exit-code
+// table, one way to parse and report mistakes, range checks with plain
+// messages, signal handling that leaves no temporary behind, and a checked
+// standard output. Linked only by executables, never by the libraries
+// (an embedding host keeps its own signals and exit codes).
+//
+// Thread rule: parse(), finish() and installSignalHandlers() from the main
+// thread; the validators run inside parse().
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace clipstream::cli {
+
+// Exit codes of every program (docs/cli.md).
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;  // the work failed: input unreadable, output unwritable, ...
+constexpr int kExitUsage = 2;    // a command-line mistake: nothing was read or written
+constexpr int kExitCorrupt = 3;  // clipstream-info: corruption found
+constexpr int kExitSignalBase = 128;  // 128 + N: stopped by signal N (INT 130, TERM 143, HUP 129)
+
+// Parses the command line. Returns nullopt to go on, or the exit code to
+// return now: 0 after --help, kExitUsage after a mistake (printed on stderr
+// as "PROGRAM: <problem>" with a pointer to --help).
+std::optional<int> parse(CLI::App& app, int argc, char** argv);
+
+// "PROGRAM: <message>" on stderr; returns kExitUsage. For mistakes found
+// after parse() (e.g. a malformed size).
+int usageError(const CLI::App& app, const std::string& message);
+
+// Validators: the value must be a finite number in [lo, hi] (inRange) or a
+// whole number in [lo, hi] (wholeInRange). Messages name the bounds plainly
+// ("must be a number from 0 to 10000"); NaN, infinities and numbers too long
+// to hold are rejected.
+CLI::Validator inRange(double lo, double hi);
+CLI::Validator wholeInRange(int64_t lo, int64_t hi);
+
+// SIGINT, SIGTERM and SIGHUP. With `cancel`, the first signal stores its
+// number there (the program polls it, stops, cleans up and returns
+// kExitSignalBase + N); a second signal, or any signal without `cancel`,
+// removes every live output temporary (removeOutputTemporaries()) and ends
+// the process by that signal. SIGPIPE is ignored (a closed pipe is a write
+// error, reported by finish()); SIGXFSZ too (a file-size limit is a write
+// error, reported and cleaned up).
+void installSignalHandlers(std::atomic<int>* cancel = nullptr);
+
+// Flushes standard output (C and C++ streams). If anything written to it
+// failed (a full disk, /dev/full, a closed pipe) prints
+// "PROGRAM: cannot write standard output: <reason>" and returns
+// kExitFailure; else returns `code`.
+int finish(const CLI::App& app, int code);
+
+}  // namespace clipstream::cli

@@ -1,0 +1,130 @@
+#include <clipstream/cli/cli.h>
+
+#include <clipstream/store/output_file.h>
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+
+namespace clipstream::cli {
+
+namespace {
+
+std::atomic<int>* g_cancel = nullptr;
+
+extern "C" void onSignal(int signo) {
+  if (g_cancel) {
+    int expected = 0;
+    if (g_cancel->compare_exchange_strong(expected, signo)) return;  // first: cooperative
+  }
+  removeOutputTemporaries();
+  ::signal(signo, SIG_DFL);
+  ::raise(signo);
+}
+
+// Numbers in messages: integers as integers, the rest in %g.
+std::string numberText(double v) {
+  char text[64];
+  if (std::fabs(v) < 1e15 && v == std::floor(v)) {
+    std::snprintf(text, sizeof text, "%.0f", v);
+  } else {
+    std::snprintf(text, sizeof text, "%g", v);
+  }
+  return text;
+}
+
+std::string quotedValue(const std::string& text) {
+  std::string out;
+  for (char c : text.substr(0, 40)) {
+    const auto byte = static_cast<unsigned char>(c);
+    out += byte < 0x20 || byte == 0x7f ? '?' : c;
+  }
+  return "'" + out + (text.size() > 40 ? "...'" : "'");
+}
+
+}  // namespace
+
+std::optional<int> parse(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp&) {
+    std::cout << app.help();
+    return kExitOk;
+  } catch (const CLI::CallForAllHelp&) {
+    std::cout << app.help("", CLI::AppFormatMode::All);
+    return kExitOk;
+  } catch (const CLI::ParseError& e) {
+    std::cerr << app.get_name() << ": " << e.what() << "\nRun " << app.get_name()
+              << " --help for the options.\n";
+    return kExitUsage;
+  }
+  return std::nullopt;
+}
+
+int usageError(const CLI::App& app, const std::string& message) {
+  std::cerr << app.get_name() << ": " << message << "\n";
+  return kExitUsage;
+}
+
+CLI::Validator inRange(double lo, double hi) {
+  const std::string bounds = numberText(lo) + " to " + numberText(hi);
+  return CLI::Validator(
+      [lo, hi, bounds](std::string& text) -> std::string {
+        errno = 0;
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v) ||
+            v < lo || v > hi) {
+          return quotedValue(text) + " must be a number from " + bounds;
+        }
+        return {};
+      },
+      "NUMBER in " + bounds, "RANGE");
+}
+
+CLI::Validator wholeInRange(int64_t lo, int64_t hi) {
+  const std::string bounds = std::to_string(lo) + " to " + std::to_string(hi);
+  return CLI::Validator(
+      [lo, hi, bounds](std::string& text) -> std::string {
+        errno = 0;
+        char* end = nullptr;
+        const long long v = std::strtoll(text.c_str(), &end, 10);
+        if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || v < lo || v > hi) {
+          return quotedValue(text) + " must be a whole number from " + bounds;
+        }
+        return {};
+      },
+      "INT in " + bounds, "RANGE");
+}
+
+void installSignalHandlers(std::atomic<int>* cancel) {
+  g_cancel = cancel;
+  struct sigaction action = {};
+  action.sa_handler = onSignal;
+  sigemptyset(&action.sa_mask);
+  for (int signo : {SIGINT, SIGTERM, SIGHUP}) sigaction(signo, &action, nullptr);
+  ::signal(SIGPIPE, SIG_IGN);
+  ::signal(SIGXFSZ, SIG_IGN);
+}
+
+int finish(const CLI::App& app, int code) {
+  errno = 0;
+  std::cout.flush();
+  const bool cxx_failed = !std::cout;
+  int err = errno;
+  const bool c_failed = std::fflush(stdout) != 0 || std::ferror(stdout);
+  if (err == 0) err = errno;
+  if (cxx_failed || c_failed) {
+    std::cerr << app.get_name() << ": cannot write standard output"
+              << (err ? std::string(": ") + std::strerror(err) : std::string()) << "\n";
+    return kExitFailure;
+  }
+  return code;
+}
+
+}  // namespace clipstream::cli
