@@ -1,6 +1,7 @@
 #include <clipstream/cli/cli.h>
 
 #include <clipstream/store/output_file.h>
+#include <clipstream/store/types.h>
 
 #include <signal.h>
 #include <unistd.h>
@@ -59,16 +60,19 @@ std::optional<int> parse(CLI::App& app, int argc, char** argv) {
     std::cout << app.help("", CLI::AppFormatMode::All);
     return kExitOk;
   } catch (const CLI::ParseError& e) {
-    std::cerr << app.get_name() << ": " << e.what() << "\nRun " << app.get_name()
-              << " --help for the options.\n";
+    printError(app, std::string(e.what()) + " (" + app.get_name() + " --help lists the options)");
     return kExitUsage;
   }
   return std::nullopt;
 }
 
 int usageError(const CLI::App& app, const std::string& message) {
-  std::cerr << app.get_name() << ": " << message << "\n";
+  printError(app, message);
   return kExitUsage;
+}
+
+void printError(const CLI::App& app, const std::string& message) {
+  std::cerr << app.get_name() << ": " << printableText(message, kMaxMessageBytes) << "\n";
 }
 
 CLI::Validator inRange(double lo, double hi) {
@@ -82,6 +86,11 @@ CLI::Validator inRange(double lo, double hi) {
             v < lo || v > hi) {
           return quotedValue(text) + " must be a number from " + bounds;
         }
+        // What was checked is what CLI11 converts next: the value in plain
+        // decimal (its own parser reads hex and other forms differently).
+        char exact[64];
+        std::snprintf(exact, sizeof exact, "%.17g", v);
+        text = exact;
         return {};
       },
       "NUMBER in " + bounds, "RANGE");
@@ -97,6 +106,9 @@ CLI::Validator wholeInRange(int64_t lo, int64_t hi) {
         if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || v < lo || v > hi) {
           return quotedValue(text) + " must be a whole number from " + bounds;
         }
+        // Decimal, as checked: CLI11's own conversion would read "010" as
+        // octal 8 and "0x10" as 16.
+        text = std::to_string(v);
         return {};
       },
       "INT in " + bounds, "RANGE");

@@ -26,6 +26,7 @@ Status writePng(const std::string& path, uint32_t width_px, uint32_t height_px,
   OutputOptions options;
   options.existing = ExistingOutput::kReplaceRegular;
   options.fsync = false;  // frames are measurements a rerun remakes; atomicity is what matters
+  options.sweep = false;  // one scan per frame would be quadratic; clipstream-fly sweeps --out once
   return writeOutputFile(path, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()),
                          options);
 }

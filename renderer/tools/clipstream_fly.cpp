@@ -18,23 +18,23 @@ int main(int argc, char** argv) {
   app.add_option("store", o.store_path, "Tile store file (omit with --procedural)");
   app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom) or JSON file");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
-      ->check(frames);
+      ->transform(frames);
   app.add_option("--size", size, "Viewport WIDTHxHEIGHT");
   app.add_option("--speed", o.speed, "Path seconds per simulated second")
-      ->check(cli::inRange(0.001, kMaxFlySpeed));
+      ->transform(cli::inRange(0.001, kMaxFlySpeed));
   app.add_option("--cache-mb", o.cache_mb, "Streamer RAM budget in MiB")
-      ->check(cli::wholeInRange(1, int64_t(1) << 30));
+      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", o.upload_tiles, "GPU tile uploads per frame")
-      ->check(cli::wholeInRange(1, 1000000));
+      ->transform(cli::wholeInRange(1, 1000000));
   app.add_option("--io-threads", o.io_threads, "Loader threads (0 = cores)")
-      ->check(cli::wholeInRange(0, kMaxIoThreads));
+      ->transform(cli::wholeInRange(0, kMaxIoThreads));
   app.add_option("--out", o.out_dir,
                  "Output directory (holds one run: an earlier run's frames and statistics there are "
                  "removed first)");
   app.add_option("--save-frames", o.save_every, "Save every Nth frame as PNG (0 = none)")
-      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
-      ->check(cli::wholeInRange(1, int64_t(1) << 40));
+      ->transform(cli::wholeInRange(1, int64_t(1) << 40));
   app.add_option("--buffering", buffering, "single, double-upload or double-copy");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
   std::string resize;
@@ -42,10 +42,10 @@ int main(int argc, char** argv) {
   app.add_flag("--reference", o.reference,
                "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
-      ->check(frames);
+      ->transform(frames);
   app.add_option("--ground-truth-every", o.ground_truth_every,
                  "Also compare the reference with the CPU ground truth every Nth frame (0 = never)")
-      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
   app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
   app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
@@ -54,20 +54,20 @@ int main(int argc, char** argv) {
                "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
                "an interactive flight");
   app.add_option("--fault-latency-ms", o.fault_latency_ms, "Added latency per tile read (ms)")
-      ->check(delay_ms);
+      ->transform(delay_ms);
   app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")
-      ->check(cli::inRange(0.0, 1.0));
+      ->transform(cli::inRange(0.0, 1.0));
   app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
   app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames")
-      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--warmup-frames", o.warmup_frames,
                  "First hold the first camera for N frames that are not recorded (start-up excluded)")
-      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--rest-frame-ms", o.rest_frame_ms, "Rest frames last at least this wall time (ms)")
-      ->check(delay_ms);
+      ->transform(delay_ms);
   app.add_flag("--loop", o.loop, "Wrap path time instead of stopping at the path's end");
   app.add_option("--teleport-frames", o.teleport_frames, "Frames between jumps of the teleport path")
-      ->check(frames);
+      ->transform(frames);
   app.add_option("--trace", o.trace_path, "Record the streamer's request trace (clipstream-trace)");
   app.footer(
       "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written;\n"
@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
   cli::installSignalHandlers();
   s = runFly(o, std::cout);
   if (!s) {
-    std::cerr << "clipstream-fly: " << s.toString() << "\n";
+    cli::printError(app, s.toString());
     return cli::finish(app, cli::kExitFailure);
   }
   return cli::finish(app, cli::kExitOk);

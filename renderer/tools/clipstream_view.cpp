@@ -44,15 +44,15 @@ int main(int argc, char** argv) {
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
   app.add_option("store", store_path, "Tile store file (omit with --procedural)");
   app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
-      ->check(cli::wholeInRange(1, int64_t(1) << 40));
+      ->transform(cli::wholeInRange(1, int64_t(1) << 40));
   app.add_option("--size", size, "Window WIDTHxHEIGHT");
   app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
-      ->check(cli::wholeInRange(1, int64_t(1) << 30));
+      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame")
-      ->check(cli::wholeInRange(1, 1000000));
+      ->transform(cli::wholeInRange(1, 1000000));
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
   app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
-      ->check(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
     OutputOptions record_options;
     record_options.existing = ExistingOutput::kReplaceRegular;
     if (Status s = checkOutputPath(record_path, record_options); !s) {
-      std::cerr << "clipstream-view: --record-out: " << s.toString() << "\n";
+      cli::printError(app, "--record-out: " + s.toString());
       return cli::kExitFailure;
     }
   }
@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
     Status s;
     source = openStoreSource(store_path, &s);
     if (!source) {
-      std::cerr << "clipstream-view: " << s.toString() << "\n";
+      cli::printError(app, s.toString());
       return 1;
     }
   }
@@ -143,7 +143,7 @@ int main(int argc, char** argv) {
   const ClipmapPlan first = planClipmap(g, vp, camera, sc.planner);
   std::unique_ptr<ClipmapRenderer> renderer;
   if (Status s = ClipmapRenderer::create(g, {first.clip_tiles, first.pyramid_level}, &renderer); !s) {
-    std::cerr << "clipstream-view: " << s.toString() << "\n";
+    cli::printError(app, s.toString());
     return 1;
   }
   // The coarse pyramid first (before any frame), so there is always
@@ -200,7 +200,7 @@ int main(int argc, char** argv) {
         last_key_s = -1.0;
       } else {
         Status s = recording.save(record_path);
-        std::cerr << (s ? "recorded path written to " + record_path : s.toString()) << "\n";
+        cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
       }
     }
     if (recording_on && (last_key_s < 0 || t - last_key_s >= 0.25)) {
@@ -244,7 +244,7 @@ int main(int argc, char** argv) {
   int code = cli::kExitOk;
   if (recording_on) {
     Status s = recording.save(record_path);
-    std::cerr << (s ? "recorded path written to " + record_path : s.toString()) << "\n";
+    cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
     if (!s) code = cli::kExitFailure;
   }
   streamer.shutdown();

@@ -105,6 +105,13 @@ Status inspectPath(const std::string& path, const OutputOptions& options, bool* 
     return Status::error(ErrorCode::kNotFound,
                          path + ": output directory " + directory + " is not a directory");
   }
+  // Checked now rather than after the work (a read-only filesystem, a
+  // directory without write permission).
+  if (::access(directory.c_str(), W_OK | X_OK) != 0) {
+    const int err = errno;
+    return Status::error(ErrorCode::kIo, path + ": output directory " + directory +
+                                             " is not writable: " + fileio::errnoText(err));
+  }
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0) {
     const int err = errno;
@@ -151,11 +158,16 @@ void sweepDeadTemporaries(const std::string& directory, const std::string& name,
   }
   ::closedir(dir);
   for (const auto& [main_name, members] : groups) {
-    // "PID-RANDOM" after the prefix.
+    // Only names this class makes: "PID-XXXXXXXX" (8 hex digits) after the
+    // prefix, and scratch suffixes "idx" or "L<digits>".
     const std::string tail = main_name.substr(prefix.size());
-    char* end = nullptr;
-    const long pid = std::strtol(tail.c_str(), &end, 10);
-    if (end == tail.c_str() || *end != '-') continue;  // not one of ours
+    const size_t dash = tail.find('-');
+    const bool digits = dash != std::string::npos && dash > 0 &&
+                        tail.find_first_not_of("0123456789") == dash;
+    if (!digits || tail.size() != dash + 9 ||
+        tail.find_first_not_of("0123456789abcdef", dash + 1) != std::string::npos)
+      continue;
+    const long pid = std::strtol(tail.c_str(), nullptr, 10);
     if (processAlive(pid)) continue;
     const std::string main_path = directory + "/" + main_name;
     const int fd = ::open(main_path.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
@@ -168,15 +180,27 @@ void sweepDeadTemporaries(const std::string& directory, const std::string& name,
       }
     }
     uint64_t bytes = 0;
+    size_t removed = 0;
     for (const std::string& member : members) {
+      if (member != main_name) {
+        const std::string suffix = member.substr(main_name.size() + 1);
+        const bool scratch = suffix == "idx" || (suffix.size() > 1 && suffix[0] == 'L' &&
+                                                 suffix.find_first_not_of("0123456789", 1) == std::string::npos);
+        if (!scratch) continue;
+      }
       const std::string member_path = directory + "/" + member;
       struct stat st {};
       if (::lstat(member_path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
-      if (::unlink(member_path.c_str()) == 0) bytes += uint64_t(st.st_size);
+      if (::unlink(member_path.c_str()) == 0) {
+        bytes += uint64_t(st.st_size);
+        ++removed;
+      }
     }
     if (fd >= 0) ::close(fd);
+    if (removed == 0) continue;
     char text[64];
-    std::snprintf(text, sizeof text, " (%.1f MB)", double(bytes) / 1e6);
+    std::snprintf(text, sizeof text, " (%zu file%s, %.1f MB)", removed, removed == 1 ? "" : "s",
+                  double(bytes) / 1e6);
     swept->push_back(directory + "/" + main_name + text);
   }
 }
@@ -194,7 +218,7 @@ Status OutputFile::create(const std::string& path, const OutputOptions& options,
   std::string name;
   splitPath(path, &file->m_directory, &name);
   if (Status s = inspectPath(path, options, &file->m_had_existing, &file->m_existing); !s) return s;
-  sweepDeadTemporaries(file->m_directory, name, &file->m_swept);
+  if (options.sweep) sweepDeadTemporaries(file->m_directory, name, &file->m_swept);
 
   std::random_device random;
   char suffix[64];

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <tuple>
 
@@ -654,15 +655,27 @@ Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_pro
 
   std::mutex done_mutex;  // pairs with done_cv; guards nothing else
   std::condition_variable done_cv;
-  unsigned running = threads;
+  unsigned running = 0;
   std::vector<std::thread> pool;
   for (unsigned i = 0; i < threads; ++i) {
-    pool.emplace_back([&] {
-      worker();
+    {
       std::lock_guard<std::mutex> lock(done_mutex);
-      if (--running == 0) done_cv.notify_all();
-    });
+      ++running;
+    }
+    try {
+      pool.emplace_back([&] {
+        worker();
+        std::lock_guard<std::mutex> lock(done_mutex);
+        if (--running == 0) done_cv.notify_all();
+      });
+    } catch (const std::system_error&) {
+      // The system's thread limit: verify with the threads that started.
+      std::lock_guard<std::mutex> lock(done_mutex);
+      --running;
+      break;
+    }
   }
+  if (pool.empty()) worker();  // no thread at all: verify on this one
   // The calling thread only reports progress, so callbacks never run on a
   // worker and need no locking of their own.
   {

@@ -169,7 +169,7 @@ int main(int argc, char** argv) {
   app.add_flag("--verify", verify, "read, check and decode every tile");
   app.add_flag("--json", json, "print JSON on stdout instead of text");
   app.add_option("--threads", threads, "verification threads (0 = all cores)")
-      ->check(cli::wholeInRange(0, 1024));
+      ->transform(cli::wholeInRange(0, 1024));
   app.footer(
       "Exit codes:\n"
       "  0  success (and, with --verify, every tile verified)\n"
@@ -184,14 +184,14 @@ int main(int argc, char** argv) {
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(path, &reader);
   if (!status) {
-    std::fprintf(stderr, "clipstream-info: cannot open store: %s\n", status.toString().c_str());
+    cli::printError(app, "cannot open store: " + status.toString());
     return kExitOpenFailed;
   }
   int exit_code = kExitOk;
   std::vector<LevelStats> stats;
   const Status stats_status = reader->levelStats(&stats);
   if (!stats_status) {
-    std::fprintf(stderr, "clipstream-info: index: %s\n", stats_status.toString().c_str());
+    cli::printError(app, "index: " + stats_status.toString());
     exit_code = kExitCorrupt;
   }
   const std::vector<LevelStats>* stats_ptr = stats_status ? &stats : nullptr;

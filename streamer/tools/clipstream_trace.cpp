@@ -17,9 +17,9 @@ int main(int argc, char** argv) {
   app.add_option("trace", trace_path, "trace file written by the streamer")->required();
   app.add_option("--budget-mb", budget_mb, "RAM budget in MiB")
       ->required()
-      ->check(cli::inRange(0.001, 16.0 * 1024 * 1024));
+      ->transform(cli::inRange(0.001, 16.0 * 1024 * 1024));
   app.add_option("--tile-bytes", tile_bytes, "decoded bytes per tile (default 128*128*4)")
-      ->check(cli::wholeInRange(1, int64_t(1) << 30));
+      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.footer("Exit codes: 0 success, 1 the trace cannot be read or is damaged, 2 command-line mistake.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
   cli::installSignalHandlers();
@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
   std::vector<clipstream::TraceEvent> events;
   const clipstream::Status status = clipstream::readTrace(trace_path, &events);
   if (!status) {
-    std::fprintf(stderr, "clipstream-trace: %s\n", status.toString().c_str());
+    cli::printError(app, status.toString());
     return cli::kExitFailure;
   }
   // Same accounting as the streamer: payload plus a fixed per-entry overhead.
@@ -35,7 +35,7 @@ int main(int argc, char** argv) {
   const uint64_t capacity = uint64_t(budget_mb * 1024.0 * 1024.0) / entry_bytes;
   const clipstream::ReplayResult r = clipstream::replayTrace(events, capacity);
   std::printf("# %s: %llu accesses, %llu distinct tiles, budget %.1f MiB = %llu tiles of %llu B\n",
-              trace_path.c_str(), (unsigned long long)r.accesses,
+              clipstream::printableText(trace_path, 300).c_str(), (unsigned long long)r.accesses,
               (unsigned long long)r.distinct_tiles, budget_mb, (unsigned long long)capacity,
               (unsigned long long)entry_bytes);
   std::printf("policy\thits\thit_rate_%%\tof_opt_%%\n");

@@ -14,6 +14,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <fstream>
 
 namespace clipstream {
@@ -29,7 +30,11 @@ class OutputFileTest : public ::testing::Test {
   void SetUp() override { m_dir = testutil::tempDir("output"); }
   void TearDown() override { std::filesystem::remove_all(m_dir); }
   std::string file(const std::string& name) const { return (m_dir / name).string(); }
-  std::vector<std::string> entries() const { return testutil::listDir(m_dir); }
+  std::vector<std::string> entries() const {
+    std::vector<std::string> names = testutil::listDir(m_dir);
+    std::sort(names.begin(), names.end());
+    return names;
+  }
 
   std::filesystem::path m_dir;
 };
@@ -188,12 +193,33 @@ TEST_F(OutputFileTest, TemporariesOfAKilledWriterAreSweptAndReported) {
   std::unique_ptr<OutputFile> live;
   ASSERT_TRUE(OutputFile::create(path, {}, &live).isOk());
   ASSERT_EQ(live->swept().size(), 1u);
-  EXPECT_NE(live->swept()[0].find("(0.0 MB)"), std::string::npos) << live->swept()[0];
+  EXPECT_NE(live->swept()[0].find("(2 files, 0.0 MB)"), std::string::npos) << live->swept()[0];
   EXPECT_EQ(entries().size(), 1u) << "only the live writer's temporary is left";
   std::unique_ptr<OutputFile> second;
   ASSERT_TRUE(OutputFile::create(path, {}, &second).isOk());
   EXPECT_TRUE(second->swept().empty());
   EXPECT_EQ(entries().size(), 2u);
+}
+
+// The sweep removes only names OutputFile makes, of writers that are gone,
+// and regular files only.
+TEST_F(OutputFileTest, TheSweepTouchesOnlyItsOwnNames) {
+  const std::string path = file("out.cst");
+  const std::vector<std::string> foreign = {
+      ".out.cst.tmp-999999999-abcdef12.mydata", ".out.cst.tmp-zz", ".out.cst.tmp-999999999-abcdef1",
+      ".out.cst.tmp-999999999-abcdef12x", ".out.cst.tmp-999999999-ABCDEF12", ".other.cst.tmp-999999999-abcdef12"};
+  for (const std::string& name : foreign) std::ofstream(file(name)) << "keep";
+  std::filesystem::create_symlink(file("target"), file(".out.cst.tmp-999999999-00000000"));
+  std::ofstream(file(".out.cst.tmp-999999999-12345678")) << "stale";
+  std::ofstream(file(".out.cst.tmp-999999999-12345678.L3")) << "stale";
+  std::vector<std::string> swept;
+  sweepOutputTemporaries(path, &swept);
+  ASSERT_EQ(swept.size(), 1u);
+  EXPECT_NE(swept[0].find(".out.cst.tmp-999999999-12345678 (2 files"), std::string::npos) << swept[0];
+  std::vector<std::string> expected = foreign;
+  expected.push_back(".out.cst.tmp-999999999-00000000");
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(entries(), expected);
 }
 
 // A signal handler calls removeOutputTemporaries() before the process dies.

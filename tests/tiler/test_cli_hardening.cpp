@@ -173,6 +173,20 @@ TEST(TileCliHardening, AJsonSummaryThatCannotBeWrittenFailsTheRun) {
   EXPECT_EQ(left, std::vector<std::string>{"filler"});
 }
 
+// The summary named as the store (or the input) would replace it at the end.
+TEST(TileCliHardening, TheSummaryIsNeitherTheStoreNorTheInput) {
+  TempDir dir;
+  const std::string input = dir.file("s.tif");
+  writeRawTiff(input, 40, 30, 1, false);
+  const std::string before = readText(input);
+  for (const std::string& json : {dir.file("o.cst"), dir.file("./o.cst"), input}) {
+    const RunResult r = runTiler({input, dir.file("o.cst"), "-q", "--json-summary", json});
+    EXPECT_EQ(r.exit_code, 2) << json << ": " << r.output;
+  }
+  EXPECT_EQ(readText(input), before);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"s.tif"});
+}
+
 // Bug 8: SIGHUP was not handled (rc 129 by the signal, every temporary left).
 TEST(TileCliHardening, HangupRemovesTheTemporaries) {
   TempDir dir;
@@ -230,6 +244,37 @@ TEST(TileCliHardening, CommandLineMistakesExitTwoWithAShortMessage) {
   EXPECT_NE(runTiler({"--synthetic", "99999999999999999999x2", out}).output.find("too large"),
             std::string::npos);
   EXPECT_TRUE(dir.entries().empty());
+}
+
+// Second pass: CLI11 read "010" as octal 8 after our range check had read
+// ten; file names, values and file contents reached the terminal raw.
+TEST(TileCliHardening, NumbersAreDecimalAndMessagesArePrintable) {
+  TempDir dir;
+  RunResult r = runTiler({"--synthetic", "64x64", "-q", "--zstd-level", "010", dir.file("a.cst")});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::unique_ptr<TileStoreReader> reader;
+  ASSERT_TRUE(TileStoreReader::open(dir.file("a.cst"), &reader).isOk());
+  EXPECT_EQ(reader->info().encoding.zstd_level, 10);
+  r = runTiler({"--synthetic", "64x64", "-q", "--tile-size", "0100", dir.file("b.cst")});
+  EXPECT_EQ(r.exit_code, 2) << "100 is not a power of two (octal 0100 would be 64): " << r.output;
+  const std::string hostile = "x\x1b[2J\ny\a";
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--synthetic", "1" + hostile, dir.file("c.cst")},
+        std::vector<std::string>{"--synthetic", "64x64", "-q", dir.file("missing" + hostile + "/c.cst")},
+        std::vector<std::string>{dir.file("absent" + hostile + ".tif"), dir.file("c.cst")},
+        std::vector<std::string>{"--bogus" + hostile, dir.file("c.cst")}}) {
+    r = runTiler(args);
+    EXPECT_NE(r.exit_code, 0);
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    for (char c : r.output) {
+      if (c != '\n') {
+        EXPECT_GE(static_cast<unsigned char>(c), 0x20) << r.output;
+      }
+    }
+  }
+  r = runTiler({"", dir.file("d.cst")});
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("must not be empty"), std::string::npos) << r.output;
 }
 
 // Minor: a TIFF Orientation tag was ignored without a word.

@@ -280,6 +280,7 @@ Status openOiio(const std::string& path, std::optional<PixelFormat> forced,
   out->reset();
   std::error_code ec;
   if (!fs::exists(path, ec)) {
+    if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
     return Status::error(ErrorCode::kNotFound, path + ": no such file");
   }
   if (!fs::is_regular_file(path, ec)) {

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <system_error>
 #include <thread>
 
 #include <time.h>
@@ -400,7 +401,14 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     jobs.abort();
   };
 
-  std::thread reader([&] {
+  // A refused thread (the system's thread or memory limit) fails the run
+  // like any other resource: reported, temporaries removed.
+  auto threadRefused = [](const char* which, const std::system_error& e) {
+    return Status::error(ErrorCode::kIo, std::string("cannot start the ") + which + " thread: " + e.what());
+  };
+  std::thread reader;
+  try {
+    reader = std::thread([&] {
     try {
     const double cpu0 = threadCpuSeconds();
     for (uint64_t by = 0; by < layout.blocks_y && !error.failed(); ++by) {
@@ -438,10 +446,15 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
       abortAll();
     }
     filled.close();
-  });
+    });
+  } catch (const std::system_error& e) {
+    writer.reset();  // removes the temporary file
+    return threadRefused("reader", e);
+  }
 
   std::vector<std::thread> encoders;
   for (unsigned t = 0; t < threads; ++t) {
+    try {
     encoders.emplace_back([&] {
       const double cpu0 = threadCpuSeconds();
       TileJob job;
@@ -470,6 +483,11 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
       std::lock_guard lock(encode_time_mutex);
       encode_s += threadCpuSeconds() - cpu0;
     });
+    } catch (const std::system_error& e) {
+      error.set(threadRefused("encoder", e));
+      abortAll();
+      break;
+    }
   }
 
   ProgressBar progress("tiling", src.width_px * src.height_px, o.progress, "px");

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 
 namespace {
@@ -102,16 +103,16 @@ int main(int argc, char** argv) {
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
   app.add_option("--format", format_text, "force the store format: R8, R16, RGB8, RGBA8");
   app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
-      ->check(cli::wholeInRange(tiler::kMinTilePx, tiler::kMaxTilePx));
+      ->transform(cli::wholeInRange(tiler::kMinTilePx, tiler::kMaxTilePx));
   app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)")
-      ->check(cli::wholeInRange(1, 22));
+      ->transform(cli::wholeInRange(1, 22));
   app.add_flag("--no-predictor", no_predictor, "store tiles without the left-delta predictor");
   app.add_option("--filter", filter_text, "downsampling filter: box (default) or lanczos3");
   app.add_flag("--linear-light", linear_light, "with lanczos3: filter in linear light (sRGB input)");
   app.add_option("--threads", threads, "encoder threads (default: all cores)")
-      ->check(cli::wholeInRange(0, tiler::kMaxThreads));
+      ->transform(cli::wholeInRange(0, tiler::kMaxThreads));
   app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)")
-      ->check(cli::wholeInRange(int64_t(tiler::kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
+      ->transform(cli::wholeInRange(int64_t(tiler::kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
   app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
@@ -125,6 +126,7 @@ int main(int argc, char** argv) {
   std::string input_name;
   if (!synthetic.empty()) {
     if (positional.size() != 1) return cli::usageError(app, "with --synthetic give only OUTPUT");
+    if (positional[0].empty()) return cli::usageError(app, "OUTPUT must not be empty");
     const std::string problem =
         parseSize(synthetic, &options.synthetic_width_px, &options.synthetic_height_px);
     if (!problem.empty()) return cli::usageError(app, "--synthetic '" + synthetic + "' " + problem);
@@ -133,6 +135,9 @@ int main(int argc, char** argv) {
   } else {
     if (positional.size() != 2) {
       return cli::usageError(app, "need INPUT and OUTPUT (or --synthetic WxH OUTPUT)");
+    }
+    if (positional[0].empty() || positional[1].empty()) {
+      return cli::usageError(app, "INPUT and OUTPUT must not be empty");
     }
     options.input_path = positional[0];
     options.output_path = positional[1];
@@ -168,12 +173,17 @@ int main(int argc, char** argv) {
   json_options.existing = ExistingOutput::kReplaceRegular;
   json_options.fsync = options.fsync;
   if (!json_path.empty() && json_path != "-") {
-    if (sameFile(json_path, options.output_path) ||
+    // The same file now (links included) or the same path once the store exists.
+    const auto canonical = [](const std::string& p) {
+      std::error_code ec;
+      return std::filesystem::weakly_canonical(p, ec).string();
+    };
+    if (sameFile(json_path, options.output_path) || canonical(json_path) == canonical(options.output_path) ||
         (!options.input_path.empty() && sameFile(json_path, options.input_path))) {
       return cli::usageError(app, "--json-summary " + json_path + " is the input or the output");
     }
     if (Status s = checkOutputPath(json_path, json_options); !s) {
-      std::cerr << "clipstream-tile: --json-summary: " << s.toString() << "\n";
+      cli::printError(app, "--json-summary: " + s.toString());
       return cli::kExitFailure;
     }
   }
@@ -187,19 +197,19 @@ int main(int argc, char** argv) {
       std::cerr << "clipstream-tile: stopped by signal " << g_cancel.load() << "; nothing was written\n";
       return cli::kExitSignalBase + g_cancel.load();
     }
-    std::cerr << "clipstream-tile: " << status.toString() << "\n";
+    cli::printError(app, status.toString());
     return cli::kExitFailure;
   }
 
-  for (const std::string& w : summary.warnings) std::cerr << "clipstream-tile: warning: " << w << "\n";
+  for (const std::string& w : summary.warnings) cli::printError(app, "warning: " + w);
   if (!quiet) {
     const double mp = double(summary.width_px * summary.height_px) / 1e6;
     std::printf(
         "%s: %llux%llu %s -> %s: %u levels, %llu tiles (%llu constant), %.1f MP/s, input %s, "
         "output %s, ratio %.2f:1 (raw/output), peak RSS %s, wall %.2f s\n",
-        input_name.c_str(), (unsigned long long)summary.width_px,
+        printableText(input_name, 300).c_str(), (unsigned long long)summary.width_px,
         (unsigned long long)summary.height_px, pixelFormatName(summary.format),
-        options.output_path.c_str(), summary.levels, (unsigned long long)summary.tiles,
+        printableText(options.output_path, 300).c_str(), summary.levels, (unsigned long long)summary.tiles,
         (unsigned long long)summary.constant_tiles, summary.wall_s > 0 ? mp / summary.wall_s : 0.0,
         megabytes(summary.input_bytes).c_str(), megabytes(summary.output_bytes).c_str(),
         summary.output_bytes ? double(summary.raw_bytes) / double(summary.output_bytes) : 0.0,
@@ -208,7 +218,7 @@ int main(int argc, char** argv) {
       const double* t = summary.geo.transform;
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
-                  summary.geo.crs.empty() ? "(unknown)" : summary.geo.crs.c_str());
+                  summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
     }
     if (summary.clamped_samples > 0) {
       std::printf("note: %llu input samples were outside the output range and clamped\n",
@@ -220,8 +230,8 @@ int main(int argc, char** argv) {
     if (json_path == "-") {
       std::fputs(text.c_str(), stdout);
     } else if (Status s = writeOutputFile(json_path, text, json_options); !s) {
-      std::cerr << "clipstream-tile: --json-summary: " << s.toString()
-                << " (the store " << options.output_path << " was written)\n";
+      cli::printError(app, "--json-summary: " + s.toString() + " (the store " + options.output_path +
+                               " was written)");
       return cli::kExitFailure;
     }
   }

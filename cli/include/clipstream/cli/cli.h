@@ -29,14 +29,22 @@ constexpr int kExitSignalBase = 128;  // 128 + N: stopped by signal N (INT 130, 
 // as "PROGRAM: <problem>" with a pointer to --help).
 std::optional<int> parse(CLI::App& app, int argc, char** argv);
 
-// "PROGRAM: <message>" on stderr; returns kExitUsage. For mistakes found
-// after parse() (e.g. a malformed size).
+// "PROGRAM: <message>" on stderr, one line: control bytes (from file names,
+// file contents, option values) shown as '?', cut at kMaxMessageBytes.
+// Every message a program prints goes through it.
+constexpr size_t kMaxMessageBytes = 1000;
+void printError(const CLI::App& app, const std::string& message);
+
+// printError(), then returns kExitUsage. For mistakes found after parse()
+// (e.g. a malformed size).
 int usageError(const CLI::App& app, const std::string& message);
 
 // Validators: the value must be a finite number in [lo, hi] (inRange) or a
-// whole number in [lo, hi] (wholeInRange). Messages name the bounds plainly
-// ("must be a number from 0 to 10000"); NaN, infinities and numbers too long
-// to hold are rejected.
+// decimal whole number in [lo, hi] (wholeInRange). Messages name the bounds
+// plainly ("must be a number from 0 to 10000"); NaN, infinities and numbers
+// too long to hold are rejected. The value is rewritten in plain decimal
+// before CLI11 converts it, so "010" is ten, never octal eight: attach them
+// with Option::transform() (check() would discard the rewrite).
 CLI::Validator inRange(double lo, double hi);
 CLI::Validator wholeInRange(int64_t lo, int64_t hi);
 

@@ -65,7 +65,8 @@ Status readImageRgba(const std::string& path, std::vector<uint8_t>* rgba, uint32
 // Writes one RGBA8 image as PNG (encoded by OpenImageIO in memory) on the
 // calling thread, under OutputFile's rule (a regular file at `path` is
 // replaced; nothing half-written is ever under `path`). kIo / kNoSpace /
-// kInvalidArgument / kAlreadyExists naming the file.
+// kInvalidArgument / kAlreadyExists naming the file. Does not sweep stale
+// temporaries (OutputOptions::sweep): the caller owns the directory.
 Status writePng(const std::string& path, uint32_t width_px, uint32_t height_px,
                 const uint8_t* rgba);
 

@@ -34,6 +34,11 @@ enum class ExistingOutput {
 struct OutputOptions {
   ExistingOutput existing = ExistingOutput::kRefuse;
   bool fsync = true;  // flush the file (and its directory) before and after the rename
+  // Remove temporaries of killed writers of the same name first (a scan of
+  // the directory). Off for many small outputs in one directory whose owner
+  // sweeps it once (clipstream-fly's frames), where a scan per file would
+  // cost O(files^2).
+  bool sweep = true;
 };
 
 // One output file being written.
