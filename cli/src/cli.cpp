@@ -39,14 +39,12 @@ std::string numberText(double v) {
   return text;
 }
 
-std::string quotedValue(const std::string& text) {
-  std::string out;
-  for (char c : text.substr(0, 40)) {
-    const auto byte = static_cast<unsigned char>(c);
-    out += byte < 0x20 || byte == 0x7f ? '?' : c;
-  }
-  return "'" + out + (text.size() > 40 ? "...'" : "'");
+// Digits, sign, point and exponent only: no spaces, no hex, no "inf".
+bool plainNumber(const std::string& text) {
+  return text.find_first_not_of("0123456789+-.eE") == std::string::npos;
 }
+
+std::string quotedValue(const std::string& text) { return "'" + printableText(text, 40) + "'"; }
 
 }  // namespace
 
@@ -82,7 +80,8 @@ CLI::Validator inRange(double lo, double hi) {
         errno = 0;
         char* end = nullptr;
         const double v = std::strtod(text.c_str(), &end);
-        if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v) ||
+        if (text.empty() || !plainNumber(text) || end != text.c_str() + text.size() ||
+            (errno == ERANGE && std::fabs(v) >= 1.0) || !std::isfinite(v) ||
             v < lo || v > hi) {
           return quotedValue(text) + " must be a number from " + bounds;
         }
@@ -103,7 +102,7 @@ CLI::Validator wholeInRange(int64_t lo, int64_t hi) {
         errno = 0;
         char* end = nullptr;
         const long long v = std::strtoll(text.c_str(), &end, 10);
-        if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || v < lo || v > hi) {
+        if (text.empty() || !plainNumber(text) || end != text.c_str() + text.size() || errno == ERANGE || v < lo || v > hi) {
           return quotedValue(text) + " must be a whole number from " + bounds;
         }
         // Decimal, as checked: CLI11's own conversion would read "010" as
@@ -119,7 +118,13 @@ void installSignalHandlers(std::atomic<int>* cancel) {
   struct sigaction action = {};
   action.sa_handler = onSignal;
   sigemptyset(&action.sa_mask);
-  for (int signo : {SIGINT, SIGTERM, SIGHUP}) sigaction(signo, &action, nullptr);
+  for (int signo : {SIGINT, SIGTERM, SIGHUP}) {
+    // A signal ignored at start stays ignored (nohup, background jobs of a
+    // non-interactive shell): the caller asked for that.
+    struct sigaction old = {};
+    if (sigaction(signo, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+    sigaction(signo, &action, nullptr);
+  }
   ::signal(SIGPIPE, SIG_IGN);
   ::signal(SIGXFSZ, SIG_IGN);
 }

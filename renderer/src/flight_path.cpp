@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <sstream>
@@ -90,6 +91,11 @@ Status FlightPath::fromJson(const std::string& text, FlightPath* out) {
 }
 
 Status FlightPath::load(const std::string& path, FlightPath* out) {
+  // A FIFO would wait for a writer forever; a directory "opens" and reads as
+  // nothing. Only regular files are read (docs/cli.md, "Inputs").
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
+    return Status::error(ErrorCode::kIo, "flight path " + path + " is not a regular file");
   std::ifstream in(path, std::ios::binary);
   if (!in) return Status::error(ErrorCode::kNotFound, "flight path: cannot open " + path);
   std::stringstream ss;

@@ -80,13 +80,49 @@ Status writeRunFiles(const std::vector<std::pair<std::string, std::string>>& fil
   return Status::ok();
 }
 
+// "frame_NNNNN.png" exactly as the frame loop names frames ("%05u"): five
+// digits, or more without a leading zero.
 bool isFrameName(const std::string& name) {
-  if (name.size() < 11 || name.compare(0, 6, "frame_") != 0 ||
+  if (name.size() < 15 || name.compare(0, 6, "frame_") != 0 ||
       name.compare(name.size() - 4, 4, ".png") != 0)
     return false;
-  for (size_t i = 6; i + 4 < name.size(); ++i)
-    if (name[i] < '0' || name[i] > '9') return false;
-  return true;
+  const std::string digits = name.substr(6, name.size() - 10);
+  if (digits.size() > 10 || digits.find_first_not_of("0123456789") != std::string::npos) return false;
+  return digits.size() == 5 || (digits[0] != '0' && std::stoull(digits) <= UINT32_MAX);
+}
+
+bool isRunFileName(const std::string& name) {
+  return isFrameName(name) || name == "frames.csv" || name == "frames.json" || name == "summary.tsv";
+}
+
+// --trace must not be an input (the store, the path file) nor one of the
+// run's own files in --out; the inputs must not sit in --out under a name the
+// run removes. Compared as files (links included) and as paths.
+Status checkFlyOutputs(const FlyOptions& o) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  auto canonical = [&](const std::string& p) { return fs::weakly_canonical(p, ec).string(); };
+  const std::string out_dir = canonical(o.out_dir);
+  for (const std::string& input : {o.store_path, o.path}) {
+    if (input.empty() || !fs::exists(input, ec)) continue;
+    if (!o.trace_path.empty() && (sameFile(input, o.trace_path) || canonical(input) == canonical(o.trace_path)))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--trace " + o.trace_path + " is the input " + input + "; refusing to overwrite it");
+    const fs::path in = canonical(input);
+    if (in.parent_path().string() == out_dir && isRunFileName(in.filename().string()))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           input + " is in --out " + o.out_dir + " under a name the run replaces");
+  }
+  if (!o.trace_path.empty()) {
+    const fs::path trace = canonical(o.trace_path);
+    if (trace.parent_path().string() == out_dir && isRunFileName(trace.filename().string()))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--trace " + o.trace_path + " is one of the run's own files in --out");
+    OutputOptions trace_options;
+    trace_options.existing = ExistingOutput::kReplaceRegular;
+    if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
+  }
+  return Status::ok();
 }
 
 // --out holds one run: creates it if needed, then removes what an earlier run
@@ -100,20 +136,20 @@ Status prepareOutDir(const std::string& dir, std::vector<std::string>* swept) {
   if (ec) return Status::error(ErrorCode::kIo, "cannot create --out " + dir + ": " + ec.message());
   if (!fs::is_directory(dir, ec))
     return Status::error(ErrorCode::kInvalidArgument, "--out " + dir + " is not a directory");
-  static const char* const kRunFiles[] = {"frames.csv", "frames.json", "summary.tsv"};
   std::vector<std::string> stale;
   for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    bool ours = isFrameName(name);
-    for (const char* run_file : kRunFiles) ours = ours || name == run_file;
-    if (ours && entry.is_regular_file(ec) && !entry.is_symlink(ec)) stale.push_back(entry.path().string());
+    if (isRunFileName(name)) {
+      if (!entry.is_regular_file(ec) || entry.is_symlink(ec))
+        return Status::error(ErrorCode::kInvalidArgument,
+                             entry.path().string() + " is not a regular file; the run would write there");
+      stale.push_back(entry.path().string());
+    }
     // ".NAME.tmp-..." of one of our names: its writer may be dead.
     const size_t tmp = name.find(".tmp-");
     if (name.size() > 1 && name[0] == '.' && tmp != std::string::npos) {
       const std::string final_name = name.substr(1, tmp - 1);
-      bool our_temp = isFrameName(final_name);
-      for (const char* run_file : kRunFiles) our_temp = our_temp || final_name == run_file;
-      if (our_temp) sweepOutputTemporaries(dir + "/" + final_name, swept);
+      if (isRunFileName(final_name)) sweepOutputTemporaries(dir + "/" + final_name, swept);
     }
   }
   if (ec) return Status::error(ErrorCode::kIo, "cannot list --out " + dir + ": " + ec.message());
@@ -180,18 +216,18 @@ Status parseBuffering(const std::string& text, Buffering* out) {
 
 Status parseResize(const std::string& text, uint32_t* frame, Viewport* out) {
   const size_t colon = text.find(':');
-  unsigned f = 0;
-  char tail = 0;
-  if (colon == std::string::npos ||
-      std::sscanf(text.substr(0, colon).c_str(), "%u%c", &f, &tail) != 1 || f == 0)
+  const std::string digits = colon == std::string::npos ? std::string() : text.substr(0, colon);
+  if (digits.empty() || digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos ||
+      std::stoul(digits) == 0 || std::stoul(digits) > kMaxFlyFrames)
     return Status::error(ErrorCode::kInvalidArgument,
-                         "resize \"" + text + "\" is not FRAME:WIDTHxHEIGHT (e.g. 120:640x360)");
+                         "resize \"" + printableText(text, 40) + "\" is not FRAME:WIDTHxHEIGHT with FRAME from 1 to " +
+                             std::to_string(kMaxFlyFrames) + " (e.g. 120:640x360)");
   if (Status s = parseViewport(text.substr(colon + 1), out); !s) return s;
-  *frame = f;
+  *frame = uint32_t(std::stoul(digits));
   return Status::ok();
 }
 
-Status runFly(const FlyOptions& o, std::ostream& log) {
+Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   if (Status s = checkFlyOptions(o); !s) return s;
   // Source.
   std::shared_ptr<TileSource> source;
@@ -226,18 +262,19 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     if (!s) return s;
   }
   const double speed = o.speed > 0.0 ? o.speed : 1.0;
-  const uint32_t frames =
-      o.frames > 0 ? o.frames
-                   : uint32_t(std::ceil(path.durationS() / (speed * renderer_config::kSimulatedFrameSeconds))) + 1;
+  // The whole path at this speed, bounded like --frames: a long path flown
+  // slowly would otherwise ask for billions of frames.
+  const double path_frames =
+      std::ceil(path.durationS() / (speed * renderer_config::kSimulatedFrameSeconds)) + 1.0;
+  if (o.frames == 0 && !(path_frames <= double(kMaxFlyFrames)))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "the path lasts " + std::to_string(path.durationS()) + " s: at speed " +
+                             std::to_string(speed) + " that is more than " + std::to_string(kMaxFlyFrames) +
+                             " frames; give a higher speed or --frames");
+  const uint32_t frames = o.frames > 0 ? o.frames : uint32_t(path_frames);
 
-  // Outputs are checked before any work: --out, then the trace's path.
-  std::vector<std::string> swept;
-  if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
-  if (!o.trace_path.empty()) {
-    OutputOptions trace_options;
-    trace_options.existing = ExistingOutput::kReplaceRegular;
-    if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
-  }
+  // Outputs are checked before any work, and none of them may be an input.
+  if (Status s = checkFlyOutputs(o); !s) return s;
 
   // GL.
   std::unique_ptr<HeadlessContext> context;
@@ -289,6 +326,12 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
     if (Status s = FlyAccuracy::create(source, viewport, sc.planner, ao, &accuracy); !s) return s;
   }
 
+  // Everything that can fail before the first frame has been tried: only now
+  // are an earlier run's files in --out removed.
+  std::vector<std::string> swept;
+  if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
+  if (!o.trace_path.empty()) sweepOutputTemporaries(o.trace_path, &swept);
+
   // Path time of recorded frame `frame` (fractional for the hint): `speed`
   // times the simulated time, held at the last pose through the rest frames.
   // The streamer's clock runs at kSimulatedFrameSeconds per frame from the
@@ -310,7 +353,7 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
   const uint32_t total_frames = frames + o.rest_frames;
   std::vector<FrameRow> rows;
-  rows.reserve(total_frames);
+  rows.reserve(std::min<uint32_t>(total_frames, 100000));  // grows past that as frames come
   StreamerStats before = streamer.stats();
   const uint32_t levels = geometry.levelCount();
   const auto run_start = Clock::now();
@@ -644,7 +687,8 @@ Status runFly(const FlyOptions& o, std::ostream& log) {
   if (Status s = writeRunFiles(run_files); !s) return s;
 
   for (const std::string& line : swept)
-    log << "clipstream-fly: removed a temporary file left by an interrupted earlier run: " << line << "\n";
+    (warnings ? *warnings : log) << "clipstream-fly: warning: removed a temporary file left by an interrupted "
+                                    "earlier run: " << printableText(line, 300) << "\n";
   if (!o.quiet) {
     char buf[256];
     log << "clipstream-fly: " << source->describe() << ", path " << o.path << ", " << total_frames

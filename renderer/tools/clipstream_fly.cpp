@@ -3,8 +3,11 @@
 #include <clipstream/cli/cli.h>
 #include <clipstream/renderer/fly.h>
 #include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
 
 #include <iostream>
+#include <new>
+#include <system_error>
 
 int main(int argc, char** argv) {
   using namespace clipstream;
@@ -34,7 +37,7 @@ int main(int argc, char** argv) {
   app.add_option("--save-frames", o.save_every, "Save every Nth frame as PNG (0 = none)")
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
-      ->transform(cli::wholeInRange(1, int64_t(1) << 40));
+      ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--buffering", buffering, "single, double-upload or double-copy");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
   std::string resize;
@@ -88,7 +91,13 @@ int main(int argc, char** argv) {
   o.frustum_priority = !no_frustum;
 
   cli::installSignalHandlers();
-  s = runFly(o, std::cout);
+  try {
+    s = runFly(o, std::cout, &std::cerr);
+  } catch (const std::bad_alloc&) {
+    s = Status::error(ErrorCode::kNoSpace, "out of memory");  // temporaries removed while unwinding
+  } catch (const std::system_error& e) {
+    s = Status::error(ErrorCode::kIo, std::string("cannot start a thread: ") + e.what());
+  }
   if (!s) {
     cli::printError(app, s.toString());
     return cli::finish(app, cli::kExitFailure);

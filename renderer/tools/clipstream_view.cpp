@@ -44,7 +44,7 @@ int main(int argc, char** argv) {
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
   app.add_option("store", store_path, "Tile store file (omit with --procedural)");
   app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
-      ->transform(cli::wholeInRange(1, int64_t(1) << 40));
+      ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--size", size, "Window WIDTHxHEIGHT");
   app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));

@@ -4,6 +4,7 @@
 
 #include <xxhash.h>
 
+#include <algorithm>
 #include <limits>
 
 namespace clipstream {
@@ -126,10 +127,31 @@ std::string Status::toString() const {
 }
 
 std::string printableText(const std::string& text, size_t max_bytes) {
-  std::string out = text.substr(0, max_bytes);
-  for (char& c : out) {
-    const auto byte = static_cast<unsigned char>(c);
-    if (byte < 0x20 || byte == 0x7f) c = '?';
+  // Walks UTF-8: printable characters pass (names in any script); C0 and C1
+  // controls, DEL, bidirectional overrides (U+202A-202E, U+2066-2069) and
+  // bytes that are not valid UTF-8 (a raw 0x9B is a terminal's CSI) become '?'.
+  std::string out;
+  const size_t n = std::min(text.size(), max_bytes);
+  size_t i = 0;
+  while (i < n) {
+    const auto b0 = static_cast<unsigned char>(text[i]);
+    size_t len = b0 < 0x80 ? 1 : (b0 >> 5) == 0x6 ? 2 : (b0 >> 4) == 0xe ? 3 : (b0 >> 3) == 0x1e ? 4 : 0;
+    uint32_t cp = len == 1 ? b0 : len == 2 ? (b0 & 0x1f) : len == 3 ? (b0 & 0x0f) : (b0 & 0x07);
+    bool valid = len > 0 && i + len <= n;
+    for (size_t k = 1; valid && k < len; ++k) {
+      const auto b = static_cast<unsigned char>(text[i + k]);
+      valid = (b & 0xc0) == 0x80;
+      cp = (cp << 6) | (b & 0x3f);
+    }
+    const bool control = cp < 0x20 || (cp >= 0x7f && cp < 0xa0) || (cp >= 0x202a && cp <= 0x202e) ||
+                         (cp >= 0x2066 && cp <= 0x2069);
+    if (!valid || control) {
+      out += '?';
+      i += valid ? len : 1;
+    } else {
+      out.append(text, i, len);
+      i += len;
+    }
   }
   if (text.size() > max_bytes) out += "...";
   return out;

@@ -104,8 +104,7 @@ void proceduralTexel(const ProceduralSpec& spec, uint32_t level, uint64_t tx, ui
 
 std::shared_ptr<TileSource> makeProceduralSource(const ProceduralSpec& spec) {
   PyramidGeometry geometry;
-  const uint64_t kMaxSide = uint64_t(1) << 31;
-  if (spec.width_px > kMaxSide || spec.height_px > kMaxSide || spec.tile_px < 8 ||
+  if (spec.width_px > kMaxProceduralSidePx || spec.height_px > kMaxProceduralSidePx || spec.tile_px < 8 ||
       !makePyramidGeometry(spec.width_px, spec.height_px, spec.tile_px, PixelFormat::kRGBA8,
                            &geometry))
     return nullptr;

@@ -220,5 +220,125 @@ TEST(FlyHardening, SignalsLeaveOnlyWholeFiles) {
   }
 }
 
+// A path file: two keyframes `duration_s` apart over a procedural texture.
+std::string writePathJson(const std::string& path, double duration_s) {
+  std::ofstream(path) << R"({"interpolation": "smooth", "keyframes": [)"
+                      << R"({"t": 0, "x": 1000, "y": 300, "z": 1000, "heading_deg": 0, "pitch_deg": -30},)"
+                      << R"({"t": )" << duration_s
+                      << R"(, "x": 3000, "y": 300, "z": 1000, "heading_deg": 0, "pitch_deg": -30}]})";
+  return path;
+}
+
+// Second pass: a FIFO as the path file hung; a long path at a low speed
+// (no --frames) aborted with std::bad_alloc and left the trace temporary.
+TEST(FlyHardening, APathThatIsAFifoOrTooLongIsRefused) {
+  test::TempDir dir("fly_path");
+  const std::string fifo = dir.path + "/path.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  FlyRun run = runFly({"--procedural", "65536", "--path", fifo, "--out", dir.path + "/out"}, dir.path + "/log");
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_NE(run.output.find("not a regular file"), std::string::npos) << run.output;
+  const std::string long_path = writePathJson(dir.path + "/long.json", 10000.0);
+  run = runFly({"--procedural", "65536", "--path", long_path, "--speed", "0.001", "--trace", dir.path + "/t.trace",
+                "--out", dir.path + "/out"},
+               dir.path + "/log");
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_NE(run.output.find("--frames"), std::string::npos) << run.output;
+  EXPECT_EQ(namesIn(dir.path), (std::vector<std::string>{"log", "long.json", "path.fifo"}));
+}
+
+// Second pass: --trace naming an input (the path file) replaced it, and
+// --trace or an input inside --out under a run file's name collided.
+TEST(FlyHardening, TheTraceIsNeverAnInputNorARunFile) {
+  test::TempDir dir("fly_inputs");
+  const std::string path_file = writePathJson(dir.path + "/p.json", 2.0);
+  const fs::path out = dir.path + "/out";
+  fs::create_directories(out);
+  const std::string moved = writePathJson((out / "frames.csv").string(), 2.0);
+  const std::vector<std::vector<std::string>> cases = {
+      {"--path", path_file, "--trace", path_file},
+      {"--path", path_file, "--trace", dir.path + "/./p.json"},
+      {"--path", path_file, "--trace", (out / "frames.json").string()},
+      {"--path", path_file, "--trace", (out / "frame_00001.png").string()},
+      {"--path", moved}};
+  for (std::vector<std::string> args : cases) {
+    args.insert(args.begin(), {"--procedural", "65536", "--frames", "3", "--out", out.string()});
+    const FlyRun run = runFly(args, dir.path + "/log");
+    EXPECT_EQ(run.exit_code, 1) << args[7] << ": " << run.output;
+  }
+  std::ifstream in(path_file);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("keyframes"), std::string::npos) << "the path file was overwritten";
+  EXPECT_EQ(namesIn(out), std::vector<std::string>{"frames.csv"});
+}
+
+// Second pass: a bad --trace (or any failure before the first frame)
+// removed the earlier run's results before failing; the sweep removed
+// "frame_1.png" and other names the run never writes; "--frames 010" ran 8
+// frames; --resize-at took negative and huge frame numbers.
+TEST(FlyHardening, NothingIsRemovedBeforeTheRunCanStartAndOnlyItsOwnNames) {
+  test::TempDir dir("fly_sweep");
+  const fs::path out = dir.path + "/out";
+  fs::create_directories(out);
+  const std::vector<std::string> others = {"frame_1.png", "frame_000000.png", "frame_00000000000000000001.png",
+                                           "frame_0000a.png", "FRAMES.CSV", "notes.txt"};
+  for (const std::string& name : others) std::ofstream(out / name) << "mine";
+  std::ofstream(out / "frame_00007.png") << "earlier run";
+  std::ofstream(out / "summary.tsv") << "earlier run";
+  FlyRun run = runFly({"--procedural", "65536", "--frames", "3", "--trace", dir.path + "/missing/t.trace", "--out",
+                       out.string()},
+                      dir.path + "/log");
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_TRUE(fs::exists(out / "frame_00007.png"));
+  EXPECT_TRUE(fs::exists(out / "summary.tsv"));
+  for (const char* resize : {"-1:160x90", "0:160x90", "99999999999999999999:160x90", "-18446744073709551615:160x90",
+                             "10000001:160x90"}) {
+    run = runFly({"--procedural", "65536", "--frames", "3", "--resize-at", resize, "--out", out.string()},
+                 dir.path + "/log");
+    EXPECT_EQ(run.exit_code, 2) << resize << ": " << run.output;
+  }
+  CLIPSTREAM_REQUIRE_GL();
+  run = runFly({"--procedural", "65536", "--frames", "010", "--size", "160x90", "--out", out.string()},
+               dir.path + "/log");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  std::ifstream csv(out / "frames.csv");
+  size_t lines = 0;
+  for (std::string line; std::getline(csv, line);) ++lines;
+  EXPECT_EQ(lines, 11u) << "header + ten frames (not octal 8)";
+  std::vector<std::string> expected = others;
+  for (const char* name : {"frames.csv", "frames.json", "summary.tsv"}) expected.push_back(name);
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(namesIn(out), expected);
+}
+
+// Second pass: a signal ignored at start (nohup, a background job) was
+// caught anyway and ended the run.
+TEST(FlyHardening, ASignalIgnoredAtStartStaysIgnored) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_nohup");
+  const fs::path out = dir.path + "/out";
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int fd = ::open((dir.path + "/log").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 1);
+    ::dup2(fd, 2);
+    ::signal(SIGHUP, SIG_IGN);  // as nohup does
+    ::alarm(120);
+    const std::string out_arg = out.string();
+    ::execl(CLIPSTREAM_FLY_EXE, CLIPSTREAM_FLY_EXE, "--procedural", "65536", "--frames", "40", "--size", "160x90",
+            "--save-frames", "1", "--out", out_arg.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  for (int i = 0; i < 2400 && !fs::exists(out / "frame_00002.png"); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  ::kill(pid, SIGHUP);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  EXPECT_TRUE(fs::exists(out / "summary.tsv"));
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -62,11 +62,14 @@ struct FlyOptions {
 // the real render time (simulated pacing: results are deterministic).
 // Writes OUT/frames.csv, OUT/frames.json, OUT/summary.tsv and
 // OUT/frame_NNNNN.png, each under OutputFile's rule, after removing what an
-// earlier run wrote in OUT (the statistics files appear only when the run
-// succeeds), and prints a summary table to `log`. Returns the first error
+// earlier run wrote in OUT (once the GL context and the first frame's
+// resources exist; the statistics files are published only when the run
+// succeeded), and prints a summary table to `log`. Returns the first error
 // (options out of bounds, bad store, no GL context, unwritable output or
 // trace); per-tile failures are counted, not errors.
-Status runFly(const FlyOptions& options, std::ostream& log);
+// Warnings (temporaries of killed runs removed) go to `warnings`, or to
+// `log` when it is null.
+Status runFly(const FlyOptions& options, std::ostream& log, std::ostream* warnings = nullptr);
 
 // "1280x720" -> viewport. kInvalidArgument otherwise.
 Status parseViewport(const std::string& text, Viewport* out);

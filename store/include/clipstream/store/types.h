@@ -118,8 +118,9 @@ struct [[nodiscard]] Status {
 };
 
 // Untrusted text (from a file, a command line) made safe to show on a
-// terminal or in a message: control bytes (newlines, escape sequences, NUL)
-// become '?'; longer than max_bytes is cut and marked with "...".
+// terminal or in a message: C0 and C1 controls (newlines, escapes, NUL),
+// bidirectional overrides and bytes that are not valid UTF-8 become '?';
+// printable UTF-8 passes. Longer than max_bytes is cut and marked "...".
 std::string printableText(const std::string& text, size_t max_bytes = SIZE_MAX);
 
 }  // namespace clipstream

@@ -54,6 +54,10 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* sta
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)
 // in that level's texel coordinates (see proceduralTexel()). Texels of edge
 // tiles beyond the level's size follow the same function (no padding rule).
+// Largest procedural side makeProceduralSource() accepts (2^31 texels: a
+// planet at 2 cm per texel, and positions stay exact in double precision).
+inline constexpr uint64_t kMaxProceduralSidePx = uint64_t(1) << 31;
+
 struct ProceduralSpec {
   uint64_t width_px = uint64_t(1) << 26;
   uint64_t height_px = uint64_t(1) << 26;
