@@ -18,14 +18,27 @@ namespace {
 
 std::atomic<int>* g_cancel = nullptr;
 
+// A cooperative stop must come within this time; a program busy where it
+// does not poll (an image library guessing the format of a huge file) is
+// stopped by the alarm instead.
+constexpr unsigned kCooperativeGraceSeconds = 5;
+
 extern "C" void onSignal(int signo) {
   if (g_cancel) {
     int expected = 0;
-    if (g_cancel->compare_exchange_strong(expected, signo)) return;  // first: cooperative
+    if (g_cancel->compare_exchange_strong(expected, signo)) {  // first: cooperative
+      ::alarm(kCooperativeGraceSeconds);
+      return;
+    }
   }
   removeOutputTemporaries();
   ::signal(signo, SIG_DFL);
   ::raise(signo);
+}
+
+extern "C" void onGraceExpired(int) {
+  removeOutputTemporaries();
+  ::_exit(kExitSignalBase + (g_cancel ? g_cancel->load() : SIGALRM));
 }
 
 // Numbers in messages: integers as integers, the rest in %g.
@@ -124,6 +137,12 @@ void installSignalHandlers(std::atomic<int>* cancel) {
     struct sigaction old = {};
     if (sigaction(signo, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
     sigaction(signo, &action, nullptr);
+  }
+  if (cancel) {
+    struct sigaction grace = {};
+    grace.sa_handler = onGraceExpired;
+    sigemptyset(&grace.sa_mask);
+    sigaction(SIGALRM, &grace, nullptr);
   }
   ::signal(SIGPIPE, SIG_IGN);
   ::signal(SIGXFSZ, SIG_IGN);

@@ -96,6 +96,13 @@ Status FlightPath::load(const std::string& path, FlightPath* out) {
   std::error_code ec;
   if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
     return Status::error(ErrorCode::kIo, "flight path " + path + " is not a regular file");
+  // A million keyframes is about 90 MB of JSON; anything far larger is not a
+  // path, and reading it whole would only exhaust memory.
+  constexpr uintmax_t kMaxPathFileBytes = uintmax_t(256) << 20;
+  if (const uintmax_t bytes = std::filesystem::file_size(path, ec); !ec && bytes > kMaxPathFileBytes)
+    return Status::error(ErrorCode::kInvalidArgument, "flight path " + path + " is " +
+                                                          std::to_string(bytes >> 20) +
+                                                          " MB, larger than any flight path (256 MB at most)");
   std::ifstream in(path, std::ios::binary);
   if (!in) return Status::error(ErrorCode::kNotFound, "flight path: cannot open " + path);
   std::stringstream ss;

@@ -343,6 +343,16 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   };
   const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
   Streamer streamer(source, sc);
+  // A run that fails after this point leaves no trace: published only when
+  // everything else was written.
+  bool run_succeeded = false;
+  struct DiscardTraceUnlessDone {
+    Streamer& streamer;
+    const bool& done;
+    ~DiscardTraceUnlessDone() {
+      if (!done) streamer.discardTrace();
+    }
+  } discard_trace_unless_done{streamer, run_succeeded};
   if (o.path_hint) {
     PathHint hint;
     hint.camera_at = [&](double clock_s) {
@@ -484,8 +494,9 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   }
   const double run_ms = msBetween(run_start, Clock::now());
   const StreamerStats final_stats = streamer.stats();
-  streamer.shutdown();
   Status write_status = writer.close();
+  if (!write_status) streamer.discardTrace();
+  streamer.shutdown();
   if (write_status) write_status = streamer.traceStatus();
 
   // CSV: one row per frame; per-level columns after the totals.
@@ -685,6 +696,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     run_files.push_back({o.out_dir + "/summary.tsv", keys + "\n" + values + "\n"});
   }
   if (Status s = writeRunFiles(run_files); !s) return s;
+  run_succeeded = true;
 
   for (const std::string& line : swept)
     (warnings ? *warnings : log) << "clipstream-fly: warning: removed a temporary file left by an interrupted "

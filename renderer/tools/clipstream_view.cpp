@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <numbers>
 
@@ -61,6 +62,11 @@ int main(int argc, char** argv) {
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {
+    std::error_code ec;
+    if (!store_path.empty() &&
+        (sameFile(store_path, record_path) || std::filesystem::weakly_canonical(store_path, ec) ==
+                                                   std::filesystem::weakly_canonical(record_path, ec)))
+      return cli::usageError(app, "--record-out " + record_path + " is the store being viewed");
     OutputOptions record_options;
     record_options.existing = ExistingOutput::kReplaceRegular;
     if (Status s = checkOutputPath(record_path, record_options); !s) {

@@ -543,6 +543,13 @@ void Streamer::Impl::flushTrace(bool publish) {
 
 Status Streamer::traceStatus() const { return m_impl->trace_status; }
 
+void Streamer::discardTrace() {
+  Impl& s = *m_impl;
+  s.tracing = false;
+  s.trace.str({});
+  s.trace_file.reset();  // removes the temporary
+}
+
 Streamer::~Streamer() { shutdown(); }
 
 const PyramidGeometry& Streamer::geometry() const { return m_impl->geometry; }

@@ -36,6 +36,22 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   };
   std::string line;
   uint64_t line_no = 0;
+  // The first bytes name the format: checked before reading a line, so a
+  // huge file of another kind is refused at once, not read whole.
+  {
+    char head[20] = {};
+    in.read(head, sizeof head);
+    const std::string got(head, size_t(in.gcount()));
+    const std::string magic = "# clipstream trace v";
+    if (got.empty()) {
+      if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);
+      return Status::error(ErrorCode::kInvalidArgument, path + " is empty, not a clipstream trace");
+    }
+    if (got != magic.substr(0, got.size()) || got.size() < magic.size())
+      return bad(1, "the header '" + magic + "2...'", got);
+    in.clear();
+    in.seekg(0);
+  }
   // The first line names the format: an empty file or another file is not a trace.
   if (!std::getline(in, line)) {
     if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);

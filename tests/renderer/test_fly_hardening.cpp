@@ -153,9 +153,11 @@ TEST(FlyHardening, AFullDiskLeavesOnlyWholeFiles) {
   // 640x360 frames are larger than the 8 KiB limit: every PNG fails.
   const fs::path out = dir.path + "/big";
   FlyRun run = runFly({"--procedural", "65536", "--path", "pass", "--frames", "3", "--size", "640x360",
-                    "--save-frames", "1", "--io-threads", "2", "--out", out.string()},
+                    "--save-frames", "1", "--io-threads", "2", "--trace", dir.path + "/t.trace", "--out",
+                    out.string()},
                    dir.path + "/log", 8192);
   EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_FALSE(fs::exists(dir.path + "/t.trace")) << "a failed run published its trace";
   EXPECT_NE(run.output.find("frame_0000"), std::string::npos) << run.output;
   expectOnlyWholeFiles(out, 640, 360);
   EXPECT_FALSE(fs::exists(out / "frames.csv"));
@@ -309,6 +311,25 @@ TEST(FlyHardening, NothingIsRemovedBeforeTheRunCanStartAndOnlyItsOwnNames) {
   for (const char* name : {"frames.csv", "frames.json", "summary.tsv"}) expected.push_back(name);
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(namesIn(out), expected);
+}
+
+// Third pass: clipstream-view --record-out naming the store being viewed
+// would have replaced it with the recorded path.
+TEST(FlyHardening, ViewNeverRecordsOverItsStore) {
+  test::TempDir dir("view_record");
+  const std::string store = dir.path + "/a.cst";
+  std::ofstream(store) << "a store";
+  for (const std::string& record : {store, dir.path + "/./a.cst"}) {
+    const std::string cmd = std::string("'") + CLIPSTREAM_VIEW_EXE + "' '" + store + "' --record-out '" + record +
+                            "' > /dev/null 2>&1";
+    const int status = std::system(cmd.c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 2) << record;
+  }
+  std::ifstream in(store);
+  std::string text;
+  std::getline(in, text);
+  EXPECT_EQ(text, "a store");
 }
 
 // Second pass: a signal ignored at start (nohup, a background job) was

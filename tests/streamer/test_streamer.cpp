@@ -610,6 +610,8 @@ TEST(Trace, EmptyTruncatedForeignOrNonRegularTracesAreRefused) {
   EXPECT_NE(st.message.find(":3:"), std::string::npos) << st.message;
   st = readText("1 0 2 3\n");
   EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << "no header";
+  st = readText(std::string(1 << 20, '\0'));  // no newline anywhere: refused from its first bytes
+  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << st.toString();
   st = readText("# clipstream trace v9: from the future\n");
   EXPECT_EQ(st.code, ErrorCode::kUnsupported) << st.toString();
   st = readText(header + "1 0 \x1b[31mred\x07\n");

@@ -200,6 +200,37 @@ TEST(TileCliHardening, HangupRemovesTheTemporaries) {
   EXPECT_TRUE(dir.entries().empty()) << dir.entries().front();
 }
 
+// Third pass: a huge all-zero input kept the image library busy guessing its
+// format for minutes, where the tiler never polls its stop flag: one SIGTERM
+// did nothing. The grace alarm ends the run within seconds.
+TEST(TileCliHardening, OneSignalStopsTheRunEvenInsideTheImageLibrary) {
+  TempDir dir;
+  const std::string input = dir.file("zeros.jpg");
+  { std::ofstream create(input); }
+  std::filesystem::resize_file(input, uint64_t(4) << 30);  // sparse: no disk used
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 1);
+    dup2(devnull, 2);
+    alarm(120);
+    execl(CLIPSTREAM_TILE_EXE, CLIPSTREAM_TILE_EXE, "-q", input.c_str(), dir.file("z.cst").c_str(),
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  const auto start = std::chrono::steady_clock::now();
+  kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  const double waited_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGTERM);
+  EXPECT_LT(waited_s, 30.0);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"zeros.jpg"});
+}
+
 // Bug 8: temporaries left by SIGKILL (80-130 MB each) were never swept or
 // reported.
 TEST(TileCliHardening, TemporariesOfAKilledRunAreSweptAndReported) {

@@ -48,11 +48,13 @@ int usageError(const CLI::App& app, const std::string& message);
 CLI::Validator inRange(double lo, double hi);
 CLI::Validator wholeInRange(int64_t lo, int64_t hi);
 
-// SIGINT, SIGTERM and SIGHUP. With `cancel`, the first signal stores its
-// number there (the program polls it, stops, cleans up and returns
-// kExitSignalBase + N); a second signal, or any signal without `cancel`,
-// removes every live output temporary (removeOutputTemporaries()) and ends
-// the process by that signal. SIGPIPE is ignored (a closed pipe is a write
+// SIGINT, SIGTERM and SIGHUP (unless ignored at start, as under nohup).
+// With `cancel`, the first signal stores its number there (the program polls
+// it, stops, cleans up and returns kExitSignalBase + N) and arms a 5 s alarm:
+// a program that does not poll in time (busy inside a library) then removes
+// its temporaries and exits kExitSignalBase + N from the alarm. A second
+// signal, or any signal without `cancel`, removes every live output
+// temporary (removeOutputTemporaries()) and ends the process by that signal. SIGPIPE is ignored (a closed pipe is a write
 // error, reported by finish()); SIGXFSZ too (a file-size limit is a write
 // error, reported and cleaned up).
 void installSignalHandlers(std::atomic<int>* cancel = nullptr);

@@ -157,6 +157,10 @@ class Streamer {
   // kAlreadyExists naming the path).
   Status traceStatus() const;
 
+  // Render thread. Drops the trace being recorded: nothing is published at
+  // shutdown() (a run that failed leaves no trace that looks whole).
+  void discardTrace();
+
  private:
   struct Impl;
   std::unique_ptr<Impl> m_impl;
