@@ -140,16 +140,8 @@ TEST(TileCli, RefusesToOverwriteWithoutForce) {
 TEST(TileCli, InterruptRemovesTemporaryFiles) {
   TempDir dir;
   const std::string out = dir.file("out.cst");
-  const pid_t pid = fork();
+  const pid_t pid = spawnTiler({"--synthetic", "60000x60000", "--threads", "1", "--no-fsync", out});
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    execl(CLIPSTREAM_TILE_EXE, CLIPSTREAM_TILE_EXE, "--synthetic", "60000x60000", "--threads", "1",
-          "--no-fsync", out.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
   // Wait until the writer's temporary file exists, so the signal arrives mid-run.
   bool started = false;
   for (int i = 0; i < 400 && !started; ++i) {

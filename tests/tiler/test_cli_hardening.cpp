@@ -69,15 +69,7 @@ void writeRawTiff(const std::string& path, uint32_t w, uint32_t h, uint16_t orie
 // Starts clipstream-tile on a large synthetic image, returns its pid once
 // its temporary file exists (the run is under way).
 pid_t startLongRun(const TempDir& dir, const std::string& out, const char* size = "30000x30000") {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    execl(CLIPSTREAM_TILE_EXE, CLIPSTREAM_TILE_EXE, "--synthetic", size, "--threads", "1", "--no-fsync",
-          out.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
+  const pid_t pid = spawnTiler({"--synthetic", size, "--threads", "1", "--no-fsync", out});
   for (int i = 0; i < 400 && !hasTemporary(dir); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(25));
   return pid;
 }
@@ -208,17 +200,8 @@ TEST(TileCliHardening, OneSignalStopsTheRunEvenInsideTheImageLibrary) {
   const std::string input = dir.file("zeros.jpg");
   { std::ofstream create(input); }
   std::filesystem::resize_file(input, uint64_t(4) << 30);  // sparse: no disk used
-  const pid_t pid = fork();
+  const pid_t pid = spawnTiler({"-q", input, dir.file("z.cst")});
   ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    alarm(120);
-    execl(CLIPSTREAM_TILE_EXE, CLIPSTREAM_TILE_EXE, "-q", input.c_str(), dir.file("z.cst").c_str(),
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   const auto start = std::chrono::steady_clock::now();
   kill(pid, SIGTERM);

@@ -1,5 +1,8 @@
 #include "tiler_test_util.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -198,6 +201,22 @@ RunResult runTiler(const std::vector<std::string>& args, const std::string& stdo
   const int status = pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return r;
+}
+
+pid_t spawnTiler(const std::vector<std::string>& args) {
+  std::vector<char*> argv = {const_cast<char*>(CLIPSTREAM_TILE_EXE)};
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 1);
+    dup2(devnull, 2);
+    alarm(120);
+    execv(CLIPSTREAM_TILE_EXE, argv.data());
+    _exit(127);
+  }
+  return pid;
 }
 
 std::string sharedDataDir() {

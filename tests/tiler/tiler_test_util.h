@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/types.h>
+
 namespace clipstream::test {
 
 namespace fs = std::filesystem;
@@ -69,6 +71,10 @@ struct RunResult {
 // Runs clipstream-tile with `args` (shell-quoted here), capturing output;
 // `stdout_redirect` (e.g. ">/dev/full") redirects standard output alone.
 RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect = "");
+
+// Starts clipstream-tile with `args` in a child with its output discarded
+// and a 120 s alarm (a hang fails the test); returns the pid, or -1.
+pid_t spawnTiler(const std::vector<std::string>& args);
 
 // Where the real sample data lives, or "" when absent.
 std::string sharedDataDir();
