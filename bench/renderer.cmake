@@ -1,10 +1,25 @@
 # renderer benchmarks: programs that print tab-separated tables (best-of-N).
 find_package(OpenGL REQUIRED COMPONENTS OpenGL)
-add_executable(bench_renderer_frame ${CMAKE_CURRENT_LIST_DIR}/renderer_frame.cpp)
-target_link_libraries(bench_renderer_frame PRIVATE clipstream::renderer clipstream_warnings
-  OpenGL::OpenGL)
 
+# The plain-texture baseline of bench_renderer_frame: a comparison method,
+# built here from the renderer's private GL helpers and ray shader, with its
+# own fragment shader embedded like the renderer's.
+set(plain_shader ${CMAKE_CURRENT_LIST_DIR}/shaders/ground_plain.frag)
+set(plain_shader_cpp ${CMAKE_CURRENT_BINARY_DIR}/plain_shaders_embedded.cpp)
+add_custom_command(
+  OUTPUT ${plain_shader_cpp}
+  COMMAND ${CMAKE_COMMAND} -DOUT=${plain_shader_cpp} -DINPUTS=${plain_shader} -DHEADER=plain_shaders.h
+          -P ${PROJECT_SOURCE_DIR}/renderer/cmake/embed_shaders.cmake
+  DEPENDS ${plain_shader} ${PROJECT_SOURCE_DIR}/renderer/cmake/embed_shaders.cmake
+  COMMENT "Embedding the plain-texture baseline's shader"
+  VERBATIM)
+add_executable(bench_renderer_frame ${CMAKE_CURRENT_LIST_DIR}/renderer_frame.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/plain_texture_renderer.cpp ${plain_shader_cpp})
+target_include_directories(bench_renderer_frame PRIVATE ${CMAKE_CURRENT_LIST_DIR}
+  ${PROJECT_SOURCE_DIR}/renderer/src)
+target_link_libraries(bench_renderer_frame PRIVATE clipstream::renderer clipstream::cli
+  clipstream_warnings OpenGL::OpenGL)
 
 add_executable(bench_renderer_buffering ${CMAKE_CURRENT_LIST_DIR}/renderer_buffering.cpp)
-target_link_libraries(bench_renderer_buffering PRIVATE clipstream::renderer clipstream_warnings
+target_link_libraries(bench_renderer_buffering PRIVATE clipstream::renderer clipstream::cli clipstream_warnings
   OpenGL::OpenGL)

@@ -10,7 +10,8 @@
 // part is the GL work of each frame. Wall-clock times, best run of R.
 //
 //   bench_renderer_buffering [--size 1280x720] [--frames 240] [--upload-tiles 16] [--runs 3]
-#include <clipstream/renderer/fly.h>
+#include <clipstream/cli/sizes.h>
+#include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/gl_context.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/streamer/planner.h>
@@ -72,17 +73,8 @@ Result runOnce(Buffering buffering, TileSource& source, const Viewport& vp, uint
     c.pitch_rad = -0.45;
     return c;
   };
-  const ClipmapPlan first = planClipmap(g, vp, cameraAt(0), {});
   std::unique_ptr<ClipmapRenderer> r;
-  if (!ClipmapRenderer::create(g, {first.clip_tiles, first.pyramid_level, buffering}, &r).isOk())
-    return {};
-  r->beginFrame();
-  r->loadPyramid([&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
-    auto px = std::make_shared<std::vector<uint8_t>>();
-    if (!source.fetch(key, px.get()).isOk()) return nullptr;
-    return px;
-  });
-  r->endUploads();
+  if (!createClipmapRenderer(source, vp, cameraAt(0), {}, buffering, &r, nullptr).isOk()) return {};
   glFinish();
 
   std::set<TileKey, KeyLess> resident;
@@ -172,7 +164,7 @@ int main(int argc, char** argv) {
   Viewport vp{1280, 720};
   uint32_t frames = 240, upload_tiles = 16, runs = 3;
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size") && !parseViewport(argv[i + 1], &vp).isOk()) return 2;
+    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).isOk()) return 2;
     if (!std::strcmp(argv[i], "--frames")) frames = uint32_t(std::max(2, std::atoi(argv[i + 1])));
     if (!std::strcmp(argv[i], "--upload-tiles")) upload_tiles = uint32_t(std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--runs")) runs = uint32_t(std::max(1, std::atoi(argv[i + 1])));

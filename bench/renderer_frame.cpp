@@ -5,11 +5,13 @@
 // that thread (then the CPU time is the whole frame's work).
 //
 //   bench_renderer_frame [--size 1280x720] [--repeats 15] [--clip-tiles C]
-#include <clipstream/renderer/fly.h>
+#include "plain_texture_renderer.h"
+
+#include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/gl_context.h>
-#include <clipstream/renderer/reference.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/streamer/planner.h>
+#include <clipstream/streamer/tile_source.h>
 
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/glcorearb.h>
@@ -70,7 +72,7 @@ int main(int argc, char** argv) {
   int repeats = 15;
   PlannerConfig planner;
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size") && !parseViewport(argv[i + 1], &vp).isOk()) return 2;
+    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).isOk()) return 2;
     if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--clip-tiles")) planner.clip_tiles = uint32_t(std::atoi(argv[i + 1]));
   }

@@ -109,7 +109,7 @@ int main(int argc, char** argv) {
   std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
               kSide, kSide, frames);
   std::printf(
-      "path\tbudget_MiB\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%"
+      "path\tbudget_mib\taccesses\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%"
       "\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
   struct FrameCost {
     std::string path;

@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
               (unsigned long long)side, (unsigned long long)side, keys.size(), raws.size(),
               double(stored) / (1024.0 * 1024.0),
               double(raws.size()) * double(g.tileBytes()) / double(stored), repeats);
-  std::printf("pipeline\tthreads\ttiles\tbest_s\ttiles_per_s\tdecoded_MiB_per_s\tper_thread_vs_zstd_%%\n");
+  std::printf("pipeline\tthreads\ttiles\tbest_s\ttiles_per_s\tdecoded_mib_per_s\tper_thread_vs_zstd_%%\n");
   for (const Measure& m : measures) {
     const double tiles_s = double(m.tiles) / m.best_s;
     std::printf("%s\t%u\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", m.name, m.threads, m.tiles, m.best_s,

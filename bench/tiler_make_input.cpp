@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
   for (long y = 0; y < size; ++y) {
     if (src.empty()) {
       for (long x = 0; x < size; ++x) {
-        clipstream::tiler::syntheticPixel(uint64_t(x), uint64_t(y), clipstream::PixelFormat::kRGB8,
+        clipstream::syntheticPixel(uint64_t(x), uint64_t(y), clipstream::PixelFormat::kRGB8,
                                           &row[size_t(x) * 3]);
       }
     } else {

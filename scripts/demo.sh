@@ -20,7 +20,7 @@ echo "== Verifying the store =="
 build/store/clipstream-info "$store" --verify
 
 echo "== Flying through it headless =="
-build/renderer/clipstream-fly "$store" --path pass --frames 600 --size 1280x720 \
+build/eval/clipstream-fly "$store" --path pass --frames 600 --size 1280x720 \
   --out "$out/fly" --save-frames 150
 
 echo "== Charts =="

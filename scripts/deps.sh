@@ -6,6 +6,7 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config
+  dpkg-dev file  # the Debian package: dpkg-shlibdeps, and CPack finds ELF files with file
   libopenimageio-dev libzstd-dev libxxhash-dev
   libcli11-dev nlohmann-json3-dev libglm-dev
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri

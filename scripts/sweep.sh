@@ -8,7 +8,7 @@
 # Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
 # once, runs every experiment with clipstream-fly --reference (each frame's
 # PSNR against the ideal reference), replays a request trace with
-# clipstream-trace, runs the stability scenarios (tests/renderer/
+# clipstream-trace, runs the stability scenarios (tests/eval/
 # test_stability.cpp, with the 10,000-frame soak at default settings), runs
 # the soak again under AddressSanitizer + UBSan with leak checking (built in
 # $ASAN_BUILD_DIR, default build-asan, when missing), writes docs/data/*.csv,
@@ -40,14 +40,14 @@ mkdir -p "$WORK" "$DATA" "$CHARTS"
 # ---- build ------------------------------------------------------------------
 scripts/deps.sh
 need=()
-for t in tiler/clipstream-tile renderer/clipstream-fly streamer/clipstream-trace tests/renderer/test_renderer; do
+for t in tiler/clipstream-tile eval/clipstream-fly streamer/clipstream-trace tests/eval/test_eval; do
   [[ -x "$BUILD/$t" ]] || need+=("$(basename "$t")")
 done
 if [[ ! -f "$BUILD/build.ninja" ]]; then
   cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 fi
 echo "sweep: building ${need[*]:-(up to date check)}"
-cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_renderer >/dev/null
+cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_eval >/dev/null
 # The soak also runs under ASan + UBSan: reuse $ASAN_BUILD, configure it if
 # missing; building brings it up to date (a no-op when it is).
 if (( ! CHARTS_ONLY )); then
@@ -55,10 +55,10 @@ if (( ! CHARTS_ONLY )); then
     cmake -S . -B "$ASAN_BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
       -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF >/dev/null
   fi
-  echo "sweep: building test_renderer under ASan in $ASAN_BUILD (minutes when it is new)"
-  cmake --build "$ASAN_BUILD" -j "$JOBS" --target test_renderer >/dev/null
+  echo "sweep: building test_eval under ASan in $ASAN_BUILD (minutes when it is new)"
+  cmake --build "$ASAN_BUILD" -j "$JOBS" --target test_eval >/dev/null
 fi
-FLY=${SWEEP_FLY:-$BUILD/renderer/clipstream-fly}
+FLY=${SWEEP_FLY:-$BUILD/eval/clipstream-fly}
 TRACE_TOOL="$BUILD/streamer/clipstream-trace"
 STORE="$WORK/autzen.cstore"
 if [[ ! -f "$STORE" ]]; then
@@ -135,25 +135,25 @@ for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
   echo "$FLY $args --out $WORK/$name" >"$WORK/$name.cmd"
   i=$((i + 1)); done_weight=$((done_weight + w))
 done
-STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/renderer/test_renderer --gtest_filter=Stability.*"
+STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/eval/test_eval --gtest_filter=Stability.*"
 # The soak once more under ASan + UBSan: LeakSanitizer checks at exit, with
 # the driver kept mapped (tests/renderer/lsan_keep_gl_driver.cpp) and
 # tests/lsan.supp; any report makes the process fail (docs/accuracy.md).
 ASAN_ENV=(ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp"
           UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1")
-ASAN_SOAK_CMD="ASAN_OPTIONS='detect_leaks=1 halt_on_error=1' LSAN_OPTIONS=suppressions=tests/lsan.supp UBSAN_OPTIONS='halt_on_error=1 print_stacktrace=1' CLIPSTREAM_STABILITY_OUT=$WORK/soak_asan.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $ASAN_BUILD/tests/renderer/test_renderer --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget"
+ASAN_SOAK_CMD="ASAN_OPTIONS='detect_leaks=1 halt_on_error=1' LSAN_OPTIONS=suppressions=tests/lsan.supp UBSAN_OPTIONS='halt_on_error=1 print_stacktrace=1' CLIPSTREAM_STABILITY_OUT=$WORK/soak_asan.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $ASAN_BUILD/tests/eval/test_eval --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget"
 if (( ! CHARTS_ONLY )); then
 progress "$i" "stability scenarios"
 rm -f "$WORK/stability.jsonl"
 if ! env CLIPSTREAM_STABILITY_OUT="$WORK/stability.jsonl" CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK \
-    "$BUILD/tests/renderer/test_renderer" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
+    "$BUILD/tests/eval/test_eval" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
   echo; echo "sweep: a stability scenario failed (see $WORK/stability.log); its row says FAIL"
 fi
 done_weight=$((done_weight + STAB_WEIGHT))
 progress "$((i + 1))" "soak under ASan"
 rm -f "$WORK/soak_asan.jsonl"
 if ! env "${ASAN_ENV[@]}" CLIPSTREAM_STABILITY_OUT="$WORK/soak_asan.jsonl" CLIPSTREAM_SOAK=full \
-    CLIPSTREAM_SOAK_FRAMES=$SOAK "$ASAN_BUILD/tests/renderer/test_renderer" \
+    CLIPSTREAM_SOAK_FRAMES=$SOAK "$ASAN_BUILD/tests/eval/test_eval" \
     --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget >"$WORK/soak_asan.log" 2>&1; then
   echo "1" >"$WORK/soak_asan.rc"
   echo; echo "sweep: the soak under ASan failed or reported (see $WORK/soak_asan.log); its row says FAIL"
@@ -228,12 +228,12 @@ pair "$DATA/frametime_prefetch.csv" prefetch_on prefetch_off frame_ms psnr_db
 } >"$DATA/overfetch.csv.tmp.$$"
 publish "$DATA/overfetch.csv"
 {
-  echo "run,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,gt_psnr_mean_db"
+  echo "run,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,ground_truth_psnr_mean_db"
   for r in "${RUNS[@]}"; do
     IFS='|' read -r name _ _ <<<"$r"
     [[ "$name" == trace ]] && continue
     line="$name"
-    for k in frames psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_mean time_to_sharp_max frame_ms_p50 frame_ms_p99 frame_ms_max bytes_read tiles_uploaded tiles_loaded ram_hit_rate gpu_hit_rate peak_rss_mib over_fetch_ratio gt_psnr_mean_db; do
+    for k in frames psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_mean time_to_sharp_max frame_ms_p50 frame_ms_p99 frame_ms_max bytes_read tiles_uploaded tiles_loaded ram_hit_rate gpu_hit_rate peak_rss_mib over_fetch_ratio ground_truth_psnr_mean_db; do
       line="$line,$(S "$name" "$k")"
     done
     echo "$line"

@@ -29,7 +29,7 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 echo "== AddressSanitizer + UBSan build of the renderer's stability scenarios and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-asan -j "$jobs" --target test_renderer
+cmake --build build-asan -j "$jobs" --target test_eval
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
   UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
   ctest --test-dir build-asan -R '^Stability\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900

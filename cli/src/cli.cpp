@@ -6,6 +6,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -124,6 +125,16 @@ CLI::Validator wholeInRange(int64_t lo, int64_t hi) {
         return {};
       },
       "INT in " + bounds, "RANGE");
+}
+
+std::optional<PixelFormat> parsePixelFormat(const std::string& text) {
+  std::string upper = text;
+  for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+  for (PixelFormat format :
+       {PixelFormat::kR8, PixelFormat::kR16, PixelFormat::kRGB8, PixelFormat::kRGBA8}) {
+    if (upper == pixelFormatName(format)) return format;
+  }
+  return std::nullopt;
 }
 
 void installSignalHandlers(std::atomic<int>* cancel) {

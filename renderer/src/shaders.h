@@ -5,5 +5,4 @@ namespace clipstream::shaders {
 extern const char* const k_fullscreen_vert;
 extern const char* const k_ground_ray_glsl;
 extern const char* const k_ground_clipmap_frag;
-extern const char* const k_ground_plain_frag;
 }  // namespace clipstream::shaders

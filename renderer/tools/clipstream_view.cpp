@@ -2,13 +2,14 @@
 // wheel/shift for speed, O toggles the overlay, R records the flown path to
 // JSON for clipstream-fly. Usage: docs/renderer.md.
 #include <clipstream/cli/cli.h>
+#include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/config.h>
-#include <clipstream/renderer/flight_path.h>
-#include <clipstream/renderer/fly.h>
+#include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/renderer.h>
+#include <clipstream/store/output_file.h>
+#include <clipstream/streamer/flight_path.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
-#include <clipstream/store/output_file.h>
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -53,12 +54,12 @@ int main(int argc, char** argv) {
       ->transform(cli::wholeInRange(1, 1000000));
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
   app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
-      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+      ->transform(cli::wholeInRange(0, UINT32_MAX));
   app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
   Viewport vp;
-  if (Status s = parseViewport(size, &vp); !s) return cli::usageError(app, s.message);
+  if (Status s = cli::parseSize(size, &vp.width_px, &vp.height_px); !s) return cli::usageError(app, s.message);
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {
@@ -144,24 +145,26 @@ int main(int argc, char** argv) {
   camera.pitch_rad = -0.6;
   input.speed_texels_s = camera.position.y;
 
-  StreamerConfig sc;
-  sc.ram_budget_bytes = cache_mb << 20;
-  const ClipmapPlan first = planClipmap(g, vp, camera, sc.planner);
-  std::unique_ptr<ClipmapRenderer> renderer;
-  if (Status s = ClipmapRenderer::create(g, {first.clip_tiles, first.pyramid_level}, &renderer); !s) {
-    cli::printError(app, s.toString());
-    return 1;
+  // The one frame loop's step, drawing into the window. The coarse pyramid
+  // is loaded before any frame, so there is always something correct to draw.
+  FlightConfig fc;
+  fc.viewport = vp;
+  fc.streamer.ram_budget_bytes = cache_mb << 20;
+  fc.upload_tiles = upload_tiles;
+  fc.offscreen = false;
+  {
+    int fb_w = 0, fb_h = 0;
+    glfwGetFramebufferSize(window, &fb_w, &fb_h);
+    fc.framebuffer = {uint32_t(std::max(fb_w, 1)), uint32_t(std::max(fb_h, 1))};
   }
-  // The coarse pyramid first (before any frame), so there is always
-  // something correct to draw.
-  renderer->beginFrame();
-  renderer->loadPyramid([&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
-    auto px = std::make_shared<std::vector<uint8_t>>();
-    if (!source->fetch(key, px.get()).isOk()) return nullptr;  // filled from its ancestor
-    return px;
-  });
-  renderer->endUploads();
-  Streamer streamer(source, sc);
+  std::unique_ptr<Flight> flight;
+  if (Status s = Flight::create(source, fc, camera, &flight); !s) {
+    cli::printError(app, s.toString());
+    glfwDestroyWindow(window);
+    glfwTerminate();
+    return cli::kExitFailure;
+  }
+  ClipmapRenderer& renderer = flight->renderer();
 
   FlightPath recording;
   bool recording_on = false;
@@ -195,7 +198,7 @@ int main(int argc, char** argv) {
     camera.position.y = std::max(camera.position.y, 1.0);
 
     if (input.overlay_toggled) {
-      renderer->setOverlay(renderer->overlay() == Overlay::kOff ? Overlay::kLevels : Overlay::kOff);
+      renderer.setOverlay(renderer.overlay() == Overlay::kOff ? Overlay::kLevels : Overlay::kOff);
       input.overlay_toggled = false;
     }
     if (input.record_toggled) {
@@ -219,30 +222,22 @@ int main(int argc, char** argv) {
       last_key_s = t;
     }
 
-    const auto f0 = std::chrono::steady_clock::now();
-    streamer.update(camera, vp, t);
-    renderer->applyHandoff(streamer.takeReady(upload_tiles));
-    int fb_w = 0, fb_h = 0;
-    glfwGetFramebufferSize(window, &fb_w, &fb_h);
-    bindWindowFramebuffer({uint32_t(fb_w), uint32_t(fb_h)});
-    ClipmapRenderer::clearSky();
-    renderer->draw(camera, vp);
-    const double frame_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - f0).count();
-    frame_ms_avg = frame_ms_avg * 0.9 + frame_ms * 0.1;
+    // Wall-clock time drives the streamer (an interactive flight).
+    const FrameSample frame = flight->step(camera, t);
+    frame_ms_avg = frame_ms_avg * 0.9 + frame.frame_ms * 0.1;
     glfwSwapBuffers(window);
     ++frames;
 
     title_timer += dt;
     if (title_timer > 0.25 || frames == 1) {
       title_timer = 0.0;
-      const StreamerStats st = streamer.stats();
+      const StreamerStats st = flight->streamer().stats();
       char title[256];
       std::snprintf(title, sizeof title,
                     "clipstream-view | %.1f ms | lod %u | queue %llu | RAM %.0f MiB | speed %.0f/s%s%s",
                     frame_ms_avg, st.max_texture_lod, (unsigned long long)st.queue_depth,
                     double(st.ram_bytes) / (1 << 20), speed,
-                    renderer->overlay() == Overlay::kOff ? "" : " | overlay",
+                    renderer.overlay() == Overlay::kOff ? "" : " | overlay",
                     recording_on ? " | REC" : "");
       glfwSetWindowTitle(window, title);
     }
@@ -253,8 +248,8 @@ int main(int argc, char** argv) {
     cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
     if (!s) code = cli::kExitFailure;
   }
-  streamer.shutdown();
-  renderer.reset();
+  flight->finish();
+  flight.reset();  // GL objects go before the context
   glfwDestroyWindow(window);
   glfwTerminate();
   return cli::finish(app, code);

@@ -5,28 +5,12 @@
 
 #include <clipstream/store/tile_store.h>
 
-#include <xxhash.h>
 #include <zstd.h>
 
 #include <algorithm>
 #include <memory>
 
 namespace clipstream {
-namespace format {
-
-uint64_t checksum64(const void* data, size_t bytes) { return XXH3_64bits(data, bytes); }
-
-size_t maxStoredBytes(size_t tile_bytes, Compression compression) {
-  return compression == Compression::kZstd ? ZSTD_compressBound(tile_bytes) : tile_bytes;
-}
-
-std::string keyText(const TileKey& key) {
-  return "level " + std::to_string(key.level) + " tile (" + std::to_string(key.x) + ", " +
-         std::to_string(key.y) + ")";
-}
-
-}  // namespace format
-
 namespace {
 
 // Per row, per channel: out[x] = in[x] - in[x - 1] modulo the sample width.

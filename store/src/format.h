@@ -1,6 +1,10 @@
-// Private: the byte layout of a tile store file, shared by reader.cpp and
-// writer.cpp only. docs/tile-store.md is the specification; every constant
-// and offset here must match it.
+// Private: the byte layout of a tile store file and the one encoder and
+// decoder of each record (format.cpp). reader.cpp and writer.cpp go through
+// these and never touch a field offset themselves. docs/tile-store.md is the
+// specification; every constant and offset here must match it (tests/store/
+// test_format.cpp checks a real store's bytes against the documented table).
+//
+// Thread-safe: constants and pure functions over caller-owned buffers.
 #pragma once
 
 #include <clipstream/store/tile_store.h>
@@ -9,7 +13,9 @@
 #include <bit>
 #include <cstdint>
 #include <cstring>
+#include <span>
 #include <string>
+#include <vector>
 
 namespace clipstream::format {
 
@@ -23,7 +29,7 @@ constexpr uint32_t kVersion = 1;
 constexpr uint32_t kHeaderBytes = 136;
 constexpr uint32_t kHeaderChecksumOffset = 128;  // XXH3-64 of bytes [0, 128)
 
-// Header field offsets.
+// Header field offsets (docs/tile-store.md section 5).
 constexpr size_t kOffMagic = 0;
 constexpr size_t kOffVersion = 8;
 constexpr size_t kOffHeaderBytes = 12;
@@ -46,6 +52,12 @@ constexpr size_t kOffIndexBytes = 96;
 constexpr size_t kOffMetadataOffset = 104;
 constexpr size_t kOffMetadataBytes = 112;
 constexpr size_t kOffFileBytes = 120;
+static_assert(kOffFileBytes + 8 == kHeaderChecksumOffset && kHeaderChecksumOffset + 8 == kHeaderBytes);
+
+// A reader needs this many bytes to check the magic, and this many to read
+// the version (checked before the header checksum, section 5).
+constexpr size_t kMagicEndBytes = kOffMagic + sizeof(kMagic);
+constexpr size_t kVersionEndBytes = kOffVersion + 4;
 
 constexpr uint32_t kFlagLinearLight = 1u << 0;
 constexpr uint32_t kFlagGeoPresent = 1u << 1;
@@ -61,17 +73,48 @@ constexpr uint32_t kMaxTilePx = 4096;
 constexpr uint32_t kMaxLevels = 64;
 constexpr uint32_t kMaxCrsBytes = 1u << 20;
 
-// Level table entry, one per level, then an XXH3-64 of all entries.
-constexpr uint32_t kLevelEntryBytes = 64;
-// Page directory entry, one per page of a level, then an XXH3-64.
-constexpr uint32_t kPageEntryBytes = 32;
-constexpr uint32_t kPageFlagConstant = 1u << 0;
-// Tile entry inside an index page.
-constexpr uint32_t kTileEntryBytes = 16;
-// Metadata block: 6 f64 transform, u32 CRS length, CRS bytes, XXH3-64.
-constexpr uint32_t kMetadataFixedBytes = 48 + 4 + 8;
-
+// Checksummed blocks (level table, page directories, metadata) end in an
+// XXH3-64 of everything before it.
 constexpr uint32_t kChecksumBytes = 8;
+
+// Level table entry, one per level (section 6), then the checksum.
+constexpr uint32_t kLevelEntryBytes = 64;
+constexpr size_t kLevelOffWidth = 0;
+constexpr size_t kLevelOffHeight = 8;
+constexpr size_t kLevelOffTilesX = 16;
+constexpr size_t kLevelOffTilesY = 20;
+constexpr size_t kLevelOffPagesX = 24;
+constexpr size_t kLevelOffPagesY = 28;
+constexpr size_t kLevelOffPayloadOffset = 32;
+constexpr size_t kLevelOffPayloadBytes = 40;
+constexpr size_t kLevelOffDirectoryOffset = 48;
+constexpr size_t kLevelOffDirectoryBytes = 56;
+static_assert(kLevelOffDirectoryBytes + 8 == kLevelEntryBytes);
+
+// Page directory entry, one per page of a level (section 7), then the checksum.
+constexpr uint32_t kPageEntryBytes = 32;
+constexpr size_t kPageOffOffset = 0;
+constexpr size_t kPageOffBytes = 8;
+constexpr size_t kPageOffFlags = 12;
+constexpr size_t kPageOffConstantValue = 16;
+constexpr size_t kPageOffChecksum = 24;
+static_assert(kPageOffChecksum + 8 == kPageEntryBytes);
+constexpr uint32_t kPageFlagConstant = 1u << 0;
+
+// Tile entry inside an index page (section 8); the page has no checksum of
+// its own, its directory entry carries it.
+constexpr uint32_t kTileEntryBytes = 16;
+constexpr size_t kTileOffOffsetOrValue = 0;
+constexpr size_t kTileOffStoredBytes = 8;
+constexpr size_t kTileOffChecksum = 12;
+static_assert(kTileOffChecksum + 4 == kTileEntryBytes);
+
+// Metadata block (section 10): 6 f64 transform, u32 CRS length, CRS bytes,
+// then the checksum.
+constexpr size_t kMetaOffTransform = 0;
+constexpr size_t kMetaOffCrsBytes = 48;
+constexpr size_t kMetaOffCrs = 52;
+constexpr uint32_t kMetadataFixedBytes = kMetaOffCrs + kChecksumBytes;
 
 inline void put32(uint8_t* p, uint32_t v) { std::memcpy(p, &v, 4); }
 inline void put64(uint8_t* p, uint64_t v) { std::memcpy(p, &v, 8); }
@@ -99,6 +142,128 @@ inline uint32_t tileChecksum(const void* data, size_t bytes) {
   return static_cast<uint32_t>(checksum64(data, bytes));
 }
 
+// ---- Records ----
+// Each record has one encoder and one decoder. Decoders check only what the
+// bytes themselves say (checksums, sizes); the rules between fields and
+// regions are the reader's (section 11). Every field is the raw stored value.
+
+// The header fields after the magic, as stored.
+struct Header {
+  uint32_t format_version = kVersion;
+  uint32_t header_bytes = kHeaderBytes;
+  uint64_t width_px = 0;
+  uint64_t height_px = 0;
+  uint32_t tile_px = 0;
+  uint32_t pixel_format = 0;
+  uint32_t level_count = 0;
+  uint32_t compression = 0;
+  int32_t zstd_level = 0;
+  uint32_t predictor = 0;
+  uint32_t filter = 0;
+  uint32_t flags = 0;
+  uint32_t page_tiles = kPageTiles;
+  uint32_t tile_entry_bytes = kTileEntryBytes;
+  uint64_t level_table_offset = 0;
+  uint64_t level_table_bytes = 0;
+  uint64_t index_offset = 0;
+  uint64_t index_bytes = 0;
+  uint64_t metadata_offset = 0;
+  uint64_t metadata_bytes = 0;
+  uint64_t file_bytes = 0;
+
+  friend bool operator==(const Header&, const Header&) = default;
+};
+
+// Writes the kHeaderBytes-byte header to `out`: magic, every field, checksum.
+void encodeHeader(const Header& header, uint8_t* out);
+// The checks a reader makes before trusting anything else, in the order
+// section 5 gives: the magic (needs kMagicEndBytes bytes), the version
+// (needs kVersionEndBytes), the checksum (needs kHeaderBytes).
+bool hasMagic(const uint8_t* bytes);
+uint32_t decodeVersion(const uint8_t* bytes);
+bool headerChecksumOk(const uint8_t* header);
+// Reads every field of a kHeaderBytes-byte header (no check of any value).
+void decodeHeader(const uint8_t* header, Header* out);
+
+// What a decoder of a checksummed block found.
+enum class Decoded {
+  kOk,
+  kBadChecksum,  // the stored checksum does not match the bytes
+  kBadSize,      // the block's size does not fit its own fields
+};
+
+struct LevelEntry {
+  uint64_t width_px = 0;
+  uint64_t height_px = 0;
+  uint32_t tiles_x = 0;
+  uint32_t tiles_y = 0;
+  uint32_t pages_x = 0;
+  uint32_t pages_y = 0;
+  uint64_t payload_offset = 0;    // absolute
+  uint64_t payload_bytes = 0;
+  uint64_t directory_offset = 0;  // absolute
+  uint64_t directory_bytes = 0;
+
+  friend bool operator==(const LevelEntry&, const LevelEntry&) = default;
+};
+
+// Size of the level table for `level_count` levels: entries plus checksum.
+inline uint64_t levelTableBytes(uint64_t level_count) {
+  return level_count * kLevelEntryBytes + kChecksumBytes;
+}
+// The whole level table: entries, level 0 first, then their checksum.
+std::vector<uint8_t> encodeLevelTable(std::span<const LevelEntry> levels);
+// kBadSize unless the table is N entries plus a checksum.
+Decoded decodeLevelTable(std::span<const uint8_t> table, std::vector<LevelEntry>* out);
+
+struct PageDirEntry {
+  uint64_t offset = 0;  // absolute offset of the index page; 0 for a constant page
+  uint32_t bytes = 0;
+  uint32_t flags = 0;   // kPageFlagConstant
+  uint64_t constant_value = 0;
+  uint64_t checksum = 0;  // of the index page's bytes
+
+  friend bool operator==(const PageDirEntry&, const PageDirEntry&) = default;
+};
+
+inline uint64_t pageDirectoryBytes(uint64_t page_count) {
+  return page_count * kPageEntryBytes + kChecksumBytes;
+}
+// One level's page directory: entries row-major by page, then their checksum.
+std::vector<uint8_t> encodePageDirectory(std::span<const PageDirEntry> pages);
+// kBadSize unless the directory is N entries plus a checksum.
+Decoded decodePageDirectory(std::span<const uint8_t> directory, std::vector<PageDirEntry>* out);
+
+// A tile's index entry: stored_bytes 0 is a constant tile whose value (the
+// first bpp bytes, rest 0) is in offset_or_value; otherwise offset_or_value
+// is relative to the level's payload region.
+struct TileEntry {
+  uint64_t offset_or_value = 0;
+  uint32_t stored_bytes = 0;
+  uint32_t checksum = 0;  // checksum32 of the stored payload; 0 when constant
+
+  friend bool operator==(const TileEntry&, const TileEntry&) = default;
+};
+
+// One index page: entries row-major inside the page. Returns the page's
+// checksum, which goes in its directory entry.
+uint64_t encodeIndexPage(std::span<const TileEntry> entries, std::vector<uint8_t>* out);
+// kBadChecksum when the bytes do not match `checksum` (from the directory),
+// kBadSize unless they are whole entries.
+Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum,
+                        std::vector<TileEntry>* out);
+
+inline uint64_t metadataBytes(uint64_t crs_bytes) { return kMetadataFixedBytes + crs_bytes; }
+// The metadata block of `transform` and `crs` (at most kMaxCrsBytes; the
+// caller checks), checksum included.
+std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs);
+// Fills transform and crs (not `present`: that is a header flag). kBadSize
+// when the block is shorter than kMetadataFixedBytes or its CRS length does
+// not match its size.
+Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out);
+
+// ---- Geometry helpers ----
+
 // Largest stored payload a reader accepts for one tile: the zstd bound of a
 // raw tile (or the raw size when uncompressed).
 size_t maxStoredBytes(size_t tile_bytes, Compression compression);
@@ -120,4 +285,3 @@ inline uint32_t pageSpan(uint32_t tiles, uint32_t page) {
 std::string keyText(const TileKey& key);
 
 }  // namespace clipstream::format
-

@@ -23,19 +23,8 @@ namespace clipstream {
 
 namespace {
 
-struct PageDirEntry {
-  uint64_t offset = 0;
-  uint32_t bytes = 0;
-  uint32_t flags = 0;
-  uint64_t constant_value = 0;
-  uint64_t checksum = 0;
-};
-
-struct TileEntry {
-  uint64_t offset_or_value = 0;
-  uint32_t stored_bytes = 0;
-  uint32_t checksum = 0;
-};
+using format::PageDirEntry;
+using format::TileEntry;
 
 struct Page {
   std::vector<TileEntry> entries;
@@ -127,36 +116,38 @@ Status TileStoreReader::Impl::openImpl() {
   const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
 
   // Header.
-  uint8_t header[format::kHeaderBytes];
-  if (actual_bytes < sizeof(format::kMagic)) {
+  uint8_t header_bytes[format::kHeaderBytes];
+  if (actual_bytes < format::kMagicEndBytes) {
     return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
                                           " bytes, too short to be a tile store");
   }
-  const size_t header_read = static_cast<size_t>(std::min<uint64_t>(actual_bytes, sizeof(header)));
-  Status status = read(header, header_read, 0);
+  const size_t header_read =
+      static_cast<size_t>(std::min<uint64_t>(actual_bytes, sizeof(header_bytes)));
+  Status status = read(header_bytes, header_read, 0);
   if (!status) return status;
-  if (std::memcmp(header, format::kMagic, sizeof(format::kMagic)) != 0) {
+  if (!format::hasMagic(header_bytes)) {
     return bad(ErrorCode::kBadMagic, "not a clipstream tile store (bad magic)");
   }
-  if (header_read < format::kOffVersion + 4) {
+  if (header_read < format::kVersionEndBytes) {
     return bad(ErrorCode::kTruncated, "file ends inside the header");
   }
-  const uint32_t version = format::get32(header + format::kOffVersion);
+  const uint32_t version = format::decodeVersion(header_bytes);
   if (version != format::kVersion) {
     return bad(ErrorCode::kBadVersion, "format version " + std::to_string(version) +
                                            " (this reader knows version " +
                                            std::to_string(format::kVersion) + ")");
   }
-  if (header_read < sizeof(header)) {
+  if (header_read < sizeof(header_bytes)) {
     return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
                                           " bytes, shorter than the " +
                                           std::to_string(format::kHeaderBytes) + "-byte header");
   }
-  if (format::get64(header + format::kHeaderChecksumOffset) !=
-      format::checksum64(header, format::kHeaderChecksumOffset)) {
+  if (!format::headerChecksumOk(header_bytes)) {
     return bad(ErrorCode::kBadHeader, "header checksum mismatch");
   }
-  const uint64_t file_bytes = format::get64(header + format::kOffFileBytes);
+  format::Header header;
+  format::decodeHeader(header_bytes, &header);
+  const uint64_t file_bytes = header.file_bytes;
   if (actual_bytes < file_bytes) {
     return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
                                           " bytes, the header says " +
@@ -166,45 +157,41 @@ Status TileStoreReader::Impl::openImpl() {
     return bad(ErrorCode::kBadHeader, "file has " + std::to_string(actual_bytes - file_bytes) +
                                           " bytes after the end the header records");
   }
-  if (format::get32(header + format::kOffHeaderBytes) != format::kHeaderBytes) {
+  if (header.header_bytes != format::kHeaderBytes) {
     return bad(ErrorCode::kBadHeader, "header size field is not " +
                                           std::to_string(format::kHeaderBytes));
   }
-  const uint64_t width = format::get64(header + format::kOffWidth);
-  const uint64_t height = format::get64(header + format::kOffHeight);
-  const uint32_t tile_px = format::get32(header + format::kOffTilePx);
-  const uint32_t raw_format = format::get32(header + format::kOffPixelFormat);
-  const uint32_t level_count = format::get32(header + format::kOffLevelCount);
-  const uint32_t compression = format::get32(header + format::kOffCompression);
-  const int32_t zstd_level = static_cast<int32_t>(format::get32(header + format::kOffZstdLevel));
-  const uint32_t predictor = format::get32(header + format::kOffPredictor);
-  const uint32_t filter = format::get32(header + format::kOffFilter);
-  const uint32_t flags = format::get32(header + format::kOffFlags);
+  const uint32_t tile_px = header.tile_px;
+  const uint32_t level_count = header.level_count;
   if (tile_px < format::kMinTilePx || tile_px > format::kMaxTilePx) {
     return bad(ErrorCode::kBadHeader, "tile size " + std::to_string(tile_px) + " outside 16..4096");
   }
-  if (!isValidPixelFormat(raw_format)) {
-    return bad(ErrorCode::kUnsupported, "unknown pixel format " + std::to_string(raw_format));
+  if (!isValidPixelFormat(header.pixel_format)) {
+    return bad(ErrorCode::kUnsupported,
+               "unknown pixel format " + std::to_string(header.pixel_format));
   }
-  if (compression > 1) {
-    return bad(ErrorCode::kUnsupported, "unknown compression " + std::to_string(compression));
+  if (header.compression > 1) {
+    return bad(ErrorCode::kUnsupported, "unknown compression " + std::to_string(header.compression));
   }
-  if (predictor > 1) {
-    return bad(ErrorCode::kUnsupported, "unknown predictor " + std::to_string(predictor));
+  if (header.predictor > 1) {
+    return bad(ErrorCode::kUnsupported, "unknown predictor " + std::to_string(header.predictor));
   }
-  if (filter > 1) return bad(ErrorCode::kBadHeader, "unknown filter " + std::to_string(filter));
-  if ((flags & ~format::kKnownFlags) != 0) {
+  if (header.filter > 1) {
+    return bad(ErrorCode::kBadHeader, "unknown filter " + std::to_string(header.filter));
+  }
+  if ((header.flags & ~format::kKnownFlags) != 0) {
     return bad(ErrorCode::kBadHeader, "unknown header flags");
   }
-  if (format::get32(header + format::kOffPageTiles) != format::kPageTiles ||
-      format::get32(header + format::kOffEntryBytes) != format::kTileEntryBytes) {
+  if (header.page_tiles != format::kPageTiles ||
+      header.tile_entry_bytes != format::kTileEntryBytes) {
     return bad(ErrorCode::kBadHeader, "index page shape is not 64 tiles of 16 bytes");
   }
   PyramidGeometry geometry;
-  if (!makePyramidGeometry(width, height, tile_px, static_cast<PixelFormat>(raw_format),
-                           &geometry)) {
-    return bad(ErrorCode::kBadHeader, "image size " + std::to_string(width) + "x" +
-                                          std::to_string(height) + " is not representable");
+  if (!makePyramidGeometry(header.width_px, header.height_px, tile_px,
+                           static_cast<PixelFormat>(header.pixel_format), &geometry)) {
+    return bad(ErrorCode::kBadHeader, "image size " + std::to_string(header.width_px) + "x" +
+                                          std::to_string(header.height_px) +
+                                          " is not representable");
   }
   if (geometry.levelCount() != level_count) {
     return bad(ErrorCode::kBadHeader, "level count " + std::to_string(level_count) +
@@ -212,24 +199,24 @@ Status TileStoreReader::Impl::openImpl() {
                                           std::to_string(geometry.levelCount()) + ")");
   }
   info.geometry = geometry;
-  info.encoding.compression = static_cast<Compression>(compression);
-  info.encoding.zstd_level = zstd_level;
-  info.encoding.predictor = static_cast<Predictor>(predictor);
-  info.encoding.filter = static_cast<DownsampleFilter>(filter);
-  info.encoding.linear_light = (flags & format::kFlagLinearLight) != 0;
+  info.encoding.compression = static_cast<Compression>(header.compression);
+  info.encoding.zstd_level = header.zstd_level;
+  info.encoding.predictor = static_cast<Predictor>(header.predictor);
+  info.encoding.filter = static_cast<DownsampleFilter>(header.filter);
+  info.encoding.linear_light = (header.flags & format::kFlagLinearLight) != 0;
   info.file_bytes = file_bytes;
   info.format_version = version;
   max_stored_bytes = format::maxStoredBytes(geometry.tileBytes(), info.encoding.compression);
 
   // Region layout: payloads, index, level table, metadata, end of file,
   // each starting where the previous ends.
-  const uint64_t table_offset = format::get64(header + format::kOffLevelTableOffset);
-  const uint64_t table_bytes = format::get64(header + format::kOffLevelTableBytes);
-  const uint64_t index_offset = format::get64(header + format::kOffIndexOffset);
-  const uint64_t index_bytes = format::get64(header + format::kOffIndexBytes);
-  const uint64_t metadata_offset = format::get64(header + format::kOffMetadataOffset);
-  const uint64_t metadata_bytes = format::get64(header + format::kOffMetadataBytes);
-  if (table_bytes != uint64_t(level_count) * format::kLevelEntryBytes + format::kChecksumBytes) {
+  const uint64_t table_offset = header.level_table_offset;
+  const uint64_t table_bytes = header.level_table_bytes;
+  const uint64_t index_offset = header.index_offset;
+  const uint64_t index_bytes = header.index_bytes;
+  const uint64_t metadata_offset = header.metadata_offset;
+  const uint64_t metadata_bytes = header.metadata_bytes;
+  if (table_bytes != format::levelTableBytes(level_count)) {
     return bad(ErrorCode::kBadHeader, "level table size does not match the level count");
   }
   if (!fits(index_offset, index_bytes, file_bytes) || table_offset != index_offset + index_bytes ||
@@ -238,49 +225,51 @@ Status TileStoreReader::Impl::openImpl() {
       metadata_offset + metadata_bytes != file_bytes || index_offset < format::kHeaderBytes) {
     return bad(ErrorCode::kBadHeader, "region offsets in the header are inconsistent");
   }
-  if (metadata_bytes < format::kMetadataFixedBytes ||
-      metadata_bytes > format::kMetadataFixedBytes + format::kMaxCrsBytes) {
+  if (metadata_bytes < format::metadataBytes(0) ||
+      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes)) {
     return bad(ErrorCode::kBadHeader, "metadata block size out of range");
   }
 
-  // Level table.
-  std::vector<uint8_t> table(static_cast<size_t>(table_bytes));
-  status = read(table.data(), table.size(), table_offset);
-  if (!status) return status;
-  const size_t table_body = table.size() - format::kChecksumBytes;
-  if (format::get64(table.data() + table_body) != format::checksum64(table.data(), table_body)) {
-    return bad(ErrorCode::kCorruptIndex, "level table checksum mismatch");
+  // Level table (its size was checked against the level count above).
+  std::vector<format::LevelEntry> table;
+  {
+    std::vector<uint8_t> bytes(static_cast<size_t>(table_bytes));
+    status = read(bytes.data(), bytes.size(), table_offset);
+    if (!status) return status;
+    if (format::decodeLevelTable(bytes, &table) != format::Decoded::kOk) {
+      return bad(ErrorCode::kCorruptIndex, "level table checksum mismatch");
+    }
   }
   levels.resize(level_count);
   uint64_t payload_end = format::kHeaderBytes;
   uint64_t directories_bytes = 0;
   for (uint32_t l = 0; l < level_count; ++l) {
-    const uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
+    const format::LevelEntry& entry = table[l];
     const LevelInfo& expected = geometry.levels[l];
     LevelRead& level = levels[l];
     const std::string where = "level table entry " + std::to_string(l) + ": ";
-    if (format::get64(p) != expected.width_px || format::get64(p + 8) != expected.height_px ||
-        format::get32(p + 16) != expected.tiles_x || format::get32(p + 20) != expected.tiles_y) {
+    if (entry.width_px != expected.width_px || entry.height_px != expected.height_px ||
+        entry.tiles_x != expected.tiles_x || entry.tiles_y != expected.tiles_y) {
       return bad(ErrorCode::kCorruptIndex, where + "size does not match the pyramid rule");
     }
-    level.pages_x = format::get32(p + 24);
-    level.pages_y = format::get32(p + 28);
+    level.pages_x = entry.pages_x;
+    level.pages_y = entry.pages_y;
     if (level.pages_x != format::pagesAlong(expected.tiles_x) ||
         level.pages_y != format::pagesAlong(expected.tiles_y)) {
       return bad(ErrorCode::kCorruptIndex, where + "page grid does not match the tile grid");
     }
-    level.payload_offset = format::get64(p + 32);
-    level.payload_bytes = format::get64(p + 40);
+    level.payload_offset = entry.payload_offset;
+    level.payload_bytes = entry.payload_bytes;
     if (level.payload_offset != payload_end || !fits(level.payload_offset, level.payload_bytes,
                                                      index_offset)) {
       return bad(ErrorCode::kCorruptIndex, where + "payload region out of place");
     }
     payload_end = level.payload_offset + level.payload_bytes;
     const uint64_t page_count = uint64_t(level.pages_x) * level.pages_y;
-    if (format::get64(p + 56) != page_count * format::kPageEntryBytes + format::kChecksumBytes) {
+    if (entry.directory_bytes != format::pageDirectoryBytes(page_count)) {
       return bad(ErrorCode::kCorruptIndex, where + "page directory size does not match");
     }
-    directories_bytes += format::get64(p + 56);
+    directories_bytes += entry.directory_bytes;
   }
   if (payload_end != index_offset) {
     return bad(ErrorCode::kCorruptIndex, "payload regions do not end where the index begins");
@@ -293,32 +282,24 @@ Status TileStoreReader::Impl::openImpl() {
   pages_end = index_offset + index_bytes - directories_bytes;
   uint64_t directory_offset = pages_end;
   for (uint32_t l = 0; l < level_count; ++l) {
-    const uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
     LevelRead& level = levels[l];
-    const uint64_t bytes = format::get64(p + 56);
-    if (format::get64(p + 48) != directory_offset) {
+    const uint64_t bytes = table[l].directory_bytes;
+    if (table[l].directory_offset != directory_offset) {
       return bad(ErrorCode::kCorruptIndex,
                  "level table entry " + std::to_string(l) + ": page directory out of place");
     }
     std::vector<uint8_t> directory(static_cast<size_t>(bytes));
     status = read(directory.data(), directory.size(), directory_offset);
     if (!status) return status;
-    const size_t body = directory.size() - format::kChecksumBytes;
-    if (format::get64(directory.data() + body) != format::checksum64(directory.data(), body)) {
+    // Its size was checked against the page grid above.
+    if (format::decodePageDirectory(directory, &level.directory) != format::Decoded::kOk) {
       return bad(ErrorCode::kCorruptIndex,
                  "page directory of level " + std::to_string(l) + ": checksum mismatch");
     }
-    const size_t page_count = size_t(level.pages_x) * level.pages_y;
-    level.directory.resize(page_count);
+    const size_t page_count = level.directory.size();
     const size_t bpp = bytesPerPixel(geometry.format);
     for (size_t i = 0; i < page_count; ++i) {
-      const uint8_t* e = directory.data() + i * format::kPageEntryBytes;
-      PageDirEntry& entry = level.directory[i];
-      entry.offset = format::get64(e);
-      entry.bytes = format::get32(e + 8);
-      entry.flags = format::get32(e + 12);
-      entry.constant_value = format::get64(e + 16);
-      entry.checksum = format::get64(e + 24);
+      const format::PageDirEntry& entry = level.directory[i];
       const uint32_t px = static_cast<uint32_t>(i % level.pages_x);
       const uint32_t py = static_cast<uint32_t>(i / level.pages_x);
       const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
@@ -345,22 +326,18 @@ Status TileStoreReader::Impl::openImpl() {
     directory_offset += bytes;
   }
 
-  // Metadata block.
+  // Metadata block (its size was checked against the header's range above).
   std::vector<uint8_t> metadata(static_cast<size_t>(metadata_bytes));
   status = read(metadata.data(), metadata.size(), metadata_offset);
   if (!status) return status;
-  const size_t metadata_body = metadata.size() - format::kChecksumBytes;
-  if (format::get64(metadata.data() + metadata_body) !=
-      format::checksum64(metadata.data(), metadata_body)) {
-    return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
+  switch (format::decodeMetadata(metadata, &info.geo)) {
+    case format::Decoded::kOk: break;
+    case format::Decoded::kBadChecksum:
+      return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
+    case format::Decoded::kBadSize:
+      return bad(ErrorCode::kBadHeader, "metadata CRS length does not match the block size");
   }
-  const uint32_t crs_bytes = format::get32(metadata.data() + 48);
-  if (uint64_t(crs_bytes) + format::kMetadataFixedBytes != metadata_bytes) {
-    return bad(ErrorCode::kBadHeader, "metadata CRS length does not match the block size");
-  }
-  info.geo.present = (flags & format::kFlagGeoPresent) != 0;
-  for (int i = 0; i < 6; ++i) info.geo.transform[i] = format::getF64(metadata.data() + 8 * i);
-  info.geo.crs.assign(reinterpret_cast<const char*>(metadata.data() + 52), crs_bytes);
+  info.geo.present = (header.flags & format::kFlagGeoPresent) != 0;
   return Status::ok();
 }
 
@@ -373,21 +350,16 @@ Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32
   std::vector<uint8_t> bytes(dir.bytes);
   Status status = read(bytes.data(), bytes.size(), dir.offset);
   if (!status) return status;
-  if (format::checksum64(bytes.data(), bytes.size()) != dir.checksum) {
+  auto page = std::make_unique<Page>();
+  // Its size was checked against the page's tile count at open.
+  if (format::decodeIndexPage(bytes, dir.checksum, &page->entries) != format::Decoded::kOk) {
     return bad(ErrorCode::kCorruptIndex, where + ": checksum mismatch");
   }
   const LevelInfo& level_info = info.geometry.levels[level_index];
   const uint32_t w = format::pageSpan(level_info.tiles_x, px);
   const size_t bpp = bytesPerPixel(info.geometry.format);
-  auto page = std::make_unique<Page>();
-  const size_t count = bytes.size() / format::kTileEntryBytes;
-  page->entries.resize(count);
-  for (size_t i = 0; i < count; ++i) {
-    const uint8_t* p = bytes.data() + i * format::kTileEntryBytes;
-    TileEntry& entry = page->entries[i];
-    entry.offset_or_value = format::get64(p);
-    entry.stored_bytes = format::get32(p + 8);
-    entry.checksum = format::get32(p + 12);
+  for (size_t i = 0; i < page->entries.size(); ++i) {
+    const format::TileEntry& entry = page->entries[i];
     const bool ok = entry.stored_bytes == 0
                         ? entry.checksum == 0 && valueFits(entry.offset_or_value, bpp)
                         : entry.stored_bytes <= max_stored_bytes &&

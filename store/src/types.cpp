@@ -112,6 +112,7 @@ const char* errorCodeName(ErrorCode code) {
     case ErrorCode::kCancelled: return "cancelled";
     case ErrorCode::kUnavailable: return "unavailable";
     case ErrorCode::kAlreadyExists: return "already exists";
+    case ErrorCode::kOutOfMemory: return "out of memory";
   }
   return "unknown error";
 }

@@ -24,13 +24,8 @@ namespace clipstream {
 
 namespace {
 
-// One tile's index entry while its page is being filled (same 16 bytes as
-// on disk: relative offset or constant value, stored size, checksum).
-struct PendingEntry {
-  uint64_t offset_or_value = 0;
-  uint32_t stored_bytes = 0;
-  uint32_t checksum = 0;
-};
+// A tile's index entry while its page is being filled: the on-disk record.
+using PendingEntry = format::TileEntry;
 
 enum class PageState : uint8_t { kEmpty, kFilling, kDone, kConstant };
 
@@ -174,20 +169,16 @@ struct TileStoreWriter::Impl {
       page->state = PageState::kConstant;
       page->constant_value = page->entries[0].offset_or_value;
     } else {
-      std::vector<uint8_t> bytes(size_t(count) * format::kTileEntryBytes);
-      for (uint32_t i = 0; i < count; ++i) {
-        uint8_t* p = bytes.data() + size_t(i) * format::kTileEntryBytes;
-        format::put64(p, page->entries[i].offset_or_value);
-        format::put32(p + 8, page->entries[i].stored_bytes);
-        format::put32(p + 12, page->entries[i].checksum);
-      }
+      std::vector<uint8_t> bytes;
+      const uint64_t checksum =
+          format::encodeIndexPage(std::span<const PendingEntry>(page->entries.get(), count), &bytes);
       Status status = fileio::pwriteAll(index_fd, bytes.data(), bytes.size(), index_bytes,
                                         index_temp);
       if (!status) return status;
       page->state = PageState::kDone;
       page->rel_offset = index_bytes;
       page->bytes = static_cast<uint32_t>(bytes.size());
-      page->checksum = format::checksum64(bytes.data(), bytes.size());
+      page->checksum = checksum;
       index_bytes += bytes.size();
     }
     page->entries.reset();
@@ -489,104 +480,83 @@ Status TileStoreWriter::Impl::finishLocked() {
     if (!status) return status;
   }
   position += index_bytes;
-  std::vector<uint64_t> directory_offset(levels.size());
-  std::vector<uint64_t> directory_bytes(levels.size());
+  std::vector<format::LevelEntry> table(levels.size());
   for (uint32_t l = 0; l < levels.size(); ++l) {
     const LevelBuild& level = levels[l];
-    const size_t page_count = level.pages.size();
-    std::vector<uint8_t> bytes(page_count * format::kPageEntryBytes + format::kChecksumBytes);
-    for (size_t i = 0; i < page_count; ++i) {
+    std::vector<format::PageDirEntry> entries(level.pages.size());
+    for (size_t i = 0; i < level.pages.size(); ++i) {
       const PageBuild& page = level.pages[i];
-      uint8_t* p = bytes.data() + i * format::kPageEntryBytes;
+      format::PageDirEntry& entry = entries[i];
       if (page.state == PageState::kConstant) {
-        format::put32(p + 12, format::kPageFlagConstant);
-        format::put64(p + 16, page.constant_value);
+        entry.flags = format::kPageFlagConstant;
+        entry.constant_value = page.constant_value;
       } else {
-        format::put64(p, index_offset + page.rel_offset);
-        format::put32(p + 8, page.bytes);
-        format::put64(p + 24, page.checksum);
+        entry.offset = index_offset + page.rel_offset;
+        entry.bytes = page.bytes;
+        entry.checksum = page.checksum;
       }
     }
-    format::put64(bytes.data() + page_count * format::kPageEntryBytes,
-                  format::checksum64(bytes.data(), page_count * format::kPageEntryBytes));
+    const std::vector<uint8_t> bytes = format::encodePageDirectory(entries);
     Status status = fileio::pwriteAll(main_fd, bytes.data(), bytes.size(), position, main_temp);
     if (!status) return status;
-    directory_offset[l] = position;
-    directory_bytes[l] = bytes.size();
+    const LevelInfo& info = geometry.levels[l];
+    format::LevelEntry& entry = table[l];
+    entry.width_px = info.width_px;
+    entry.height_px = info.height_px;
+    entry.tiles_x = info.tiles_x;
+    entry.tiles_y = info.tiles_y;
+    entry.pages_x = level.pages_x;
+    entry.pages_y = level.pages_y;
+    entry.payload_offset = payload_offset[l];
+    entry.payload_bytes = level.payload_bytes;
+    entry.directory_offset = position;
+    entry.directory_bytes = bytes.size();
     position += bytes.size();
   }
   const uint64_t index_total = position - index_offset;
 
   // Level table.
   const uint64_t level_table_offset = position;
-  std::vector<uint8_t> table(levels.size() * format::kLevelEntryBytes + format::kChecksumBytes);
-  for (uint32_t l = 0; l < levels.size(); ++l) {
-    uint8_t* p = table.data() + size_t(l) * format::kLevelEntryBytes;
-    const LevelInfo& info = geometry.levels[l];
-    format::put64(p, info.width_px);
-    format::put64(p + 8, info.height_px);
-    format::put32(p + 16, info.tiles_x);
-    format::put32(p + 20, info.tiles_y);
-    format::put32(p + 24, levels[l].pages_x);
-    format::put32(p + 28, levels[l].pages_y);
-    format::put64(p + 32, payload_offset[l]);
-    format::put64(p + 40, levels[l].payload_bytes);
-    format::put64(p + 48, directory_offset[l]);
-    format::put64(p + 56, directory_bytes[l]);
-  }
-  const size_t table_body = levels.size() * format::kLevelEntryBytes;
-  format::put64(table.data() + table_body, format::checksum64(table.data(), table_body));
-  Status status = fileio::pwriteAll(main_fd, table.data(), table.size(), position, main_temp);
+  const std::vector<uint8_t> table_bytes = format::encodeLevelTable(table);
+  Status status =
+      fileio::pwriteAll(main_fd, table_bytes.data(), table_bytes.size(), position, main_temp);
   if (!status) return status;
-  position += table.size();
+  position += table_bytes.size();
 
   // Metadata block: georeference.
   const uint64_t metadata_offset = position;
   // Without a georeference the block holds the identity transform and no
   // CRS, so stale caller values never reach the file.
   const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
-  std::vector<uint8_t> metadata(format::kMetadataFixedBytes + geo.crs.size());
-  for (int i = 0; i < 6; ++i) format::putF64(metadata.data() + 8 * i, geo.transform[i]);
-  format::put32(metadata.data() + 48, static_cast<uint32_t>(geo.crs.size()));
-  std::memcpy(metadata.data() + 52, geo.crs.data(), geo.crs.size());
-  const size_t metadata_body = metadata.size() - format::kChecksumBytes;
-  format::put64(metadata.data() + metadata_body,
-                format::checksum64(metadata.data(), metadata_body));
+  const std::vector<uint8_t> metadata = format::encodeMetadata(geo.transform, geo.crs);
   status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
   if (!status) return status;
   position += metadata.size();
 
   // Header last: a crash before this point leaves no valid magic.
-  uint8_t header[format::kHeaderBytes] = {};
-  std::memcpy(header + format::kOffMagic, format::kMagic, sizeof(format::kMagic));
-  format::put32(header + format::kOffVersion, format::kVersion);
-  format::put32(header + format::kOffHeaderBytes, format::kHeaderBytes);
-  format::put64(header + format::kOffWidth, geometry.width_px);
-  format::put64(header + format::kOffHeight, geometry.height_px);
-  format::put32(header + format::kOffTilePx, geometry.tile_px);
-  format::put32(header + format::kOffPixelFormat, static_cast<uint32_t>(geometry.format));
-  format::put32(header + format::kOffLevelCount, static_cast<uint32_t>(levels.size()));
+  format::Header header;
+  header.width_px = geometry.width_px;
+  header.height_px = geometry.height_px;
+  header.tile_px = geometry.tile_px;
+  header.pixel_format = static_cast<uint32_t>(geometry.format);
+  header.level_count = static_cast<uint32_t>(levels.size());
   const StoreEncoding& encoding = options.encoding;
-  format::put32(header + format::kOffCompression, static_cast<uint32_t>(encoding.compression));
-  format::put32(header + format::kOffZstdLevel, static_cast<uint32_t>(encoding.zstd_level));
-  format::put32(header + format::kOffPredictor, static_cast<uint32_t>(encoding.predictor));
-  format::put32(header + format::kOffFilter, static_cast<uint32_t>(encoding.filter));
-  uint32_t flags = 0;
-  if (encoding.linear_light) flags |= format::kFlagLinearLight;
-  if (geo.present) flags |= format::kFlagGeoPresent;
-  format::put32(header + format::kOffFlags, flags);
-  format::put32(header + format::kOffPageTiles, format::kPageTiles);
-  format::put32(header + format::kOffEntryBytes, format::kTileEntryBytes);
-  format::put64(header + format::kOffLevelTableOffset, level_table_offset);
-  format::put64(header + format::kOffLevelTableBytes, table.size());
-  format::put64(header + format::kOffIndexOffset, index_offset);
-  format::put64(header + format::kOffIndexBytes, index_total);
-  format::put64(header + format::kOffMetadataOffset, metadata_offset);
-  format::put64(header + format::kOffMetadataBytes, metadata.size());
-  format::put64(header + format::kOffFileBytes, position);
-  format::put64(header + format::kHeaderChecksumOffset,
-                format::checksum64(header, format::kHeaderChecksumOffset));
-  status = fileio::pwriteAll(main_fd, header, sizeof(header), 0, main_temp);
+  header.compression = static_cast<uint32_t>(encoding.compression);
+  header.zstd_level = encoding.zstd_level;
+  header.predictor = static_cast<uint32_t>(encoding.predictor);
+  header.filter = static_cast<uint32_t>(encoding.filter);
+  if (encoding.linear_light) header.flags |= format::kFlagLinearLight;
+  if (geo.present) header.flags |= format::kFlagGeoPresent;
+  header.level_table_offset = level_table_offset;
+  header.level_table_bytes = table_bytes.size();
+  header.index_offset = index_offset;
+  header.index_bytes = index_total;
+  header.metadata_offset = metadata_offset;
+  header.metadata_bytes = metadata.size();
+  header.file_bytes = position;
+  uint8_t header_bytes[format::kHeaderBytes];
+  format::encodeHeader(header, header_bytes);
+  status = fileio::pwriteAll(main_fd, header_bytes, sizeof(header_bytes), 0, main_temp);
   if (!status) return status;
 
   return output->commit();

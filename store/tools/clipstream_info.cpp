@@ -1,7 +1,7 @@
 // clipstream-info: prints what a tile store holds and, with --verify,
 // decodes every tile. Thin: all format knowledge lives in clipstream_store.
 #include <clipstream/cli/cli.h>
-#include <clipstream/store/progress.h>
+#include <clipstream/cli/progress.h>
 #include <clipstream/store/tile_store.h>
 
 #include <nlohmann/json.hpp>
@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
     for (const LevelInfo& level : reader->geometry().levels) {
       total_tiles += uint64_t(level.tiles_x) * level.tiles_y;
     }
-    ProgressBar bar("verify", total_tiles, progressEnabledByDefault(), "tiles");
+    cli::ProgressBar bar("verify", total_tiles, cli::progressEnabledByDefault(), "tiles");
     std::vector<TileStoreReader::Problem> problems;
     const Status verify_status = reader->verifyAll(
         &problems, kMaxProblems, [&](uint64_t done, uint64_t) { bar.update(done); }, threads);

@@ -20,7 +20,6 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
-#include <sstream>
 #include <system_error>
 #include <mutex>
 #include <thread>
@@ -139,7 +138,7 @@ struct Streamer::Impl {
   // failure (trace_status says which).
   uint32_t loader_threads = 0;  // set once by the constructor
   bool tracing = false;
-  std::ostringstream trace;
+  std::string trace;
   std::unique_ptr<OutputFile> trace_file;
   Status trace_status;
   void flushTrace(bool publish);
@@ -379,25 +378,42 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
       hint_used && config.eviction == EvictionMode::kGpuFirst ? lookahead.snapshot() : nullptr;
   hint_used_by_plan = hint_used;
   if (tracing) {
-    // Exact time and the viewport: the replay re-plans the hint with them. A
-    // non-finite time (the hint is never used then) is written as 0.
-    char time_text[32];
-    std::snprintf(time_text, sizeof time_text, "%.17g", std::isfinite(now_s) ? now_s : 0.0);
-    trace << "t " << frame << ' ' << time_text << ' ' << (hint_used ? 1 : 0) << ' ' << viewport.width_px
-          << ' ' << viewport.height_px << '\n';
+    // Time and viewport first: the replay re-plans the hint with them.
+    TraceEvent time_line;
+    time_line.window = kTraceTimeTag;
+    time_line.frame = frame;
+    time_line.time_s = now_s;
+    time_line.kind = hint_used ? 1 : 0;
+    time_line.viewport = viewport;
+    appendTraceLine(time_line, &trace);
     auto windowLines = [&](char tag, const PlanWindows& w) {
-      for (size_t l = 0; l < w.rects.size(); ++l)
-        trace << tag << ' ' << frame << ' ' << l << ' ' << w.rects[l].x0 << ' ' << w.rects[l].y0 << ' '
-              << w.rects[l].x1 << ' ' << w.rects[l].y1 << ' ' << int(w.kinds[l]) << '\n';
+      TraceEvent line;
+      line.window = tag;
+      line.frame = frame;
+      for (size_t l = 0; l < w.rects.size(); ++l) {
+        line.key.level = uint32_t(l);
+        line.rect = w.rects[l];
+        line.kind = w.kinds[l];
+        appendTraceLine(line, &trace);
+      }
     };
-    windowLines('w', new_windows);
-    windowLines('p', new_predicted);
-    for (const TileKey& k : new_wanted)
-      if (wanted_set.count(k) == 0) trace << frame << ' ' << k.level << ' ' << k.x << ' ' << k.y << '\n';
-    for (const TileKey& k : wanted)
-      if (new_set.count(k) == 0) trace << "- " << frame << ' ' << k.level << ' ' << k.x << ' ' << k.y << '\n';
-    constexpr std::streamoff kTraceBlockBytes = std::streamoff(1) << 20;
-    if (trace.tellp() >= kTraceBlockBytes) flushTrace(false);
+    windowLines(kTraceWindowTag, new_windows);
+    windowLines(kTracePredictedTag, new_predicted);
+    TraceEvent tile_line;
+    tile_line.frame = frame;
+    for (const TileKey& k : new_wanted) {
+      if (wanted_set.count(k) != 0) continue;
+      tile_line.key = k;
+      appendTraceLine(tile_line, &trace);
+    }
+    tile_line.leave = true;
+    for (const TileKey& k : wanted) {
+      if (new_set.count(k) != 0) continue;
+      tile_line.key = k;
+      appendTraceLine(tile_line, &trace);
+    }
+    constexpr size_t kTraceBlockBytes = size_t(1) << 20;
+    if (trace.size() >= kTraceBlockBytes) flushTrace(false);
   }
 
   const auto now = Clock::now();
@@ -510,7 +526,10 @@ Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& con
     trace_options.existing = ExistingOutput::kReplaceRegular;
     s.trace_status = OutputFile::create(config.trace_path, trace_options, &s.trace_file);
     s.tracing = s.trace_status.isOk();
-    if (s.tracing) s.trace << kTraceHeader << '\n';
+    if (s.tracing) {
+      s.trace = kTraceHeader;
+      s.trace += '\n';
+    }
   }
   if (!s.source) return;  // nothing to load; update() plans nothing
   unsigned threads = config.io_threads ? config.io_threads : std::thread::hardware_concurrency();
@@ -527,9 +546,8 @@ Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& con
 
 void Streamer::Impl::flushTrace(bool publish) {
   if (!tracing) return;
-  const std::string text = trace.str();
-  trace.str({});
-  Status status = trace_file->append(text);
+  Status status = trace_file->append(trace);
+  trace.clear();  // keeps its capacity for the next block
   if (status && publish) status = trace_file->commit();
   if (!status) {
     trace_status = status;
@@ -546,7 +564,7 @@ Status Streamer::traceStatus() const { return m_impl->trace_status; }
 void Streamer::discardTrace() {
   Impl& s = *m_impl;
   s.tracing = false;
-  s.trace.str({});
+  s.trace.clear();
   s.trace_file.reset();  // removes the temporary
 }
 

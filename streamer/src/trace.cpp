@@ -1,4 +1,5 @@
-// Trace reading and offline replay against three cache policies.
+// Trace lines written and read (one definition of each line format), and
+// offline replay against three cache policies.
 #include <clipstream/streamer/trace.h>
 
 #include "eviction.h"
@@ -8,14 +9,75 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <list>
 #include <set>
 #include <sstream>
+#include <string_view>
+#include <type_traits>
 #include <unordered_map>
 
 namespace clipstream {
+
+static_assert(std::string_view(kTraceHeader).starts_with(kTraceMagic),
+              "the header line starts with the magic");
+static_assert(std::string_view(kTraceHeader).substr(std::string_view(kTraceMagic).size(), 2) ==
+                  "2:" && kTraceVersion == 2,
+              "the header line names kTraceVersion");
+
+namespace {
+
+// The line formats as readTrace() names them in its messages.
+constexpr const char* kTileLineFormat = "'frame level x y'";
+constexpr const char* kWindowLineFormat = "'w|p frame level x0 y0 x1 y1 kind'";
+constexpr const char* kTimeLineFormat = "'t frame seconds 0|1 width height'";
+
+void appendFields(std::string* out) { *out += '\n'; }
+
+// " a b c...\n": every field preceded by one space, then the newline.
+template <typename T, typename... Rest>
+void appendFields(std::string* out, T value, Rest... rest) {
+  *out += ' ';
+  if constexpr (std::is_same_v<T, const char*>) {
+    *out += value;
+  } else {
+    *out += std::to_string(value);
+  }
+  appendFields(out, rest...);
+}
+
+}  // namespace
+
+void appendTraceLine(const TraceEvent& e, std::string* out) {
+  switch (e.window) {
+    case kTraceTimeTag: {
+      // Exact time: the replay re-plans the path hint at it.
+      char time_text[32];
+      std::snprintf(time_text, sizeof time_text, "%.17g", std::isfinite(e.time_s) ? e.time_s : 0.0);
+      *out += kTraceTimeTag;
+      appendFields(out, e.frame, static_cast<const char*>(time_text), unsigned(e.kind),
+                   e.viewport.width_px, e.viewport.height_px);
+      return;
+    }
+    case kTraceWindowTag:
+    case kTracePredictedTag:
+      *out += e.window;
+      appendFields(out, e.frame, e.key.level, e.rect.x0, e.rect.y0, e.rect.x1, e.rect.y1,
+                   unsigned(e.kind));
+      return;
+    default:
+      // A tile entry starts with its frame, a leave with its tag.
+      if (e.leave) {
+        *out += kTraceLeaveTag;
+        *out += ' ';
+      }
+      *out += std::to_string(e.frame);
+      appendFields(out, e.key.level, e.key.x, e.key.y);
+      return;
+  }
+}
 
 Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   events->clear();
@@ -42,13 +104,13 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
     char head[20] = {};
     in.read(head, sizeof head);
     const std::string got(head, size_t(in.gcount()));
-    const std::string magic = "# clipstream trace v";
+    const std::string magic = kTraceMagic;
     if (got.empty()) {
       if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);
       return Status::error(ErrorCode::kInvalidArgument, path + " is empty, not a clipstream trace");
     }
     if (got != magic.substr(0, got.size()) || got.size() < magic.size())
-      return bad(1, "the header '" + magic + "2...'", got);
+      return bad(1, "the header '" + magic + std::to_string(kTraceVersion) + "...'", got);
     in.clear();
     in.seekg(0);
   }
@@ -58,13 +120,15 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
     return Status::error(ErrorCode::kInvalidArgument, path + " is empty, not a clipstream trace");
   }
   ++line_no;
-  const std::string kMagic = "# clipstream trace v";
-  if (line.compare(0, kMagic.size(), kMagic) != 0) {
-    return bad(line_no, "the header '" + kMagic + "2...'", line);
+  const std::string magic = kTraceMagic;
+  const std::string version = std::to_string(kTraceVersion);
+  if (line.compare(0, magic.size(), magic) != 0) {
+    return bad(line_no, "the header '" + magic + version + "...'", line);
   }
-  if (line.compare(0, kMagic.size() + 2, kMagic + "2:") != 0) {
+  if (line.compare(0, magic.size() + version.size() + 1, magic + version + ":") != 0) {
     return Status::error(ErrorCode::kUnsupported,
-                         path + ": trace format '" + printableText(line, 24) + "' is not v2");
+                         path + ": trace format '" + printableText(line, 24) + "' is not v" +
+                             std::to_string(kTraceVersion));
   }
   while (std::getline(in, line)) {
     ++line_no;
@@ -75,44 +139,44 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
                            path + ":" + std::to_string(line_no) +
                                ": the trace ends in the middle of a line (truncated)");
     }
-    if (line.empty() || line[0] == '#') continue;
+    if (line.empty() || line[0] == kTraceCommentTag) continue;
     std::istringstream fields(line);
     TraceEvent e;
-    if (line[0] == 'w' || line[0] == 'p') {
+    if (line[0] == kTraceWindowTag || line[0] == kTracePredictedTag) {
       e.window = line[0];
       fields.get();
       uint64_t level = 0;
       int kind = 0;
       if (!(fields >> e.frame >> level >> e.rect.x0 >> e.rect.y0 >> e.rect.x1 >> e.rect.y1 >> kind) ||
           level > 63 || kind < 0 || kind > 2) {
-        return bad(line_no, "'w|p frame level x0 y0 x1 y1 kind'", line);
+        return bad(line_no, kWindowLineFormat, line);
       }
       e.key.level = uint32_t(level);
       e.kind = uint8_t(kind);
       events->push_back(e);
       continue;
     }
-    if (line[0] == 't') {
-      e.window = 't';
+    if (line[0] == kTraceTimeTag) {
+      e.window = kTraceTimeTag;
       fields.get();
       int used = 0;
       uint64_t width = 0, height = 0;
       if (!(fields >> e.frame >> e.time_s >> used >> width >> height) || !std::isfinite(e.time_s) ||
           used < 0 || used > 1 || width > UINT32_MAX || height > UINT32_MAX) {
-        return bad(line_no, "'t frame seconds 0|1 width height'", line);
+        return bad(line_no, kTimeLineFormat, line);
       }
       e.kind = uint8_t(used);
       e.viewport = {uint32_t(width), uint32_t(height)};
       events->push_back(e);
       continue;
     }
-    if (line[0] == '-') {
+    if (line[0] == kTraceLeaveTag) {
       e.leave = true;
       fields.get();
     }
     uint64_t level = 0, x = 0, y = 0;
     if (!(fields >> e.frame >> level >> x >> y) || level > 63 || x > UINT32_MAX || y > UINT32_MAX) {
-      return bad(line_no, "'frame level x y'", line);
+      return bad(line_no, kTileLineFormat, line);
     }
     e.key = {uint32_t(level), uint32_t(x), uint32_t(y)};
     events->push_back(e);

@@ -4,7 +4,8 @@
 #include "test_helpers.h"
 
 #include <clipstream/renderer/config.h>
-#include <clipstream/renderer/frame_writer.h>
+#include <clipstream/eval/frame_writer.h>
+#include <clipstream/eval/metrics.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <gtest/gtest.h>
@@ -44,14 +45,6 @@ std::shared_ptr<TileSource> patternSource() {
   return makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
 }
 
-Camera obliqueCamera() {
-  Camera c;
-  c.position = {1000.5, 60.0, 1100.25};
-  c.heading_rad = 0.3;
-  c.pitch_rad = -0.6;
-  return c;
-}
-
 std::vector<uint8_t> reference(const TileSource& source, std::shared_ptr<TileSource> shared,
                                const Camera& camera, uint32_t min_level = 0) {
   std::vector<uint8_t> ref;
@@ -79,7 +72,7 @@ size_t groundPixels(const std::vector<uint8_t>& rgba) {
 
 TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
   CLIPSTREAM_REQUIRE_GL();
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
   test::loadPlan(*s.renderer, *s.source, s.plan);
@@ -93,7 +86,7 @@ TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
 
 TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
   CLIPSTREAM_REQUIRE_GL();
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
   s.renderer->setTestSlotBias(1);
@@ -105,7 +98,7 @@ TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
 
 TEST(ClipmapRender, FallsBackToThePyramidWhenNoStackTileIsResident) {
   CLIPSTREAM_REQUIRE_GL();
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
   test::loadPlan(*s.renderer, *s.source, s.plan, /*finest_loaded=*/s.plan.pyramid_level);
@@ -117,7 +110,7 @@ TEST(ClipmapRender, FallsBackToThePyramidWhenNoStackTileIsResident) {
 
 TEST(ClipmapRender, MaxTextureLodClampsTheFinestLevel) {
   CLIPSTREAM_REQUIRE_GL();
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
   test::loadPlan(*s.renderer, *s.source, s.plan);
@@ -132,7 +125,7 @@ class ToroidalUpdate : public ::testing::TestWithParam<Buffering> {};
 
 TEST_P(ToroidalUpdate, EqualsAFreshRenderAfterTheCameraMoves) {
   CLIPSTREAM_REQUIRE_GL();
-  Camera a = obliqueCamera();
+  Camera a = test::obliqueCamera();
   Camera b = a;
   b.position += glm::dvec3(300.0, 0.0, -260.0);  // several tiles on levels 0 and 1
   Scene moved = makeScene(patternSource(), a, GetParam());
@@ -240,20 +233,20 @@ TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
   EXPECT_GE(psnrLogged("2^26 far corner vs reference", gpu, ref), kMatchDb);
 }
 
-// Real imagery: a 2048 x 2048 crop of the Autzen orthophoto from the shared
-// test data (skipped when that folder is absent).
+// Real imagery: a 2048 x 2048 crop of the Autzen orthophoto the repository
+// ships in data/.
 TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
   CLIPSTREAM_REQUIRE_GL();
-  const std::string path = std::string(CLIPSTREAM_TEST_DATA_DIR) + "/autzen.jpg";
+  const std::string path = test::bundledDataPath("autzen.jpg");
   std::vector<uint8_t> full;
   uint32_t w = 0, h = 0;
-  if (!readImageRgba(path, &full, &w, &h).isOk()) GTEST_SKIP() << path << " not available";
+  ASSERT_TRUE(readImageRgba(path, &full, &w, &h).isOk()) << path;
   ASSERT_GE(w, 2048u);
   ASSERT_GE(h, 2048u);
   std::vector<uint8_t> crop(size_t(2048) * 2048 * 4);
   for (uint32_t y = 0; y < 2048; ++y)
     std::copy_n(full.data() + (size_t(y) * w) * 4, size_t(2048) * 4, crop.data() + size_t(y) * 2048 * 4);
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(makeImageSource(std::move(crop), 2048, 2048, 128), cam);
   ASSERT_TRUE(s.renderer);
   test::loadPlan(*s.renderer, *s.source, s.plan);
@@ -263,7 +256,7 @@ TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
 
 TEST(ClipmapRender, OverlayTintsByLevelWithoutHoles) {
   CLIPSTREAM_REQUIRE_GL();
-  const Camera cam = obliqueCamera();
+  const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
   test::loadPlan(*s.renderer, *s.source, s.plan);

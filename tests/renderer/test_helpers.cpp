@@ -19,20 +19,6 @@ HeadlessContext* sharedContext(std::string* why) {
   return context.get();
 }
 
-std::vector<uint8_t> patternImage(uint32_t width_px, uint32_t height_px) {
-  std::vector<uint8_t> rgba(size_t(width_px) * height_px * 4);
-  for (uint32_t y = 0; y < height_px; ++y) {
-    for (uint32_t x = 0; x < width_px; ++x) {
-      uint8_t* p = rgba.data() + (size_t(y) * width_px + x) * 4;
-      p[0] = uint8_t(128 + 100 * std::sin(x * 0.071) * std::cos(y * 0.053));
-      p[1] = uint8_t(128 + 90 * std::sin((x + 2.0 * y) * 0.019));
-      p[2] = ((x / 8 + y / 8) & 1) ? 200 : 60;
-      p[3] = 255;
-    }
-  }
-  return rgba;
-}
-
 std::vector<LevelResidency> fullResidency(const ClipmapPlan& plan, uint32_t finest_loaded) {
   std::vector<LevelResidency> out;
   for (const ClipLevelPlan& l : plan.stack) {
@@ -97,43 +83,6 @@ void dumpPpm(const std::string& name, const std::vector<uint8_t>& rgba, const Vi
 }  // namespace clipstream::test
 
 namespace clipstream::test {
-
-TempDir::TempDir(const std::string& name) {
-  static int counter = 0;
-  path = (std::filesystem::temp_directory_path() /
-          ("clipstream_renderer_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) +
-           "_" + name))
-             .string();
-  std::error_code ec;
-  std::filesystem::remove_all(path, ec);
-  std::filesystem::create_directories(path, ec);
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  std::filesystem::remove_all(path, ec);
-}
-
-Status writeStoreFromSource(TileSource& source, const std::string& path) {
-  const PyramidGeometry& g = source.geometry();
-  if (g.format != PixelFormat::kRGBA8)
-    return Status::error(ErrorCode::kInvalidArgument, "writeStoreFromSource: source is not RGBA8");
-  WriterOptions options;
-  options.fsync = false;
-  std::unique_ptr<TileStoreWriter> writer;
-  if (Status s = TileStoreWriter::create(path, g, options, &writer); !s) return s;
-  std::vector<uint8_t> pixels;
-  for (uint32_t l = 0; l < g.levelCount(); ++l)
-    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
-        const TileKey key{l, x, y};
-        if (Status s = source.fetch(key, &pixels); !s) return s;
-        EncodedTile encoded;
-        if (Status s = encodeTile(g, options.encoding, key, pixels, &encoded); !s) return s;
-        if (Status s = writer->write(std::move(encoded)); !s) return s;
-      }
-  return writer->finish();
-}
 
 Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDamage damage) {
   std::unique_ptr<TileStoreReader> reader;

@@ -1,9 +1,18 @@
-// Shared helpers for the renderer tests: a headless context kept for the
-// whole binary, synthetic images and "load everything" uploads.
+// The GL test helpers the renderer and evaluation suites share: a headless
+// context kept for the whole binary, "load everything" uploads, frame
+// readback and dumps, and damaged stores. Temporary directories, synthetic
+// images and stores, cameras and data paths come from the test support
+// library (tests/support, clipstream/testing/).
+//
+// Thread rule: the test's main thread (the one whose GL context is current).
 #pragma once
 
 #include <clipstream/renderer/gl_context.h>
-#include <clipstream/renderer/reference.h>
+#include <clipstream/testing/cameras.h>
+#include <clipstream/testing/sources.h>
+#include <clipstream/testing/temp_dir.h>
+#include <clipstream/testing/test_data.h>
+#include <clipstream/eval/reference.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/tile_source.h>
@@ -25,9 +34,6 @@ HeadlessContext* sharedContext(std::string* why);
       GTEST_SKIP() << require_gl_why;                                         \
   } while (0)
 
-// A w x h RGBA image whose texels encode their position: smooth waves plus
-// an 8-texel checker, so any misplaced tile or texel shows.
-std::vector<uint8_t> patternImage(uint32_t width_px, uint32_t height_px);
 
 // Uploads, synchronously, every tile of every level >= pyramid_level and the
 // whole window of every stack level in `plan`, and marks them resident.
@@ -46,20 +52,6 @@ std::vector<uint8_t> renderFrame(ClipmapRenderer& renderer, OffscreenTarget& tar
 // Writes a PPM to $CLIPSTREAM_TEST_DUMP/<name>.ppm when that variable is set
 // (for looking at a failing comparison); does nothing otherwise.
 void dumpPpm(const std::string& name, const std::vector<uint8_t>& rgba, const Viewport& vp);
-
-// A fresh directory in the temp directory, removed with its contents by the
-// destructor.
-struct TempDir {
-  std::string path;
-  explicit TempDir(const std::string& name);
-  ~TempDir();
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-};
-
-// Writes every tile of `source` (RGBA8) into a new tile store at `path` with
-// the store writer's default encoding (zstd, left-delta predictor), no fsync.
-Status writeStoreFromSource(TileSource& source, const std::string& path);
 
 // How damageTilePayload() spoils a tile's payload on disk. Either way the
 // payload checksum in the index no longer matches, which is what a reader

@@ -1,6 +1,11 @@
 // Many threads on one reader, and the lazily loaded index of huge stores.
-#include "store_test_util.h"
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
 
+#include <gtest/gtest.h>
+
+#include <atomic>
 #include <chrono>
 #include <thread>
 
@@ -8,15 +13,15 @@ namespace clipstream {
 namespace {
 
 TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
-  const auto dir = testutil::tempDir("threads");
-  const std::string path = (dir / "store.cst").string();
+  const test::TempDir dir("threads");
+  const std::string path = dir.file("store.cst");
   PyramidGeometry g;
   // 1100 px / 16 px tiles = 69 x 69 tiles at level 0: 4 index pages
   // there, so racing threads load the same pages at the same time.
   ASSERT_TRUE(makePyramidGeometry(1100, 1100, 16, PixelFormat::kRGB8, &g));
   WriterOptions options;
   options.fsync = false;
-  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
   std::unique_ptr<TileStoreReader> reader;
   ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
 
@@ -37,7 +42,7 @@ TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
       // Each thread walks all keys from a different start.
       for (size_t i = 0; i < keys.size(); ++i) {
         const TileKey& key = keys[(i + size_t(t) * 997) % keys.size()];
-        if (reader->readTile(key, &pixels).isOk() && pixels == testutil::makeTile(g, key)) {
+        if (reader->readTile(key, &pixels).isOk() && pixels == test::syntheticTile(g, key)) {
           good.fetch_add(1);
         } else {
           bad.fetch_add(1);
@@ -55,7 +60,6 @@ TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
     pages += uint64_t((level.tiles_x + 63) / 64) * ((level.tiles_y + 63) / 64);
   }
   EXPECT_EQ(reader->indexPagesLoaded(), pages);
-  std::filesystem::remove_all(dir);
 }
 
 // A 1,048,576^2 RGBA8 store (about 87 M tiles) written through the
@@ -63,8 +67,7 @@ TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
 class HugeStore : public ::testing::Test {
  protected:
   void SetUp() override {
-    m_dir = testutil::tempDir("huge");
-    m_path = (m_dir / "planet.cst").string();
+    m_path = m_dir.file("planet.cst");
     ASSERT_TRUE(makePyramidGeometry(uint64_t(1) << 20, uint64_t(1) << 20, 128, PixelFormat::kRGBA8,
                                     &m_geometry));
     WriterOptions options;
@@ -75,7 +78,7 @@ class HugeStore : public ::testing::Test {
     m_real = TileKey{0, 4000, 5000};
     EncodedTile encoded;
     ASSERT_TRUE(encodeTile(m_geometry, options.encoding, m_real,
-                           testutil::makeTile(m_geometry, m_real, false), &encoded).isOk());
+                           test::syntheticTile(m_geometry, m_real, test::ConstantTiles::kNone), &encoded).isOk());
     ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
     for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
       const LevelInfo& level = m_geometry.levels[l];
@@ -92,9 +95,8 @@ class HugeStore : public ::testing::Test {
     }
     ASSERT_TRUE(writer->finish().isOk());
   }
-  void TearDown() override { std::filesystem::remove_all(m_dir); }
 
-  std::filesystem::path m_dir;
+  test::TempDir m_dir{"huge"};
   std::string m_path;
   PyramidGeometry m_geometry;
   TileKey m_real;
@@ -129,7 +131,7 @@ TEST_F(HugeStore, OpenReadsOnlyHeaderTablesAndDirectories) {
   EXPECT_EQ(reader->indexPagesLoaded(), 1u);
   EXPECT_EQ(reader->bytesRead(), after_open + 64 * 64 * 16);
   ASSERT_TRUE(reader->readTile(m_real, &pixels).isOk());
-  EXPECT_EQ(pixels, testutil::makeTile(m_geometry, m_real, false));
+  EXPECT_EQ(pixels, test::syntheticTile(m_geometry, m_real, test::ConstantTiles::kNone));
   EXPECT_EQ(reader->bytesRead(), after_open + 64 * 64 * 16 + location.stored_bytes);
   // Its page neighbours are constant entries inside that page.
   ASSERT_TRUE(reader->readTile(TileKey{0, 4001, 5000}, &pixels).isOk());

@@ -1,11 +1,20 @@
 // Bad bytes on disk: every truncated prefix and seeded single-byte flips
 // must be reported as a Status, never as a crash or wrong pixels.
-#include "store_test_util.h"
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/files.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
+
+#include <gtest/gtest.h>
 
 #include <cstring>
+#include <random>
+#include <span>
 
 namespace clipstream {
 namespace {
+
+using test::writeBytes;
 
 // Opens `path` and reads + decodes every tile. Returns ok only if all of
 // that succeeded; any pixel mismatch against the synthetic pattern is
@@ -26,7 +35,7 @@ Status openAndReadAll(const std::string& path, const PyramidGeometry& g, bool* w
           if (first_failure.isOk()) first_failure = status;
           continue;
         }
-        if (pixels != testutil::makeTile(g, key)) *wrong_pixels = true;
+        if (pixels != test::syntheticTile(g, key)) *wrong_pixels = true;
       }
     }
   }
@@ -41,8 +50,7 @@ Status openAndReadAll(const std::string& path, const PyramidGeometry& g, bool* w
 class StoreCorruption : public ::testing::Test {
  protected:
   void SetUp() override {
-    m_dir = testutil::tempDir("corruption");
-    m_path = (m_dir / "small.cst").string();
+    m_path = m_dir.file("small.cst");
     // Several levels, partial edge pages, constant and non-constant tiles,
     // a georeference: every structure of the format is present.
     ASSERT_TRUE(makePyramidGeometry(150, 70, 16, PixelFormat::kRGB8, &m_geometry));
@@ -51,14 +59,13 @@ class StoreCorruption : public ::testing::Test {
     options.geo.present = true;
     options.geo.crs = "EPSG:2992";
     options.geo.transform[0] = 100.0;
-    ASSERT_TRUE(testutil::writeStore(m_path, m_geometry, options).isOk());
-    m_bytes = testutil::readFile(m_path);
+    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).isOk());
+    m_bytes = test::readBytes(m_path);
     ASSERT_GT(m_bytes.size(), 1000u);
-    m_damaged = (m_dir / "damaged.cst").string();
+    m_damaged = m_dir.file("damaged.cst");
   }
-  void TearDown() override { std::filesystem::remove_all(m_dir); }
 
-  std::filesystem::path m_dir;
+  test::TempDir m_dir{"corruption"};
   std::string m_path;
   std::string m_damaged;
   PyramidGeometry m_geometry;
@@ -69,7 +76,7 @@ TEST_F(StoreCorruption, EveryTruncatedPrefixFailsToOpenWithAMessage) {
   bool wrong_pixels = false;
   ASSERT_TRUE(openAndReadAll(m_path, m_geometry, &wrong_pixels).isOk());
   for (size_t length = 0; length < m_bytes.size(); ++length) {
-    testutil::writeFile(m_damaged, m_bytes, length);
+    writeBytes(m_damaged, std::span(m_bytes).first(length));
     std::unique_ptr<TileStoreReader> reader;
     const Status status = TileStoreReader::open(m_damaged, &reader);
     ASSERT_FALSE(status.isOk()) << "prefix of " << length << " bytes opened";
@@ -110,7 +117,7 @@ TEST_F(StoreCorruption, EverySingleByteFlipIsDetected) {
     const uint8_t mask = uint8_t(1u << (rng() % 8)) | uint8_t(rng() & 0xff);
     bytes = m_bytes;
     bytes[position] ^= mask;
-    testutil::writeFile(m_damaged, bytes, bytes.size());
+    writeBytes(m_damaged, bytes);
     bool wrong_pixels = false;
     std::unique_ptr<TileStoreReader> reader;
     const Status open_status = TileStoreReader::open(m_damaged, &reader);
@@ -139,13 +146,13 @@ TEST_F(StoreCorruption, FlippedPayloadNamesTheTile) {
   ASSERT_TRUE(TileStoreReader::open(m_path, &reader).isOk());
   TileLocation location;
   TileKey key{0, 2, 1};
-  ASSERT_FALSE(testutil::isConstantTile(key));
+  ASSERT_FALSE(test::isConstantTile(key));
   ASSERT_TRUE(reader->locate(key, &location).isOk());
   ASSERT_FALSE(location.constant);
   reader.reset();
   std::vector<uint8_t> bytes = m_bytes;
   bytes[location.offset + location.stored_bytes / 2] ^= 0x40;
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).isOk());
   std::vector<uint8_t> pixels;
   const Status status = reader->readTile(key, &pixels);
@@ -164,7 +171,7 @@ TEST_F(StoreCorruption, CorruptIndexPageFailsEveryTileOfThatPageOnly) {
   std::memcpy(&index_offset, m_bytes.data() + 88, 8);
   std::vector<uint8_t> bytes = m_bytes;
   bytes[index_offset + 3] ^= 0x01;  // inside the first index page written
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   std::unique_ptr<TileStoreReader> reader;
   ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).isOk());  // pages load lazily
   std::vector<TileStoreReader::Problem> problems;
@@ -188,20 +195,20 @@ TEST_F(StoreCorruption, CorruptIndexPageFailsEveryTileOfThatPageOnly) {
 TEST_F(StoreCorruption, WrongMagicVersionAndTrailingBytesAreNamed) {
   std::vector<uint8_t> bytes = m_bytes;
   bytes[0] = 'X';
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   std::unique_ptr<TileStoreReader> reader;
   EXPECT_EQ(TileStoreReader::open(m_damaged, &reader).code, ErrorCode::kBadMagic);
   bytes = m_bytes;
   bytes[8] = 2;  // version field
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   EXPECT_EQ(TileStoreReader::open(m_damaged, &reader).code, ErrorCode::kBadVersion);
   bytes = m_bytes;
   bytes.push_back(0);
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   const Status status = TileStoreReader::open(m_damaged, &reader);
   EXPECT_EQ(status.code, ErrorCode::kBadHeader);
   EXPECT_NE(status.message.find("after the end"), std::string::npos) << status.message;
-  EXPECT_EQ(TileStoreReader::open((m_dir / "absent.cst").string(), &reader).code,
+  EXPECT_EQ(TileStoreReader::open(m_dir.file("absent.cst"), &reader).code,
             ErrorCode::kNotFound);
 }
 
@@ -210,18 +217,18 @@ TEST_F(StoreCorruption, VersionIsReportedFromTheFirstTwelveBytes) {
   // 12-byte prefix of a version-2 file is kBadVersion, not kTruncated.
   std::vector<uint8_t> bytes(m_bytes.begin(), m_bytes.begin() + 12);
   bytes[8] = 2;
-  testutil::writeFile(m_damaged, bytes, bytes.size());
+  writeBytes(m_damaged, bytes);
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(m_damaged, &reader);
   EXPECT_EQ(status.code, ErrorCode::kBadVersion) << status.toString();
-  testutil::writeFile(m_damaged, bytes, 11);
+  writeBytes(m_damaged, std::span(bytes).first(11));
   status = TileStoreReader::open(m_damaged, &reader);
   EXPECT_EQ(status.code, ErrorCode::kTruncated) << status.toString();
 }
 
 TEST_F(StoreCorruption, DirectoryIsNamedAsADirectory) {
   std::unique_ptr<TileStoreReader> reader;
-  const Status status = TileStoreReader::open(m_dir.string(), &reader);
+  const Status status = TileStoreReader::open(m_dir.path().string(), &reader);
   EXPECT_EQ(status.code, ErrorCode::kIo);
   EXPECT_NE(status.message.find("is a directory"), std::string::npos) << status.message;
   EXPECT_EQ(reader, nullptr);

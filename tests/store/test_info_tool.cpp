@@ -1,10 +1,17 @@
 // clipstream-info end to end: runs the built program on real files.
-#include "store_test_util.h"
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/files.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
+
+#include <gtest/gtest.h>
 
 #include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <filesystem>
+#include <span>
 
 namespace clipstream {
 namespace {
@@ -33,8 +40,7 @@ RunResult runInfo(const std::string& arguments, const std::string& prefix = "") 
 class InfoTool : public ::testing::Test {
  protected:
   void SetUp() override {
-    m_dir = testutil::tempDir("info");
-    m_path = (m_dir / "store.cst").string();
+    m_path = m_dir.file("store.cst");
     ASSERT_TRUE(makePyramidGeometry(300, 200, 32, PixelFormat::kRGB8, &m_geometry));
     WriterOptions options;
     options.fsync = false;
@@ -42,11 +48,10 @@ class InfoTool : public ::testing::Test {
     options.geo.crs = "EPSG:2992";
     options.geo.transform[0] = 635000.0;
     options.geo.transform[3] = 849000.0;
-    ASSERT_TRUE(testutil::writeStore(m_path, m_geometry, options).isOk());
+    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).isOk());
   }
-  void TearDown() override { std::filesystem::remove_all(m_dir); }
 
-  std::filesystem::path m_dir;
+  test::TempDir m_dir{"info"};
   std::string m_path;
   PyramidGeometry m_geometry;
 };
@@ -69,16 +74,16 @@ TEST_F(InfoTool, JsonOutputCarriesLevelTable) {
 TEST_F(InfoTool, VerifyNamesTheTileWithAFlippedPayloadByte) {
   TileLocation location;
   const TileKey key{0, 3, 2};
-  ASSERT_FALSE(testutil::isConstantTile(key));
+  ASSERT_FALSE(test::isConstantTile(key));
   {
     std::unique_ptr<TileStoreReader> reader;
     ASSERT_TRUE(TileStoreReader::open(m_path, &reader).isOk());
     ASSERT_TRUE(reader->locate(key, &location).isOk());
     ASSERT_FALSE(location.constant);
   }
-  std::vector<uint8_t> bytes = testutil::readFile(m_path);
+  std::vector<uint8_t> bytes = test::readBytes(m_path);
   bytes[location.offset + 1] ^= 0x10;
-  testutil::writeFile(m_path, bytes, bytes.size());
+  test::writeBytes(m_path, bytes);
   const RunResult result = runInfo("--verify '" + m_path + "'");
   EXPECT_EQ(result.exit_code, 3) << result.output;
   EXPECT_NE(result.output.find("level 0 tile (3, 2): corrupt tile: payload checksum mismatch"),
@@ -89,11 +94,11 @@ TEST_F(InfoTool, VerifyNamesTheTileWithAFlippedPayloadByte) {
 }
 
 TEST_F(InfoTool, OpenErrorsExitNonZeroWithAMessage) {
-  const RunResult missing = runInfo("'" + (m_dir / "absent.cst").string() + "'");
+  const RunResult missing = runInfo("'" + m_dir.file("absent.cst") + "'");
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("absent.cst"), std::string::npos) << missing.output;
-  std::vector<uint8_t> bytes = testutil::readFile(m_path);
-  testutil::writeFile(m_path, bytes, bytes.size() / 2);
+  const std::vector<uint8_t> bytes = test::readBytes(m_path);
+  test::writeBytes(m_path, std::span(bytes).first(bytes.size() / 2));
   const RunResult truncated = runInfo("'" + m_path + "'");
   EXPECT_EQ(truncated.exit_code, 1);
   EXPECT_NE(truncated.output.find("truncated"), std::string::npos) << truncated.output;
@@ -114,7 +119,7 @@ TEST_F(InfoTool, CommandLineMistakesExitTwo) {
 
 // A FIFO given as the store once made the program wait forever for a writer.
 TEST_F(InfoTool, AFifoIsRefusedWithoutWaiting) {
-  const std::string fifo = (m_dir / "fifo.cst").string();
+  const std::string fifo = m_dir.file("fifo.cst");
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
   for (const char* flags : {"", "--verify ", "--json "}) {
     // timeout(1) turns a hang into exit 124 instead of a stuck suite.
@@ -135,20 +140,20 @@ TEST_F(InfoTool, AFailedWriteOfTheReportExitsOne) {
 }
 
 TEST_F(InfoTool, BadInputsGiveOneLineAndExitOne) {
-  const std::string empty = (m_dir / "empty.cst").string();
-  testutil::writeFile(empty, {}, 0);
+  const std::string empty = m_dir.file("empty.cst");
+  test::writeBytes(empty, {});
   // The first bytes of a JFIF file.
   const std::vector<uint8_t> jpeg = {0xff, 0xd8, 0xff, 0xe0, 0x00, 0x10, 'J', 'F', 'I', 'F', 0x00,
                                      0x01, 0x01, 0x00, 0x00, 0x01, 0x00, 0x01, 0x00, 0x00};
-  const std::string jpeg_path = (m_dir / "photo.jpg").string();
-  testutil::writeFile(jpeg_path, jpeg, jpeg.size());
-  const std::string sub = (m_dir / "sub").string();
+  const std::string jpeg_path = m_dir.file("photo.jpg");
+  test::writeBytes(jpeg_path, jpeg);
+  const std::string sub = m_dir.file("sub");
   std::filesystem::create_directories(sub);
   const struct {
     std::string path;
     const char* expect;
   } cases[] = {{empty, "truncated"}, {jpeg_path, "bad magic"}, {sub, "is a directory"},
-               {(m_dir / "absent.cst").string(), "not found"}};
+               {m_dir.file("absent.cst"), "not found"}};
   for (const auto& c : cases) {
     for (const char* flags : {"", "--verify ", "--json "}) {
       const RunResult result = runInfo(std::string(flags) + "'" + c.path + "'");
@@ -168,8 +173,8 @@ TEST_F(InfoTool, CrsTextThatIsNotUtf8OrHasControlBytesIsPrintedSafely) {
   options.fsync = false;
   options.geo.present = true;
   options.geo.crs = "EPSG:\xff\xfe\n\x1b[2Jx";
-  const std::string path = (m_dir / "odd_crs.cst").string();
-  ASSERT_TRUE(testutil::writeStore(path, m_geometry, options).isOk());
+  const std::string path = m_dir.file("odd_crs.cst");
+  ASSERT_TRUE(test::writeSyntheticStore(path, m_geometry, options).isOk());
   const RunResult json = runInfo("--json '" + path + "'");
   EXPECT_EQ(json.exit_code, 0) << json.output;
   EXPECT_NE(json.output.find("\"crs\": \"EPSG:"), std::string::npos) << json.output;

@@ -2,9 +2,11 @@
 // breaks one promise on purpose: a device or FIFO at the path, a file that
 // appears or changes while the output is written, a writer killed mid-way,
 // a full disk, a signal.
-#include "store_test_util.h"
-
 #include <clipstream/store/output_file.h>
+#include <clipstream/testing/files.h>
+#include <clipstream/testing/temp_dir.h>
+
+#include <gtest/gtest.h>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -15,28 +17,20 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 
 namespace clipstream {
 namespace {
 
-std::string readText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using test::readText;
 
 class OutputFileTest : public ::testing::Test {
  protected:
-  void SetUp() override { m_dir = testutil::tempDir("output"); }
-  void TearDown() override { std::filesystem::remove_all(m_dir); }
-  std::string file(const std::string& name) const { return (m_dir / name).string(); }
-  std::vector<std::string> entries() const {
-    std::vector<std::string> names = testutil::listDir(m_dir);
-    std::sort(names.begin(), names.end());
-    return names;
-  }
+  std::string file(const std::string& name) const { return m_dir.file(name); }
+  std::vector<std::string> entries() const { return m_dir.entries(); }
 
-  std::filesystem::path m_dir;
+  test::TempDir m_dir{"output"};
 };
 
 TEST_F(OutputFileTest, PublishesOnlyAtCommitAndLeavesNoTemporary) {
@@ -153,7 +147,7 @@ TEST_F(OutputFileTest, RefuseReportsAnExistingFileUpFront) {
   std::unique_ptr<OutputFile> out;
   EXPECT_EQ(OutputFile::create(path, {}, &out).code, ErrorCode::kAlreadyExists);
   EXPECT_EQ(checkOutputPath(file("missing/out.cst"), {}).code, ErrorCode::kNotFound);
-  EXPECT_EQ(checkOutputPath(m_dir.string(), {}).code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(checkOutputPath(m_dir.path().string(), {}).code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(readText(path), "precious");
 }
 

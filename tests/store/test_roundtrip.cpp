@@ -1,14 +1,22 @@
 // Write -> read round trips over geometries, pixel formats and encodings.
-#include "store_test_util.h"
-
 #include "format.h"  // private: the page-grid rule shared by reader and writer
 
-#include <tuple>
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
 
 namespace clipstream {
 namespace {
 
-using testutil::makeTile;
+using test::isConstantTile;
+using test::syntheticTile;
+using test::syntheticTileKey;
+using test::TempDir;
+using test::writeSyntheticStore;
 
 struct RoundTripCase {
   uint64_t width;
@@ -25,13 +33,13 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
   const RoundTripCase& c = GetParam();
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(c.width, c.height, c.tile_px, c.format, &g));
-  const auto dir = testutil::tempDir("roundtrip");
-  const std::string path = (dir / "store.cst").string();
+  const TempDir dir("roundtrip");
+  const std::string path = dir.file("store.cst");
   WriterOptions options;
   options.encoding.compression = c.compression;
   options.encoding.predictor = c.predictor;
   options.encoding.zstd_level = 3;
-  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+  ASSERT_TRUE(writeSyntheticStore(path, g, options).isOk());
 
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(path, &reader);
@@ -52,10 +60,15 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
         const TileKey key{l, x, y};
         status = reader->readTile(key, &pixels);
         ASSERT_TRUE(status.isOk()) << status.toString();
-        ASSERT_EQ(pixels, makeTile(g, key)) << "level " << l << " tile " << x << "," << y;
+        ASSERT_EQ(pixels, syntheticTile(g, key)) << "level " << l << " tile " << x << "," << y;
         TileLocation location;
         ASSERT_TRUE(reader->locate(key, &location).isOk());
-        EXPECT_EQ(location.constant, testutil::isConstantTile(key));
+        EXPECT_EQ(location.constant, isConstantTile(key));
+        TileKey stamped;
+        EXPECT_EQ(syntheticTileKey(c.format, pixels, &stamped), !location.constant);
+        if (!location.constant) {
+          EXPECT_EQ(stamped, key);
+        }
         constant_tiles += location.constant;
         ++tiles;
       }
@@ -73,7 +86,6 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
   std::vector<TileStoreReader::Problem> problems;
   EXPECT_TRUE(reader->verifyAll(&problems, 10, {}, 2).isOk());
   EXPECT_TRUE(problems.empty());
-  std::filesystem::remove_all(dir);
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -121,33 +133,11 @@ TEST(StoreGeometry, PageCountDoesNotWrapAtTheLargestTileGrid) {
             uint64_t(0xFFFFFFFFu) + 1);
 }
 
-TEST(StoreEncode, ConstantTilesHaveNoPayloadAndKeepTheirValue) {
-  PyramidGeometry g;
-  ASSERT_TRUE(makePyramidGeometry(256, 256, 16, PixelFormat::kRGB8, &g));
-  std::vector<uint8_t> pixels(g.tileBytes());
-  for (size_t i = 0; i < pixels.size(); i += 3) {
-    pixels[i] = 10;
-    pixels[i + 1] = 20;
-    pixels[i + 2] = 30;
-  }
-  EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
-  EXPECT_TRUE(encoded.location.constant);
-  EXPECT_TRUE(encoded.payload.empty());
-  EXPECT_EQ(encoded.location.constant_pixel[0], 10);
-  EXPECT_EQ(encoded.location.constant_pixel[1], 20);
-  EXPECT_EQ(encoded.location.constant_pixel[2], 30);
-  pixels[pixels.size() - 1] = 31;  // one sample differs: no longer constant
-  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
-  EXPECT_FALSE(encoded.location.constant);
-  EXPECT_FALSE(encoded.payload.empty());
-}
-
 TEST(StoreEncode, ConstantTilesCostNoPayloadBytesInTheFile) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(512, 512, 16, PixelFormat::kRGBA8, &g));
-  const auto dir = testutil::tempDir("constant");
-  const std::string path = (dir / "flat.cst").string();
+  const TempDir dir("constant");
+  const std::string path = dir.file("flat.cst");
   std::unique_ptr<TileStoreWriter> writer;
   ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
   const std::vector<uint8_t> flat = [&] {
@@ -177,14 +167,13 @@ TEST(StoreEncode, ConstantTilesCostNoPayloadBytesInTheFile) {
   std::vector<uint8_t> pixels;
   ASSERT_TRUE(reader->readTile(TileKey{1, 3, 5}, &pixels).isOk());
   EXPECT_EQ(pixels, flat);
-  std::filesystem::remove_all(dir);
 }
 
 TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(100, 60, 16, PixelFormat::kRGB8, &g));
-  const auto dir = testutil::tempDir("geo");
-  const std::string path = (dir / "geo.cst").string();
+  const TempDir dir("geo");
+  const std::string path = dir.file("geo.cst");
   WriterOptions options;
   options.geo.present = true;
   const double transform[6] = {635747.5, 0.25, 0.0, 848898.75, 0.0, -0.25};
@@ -192,7 +181,7 @@ TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   options.geo.crs = "PROJCS[\"NAD83 / Oregon GIC Lambert (ft)\",UNIT[\"foot\",0.3048]]";
   options.encoding.linear_light = true;
   options.encoding.filter = DownsampleFilter::kLanczos3;
-  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+  ASSERT_TRUE(writeSyntheticStore(path, g, options).isOk());
   std::unique_ptr<TileStoreReader> reader;
   ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
   const GeoReference& geo = reader->info().geo;
@@ -202,69 +191,16 @@ TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   EXPECT_TRUE(reader->info().encoding.linear_light);
   EXPECT_EQ(reader->info().encoding.filter, DownsampleFilter::kLanczos3);
 
-  const std::string plain = (dir / "plain.cst").string();
+  const std::string plain = dir.file("plain.cst");
   WriterOptions no_geo;
   no_geo.geo.crs = "EPSG:4326";  // ignored: present is false
   no_geo.geo.transform[0] = 5.0;
-  ASSERT_TRUE(testutil::writeStore(plain, g, no_geo).isOk());
+  ASSERT_TRUE(writeSyntheticStore(plain, g, no_geo).isOk());
   ASSERT_TRUE(TileStoreReader::open(plain, &reader).isOk());
   EXPECT_FALSE(reader->info().geo.present);
   EXPECT_TRUE(reader->info().geo.crs.empty());
   EXPECT_EQ(reader->info().geo.transform[0], 0.0);
   EXPECT_EQ(reader->info().geo.transform[1], 1.0);
-  std::filesystem::remove_all(dir);
-}
-
-TEST(StoreDecode, RejectsBytesAfterTheZstdFrame) {
-  // A payload is exactly one frame. ZSTD_decompressDCtx alone would accept a
-  // trailing skippable frame (or a second frame that fits), so the decoder
-  // checks the frame length itself.
-  PyramidGeometry g;
-  ASSERT_TRUE(makePyramidGeometry(16, 16, 16, PixelFormat::kRGB8, &g));
-  StoreEncoding encoding;  // zstd + left delta
-  EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, encoding, {}, testutil::makeTile(g, {}, false), &encoded).isOk());
-  RawTile raw;
-  raw.location = encoded.location;
-  raw.payload = encoded.payload;
-  std::vector<uint8_t> pixels(g.tileBytes());
-  ASSERT_TRUE(decodeTile(g, encoding, raw, pixels).isOk());
-  // Skippable frame: magic 0x184D2A50, zero-length body.
-  for (uint8_t b : {0x50, 0x2A, 0x4D, 0x18, 0x00, 0x00, 0x00, 0x00}) raw.payload.push_back(b);
-  raw.location.stored_bytes = static_cast<uint32_t>(raw.payload.size());
-  Status status = decodeTile(g, encoding, raw, pixels);
-  EXPECT_EQ(status.code, ErrorCode::kCorruptTile) << status.toString();
-  EXPECT_NE(status.message.find("exactly one zstd frame"), std::string::npos) << status.message;
-  // A truncated frame is reported too, never read past.
-  raw.payload.assign(encoded.payload.begin(), encoded.payload.end() - 1);
-  raw.location.stored_bytes = static_cast<uint32_t>(raw.payload.size());
-  EXPECT_EQ(decodeTile(g, encoding, raw, pixels).code, ErrorCode::kCorruptTile);
-}
-
-TEST(StoreEncode, PredictorRoundTripsEveryFormatAtWrapAround) {
-  // Values that wrap modulo 2^bits between neighbours.
-  for (PixelFormat format : {PixelFormat::kR8, PixelFormat::kR16, PixelFormat::kRGB8,
-                             PixelFormat::kRGBA8}) {
-    PyramidGeometry g;
-    ASSERT_TRUE(makePyramidGeometry(16, 16, 16, format, &g));
-    std::vector<uint8_t> pixels(g.tileBytes());
-    std::mt19937 rng(42);
-    for (uint8_t& b : pixels) b = (rng() & 1) ? 0xff : 0x00;
-    pixels[0] = 1;
-    for (Compression compression : {Compression::kNone, Compression::kZstd}) {
-      StoreEncoding encoding;
-      encoding.compression = compression;
-      encoding.predictor = Predictor::kLeftDelta;
-      EncodedTile encoded;
-      ASSERT_TRUE(encodeTile(g, encoding, {}, pixels, &encoded).isOk());
-      RawTile raw;
-      raw.location = encoded.location;
-      raw.payload = encoded.payload;
-      std::vector<uint8_t> decoded(g.tileBytes());
-      ASSERT_TRUE(decodeTile(g, encoding, raw, decoded).isOk());
-      EXPECT_EQ(decoded, pixels) << pixelFormatName(format);
-    }
-  }
 }
 
 }  // namespace

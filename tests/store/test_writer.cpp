@@ -1,19 +1,32 @@
 // Writer contract: atomic output, temporaries cleaned, clear failures.
-#include "store_test_util.h"
-
 #include "file_io.h"  // private: exercised directly for the disk-full path
 #include "format.h"   // private: tile checksum for hand-made payloads
 
-#include <fcntl.h>
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/files.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
 
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <random>
 #include <thread>
 
 namespace clipstream {
 namespace {
 
+using test::ConstantTiles;
+using test::syntheticTile;
+using test::TempDir;
+
 TEST(TileStoreWriter, MissingTileFailsFinishAndLeavesNoFile) {
-  const auto dir = testutil::tempDir("missing");
-  const std::string path = (dir / "out.cst").string();
+  const TempDir dir("missing");
+  const std::string path = dir.file("out.cst");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(100, 100, 16, PixelFormat::kR8, &g));
   std::unique_ptr<TileStoreWriter> writer;
@@ -23,7 +36,7 @@ TEST(TileStoreWriter, MissingTileFailsFinishAndLeavesNoFile) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         if (l == 1 && x == 2 && y == 3) continue;
         EncodedTile encoded;
-        ASSERT_TRUE(encodeTile(g, {}, {l, x, y}, testutil::makeTile(g, {l, x, y}), &encoded).isOk());
+        ASSERT_TRUE(encodeTile(g, {}, {l, x, y}, syntheticTile(g, {l, x, y}), &encoded).isOk());
         ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
       }
     }
@@ -31,15 +44,14 @@ TEST(TileStoreWriter, MissingTileFailsFinishAndLeavesNoFile) {
   const Status status = writer->finish();
   EXPECT_EQ(status.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(status.message.find("level 1 tile (2, 3)"), std::string::npos) << status.message;
-  EXPECT_TRUE(testutil::listDir(dir).empty());
+  EXPECT_TRUE(dir.entries().empty());
   writer.reset();
-  EXPECT_TRUE(testutil::listDir(dir).empty());
-  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(dir.entries().empty());
 }
 
 TEST(TileStoreWriter, DestroyingUnfinishedWriterRemovesEveryTemporary) {
-  const auto dir = testutil::tempDir("unfinished");
-  const std::string path = (dir / "out.cst").string();
+  const TempDir dir("unfinished");
+  const std::string path = dir.file("out.cst");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(200, 200, 16, PixelFormat::kRGBA8, &g));
   {
@@ -48,22 +60,21 @@ TEST(TileStoreWriter, DestroyingUnfinishedWriterRemovesEveryTemporary) {
     // Tiles on several levels so that spill files exist.
     for (uint32_t l = 0; l < g.levelCount(); ++l) {
       EncodedTile encoded;
-      ASSERT_TRUE(encodeTile(g, {}, {l, 0, 0}, testutil::makeTile(g, {l, 0, 0}, false), &encoded).isOk());
+      ASSERT_TRUE(encodeTile(g, {}, {l, 0, 0}, syntheticTile(g, {l, 0, 0}, ConstantTiles::kNone), &encoded).isOk());
       ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
     }
-    EXPECT_FALSE(testutil::listDir(dir).empty());
-    for (const std::string& name : testutil::listDir(dir)) {
+    EXPECT_FALSE(dir.entries().empty());
+    for (const std::string& name : dir.entries()) {
       EXPECT_EQ(name.rfind(".out.cst.tmp-", 0), 0u) << name;
     }
     EXPECT_FALSE(std::filesystem::exists(path));
   }
-  EXPECT_TRUE(testutil::listDir(dir).empty());
-  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(dir.entries().empty());
 }
 
 TEST(TileStoreWriter, MissingDirectoryIsNamed) {
-  const auto dir = testutil::tempDir("nodir");
-  const std::string missing = (dir / "no" / "such").string();
+  const TempDir dir("nodir");
+  const std::string missing = dir.file("no/such");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(64, 64, 16, PixelFormat::kR8, &g));
   std::unique_ptr<TileStoreWriter> writer;
@@ -71,18 +82,17 @@ TEST(TileStoreWriter, MissingDirectoryIsNamed) {
   EXPECT_TRUE(status.code == ErrorCode::kNotFound || status.code == ErrorCode::kIo);
   EXPECT_NE(status.message.find(missing), std::string::npos) << status.message;
   EXPECT_EQ(writer, nullptr);
-  std::filesystem::remove_all(dir);
 }
 
 TEST(TileStoreWriter, RejectsDuplicateTilesAndBadGeometry) {
-  const auto dir = testutil::tempDir("dup");
-  const std::string path = (dir / "out.cst").string();
+  const TempDir dir("dup");
+  const std::string path = dir.file("out.cst");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(64, 64, 16, PixelFormat::kR8, &g));
   std::unique_ptr<TileStoreWriter> writer;
   ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
   EncodedTile a, b;
-  ASSERT_TRUE(encodeTile(g, {}, {0, 1, 1}, testutil::makeTile(g, {0, 1, 1}), &a).isOk());
+  ASSERT_TRUE(encodeTile(g, {}, {0, 1, 1}, syntheticTile(g, {0, 1, 1}), &a).isOk());
   b = a;
   EXPECT_TRUE(writer->write(std::move(a)).isOk());
   const Status status = writer->write(std::move(b));
@@ -99,14 +109,13 @@ TEST(TileStoreWriter, RejectsDuplicateTilesAndBadGeometry) {
   bad = g;
   bad.levels.pop_back();
   EXPECT_EQ(TileStoreWriter::create(path, bad, {}, &writer).code, ErrorCode::kInvalidArgument);
-  EXPECT_TRUE(testutil::listDir(dir).empty());
-  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(dir.entries().empty());
 }
 
 TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
   // The reader refuses any other size, so the writer must not store one.
-  const auto dir = testutil::tempDir("short_raw");
-  const std::string path = (dir / "out.cst").string();
+  const TempDir dir("short_raw");
+  const std::string path = dir.file("out.cst");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(64, 64, 16, PixelFormat::kRGB8, &g));
   WriterOptions options;
@@ -114,7 +123,7 @@ TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
   std::unique_ptr<TileStoreWriter> writer;
   ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, options.encoding, {0, 1, 1}, testutil::makeTile(g, {0, 1, 1}, false),
+  ASSERT_TRUE(encodeTile(g, options.encoding, {0, 1, 1}, syntheticTile(g, {0, 1, 1}, ConstantTiles::kNone),
                          &encoded).isOk());
   ASSERT_EQ(encoded.payload.size(), g.tileBytes());
   EncodedTile shorter = encoded;
@@ -125,13 +134,12 @@ TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
   // The slot was not taken: the real tile still goes in.
   EXPECT_TRUE(writer->write(std::move(encoded)).isOk());
   writer.reset();
-  EXPECT_TRUE(testutil::listDir(dir).empty());
-  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(dir.entries().empty());
 }
 
 TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
-  const auto dir = testutil::tempDir("concurrent_write");
-  const std::string path = (dir / "out.cst").string();
+  const TempDir dir("concurrent_write");
+  const std::string path = dir.file("out.cst");
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(700, 500, 16, PixelFormat::kRGB8, &g));
   std::vector<TileKey> keys;
@@ -152,7 +160,7 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
     threads.emplace_back([&] {
       for (size_t i; (i = next.fetch_add(1)) < keys.size();) {
         EncodedTile encoded;
-        if (!encodeTile(g, options.encoding, keys[i], testutil::makeTile(g, keys[i]), &encoded) ||
+        if (!encodeTile(g, options.encoding, keys[i], syntheticTile(g, keys[i]), &encoded) ||
             !writer->write(std::move(encoded))) {
           failures.fetch_add(1);
         }
@@ -167,27 +175,25 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
   std::vector<uint8_t> pixels;
   for (const TileKey& key : keys) {
     ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
-    ASSERT_EQ(pixels, testutil::makeTile(g, key));
+    ASSERT_EQ(pixels, syntheticTile(g, key));
   }
-  std::filesystem::remove_all(dir);
 }
 
 TEST(TileStoreWriter, FinishReplacesAnExistingFileAtomically) {
-  const auto dir = testutil::tempDir("replace");
-  const std::string path = (dir / "out.cst").string();
-  testutil::writeFile(path, std::vector<uint8_t>(10, 'x'), 10);
+  const TempDir dir("replace");
+  const std::string path = dir.file("out.cst");
+  test::writeBytes(path, std::vector<uint8_t>(10, 'x'));
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(40, 40, 16, PixelFormat::kR8, &g));
   // Without `replace` an existing file is never touched.
-  EXPECT_EQ(testutil::writeStore(path, g).code, ErrorCode::kAlreadyExists);
-  EXPECT_EQ(testutil::readFile(path), std::vector<uint8_t>(10, 'x'));
+  EXPECT_EQ(test::writeSyntheticStore(path, g, {}).code, ErrorCode::kAlreadyExists);
+  EXPECT_EQ(test::readBytes(path), std::vector<uint8_t>(10, 'x'));
   WriterOptions options;
   options.replace = true;
-  ASSERT_TRUE(testutil::writeStore(path, g, options).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
   std::unique_ptr<TileStoreReader> reader;
   EXPECT_TRUE(TileStoreReader::open(path, &reader).isOk());
-  EXPECT_EQ(testutil::listDir(dir).size(), 1u);
-  std::filesystem::remove_all(dir);
+  EXPECT_EQ(dir.entries().size(), 1u);
 }
 
 }  // namespace

@@ -1,19 +1,22 @@
 // RAM-cache eviction: which tiles the policy gives up first, in the trace
 // replay and in the streamer itself (eviction.h).
-#include "test_helpers.h"
+#include "streamer_test_util.h"
 #include "../../streamer/src/eviction.h"  // private: the victim order under test
 
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
+#include <clipstream/testing/cameras.h>
+#include <clipstream/testing/sources.h>
 
 #include <gtest/gtest.h>
 
-#include <chrono>
-#include <thread>
+#include <memory>
+#include <vector>
 
 namespace clipstream {
 namespace {
 
+using test::expectCountersAddUp;
 using test::lookingDown;
 using test::procedural;
 using test::waitIdle;
@@ -73,15 +76,20 @@ TEST(Eviction, PyramidTilesOnTheGpuGoBeforeATileThatWillReturn) {
 }
 
 // Budget = exactly the wanted set, everything handed to the GPU, then one
-// step east: the tiles that enter need room. GPU-first takes it from the
-// pyramid (on the GPU, never leaving) and keeps the column that left;
-// protect-GPU never touches the pyramid. The budget holds either way and
+// step east (only level 0's window moves) and back: the tiles that enter
+// need room. GPU-first takes it from tiles already on the GPU that the plan
+// still wants (the pyramid first, never leaving), so the column that left is
+// still in RAM when it re-enters; protect-GPU never touches the pyramid,
+// evicts that column and reads it again. The budget holds either way and
 // the pyramid stays on the GPU, so MaxTextureLOD does not move.
 struct StepResult {
-  uint64_t entered = 0;
+  bool window_moved = false;          // level 0's window moved one tile east
+  uint64_t entered = 0;               // tiles read for the step east
   uint64_t pyramid_evictions = 0;
   uint64_t stack_evictions = 0;
-  uint64_t left_column_rereads = 0;
+  uint64_t left_column_rereads = 0;   // reads, on the way back, of the column that left
+  uint64_t reads_back = 0;            // all reads on the way back
+  uint64_t level0_ram_hits = 0;
 };
 
 StepResult stepEastAndBack(EvictionMode mode) {
@@ -107,6 +115,7 @@ StepResult stepEastAndBack(EvictionMode mode) {
   const int64_t left_x = s.plan().stack[0].window.x0;
   const size_t before_step = rec->keys().size();
   s.update(east, vp, 0.1);
+  out.window_moved = s.plan().stack[0].window.x0 == left_x + 1;
   EXPECT_TRUE(waitIdle(s));
   (void)s.takeReady(100000);
   out.entered = rec->keys().size() - before_step;
@@ -115,13 +124,15 @@ StepResult stepEastAndBack(EvictionMode mode) {
   s.update(a, vp, 0.2);
   EXPECT_TRUE(waitIdle(s));
   const std::vector<TileKey> keys = rec->keys();
+  out.reads_back = keys.size() - before_back;
   for (size_t i = before_back; i < keys.size(); ++i)
     out.left_column_rereads += keys[i].level == 0 && keys[i].x == left_x;
   const StreamerStats st = s.stats();
   for (const LevelCounters& c : st.levels) {
     (&c - st.levels.data() >= pyramid_level ? out.pyramid_evictions : out.stack_evictions) += c.evictions;
   }
-  EXPECT_LE(st.ram_peak_bytes, st.ram_budget_bytes);
+  out.level0_ram_hits = st.levels[0].ram_hits;
+  expectCountersAddUp(st);
   return out;
 }
 
@@ -135,6 +146,89 @@ TEST(Eviction, StreamerGivesUpPyramidTilesOnTheGpuFirst) {
   const StepResult protect = stepEastAndBack(EvictionMode::kProtectGpu);
   EXPECT_EQ(protect.pyramid_evictions, 0u);
   EXPECT_GT(protect.stack_evictions, 0u);
+}
+
+TEST(Streamer, GpuFirstEvictionKeepsTheTilesThatJustLeft) {
+  const StepResult r = stepEastAndBack(EvictionMode::kGpuFirst);
+  ASSERT_TRUE(r.window_moved);
+  EXPECT_EQ(r.left_column_rereads, 0u);
+  EXPECT_EQ(r.reads_back, 0u);
+  EXPECT_EQ(r.level0_ram_hits, 8u);
+}
+
+TEST(Streamer, ProtectGpuEvictionKeepsWindowTilesAndRereadsTheLeftColumn) {
+  const StepResult r = stepEastAndBack(EvictionMode::kProtectGpu);
+  ASSERT_TRUE(r.window_moved);
+  EXPECT_EQ(r.left_column_rereads, 8u);
+  EXPECT_EQ(r.reads_back, 8u);
+  EXPECT_EQ(r.level0_ram_hits, 0u);
+}
+
+TEST(Trace, EvictionModesDifferOnTilesInsideTheWindow) {
+  // Level 0 window slides right one tile and back; the tile that left (A)
+  // re-enters. GPU-first keeps A (an in-window tile goes instead); protect
+  // keeps the in-window tiles and loses A.
+  auto window = [](uint64_t frame, int64_t x0) {
+    TraceEvent e;
+    e.frame = frame;
+    e.window = 'w';
+    e.key.level = 0;
+    e.rect = {x0, 0, x0 + 3, 1};
+    e.kind = 1;
+    return e;
+  };
+  auto tile = [](uint64_t frame, uint32_t x, bool leave) {
+    TraceEvent e;
+    e.frame = frame;
+    e.key = {0, x, 0};
+    e.leave = leave;
+    return e;
+  };
+  const std::vector<TraceEvent> ev = {window(1, 0),    tile(1, 0, false), tile(1, 1, false),
+                                      tile(1, 2, false), window(2, 1),    tile(2, 3, false),
+                                      tile(2, 0, true),  window(3, 0),    tile(3, 0, false),
+                                      tile(3, 3, true)};
+  const ReplayResult r = replayTrace(ev, 3);
+  EXPECT_EQ(r.accesses, 5u);
+  EXPECT_EQ(r.hits_opt, 1u);
+  EXPECT_EQ(r.hits_gpu_first, 1u);
+  EXPECT_EQ(r.hits_plan, 0u);
+  EXPECT_EQ(r.hits_lru, 0u);
+}
+
+TEST(Trace, EqualScoresEvictTheMostRecentlyWantedTileFirst) {
+  // Window fixed on tile 10. A (x 8) and B (x 12) are both two tiles out:
+  // equal scores. When C arrives in a full cache, the most recently wanted
+  // of the tie (B) goes, so the subset kept is stable and A hits when it
+  // comes back. Least-recently-wanted ties would evict A and miss.
+  TraceEvent w;
+  w.frame = 1;
+  w.window = 'w';
+  w.key.level = 0;
+  w.rect = {10, 0, 11, 1};
+  w.kind = 1;
+  auto tile = [](uint64_t frame, uint32_t x, bool leave) {
+    TraceEvent e;
+    e.frame = frame;
+    e.key = {0, x, 0};
+    e.leave = leave;
+    return e;
+  };
+  const std::vector<TraceEvent> ev = {w,  tile(1, 8, false),  tile(1, 8, true),
+                                      tile(2, 12, false), tile(2, 12, true),
+                                      tile(3, 14, false), tile(3, 14, true),
+                                      tile(4, 8, false)};
+  const ReplayResult r = replayTrace(ev, 2);
+  EXPECT_EQ(r.accesses, 4u);
+  EXPECT_EQ(r.hits_gpu_first, 1u);
+  EXPECT_EQ(r.hits_plan, 1u);
+  EXPECT_EQ(r.hits_lru, 0u);
+  // The streamer sorts with the same rule.
+  EXPECT_TRUE(evictsBefore(2.0, 7, 2.0, 3));
+  EXPECT_FALSE(evictsBefore(2.0, 3, 2.0, 7));
+  EXPECT_TRUE(evictsBefore(3.0, 3, 2.0, 7));
+  // Without a plan, recency is all there is: least recently wanted first.
+  EXPECT_TRUE(evictsBefore(kNoPlanScore, 3, kNoPlanScore, 7));
 }
 
 }  // namespace

@@ -1,11 +1,15 @@
 // The path hint (Streamer::setPathHint): eviction by the hinted path's
 // predicted returns, prefetch from the hinted camera, a hint that does not
-// match the camera being ignored, and the trace replay of the hinted policy.
-#include "test_helpers.h"
+// match the camera being ignored, and the trace replay of the hinted policy
+// (the trace's time lines are parsed in test_trace.cpp).
+#include "streamer_test_util.h"
 #include "../../streamer/src/lookahead.h"  // private: the return prediction under test
 
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
+#include <clipstream/testing/cameras.h>
+#include <clipstream/testing/sources.h>
+#include <clipstream/testing/temp_dir.h>
 
 #include <gtest/gtest.h>
 
@@ -19,7 +23,7 @@ namespace {
 
 using test::kPi;
 using test::procedural;
-using test::TempFile;
+using test::TempDir;
 using test::waitIdle;
 
 constexpr double kSide = 1 << 20;
@@ -64,16 +68,17 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
   // still fit every frame's wanted set (at 300 the budget, not the policy,
   // decides: the streamer drops requests it has no room for).
   const uint64_t budget_tiles = 600;
-  TempFile plain_trace("plain.trace"), hinted_trace("hinted.trace");
+  const TempDir dir("path_hint");
+  const std::string plain_trace = dir.file("plain.trace"), hinted_trace = dir.file("hinted.trace");
   StreamerStats plain, hinted;
   {
-    Streamer s(source, orbitConfig(budget_tiles, plain_trace.path));
+    Streamer s(source, orbitConfig(budget_tiles, plain_trace));
     plain = flySettled(s, orbitAt, 300, vp);
   }
   PathHint hint;
   hint.camera_at = orbitAt;
   {
-    Streamer s(source, orbitConfig(budget_tiles, hinted_trace.path));
+    Streamer s(source, orbitConfig(budget_tiles, hinted_trace));
     s.setPathHint(hint);
     hinted = flySettled(s, orbitAt, 300, vp);
   }
@@ -86,8 +91,8 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
   EXPECT_EQ(hinted.total.ram_hits + hinted.total.ram_misses, accesses);
 
   std::vector<TraceEvent> plain_events, hinted_events;
-  ASSERT_TRUE(readTrace(plain_trace.path, &plain_events).isOk());
-  ASSERT_TRUE(readTrace(hinted_trace.path, &hinted_events).isOk());
+  ASSERT_TRUE(readTrace(plain_trace, &plain_events).isOk());
+  ASSERT_TRUE(readTrace(hinted_trace, &hinted_events).isOk());
   ReplayHint replay_hint;
   replay_hint.path = hint;
   replay_hint.geometry = source->geometry();
@@ -118,10 +123,11 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
 TEST(PathHint, AHintThatDisagreesWithTheCameraIsIgnored) {
   const Viewport vp{800, 600};
   auto source = procedural(uint64_t(kSide));
-  TempFile plain_trace("plain.trace"), wrong_trace("wrong.trace");
+  const TempDir dir("path_hint");
+  const std::string plain_trace = dir.file("plain.trace"), wrong_trace = dir.file("wrong.trace");
   StreamerStats plain, wrong;
   {
-    Streamer s(source, orbitConfig(600, plain_trace.path));
+    Streamer s(source, orbitConfig(600, plain_trace));
     plain = flySettled(s, orbitAt, 150, vp);
   }
   PathHint hint;
@@ -131,7 +137,7 @@ TEST(PathHint, AHintThatDisagreesWithTheCameraIsIgnored) {
     return c;
   };
   {
-    Streamer s(source, orbitConfig(600, wrong_trace.path));
+    Streamer s(source, orbitConfig(600, wrong_trace));
     s.setPathHint(hint);
     wrong = flySettled(s, orbitAt, 150, vp);
   }
@@ -140,7 +146,7 @@ TEST(PathHint, AHintThatDisagreesWithTheCameraIsIgnored) {
   EXPECT_EQ(wrong.total.ram_hits, plain.total.ram_hits);
   EXPECT_EQ(wrong.total.ram_misses, plain.total.ram_misses);
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(wrong_trace.path, &events).isOk());
+  ASSERT_TRUE(readTrace(wrong_trace, &events).isOk());
   size_t time_lines = 0;
   for (const TraceEvent& e : events) {
     if (e.window != 't') continue;
@@ -334,31 +340,6 @@ TEST(PathHint, PredictedReturnIsTheFirstEntryAfterLeaving) {
             evictionScore(never, current, none, EvictionMode::kProtectGpu));
   EXPECT_EQ(evictionScoreAhead(never, current, none, EvictionMode::kGpuFirst, nullptr),
             evictionScore(never, current, none, EvictionMode::kGpuFirst));
-}
-
-TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
-  TempFile file("times.trace");
-  auto readText = [&](const std::string& text, std::vector<TraceEvent>* events) {
-    std::ofstream(file.path) << kTraceHeader << '\n' << text;
-    return readTrace(file.path, events);
-  };
-  std::vector<TraceEvent> events;
-  ASSERT_TRUE(readText("t 3 0.10000000000000001 1 800 600\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).isOk());
-  ASSERT_EQ(events.size(), 3u);
-  EXPECT_EQ(events[0].window, 't');
-  EXPECT_EQ(events[0].frame, 3u);
-  EXPECT_DOUBLE_EQ(events[0].time_s, 0.1);
-  EXPECT_EQ(events[0].kind, 1u);
-  EXPECT_EQ(events[0].viewport.width_px, 800u);
-  EXPECT_EQ(events[0].viewport.height_px, 600u);
-  EXPECT_FALSE(events[0].isAccess());
-  for (const char* bad : {"t 3 0.1 2 800 600\n", "t 3 nan 1 800 600\n", "t 3 0.1 1\n", "t 3\n",
-                          "t x 0.1 0 800 600\n", "t 3 0.1 0 -1 600\n"}) {
-    const Status st = readText(bad, &events);
-    EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << bad;
-    EXPECT_NE(st.message.find(":2: expected 't frame seconds 0|1 width height'"), std::string::npos)
-        << st.message;
-  }
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // 2^26-texel texture planned without precision loss.
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/planner.h>
+#include <clipstream/testing/cameras.h>
 
 #include <gtest/gtest.h>
 
@@ -13,20 +14,13 @@
 namespace clipstream {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using test::kPi;
+using test::lookingDown;
 
 PyramidGeometry geometryOf(uint64_t w, uint64_t h, uint32_t tile_px = 128) {
   PyramidGeometry g;
   EXPECT_TRUE(makePyramidGeometry(w, h, tile_px, PixelFormat::kRGB8, &g));
   return g;
-}
-
-Camera lookingDown(double x, double z, double height) {
-  Camera c;
-  c.position = {x, height, z};
-  c.heading_rad = 0.0;
-  c.pitch_rad = -kPi / 2;
-  return c;
 }
 
 TEST(Camera, BasisFollowsWorldConventions) {

@@ -1,9 +1,9 @@
 // Tile sources: procedural determinism and structure, store conversion to
 // RGBA8 for every pixel format, corrupt tiles, injected faults.
-#include "test_helpers.h"
-
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
 
 #include <gtest/gtest.h>
 
@@ -94,10 +94,13 @@ class StoreSourceFormats : public ::testing::TestWithParam<PixelFormat> {};
 
 TEST_P(StoreSourceFormats, ConvertsEveryTexelToRgba8) {
   const PixelFormat format = GetParam();
-  test::TempFile file("formats.cts");
-  ASSERT_TRUE(test::writeSyntheticStore(file.path, 200, 150, 64, format).isOk());
+  const test::TempDir dir("formats");
+  const std::string path = dir.file("store.cst");
+  ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 200, .height_px = 150, .tile_px = 64,
+                                               .format = format})
+                  .isOk());
   Status status;
-  auto source = openStoreSource(file.path, &status);
+  auto source = openStoreSource(path, &status);
   ASSERT_TRUE(source) << status.toString();
   const PyramidGeometry& g = source->geometry();
   EXPECT_EQ(g.format, format);
@@ -112,15 +115,25 @@ TEST_P(StoreSourceFormats, ConvertsEveryTexelToRgba8) {
         for (uint32_t y = 0; y < 64; ++y)
           for (uint32_t x = 0; x < 64; ++x) {
             uint8_t want[4];
-            test::expectedRgba(format, key, x, y, want);
+            test::syntheticRgba(format, key, x, y, want);
             mismatches += std::memcmp(want, &rgba[(size_t(y) * 64 + x) * 4], 4) != 0;
           }
+        // The stamp survives the conversion: the tile says which it is.
+        TileKey stamped;
+        if (test::syntheticTileKey(PixelFormat::kRGBA8, rgba, &stamped)) {
+          EXPECT_EQ(stamped, key);
+        } else {
+          EXPECT_TRUE(test::isConstantTile(key)) << "level " << level << " tile " << tx << "," << ty;
+        }
       }
   EXPECT_EQ(mismatches, 0u);
+  // A tile with a payload reports the bytes it read.
+  const TileKey stored{0, 2, 1};
+  ASSERT_FALSE(test::isConstantTile(stored));
   FetchInfo info;
-  ASSERT_TRUE(source->fetchWithInfo({0, 1, 1}, &rgba, &info).isOk());
+  ASSERT_TRUE(source->fetchWithInfo(stored, &rgba, &info).isOk());
   EXPECT_GT(info.bytes_read, 0u);
-  EXPECT_NE(source->describe().find(file.path), std::string::npos);
+  EXPECT_NE(source->describe().find(path), std::string::npos);
 }
 
 INSTANTIATE_TEST_SUITE_P(AllFormats, StoreSourceFormats,
@@ -128,16 +141,19 @@ INSTANTIATE_TEST_SUITE_P(AllFormats, StoreSourceFormats,
                                            PixelFormat::kRGBA8));
 
 TEST(StoreSource, CorruptTileIsAStatusNotACrash) {
-  test::TempFile file("corrupt.cts");
-  ASSERT_TRUE(test::writeSyntheticStore(file.path, 256, 256, 64, PixelFormat::kRGB8).isOk());
+  const test::TempDir dir("corrupt");
+  const std::string path = dir.file("store.cst");
+  ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 256, .height_px = 256, .tile_px = 64,
+                                               .format = PixelFormat::kRGB8})
+                  .isOk());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(file.path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
   TileLocation loc;
   ASSERT_TRUE(reader->locate({0, 2, 1}, &loc).isOk());
   ASSERT_FALSE(loc.constant);
   reader.reset();
   {
-    std::fstream f(file.path, std::ios::in | std::ios::out | std::ios::binary);
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
     f.seekg(std::streamoff(loc.offset + loc.stored_bytes / 2));
     char c = 0;
     f.read(&c, 1);
@@ -146,7 +162,7 @@ TEST(StoreSource, CorruptTileIsAStatusNotACrash) {
     f.write(&c, 1);
   }
   Status status;
-  auto source = openStoreSource(file.path, &status);
+  auto source = openStoreSource(path, &status);
   ASSERT_TRUE(source) << status.toString();
   std::vector<uint8_t> rgba;
   const Status bad = source->fetch({0, 2, 1}, &rgba);

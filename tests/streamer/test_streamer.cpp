@@ -1,14 +1,13 @@
 // The streamer: load order, cancellation, prefetch, the hard RAM budget,
 // failures, shutdown, hand-off limits, MaxTextureLOD hysteresis, stats.
-#include "test_helpers.h"
-#include "../../streamer/src/eviction.h"  // private: the victim order under test
+// Eviction policy: test_eviction.cpp; the trace: test_trace.cpp.
+#include "streamer_test_util.h"
 
 #include <clipstream/streamer/streamer.h>
-#include <clipstream/streamer/trace.h>
-
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
+#include <clipstream/testing/cameras.h>
+#include <clipstream/testing/sources.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -23,31 +22,11 @@ namespace clipstream {
 namespace {
 
 using KeySet = std::unordered_set<TileKey, TileKeyHash>;
+using test::expectCountersAddUp;
 using test::kPi;
 using test::lookingDown;
 using test::procedural;
 using test::waitIdle;
-
-void expectCountersAddUp(const StreamerStats& st) {
-  LevelCounters sum;
-  for (const LevelCounters& c : st.levels) {
-    sum.requests += c.requests;
-    sum.loads += c.loads;
-    sum.failures += c.failures;
-    sum.cancellations += c.cancellations;
-    sum.budget_skips += c.budget_skips;
-    sum.gpu_handoffs += c.gpu_handoffs;
-    sum.evictions += c.evictions;
-  }
-  EXPECT_EQ(sum.requests, st.total.requests);
-  EXPECT_EQ(sum.loads, st.total.loads);
-  EXPECT_EQ(sum.gpu_handoffs, st.total.gpu_handoffs);
-  EXPECT_EQ(sum.evictions, st.total.evictions);
-  EXPECT_EQ(st.total.requests, st.total.loads + st.total.failures + st.total.cancellations +
-                                   st.total.budget_skips + st.queue_depth + st.in_flight);
-  EXPECT_LE(st.ram_bytes, st.ram_budget_bytes);
-  EXPECT_LE(st.ram_peak_bytes, st.ram_budget_bytes);
-}
 
 StreamerConfig baseConfig(unsigned threads, uint32_t clip_tiles) {
   StreamerConfig cfg;
@@ -248,21 +227,25 @@ TEST(Streamer, UnavailableTilesAreRetriedOnlyAfterTheBackOff) {
 }
 
 TEST(Streamer, CorruptTileInAStoreIsCountedOnceAndTheRestArrives) {
-  test::TempFile file("stream_corrupt.cts");
-  ASSERT_TRUE(test::writeSyntheticStore(file.path, 512, 512, 64, PixelFormat::kRGB8).isOk());
+  const test::TempDir dir("stream_corrupt");
+  const std::string path = dir.file("store.cst");
+  ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 512, .height_px = 512, .tile_px = 64,
+                                               .format = PixelFormat::kRGB8})
+                  .isOk());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(file.path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
   TileLocation loc;
   ASSERT_TRUE(reader->locate({0, 3, 4}, &loc).isOk());
+  ASSERT_FALSE(loc.constant) << "the damaged tile needs a payload";
   reader.reset();
   {
-    std::fstream f(file.path, std::ios::in | std::ios::out | std::ios::binary);
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
     f.seekp(std::streamoff(loc.offset + 1));
     const char garbage[4] = {'\x11', '\x22', '\x33', '\x44'};
     f.write(garbage, 4);
   }
   Status status;
-  auto source = openStoreSource(file.path, &status);
+  auto source = openStoreSource(path, &status);
   ASSERT_TRUE(source) << status.toString();
   Streamer s(source, baseConfig(2, 0));
   const Viewport vp{1280, 720};
@@ -460,48 +443,6 @@ TEST(Streamer, BudgetBelowTheNeededSetKeepsCoarseLevelsAndDoesNotThrash) {
   expectCountersAddUp(st);
 }
 
-// Budget = exactly the wanted set. Step one level-0 tile east (only level
-// 0's window moves) and back. GPU-first evicts in-window tiles already on
-// the GPU, so the column that left is still in RAM when it re-enters;
-// protect-GPU evicts that column and reads it again.
-void stepEastAndBack(EvictionMode mode, size_t expected_rereads) {
-  const Viewport vp{800, 600};
-  const Camera a = lookingDown(4032.0, 4032.0, 60.0), east = lookingDown(4160.0, 4032.0, 60.0);
-  StreamerConfig cfg = baseConfig(1, 8);
-  cfg.eviction = mode;
-  auto base = procedural(8192);
-  const ClipmapPlan plan_a = planClipmap(base->geometry(), vp, a, cfg.planner);
-  const size_t wanted = rankPlanTiles(base->geometry(), plan_a).size();
-  cfg.ram_budget_bytes = wanted * (128 * 128 * 4 + kCacheEntryOverheadBytes);
-  auto rec = std::make_shared<test::RecordingSource>(base);
-  Streamer s(rec, cfg);
-  s.update(a, vp, 0.0);
-  ASSERT_TRUE(waitIdle(s));
-  ASSERT_EQ(s.takeReady(100000).tiles.size(), wanted);
-  const int64_t left_x = s.plan().stack[0].window.x0;
-  s.update(east, vp, 0.1);
-  ASSERT_EQ(s.plan().stack[0].window.x0, left_x + 1);
-  ASSERT_TRUE(waitIdle(s));
-  (void)s.takeReady(100000);
-  const size_t before = rec->keys().size();
-  s.update(a, vp, 0.2);
-  ASSERT_TRUE(waitIdle(s));
-  size_t rereads = 0;
-  const std::vector<TileKey> keys = rec->keys();
-  for (size_t i = before; i < keys.size(); ++i) rereads += keys[i].level == 0 && keys[i].x == left_x;
-  EXPECT_EQ(rereads, expected_rereads);
-  EXPECT_EQ(keys.size() - before, expected_rereads);
-  const StreamerStats st = s.stats();
-  EXPECT_EQ(st.levels[0].ram_hits, 8u - expected_rereads);
-  expectCountersAddUp(st);
-}
-
-TEST(Streamer, GpuFirstEvictionKeepsTheTilesThatJustLeft) { stepEastAndBack(EvictionMode::kGpuFirst, 0); }
-
-TEST(Streamer, ProtectGpuEvictionKeepsWindowTilesAndRereadsTheLeftColumn) {
-  stepEastAndBack(EvictionMode::kProtectGpu, 8);
-}
-
 TEST(Streamer, StatsJsonParsesAndMatchesTheSnapshot) {
   Streamer s(procedural(8192), baseConfig(2, 8));
   const Viewport vp{800, 600};
@@ -526,161 +467,6 @@ TEST(Streamer, StatsJsonParsesAndMatchesTheSnapshot) {
             2 * rankPlanTiles(s.geometry(), s.plan()).size() - 85 /* pyramid stays */);
 }
 
-TEST(Streamer, TraceRecordsEveryAccessAndReplays) {
-  test::TempFile file("trace.txt");
-  StreamerConfig cfg = baseConfig(2, 8);
-  cfg.trace_path = file.path;
-  uint64_t accesses = 0;
-  {
-    Streamer s(procedural(1 << 16), cfg);
-    const Viewport vp{800, 600};
-    for (int i = 0; i < 30; ++i) {
-      s.update(lookingDown(20000.0 + 300.0 * i, 20000.0, 40.0), vp, i / 30.0);
-      ASSERT_TRUE(waitIdle(s));
-    }
-    const StreamerStats st = s.stats();
-    accesses = st.total.ram_hits + st.total.ram_misses;
-  }
-  std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(file.path, &events).isOk());
-  uint64_t enters = 0, leaves = 0, windows = 0;
-  for (const TraceEvent& e : events) {
-    if (e.window) windows++;
-    else (e.leave ? leaves : enters)++;
-  }
-  EXPECT_GT(windows, 0u);
-  EXPECT_EQ(enters, accesses);
-  EXPECT_GT(leaves, 0u);
-  const ReplayResult r = replayTrace(events, 300);
-  EXPECT_EQ(r.accesses, accesses);
-  EXPECT_GE(r.hits_opt, r.hits_lru);
-  EXPECT_GE(r.hits_opt, r.hits_plan);
-  EXPECT_GE(r.hits_opt, r.hits_gpu_first);
-}
-
-TEST(Trace, ReplayMatchesHandComputedHitCounts) {
-  // Accesses A B C A B with room for two tiles.
-  const TileKey a{0, 0, 0}, b{0, 1, 0}, c{0, 2, 0};
-  std::vector<TraceEvent> ev = {{1, a, false}, {1, b, false}, {2, c, false},
-                                {3, a, false}, {3, b, false}};
-  ReplayResult r = replayTrace(ev, 2);
-  EXPECT_EQ(r.accesses, 5u);
-  EXPECT_EQ(r.distinct_tiles, 3u);
-  EXPECT_EQ(r.hits_lru, 0u);  // C evicts A, A evicts B, B evicts C
-  EXPECT_EQ(r.hits_opt, 2u);  // C bypasses: A and B hit
-  // No window lines: the plan-aware policy falls back to least recently
-  // wanted, where leaving counts as wanted. A leaves (refreshed) before C
-  // arrives, so B is the victim and A hits when it re-enters; LRU evicts A.
-  std::vector<TraceEvent> ev2 = {{1, a, false}, {2, b, false}, {3, a, true},
-                                 {4, c, false}, {5, a, false}};
-  r = replayTrace(ev2, 2);
-  EXPECT_EQ(r.hits_plan, 1u);
-  EXPECT_EQ(r.hits_gpu_first, 1u);
-  EXPECT_EQ(r.hits_lru, 0u);
-  EXPECT_EQ(r.hits_opt, 1u);
-  test::TempFile bad("bad_trace.txt");
-  {
-    std::ofstream f(bad.path);
-    f << kTraceHeader << "\n1 0 2 3\nnot a line\n";
-  }
-  std::vector<TraceEvent> parsed;
-  const Status st = readTrace(bad.path, &parsed);
-  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
-  EXPECT_NE(st.message.find(":3:"), std::string::npos) << st.message;
-  EXPECT_EQ(readTrace("/nonexistent/trace", &parsed).code, ErrorCode::kNotFound);
-}
-
-// clipstream-trace accepted an empty or truncated trace and echoed raw bytes
-// (terminal escapes included) in its error.
-TEST(Trace, EmptyTruncatedForeignOrNonRegularTracesAreRefused) {
-  test::TempFile file("hostile.trace");
-  auto readText = [&](const std::string& text) {
-    std::ofstream(file.path, std::ios::binary) << text;
-    std::vector<TraceEvent> events;
-    return readTrace(file.path, &events);
-  };
-  const std::string header = std::string(kTraceHeader) + "\n";
-  EXPECT_TRUE(readText(header).isOk()) << "a header alone is a trace of no frames";
-  EXPECT_TRUE(readText(header + "1 0 2 3\n").isOk());
-  Status st = readText("");
-  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
-  EXPECT_NE(st.message.find("empty"), std::string::npos) << st.message;
-  st = readText(header + "1 0 2 3\n2 0 2");
-  EXPECT_EQ(st.code, ErrorCode::kTruncated) << st.toString();
-  EXPECT_NE(st.message.find(":3:"), std::string::npos) << st.message;
-  st = readText("1 0 2 3\n");
-  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << "no header";
-  st = readText(std::string(1 << 20, '\0'));  // no newline anywhere: refused from its first bytes
-  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << st.toString();
-  st = readText("# clipstream trace v9: from the future\n");
-  EXPECT_EQ(st.code, ErrorCode::kUnsupported) << st.toString();
-  st = readText(header + "1 0 \x1b[31mred\x07\n");
-  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
-  for (char c : st.message) EXPECT_GE(static_cast<unsigned char>(c), 0x20) << st.message;
-  EXPECT_NE(st.message.find("?[31mred?"), std::string::npos) << st.message;
-  const std::string fifo = file.path + ".fifo";
-  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
-  std::vector<TraceEvent> events;
-  EXPECT_EQ(readTrace(fifo, &events).code, ErrorCode::kIo);
-  ::unlink(fifo.c_str());
-}
-
-// clipstream-trace: NaN and other absurd numbers, and a bad trace, exit
-// with the documented codes and one plain line.
-TEST(Trace, ClipstreamTraceRejectsAbsurdArgumentsAndBadTraces) {
-  test::TempFile file("cli.trace");
-  std::ofstream(file.path) << kTraceHeader << "\n1 0 2 3\n2 0 2 3\n1 0 2 3\n";
-  auto run = [&](const std::string& args, std::string* output) {
-    const std::string cmd = std::string("{ '") + CLIPSTREAM_TRACE_EXE + "' " + args + "; } 2>&1";
-    FILE* pipe = ::popen(cmd.c_str(), "r");
-    char buffer[4096];
-    size_t got;
-    output->clear();
-    while ((got = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) output->append(buffer, got);
-    const int status = ::pclose(pipe);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  };
-  std::string out;
-  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "'", &out), 0) << out;
-  EXPECT_NE(out.find("opt\t"), std::string::npos) << out;
-  for (const char* bad : {"--budget-mb nan", "--budget-mb 0", "--budget-mb -5", "--budget-mb 1e999",
-                          "--budget-mb 1 --tile-bytes 0", "--budget-mb 1 --no-such-flag"}) {
-    EXPECT_EQ(run(std::string(bad) + " '" + file.path + "'", &out), 2) << bad << ": " << out;
-    EXPECT_LT(out.size(), 300u) << out;
-  }
-  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "' >/dev/full", &out), 1) << out;
-  EXPECT_NE(out.find("cannot write standard output"), std::string::npos) << out;
-  std::ofstream(file.path, std::ios::trunc);  // empty
-  EXPECT_EQ(run("--budget-mb 1 '" + file.path + "'", &out), 1) << out;
-  EXPECT_NE(out.find("empty"), std::string::npos) << out;
-}
-
-// The trace is written under OutputFile's rule: nothing under its name until
-// shutdown(), then the whole trace; an unwritable path is reported, not
-// printed and ignored.
-TEST(Trace, TheTraceAppearsWholeAtShutdownAndFailuresAreReported) {
-  test::TempFile file("streamer.trace");
-  {
-    StreamerConfig cfg;
-    cfg.io_threads = 1;
-    cfg.trace_path = file.path;
-    Streamer streamer(test::procedural(4096), cfg);
-    const Viewport vp{320, 240};
-    for (int f = 0; f < 5; ++f) streamer.update(test::lookingDown(2048, 2048, 300.0 + f), vp, f / 60.0);
-    EXPECT_FALSE(std::filesystem::exists(file.path)) << "visible before shutdown";
-    streamer.shutdown();
-    EXPECT_TRUE(streamer.traceStatus().isOk()) << streamer.traceStatus().toString();
-  }
-  std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(file.path, &events).isOk());
-  EXPECT_GT(events.size(), 5u);
-  StreamerConfig cfg;
-  cfg.trace_path = "/nonexistent-dir/streamer.trace";
-  Streamer streamer(test::procedural(4096), cfg);
-  streamer.shutdown();
-  EXPECT_EQ(streamer.traceStatus().code, ErrorCode::kNotFound) << streamer.traceStatus().toString();
-}
-
 // --io-threads 100000 aborted clipstream-fly: the streamer starts at most
 // kMaxIoThreads loaders and never throws when the system refuses more.
 TEST(Streamer, AnAbsurdLoaderCountIsCappedNotFatal) {
@@ -693,74 +479,6 @@ TEST(Streamer, AnAbsurdLoaderCountIsCappedNotFatal) {
   EXPECT_GT(streamer.stats().total.loads, 0u);
   EXPECT_EQ(streamer.stats().loader_threads, kMaxIoThreads);
   streamer.shutdown();
-}
-
-TEST(Trace, EvictionModesDifferOnTilesInsideTheWindow) {
-  // Level 0 window slides right one tile and back; the tile that left (A)
-  // re-enters. GPU-first keeps A (an in-window tile goes instead); protect
-  // keeps the in-window tiles and loses A.
-  auto window = [](uint64_t frame, int64_t x0) {
-    TraceEvent e;
-    e.frame = frame;
-    e.window = 'w';
-    e.key.level = 0;
-    e.rect = {x0, 0, x0 + 3, 1};
-    e.kind = 1;
-    return e;
-  };
-  auto tile = [](uint64_t frame, uint32_t x, bool leave) {
-    TraceEvent e;
-    e.frame = frame;
-    e.key = {0, x, 0};
-    e.leave = leave;
-    return e;
-  };
-  const std::vector<TraceEvent> ev = {window(1, 0),    tile(1, 0, false), tile(1, 1, false),
-                                      tile(1, 2, false), window(2, 1),    tile(2, 3, false),
-                                      tile(2, 0, true),  window(3, 0),    tile(3, 0, false),
-                                      tile(3, 3, true)};
-  const ReplayResult r = replayTrace(ev, 3);
-  EXPECT_EQ(r.accesses, 5u);
-  EXPECT_EQ(r.hits_opt, 1u);
-  EXPECT_EQ(r.hits_gpu_first, 1u);
-  EXPECT_EQ(r.hits_plan, 0u);
-  EXPECT_EQ(r.hits_lru, 0u);
-}
-
-
-TEST(Trace, EqualScoresEvictTheMostRecentlyWantedTileFirst) {
-  // Window fixed on tile 10. A (x 8) and B (x 12) are both two tiles out:
-  // equal scores. When C arrives in a full cache, the most recently wanted
-  // of the tie (B) goes, so the subset kept is stable and A hits when it
-  // comes back. Least-recently-wanted ties would evict A and miss.
-  TraceEvent w;
-  w.frame = 1;
-  w.window = 'w';
-  w.key.level = 0;
-  w.rect = {10, 0, 11, 1};
-  w.kind = 1;
-  auto tile = [](uint64_t frame, uint32_t x, bool leave) {
-    TraceEvent e;
-    e.frame = frame;
-    e.key = {0, x, 0};
-    e.leave = leave;
-    return e;
-  };
-  const std::vector<TraceEvent> ev = {w,  tile(1, 8, false),  tile(1, 8, true),
-                                      tile(2, 12, false), tile(2, 12, true),
-                                      tile(3, 14, false), tile(3, 14, true),
-                                      tile(4, 8, false)};
-  const ReplayResult r = replayTrace(ev, 2);
-  EXPECT_EQ(r.accesses, 4u);
-  EXPECT_EQ(r.hits_gpu_first, 1u);
-  EXPECT_EQ(r.hits_plan, 1u);
-  EXPECT_EQ(r.hits_lru, 0u);
-  // The streamer sorts with the same rule.
-  EXPECT_TRUE(evictsBefore(2.0, 7, 2.0, 3));
-  EXPECT_FALSE(evictsBefore(2.0, 3, 2.0, 7));
-  EXPECT_TRUE(evictsBefore(3.0, 3, 2.0, 7));
-  // Without a plan, recency is all there is: least recently wanted first.
-  EXPECT_TRUE(evictsBefore(kNoPlanScore, 3, kNoPlanScore, 7));
 }
 
 }  // namespace

@@ -5,6 +5,8 @@
 // code before the fix (docs/cli.md has the rules they pin).
 #include "tiler_test_util.h"
 
+#include <clipstream/testing/files.h>
+
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/mount.h>
@@ -20,11 +22,6 @@
 
 namespace clipstream::test {
 namespace {
-
-std::string readText(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
 
 bool hasTemporary(const TempDir& dir) {
   for (const std::string& name : dir.entries())

@@ -15,25 +15,6 @@
 
 namespace clipstream::test {
 
-TempDir::TempDir() {
-  std::string tmpl = (fs::temp_directory_path() / "clipstream-tiler-XXXXXX").string();
-  char* made = mkdtemp(tmpl.data());
-  if (made == nullptr) throw std::runtime_error("mkdtemp failed");
-  m_path = made;
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  fs::remove_all(m_path, ec);
-}
-
-std::vector<std::string> TempDir::entries() const {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(m_path)) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
 RefImage referenceBoxDownsample(const RefImage& in) {
   RefImage out;
   out.width = (in.width + 1) / 2;
@@ -217,13 +198,6 @@ pid_t spawnTiler(const std::vector<std::string>& args) {
     _exit(127);
   }
   return pid;
-}
-
-std::string sharedDataDir() {
-  const std::string dir = CLIPSTREAM_SHARED_DATA_DIR;
-  std::error_code ec;
-  if (dir.empty() || !fs::is_directory(dir, ec)) return "";
-  return dir;
 }
 
 bool readImage8(const std::string& path, RefImage* out) {

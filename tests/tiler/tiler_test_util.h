@@ -1,10 +1,14 @@
-// Helpers shared by the tiler tests: temporary directories, writing test
-// images with OpenImageIO, running clipstream-tile, and a reference pyramid
-// computed straight from the definitions in docs/tiler.md (not from tiler
-// code).
+// Helpers shared by the tiler tests: writing test images with OpenImageIO,
+// running clipstream-tile, and a reference pyramid computed straight from
+// the definitions in docs/tiler.md (not from tiler code). Temporary
+// directories and test data come from clipstream_test_support.
+//
+// Thread rule: plain functions; any thread (the tests call them from the
+// test thread only).
 #pragma once
 
 #include <clipstream/store/tile_store.h>
+#include <clipstream/testing/temp_dir.h>
 
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
@@ -18,21 +22,6 @@
 #include <sys/types.h>
 
 namespace clipstream::test {
-
-namespace fs = std::filesystem;
-
-class TempDir {
- public:
-  TempDir();
-  ~TempDir();
-  const fs::path& path() const { return m_path; }
-  std::string file(const std::string& name) const { return (m_path / name).string(); }
-  // Names of everything in the directory (to check nothing was left behind).
-  std::vector<std::string> entries() const;
-
- private:
-  fs::path m_path;
-};
 
 // An image as plain samples: width * height * channels values, row-major,
 // interleaved; values are in the store's sample range (0..255 or 0..65535).
@@ -75,9 +64,6 @@ RunResult runTiler(const std::vector<std::string>& args, const std::string& stdo
 // Starts clipstream-tile with `args` in a child with its output discarded
 // and a 120 s alarm (a hang fails the test); returns the pid, or -1.
 pid_t spawnTiler(const std::vector<std::string>& args);
-
-// Where the real sample data lives, or "" when absent.
-std::string sharedDataDir();
 
 // Reads a whole image via OIIO as 8-bit samples.
 bool readImage8(const std::string& path, RefImage* out);

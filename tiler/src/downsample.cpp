@@ -10,7 +10,7 @@
 #include <cstring>
 #include <numbers>
 
-namespace clipstream::tiler {
+namespace clipstream {
 namespace {
 
 static_assert(std::endian::native == std::endian::little,
@@ -191,4 +191,4 @@ void Downsampler::filteredRow(const uint8_t* const* rows, uint64_t width_in, uin
   }
 }
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

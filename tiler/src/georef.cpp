@@ -11,7 +11,7 @@
 #include <sstream>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 namespace {
 
 namespace fs = std::filesystem;
@@ -251,4 +251,4 @@ Status findGeoReference(const std::string& path, GeoReference* out) {
   return Status::ok();
 }
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

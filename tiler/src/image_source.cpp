@@ -19,7 +19,7 @@
 #define CLIPSTREAM_TILER_OIIO_MODULE_PATH ""
 #endif
 
-namespace clipstream::tiler {
+namespace clipstream {
 namespace {
 
 namespace fs = std::filesystem;
@@ -166,4 +166,4 @@ Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
   return s;
 }
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

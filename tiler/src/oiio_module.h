@@ -9,7 +9,7 @@
 #include <optional>
 #include <string>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 inline constexpr const char* kOiioModuleFileName = "libclipstream_tiler_oiio.so";
 inline constexpr const char* kOiioModuleSymbol = "clipstreamTilerOpenImageFile";
@@ -19,4 +19,4 @@ inline constexpr const char* kOiioModuleSymbol = "clipstreamTilerOpenImageFile";
 using OpenImageFileFn = void (*)(const std::string* path, const std::optional<PixelFormat>* forced,
                                  std::unique_ptr<ImageSource>* out, Status* status);
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

@@ -14,7 +14,7 @@
 #include <system_error>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 namespace {
 
 namespace fs = std::filesystem;
@@ -365,10 +365,10 @@ Status openOiio(const std::string& path, std::optional<PixelFormat> forced,
 }
 
 }  // namespace
-}  // namespace clipstream::tiler
+}  // namespace clipstream
 
 extern "C" __attribute__((visibility("default"))) void clipstreamTilerOpenImageFile(
     const std::string* path, const std::optional<clipstream::PixelFormat>* forced,
-    std::unique_ptr<clipstream::tiler::ImageSource>* out, clipstream::Status* status) {
-  *status = clipstream::tiler::openOiio(*path, *forced, out);
+    std::unique_ptr<clipstream::ImageSource>* out, clipstream::Status* status) {
+  *status = clipstream::openOiio(*path, *forced, out);
 }

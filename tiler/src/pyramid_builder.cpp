@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 uint64_t PyramidBuilder::capacityRows(uint32_t tile_px, const Downsampler& d) {
   // One full tile row plus the filter's reach above and below, so a level
@@ -187,4 +187,4 @@ void PyramidBuilder::emitTileRow(Level& l, uint64_t start_row) {
   }
 }
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

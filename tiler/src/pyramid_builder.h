@@ -15,7 +15,7 @@
 #include <functional>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 struct RegionSpec {
   uint32_t first_level = 0;  // level of the rows passed to appendRows
@@ -88,4 +88,4 @@ class PyramidBuilder {
   std::vector<const uint8_t*> m_taps;
 };
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

@@ -5,7 +5,7 @@
 #include <clipstream/tiler/tiler.h>
 
 #include <clipstream/store/output_file.h>
-#include <clipstream/store/progress.h>
+#include <clipstream/store/process_memory.h>
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
@@ -19,7 +19,6 @@
 #include <cstring>
 #include <deque>
 #include <filesystem>
-#include <fstream>
 #include <mutex>
 #include <system_error>
 #include <thread>
@@ -27,7 +26,7 @@
 #include <time.h>
 #include <unistd.h>
 
-namespace clipstream::tiler {
+namespace clipstream {
 namespace {
 
 namespace fs = std::filesystem;
@@ -148,18 +147,6 @@ struct Layout {
   uint64_t estimate_bytes = 0;
 };
 
-uint64_t readProcStatusKb(const char* field) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  const size_t n = std::strlen(field);
-  while (std::getline(in, line)) {
-    if (line.compare(0, n, field) == 0) {
-      return std::strtoull(line.c_str() + n, nullptr, 10);
-    }
-  }
-  return 0;
-}
-
 Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned threads,
                   uint64_t budget_bytes, uint64_t base_bytes, bool need_single, Layout* out) {
   const uint32_t levels = g.levelCount();
@@ -275,19 +262,6 @@ Status checkOutput(const TilerOptions& o) {
 }
 
 }  // namespace
-
-uint64_t peakRssBytes() { return readProcStatusKb("VmHWM:") * 1024; }
-uint64_t currentRssBytes() { return readProcStatusKb("VmRSS:") * 1024; }
-
-std::optional<PixelFormat> parsePixelFormat(const std::string& text) {
-  std::string u = text;
-  for (char& c : u) c = char(std::toupper(static_cast<unsigned char>(c)));
-  if (u == "R8") return PixelFormat::kR8;
-  if (u == "R16") return PixelFormat::kR16;
-  if (u == "RGB8") return PixelFormat::kRGB8;
-  if (u == "RGBA8") return PixelFormat::kRGBA8;
-  return std::nullopt;
-}
 
 namespace {
 
@@ -442,7 +416,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     }
     read_s = threadCpuSeconds() - cpu0;
     } catch (const std::bad_alloc&) {
-      error.set(Status::error(ErrorCode::kInvalidArgument, "out of memory while reading"));
+      error.set(Status::error(ErrorCode::kOutOfMemory, "an allocation failed while reading the input"));
       abortAll();
     }
     filled.close();
@@ -465,7 +439,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
           es = encodeTile(geometry, wopt.encoding, job.key, job.pixels, &encoded);
           if (es) es = writer->write(std::move(encoded));
         } catch (const std::bad_alloc&) {
-          es = Status::error(ErrorCode::kInvalidArgument, "out of memory while encoding");
+          es = Status::error(ErrorCode::kOutOfMemory, "an allocation failed while encoding tiles");
         }
         {
           std::lock_guard lock(recycled_mutex);
@@ -490,9 +464,11 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     }
   }
 
-  ProgressBar progress("tiling", src.width_px * src.height_px, o.progress, "px");
+  const uint64_t total_px = src.width_px * src.height_px;
+  uint64_t done_px = 0;
   const double build_cpu0 = threadCpuSeconds();
   try {
+    if (o.progress) o.progress(0, total_px);
     auto tile_sink = [&](const TileKey& key, std::vector<uint8_t>&& pixels) {
       if (!jobs.push(TileJob{key, std::move(pixels)}) && !error.failed()) {
         error.set(Status::error(ErrorCode::kCancelled, "encoder queue closed"));
@@ -547,11 +523,12 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
         coarse->appendRows(staging.data(), size_t(wm) * bpp, staging_rows);
         staging_rows = 0;
       }
-      progress.add(uint64_t(item.rows) * item.width_px);
+      done_px += uint64_t(item.rows) * item.width_px;
+      if (o.progress) o.progress(done_px, total_px);
       if (!free_buffers.push(std::move(item.pixels))) break;
     }
   } catch (const std::bad_alloc&) {
-    error.set(Status::error(ErrorCode::kInvalidArgument, "out of memory while building levels"));
+    error.set(Status::error(ErrorCode::kOutOfMemory, "an allocation failed while building levels"));
   }
   if (error.failed() || cancelled()) {
     if (!error.failed()) error.set(Status::error(ErrorCode::kCancelled, "interrupted"));
@@ -567,7 +544,6 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     writer.reset();  // removes the temporary file
     return error.get();
   }
-  progress.finish();
   summary->constant_tiles = writer->constantTiles();
   s = writer->finish();
   if (!s) {
@@ -610,9 +586,9 @@ Status tileImage(const TilerOptions& options, TilerSummary* summary) {
   try {
     return tileImageImpl(options, summary);
   } catch (const std::bad_alloc&) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "out of memory (lower --memory-mb, or the image is too large for it)");
+    return Status::error(ErrorCode::kOutOfMemory,
+                         "an allocation failed (lower --memory-mb, or the image is too large for it)");
   }
 }
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

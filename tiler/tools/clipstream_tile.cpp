@@ -1,8 +1,8 @@
 // clipstream-tile: builds a tile store from an image. Thin: argument
 // parsing, signal handling and the summary; the work is in clipstream::tiler.
 #include <clipstream/cli/cli.h>
+#include <clipstream/cli/progress.h>
 #include <clipstream/store/output_file.h>
-#include <clipstream/store/progress.h>
 #include <clipstream/tiler/tiler.h>
 
 #include <nlohmann/json.hpp>
@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 
 namespace {
 
@@ -24,11 +25,11 @@ std::string parseSize(const std::string& text, uint64_t* width, uint64_t* height
     uint64_t v = 0;
     for (char c : digits) {
       if (c < '0' || c > '9') return false;
-      if (v > clipstream::tiler::kMaxSyntheticSidePx) too_large = true;
+      if (v > clipstream::kMaxSyntheticSidePx) too_large = true;
       else v = v * 10 + uint64_t(c - '0');
     }
     *out = v;
-    if (v > clipstream::tiler::kMaxSyntheticSidePx) too_large = true;
+    if (v > clipstream::kMaxSyntheticSidePx) too_large = true;
     return true;
   };
   if (sep == std::string::npos || !number(text.substr(0, sep), width) ||
@@ -36,7 +37,7 @@ std::string parseSize(const std::string& text, uint64_t* width, uint64_t* height
     return "is not WIDTHxHEIGHT (e.g. 8192x4096)";
   }
   if (too_large) {
-    return "is too large: at most " + std::to_string(clipstream::tiler::kMaxSyntheticSidePx) +
+    return "is too large: at most " + std::to_string(clipstream::kMaxSyntheticSidePx) +
            " px on a side";
   }
   return {};
@@ -48,7 +49,7 @@ std::string megabytes(uint64_t bytes) {
   return text;
 }
 
-nlohmann::json toJson(const clipstream::tiler::TilerSummary& s, const std::string& input,
+nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& input,
                       const std::string& output) {
   nlohmann::json j;
   j["input"] = input;
@@ -103,16 +104,16 @@ int main(int argc, char** argv) {
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
   app.add_option("--format", format_text, "force the store format: R8, R16, RGB8, RGBA8");
   app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
-      ->transform(cli::wholeInRange(tiler::kMinTilePx, tiler::kMaxTilePx));
+      ->transform(cli::wholeInRange(kMinTilePx, kMaxTilePx));
   app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)")
       ->transform(cli::wholeInRange(1, 22));
   app.add_flag("--no-predictor", no_predictor, "store tiles without the left-delta predictor");
   app.add_option("--filter", filter_text, "downsampling filter: box (default) or lanczos3");
   app.add_flag("--linear-light", linear_light, "with lanczos3: filter in linear light (sRGB input)");
   app.add_option("--threads", threads, "encoder threads (default: all cores)")
-      ->transform(cli::wholeInRange(0, tiler::kMaxThreads));
+      ->transform(cli::wholeInRange(0, kMaxThreads));
   app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)")
-      ->transform(cli::wholeInRange(int64_t(tiler::kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
+      ->transform(cli::wholeInRange(int64_t(kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
   app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
@@ -122,7 +123,7 @@ int main(int argc, char** argv) {
       "128+N stopped by signal N (INT, TERM, HUP; temporaries removed). docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
-  tiler::TilerOptions options;
+  TilerOptions options;
   std::string input_name;
   if (!synthetic.empty()) {
     if (positional.size() != 1) return cli::usageError(app, "with --synthetic give only OUTPUT");
@@ -144,7 +145,7 @@ int main(int argc, char** argv) {
     input_name = positional[0];
   }
   if (!format_text.empty()) {
-    options.format = tiler::parsePixelFormat(format_text);
+    options.format = cli::parsePixelFormat(format_text);
     if (!options.format) {
       return cli::usageError(app, "--format '" + format_text + "' is not R8, R16, RGB8 or RGBA8");
     }
@@ -163,10 +164,18 @@ int main(int argc, char** argv) {
   options.threads = threads;
   options.memory_budget_bytes = memory_mb << 20;
   options.overwrite = force;
-  options.progress = !quiet && progressEnabledByDefault();
+  // The bar is made at the first report, when the image size is known, and
+  // ended below whatever the outcome so a message starts on a fresh line.
+  std::unique_ptr<cli::ProgressBar> bar;
+  if (!quiet && cli::progressEnabledByDefault()) {
+    options.progress = [&bar](uint64_t done_px, uint64_t total_px) {
+      if (!bar) bar = std::make_unique<cli::ProgressBar>("tiling", total_px, true, "px");
+      bar->update(done_px);
+    };
+  }
   options.fsync = !no_fsync;
   options.cancel = &g_cancel;
-  if (Status s = tiler::validateOptions(options); !s) return cli::usageError(app, s.message);
+  if (Status s = validateOptions(options); !s) return cli::usageError(app, s.message);
   // The summary file follows the output rule too (a regular file named by
   // the user may be replaced); checked now, not after the work.
   OutputOptions json_options;
@@ -190,8 +199,9 @@ int main(int argc, char** argv) {
 
   cli::installSignalHandlers(&g_cancel);
 
-  tiler::TilerSummary summary;
-  const Status status = tiler::tileImage(options, &summary);
+  TilerSummary summary;
+  const Status status = tileImage(options, &summary);
+  if (bar) bar->finish();
   if (!status) {
     if (status.code == ErrorCode::kCancelled) {
       std::cerr << "clipstream-tile: stopped by signal " << g_cancel.load() << "; nothing was written\n";

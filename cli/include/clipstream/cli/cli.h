@@ -1,12 +1,15 @@
 // What the clipstream programs share on the command line: one exit-code
 // table, one way to parse and report mistakes, range checks with plain
-// messages, signal handling that leaves no temporary behind, and a checked
-// standard output. Linked only by executables, never by the libraries
+// messages, option values (pixel formats), signal handling that leaves no
+// temporary behind, and a checked standard output (the progress bar is in
+// progress.h). Linked only by executables, never by the libraries
 // (an embedding host keeps its own signals and exit codes).
 //
 // Thread rule: parse(), finish() and installSignalHandlers() from the main
 // thread; the validators run inside parse().
 #pragma once
+
+#include <clipstream/store/types.h>
 
 #include <CLI/CLI.hpp>
 
@@ -47,6 +50,10 @@ int usageError(const CLI::App& app, const std::string& message);
 // with Option::transform() (check() would discard the rewrite).
 CLI::Validator inRange(double lo, double hi);
 CLI::Validator wholeInRange(int64_t lo, int64_t hi);
+
+// Parses a pixel format option value: "R8", "R16", "RGB8", "RGBA8", in any
+// case. nullopt for anything else (the caller names the option).
+std::optional<PixelFormat> parsePixelFormat(const std::string& text);
 
 // SIGINT, SIGTERM and SIGHUP (unless ignored at start, as under nohup).
 // With `cancel`, the first signal stores its number there (the program polls

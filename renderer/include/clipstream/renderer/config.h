@@ -1,5 +1,5 @@
 // Renderer tunables in one place, each with the reason for its value. The
-// shaders receive the ones they need as #defines (see shaders.cpp), so the
+// shaders receive the ones they need as #defines (gl_util.cpp, buildGroundProgram), so the
 // C++ and GLSL sides can never disagree.
 //
 // Thread-safe: constants only.

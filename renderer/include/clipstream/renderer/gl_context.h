@@ -1,5 +1,5 @@
 // OpenGL 4.5 core contexts: a headless one through EGL (tests, benchmarks,
-// clipstream-fly) and the GLFW window of clipstream-view (window.h).
+// clipstream-fly); clipstream-view makes its window's context with GLFW itself.
 //
 // Owned by the GL thread: a context is made current on the thread that
 // creates it and every GL call of the renderer happens on that thread.

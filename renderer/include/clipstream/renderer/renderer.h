@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace clipstream {
@@ -25,6 +26,9 @@ enum class Buffering {
   kDoubleCopy,         // two sets; the second copy is glCopyImageSubData on the GPU
 };
 const char* bufferingName(Buffering buffering);
+// The inverse of bufferingName(): "single", "double-upload" or
+// "double-copy". kInvalidArgument naming the choices otherwise.
+Status bufferingFromName(const std::string& name, Buffering* out);
 
 enum class Overlay { kOff = 0, kLevels = 1 };
 
@@ -192,23 +196,5 @@ class OffscreenTarget {
 // Binds the window's default framebuffer and sets the GL viewport to it.
 // GL thread only.
 void bindWindowFramebuffer(const Viewport& framebuffer);
-
-// Baseline for benchmarks: the same ground from one ordinary mipmapped 2D
-// texture (hardware trilinear). Owned by the GL thread.
-class PlainTextureRenderer {
- public:
-  // `rgba` holds width*height*4 bytes, top row first.
-  static Status create(const uint8_t* rgba, uint32_t width_px, uint32_t height_px,
-                       std::unique_ptr<PlainTextureRenderer>* out);
-  ~PlainTextureRenderer();
-  PlainTextureRenderer(const PlainTextureRenderer&) = delete;
-  PlainTextureRenderer& operator=(const PlainTextureRenderer&) = delete;
-  void draw(const Camera& camera, const Viewport& viewport);
-
- private:
-  PlainTextureRenderer() = default;
-  uint32_t m_program = 0, m_vao = 0, m_texture = 0;
-  uint32_t m_width_px = 0, m_height_px = 0;
-};
 
 }  // namespace clipstream

@@ -101,6 +101,7 @@ enum class ErrorCode : uint32_t {
   kCancelled,
   kUnavailable,    // transient source failure (e.g. injected), may be retried
   kAlreadyExists,  // an output path is taken by a file this program may not replace
+  kOutOfMemory,    // an allocation failed (std::bad_alloc): the input or the budget is too large
 };
 const char* errorCodeName(ErrorCode code);
 

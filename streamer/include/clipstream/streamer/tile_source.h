@@ -66,6 +66,13 @@ struct ProceduralSpec {
 };
 std::shared_ptr<TileSource> makeProceduralSource(const ProceduralSpec& spec);
 
+// An in-memory TileSource over an RGBA8 image (top row first): level 0 is
+// the image, each coarser level the 2x2 box average of the one below (edge
+// texels repeated for odd sizes), tile padding is black. For tests,
+// benchmarks and clipstream-view's demo mode.
+std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t width_px,
+                                            uint32_t height_px, uint32_t tile_px);
+
 // The RGBA8 value the procedural source gives texel (tx, ty) of `level`.
 // Exposed so renderer tests can compute CPU references without the source.
 // Definition: six layers of hashed colours over aligned square cells of

@@ -30,15 +30,24 @@
 
 namespace clipstream {
 
+// The format, named once. The first line is kTraceHeader; every other line
+// starts with its tag (a tile entry has none: it starts with the frame).
+inline constexpr const char* kTraceMagic = "# clipstream trace v";  // then the version
+inline constexpr int kTraceVersion = 2;
 inline constexpr const char* kTraceHeader =
 "# clipstream trace v2: 'frame level x y' = tile entered the wanted set, "
     "'- frame level x y' = it left; 'w'/'p' window and 't' time lines as in trace.h";
+inline constexpr char kTraceLeaveTag = '-';      // "- F L X Y"
+inline constexpr char kTraceWindowTag = 'w';     // "w F L X0 Y0 X1 Y1 K"
+inline constexpr char kTracePredictedTag = 'p';  // "p F L X0 Y0 X1 Y1 K"
+inline constexpr char kTraceTimeTag = 't';       // "t F T H W V"
+inline constexpr char kTraceCommentTag = '#';
 
 struct TraceEvent {
   uint64_t frame = 0;
   TileKey key;         // tile events; window events use key.level only
   bool leave = false;
-  char window = 0;     // 0: tile event; 'w': current window; 'p': predicted window; 't': time
+  char window = 0;     // 0: tile event, else its tag: kTraceWindowTag, kTracePredictedTag, kTraceTimeTag
   TileRect rect;       // window events
   uint8_t kind = 0;    // window events: 0 not needed, 1 needed, 2 pyramid; time events: hint used
   double time_s = 0.0; // time events
@@ -46,6 +55,13 @@ struct TraceEvent {
 
   bool isAccess() const { return window == 0 && !leave; }
 };
+
+// Appends `event` to `out` as one trace line, newline included: the line
+// readTrace() parses back into the same event. Time events keep time_s
+// exactly (17 significant digits); a non-finite time is written as 0.
+// Events that no line can hold (a level above 63, a kind above 2) are the
+// caller's mistake.
+void appendTraceLine(const TraceEvent& event, std::string* out);
 
 // Reads a trace file (a regular file starting with the v2 header line).
 // kNotFound / kIo if it cannot be read or is not a regular file;

@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 class Downsampler {
  public:
@@ -54,4 +54,4 @@ class Downsampler {
 float srgbToLinear(float encoded);
 float linearToSrgb(float linear);
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

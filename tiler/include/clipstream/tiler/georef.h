@@ -9,7 +9,7 @@
 
 #include <string>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 // Finds georeferencing for the image at `path`: GeoTIFF tags first (for
 // TIFF files), then a world file next to it (.wld, then the three-letter
@@ -28,4 +28,4 @@ Status readWorldFile(const std::string& path, GeoReference* out);
 // false when the file has no such tags. Malformed tags are an error.
 Status readGeoTiffTags(const std::string& path, GeoReference* out);
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

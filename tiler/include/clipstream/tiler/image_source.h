@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 // What the input looked like before conversion, for summaries and docs.
 struct SourceInfo {
@@ -69,4 +69,4 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
 // compresses roughly like an orthophoto rather than like a flat colour.
 void syntheticPixel(uint64_t x, uint64_t y, PixelFormat format, uint8_t* out);
 
-}  // namespace clipstream::tiler
+}  // namespace clipstream

@@ -6,7 +6,8 @@
 //
 // Thread rule: tileImage() may be called from any thread; it starts and
 // joins its own reader and encoder threads before returning. Concurrent
-// calls are independent (different outputs).
+// calls are independent (different outputs). TilerOptions::progress runs on
+// the thread that called tileImage().
 #pragma once
 
 #include <clipstream/store/tile_store.h>
@@ -14,11 +15,12 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
-namespace clipstream::tiler {
+namespace clipstream {
 
 // Smallest budget tileImage accepts, and the supported tile sizes.
 constexpr uint64_t kMinMemoryBudgetBytes = uint64_t(16) << 20;
@@ -42,7 +44,12 @@ struct TilerOptions {
   unsigned threads = 0;              // encoder threads; 0 = all cores
   uint64_t memory_budget_bytes = uint64_t(256) << 20;  // bound on peak RSS
   bool overwrite = false;            // replace an existing output
-  bool progress = false;             // draw the store's ProgressBar on stderr
+  // Progress in level-0 pixels: progress(done_px, total_px), total_px =
+  // width x height. Called on the thread that called tileImage(), never on a
+  // worker: once with 0 when tiling starts (after the input is opened and the
+  // memory plan made), then after each strip of one tile row. It should
+  // return quickly (the pipeline waits for it) and not throw. Empty: none.
+  std::function<void(uint64_t done_px, uint64_t total_px)> progress;
   bool fsync = true;
   const std::atomic<int>* cancel = nullptr;  // non-zero (e.g. a signal number) stops the run
 };
@@ -78,7 +85,8 @@ struct TilerSummary {
 // Errors name the problem: kNotFound/kIo (input, output directory),
 // kInvalidArgument (options, existing output without overwrite, a budget
 // too small for the image), kUnsupported (pixel type), kTruncated (damaged
-// input), kNoSpace (disk full), kCancelled.
+// input), kNoSpace (disk full), kOutOfMemory (an allocation failed),
+// kCancelled.
 Status tileImage(const TilerOptions& options, TilerSummary* summary);
 
 // The checks tileImage() makes of the options alone (sizes, tile size,
@@ -87,12 +95,4 @@ Status tileImage(const TilerOptions& options, TilerSummary* summary);
 // that a mistake on the command line is told apart from a failed run.
 Status validateOptions(const TilerOptions& options);
 
-// Peak resident set size of this process (VmHWM), in bytes; 0 if unknown.
-uint64_t peakRssBytes();
-// Current resident set size (VmRSS), in bytes; 0 if unknown.
-uint64_t currentRssBytes();
-
-// Parses "R8", "R16", "RGB8", "RGBA8" (case-insensitive).
-std::optional<PixelFormat> parsePixelFormat(const std::string& text);
-
-}  // namespace clipstream::tiler
+}  // namespace clipstream

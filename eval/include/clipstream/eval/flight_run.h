@@ -1,0 +1,123 @@
+// A measured flight along a scripted path: the one frame loop behind
+// clipstream-fly, the stability scenarios and the sweep. It flies a Flight
+// (renderer/flight.h) through the path's cameras, with warm-up, rest frames
+// and an optional resize, and judges frames against the IdealReference.
+//
+// Frame rules (docs/renderer.md, "The frame loop"): recorded frame i shows
+// path time min(i, frames - 1) * kSimulatedFrameSeconds * speed (wrapped
+// with `loop`), whatever the real render time, so runs are deterministic;
+// warm-up frames hold the first camera, rest frames the last; the clock and
+// cut rules are Flight's.
+//
+// Thread rule: runFlight() runs on the calling thread, which must have a
+// current GL context; the streamer's workers read tiles. `on_frame` runs on
+// the calling thread.
+#pragma once
+
+#include <clipstream/eval/accuracy.h>
+#include <clipstream/streamer/flight_path.h>
+#include <clipstream/eval/metrics.h>
+#include <clipstream/eval/reference.h>
+#include <clipstream/renderer/flight.h>
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/stats.h>
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+
+struct FlightRunOptions {
+  std::shared_ptr<TileSource> source;
+  FlightPath path;
+  uint32_t frames = 60;         // moving frames (at least 1)
+  uint32_t warmup_frames = 0;   // first: the first camera held, not recorded
+  uint32_t rest_frames = 0;     // then: the last camera held this many frames
+  // Rest frames take at least this wall time (a display's refresh), so a
+  // slow source gets real time to catch up; moving frames never wait.
+  double rest_frame_ms = 0.0;
+  double speed = 1.0;           // path seconds per simulated second
+  bool loop = false;            // wrap path time instead of clamping at the end
+  Viewport viewport{320, 180};
+  uint32_t resize_at_frame = 0;  // > 0: switch to resize_to before this recorded frame
+  Viewport resize_to{0, 0};
+  StreamerConfig streamer;
+  uint32_t upload_tiles = 16;
+  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Overlay overlay = Overlay::kOff;
+  bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
+
+  // Measurement.
+  uint32_t reference_every = 1;     // compare every Nth frame (and every rest frame); 0 = never
+  uint32_t ground_truth_every = 0;  // also the reference against the CPU ground truth; 0 = never
+  bool sample_tiles = true;         // collect sampledTiles() (warm-up too) for the over-fetch ratio
+  // Frames checked with countGarbagePixels(): the lowest-PSNR measured
+  // frames below kSharpPsnrDb, at most this many (CPU-heavy).
+  uint32_t garbage_checks = 0;
+  int garbage_tolerance = 6;
+  // The ground those frames are checked against; empty: texelsFromSource()
+  // of the source (a tile that fails has no texels there).
+  TexelFunction garbage_texels;
+
+  // Called once the flight, its renderer and the reference exist, before the
+  // first frame: everything that can fail at set-up has been tried. An
+  // error stops the run.
+  std::function<Status()> on_start;
+  // Called after each recorded frame is drawn and timed, before it is
+  // judged, with the flight's target (e.g. to save the frame). An error
+  // stops the run.
+  std::function<Status(const FrameSample& frame, const OffscreenTarget& target)> on_frame;
+  // Called after the last frame, before the streamer stops and publishes its
+  // trace (e.g. to finish writing frames). An error fails the run, and a
+  // failed run publishes no trace.
+  std::function<Status()> before_finish;
+};
+
+struct FlightRunFrame {
+  FrameSample sample;
+  double t_s = 0.0;            // path time shown
+  double readback_ms = 0.0;    // time in FlightRunOptions::on_frame (saving the frame)
+  AccuracyFrame accuracy;      // when judged
+};
+
+struct FlightRun {
+  std::vector<FlightRunFrame> frames;  // recorded frames only
+  RunSummary summary;                  // over the recorded frames (warm-up loads in over-fetch)
+  StreamerStats streamer;              // final statistics of the streamer
+  std::string gl;                      // GL_RENDERER / GL_VERSION
+  std::string source;                  // TileSource::describe()
+  uint32_t clip_tiles = 0, pyramid_level = 0;  // the first plan's
+  uint64_t texture_bytes = 0;
+  double preload_ms = 0.0;             // the first synchronous pyramid load
+  uint32_t preload_failures = 0;       // pyramid tiles that could not be read, every load
+  uint32_t resizes = 0;
+  uint64_t warmup_loads = 0;
+  double run_ms = 0.0;                 // the frame loop, warm-up included
+  // Fetches that ran on the render thread inside the frame loop (a frame
+  // waiting on I/O). Pyramid loads before frame 0 and at a resize, and the
+  // reference's own fetches, are not counted.
+  uint64_t render_thread_fetches = 0;
+  uint64_t rss_after_warmup_bytes = 0;  // after a quarter of the recorded frames
+  uint64_t rss_end_bytes = 0;
+  uint32_t garbage_checked_frames = 0;
+  uint32_t garbage_pixels_max = 0;       // worst checked frame
+  int final_max_abs_error = -1;          // last frame against the reference (-1: not compared)
+  uint64_t tile_failures = 0;            // streamer failures + preload failures
+  Status trace_status;                   // Streamer::traceStatus() after the streamer stopped
+  uint32_t frames_with_holes = 0;        // judged frames with hole pixels
+  uint32_t ground_truth_frames = 0;
+  double ground_truth_psnr_mean_db = 0.0, ground_truth_psnr_min_db = 0.0;  // 0 when none
+};
+
+// Flies the run. kInvalidArgument for a missing source or zero frames;
+// GL failures as from Flight::create; the first error of `on_frame` or of
+// the reference.
+Status runFlight(const FlightRunOptions& options, FlightRun* run);
+
+}  // namespace clipstream

@@ -1,0 +1,74 @@
+// The headless flythrough behind clipstream-fly: a measured flight
+// (flight_run.h) over a store or a procedural texture, with its reports
+// (report.h) published into one output directory and chosen frames as PNG.
+//
+// Thread rule: runFly() owns its GL context and runs the frame loop on the
+// calling thread; the streamer's workers read tiles and a FrameWriter
+// thread encodes PNGs. Nothing in a frame waits on I/O.
+#pragma once
+
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/camera.h>
+
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+
+namespace clipstream {
+
+// Bounds of FlyOptions that runFly() and clipstream-fly check: beyond them a
+// run would hang (a delay of hours per read) or mean nothing.
+inline constexpr double kMaxFlySpeed = 10000.0;     // path seconds per simulated second
+inline constexpr double kMaxFlyDelayMs = 10000.0;   // fault latency per read, rest-frame time
+inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up frames
+
+struct FlyOptions {
+  std::string store_path;          // tile store; empty when procedural_px > 0
+  uint64_t procedural_px = 0;      // > 0: procedural texture of this side instead
+  std::string path = "orbit";      // built-in name or JSON file
+  uint32_t frames = 0;             // 0 = the whole path at `speed`
+  Viewport viewport{1280, 720};
+  double speed = 1.0;              // path seconds per simulated second
+  uint64_t cache_mb = 256;         // streamer RAM budget
+  uint32_t upload_tiles = 16;      // GPU uploads per frame
+  unsigned io_threads = 0;         // 0 = cores
+  std::string out_dir = "fly-out";
+  uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
+  Buffering buffering = Buffering::kDoubleUploadTwice;
+  bool overlay = false;
+  bool quiet = false;              // no summary table
+  // Speed against accuracy (docs/accuracy.md).
+  bool reference = false;            // compare frames with the ideal reference
+  uint32_t reference_every = 1;      // ... every Nth frame (and every rest frame)
+  uint32_t ground_truth_every = 0;   // reference vs CPU ground truth every Nth frame; 0 = never
+  bool throttle = true;              // StreamerConfig::throttle
+  bool prefetch = true;              // StreamerConfig::prefetch
+  bool frustum_priority = true;      // StreamerConfig::frustum_priority
+  bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
+  double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
+  double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
+  uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
+  Viewport resize_to{0, 0};
+  uint32_t warmup_frames = 0;        // first hold the first camera this many frames, unrecorded
+  uint32_t rest_frames = 0;          // then hold the last camera this many frames
+  double rest_frame_ms = 0.0;        // rest frames last at least this wall time
+  bool loop = false;                 // wrap path time instead of clamping at the end
+  uint32_t teleport_frames = 30;     // the built-in teleport path jumps this often
+  std::string trace_path;            // record the streamer's request trace here
+};
+
+// Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
+// the real render time (simulated pacing: results are deterministic).
+// Writes OUT/frames.csv, OUT/frames.json, OUT/summary.tsv and
+// OUT/frame_NNNNN.png, each under OutputFile's rule, after removing what an
+// earlier run wrote in OUT (once the GL context and the first frame's
+// resources exist; the statistics files are published only when the run
+// succeeded), and prints a summary table to `log`. Returns the first error
+// (options out of bounds, bad store, no GL context, unwritable output or
+// trace); per-tile failures are counted, not errors.
+// Warnings (temporaries of killed runs removed) go to `warnings`, or to
+// `log` when it is null.
+Status runFly(const FlyOptions& options, std::ostream& log, std::ostream* warnings = nullptr);
+
+}  // namespace clipstream

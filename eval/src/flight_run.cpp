@@ -1,0 +1,244 @@
+// The one measured frame loop. See flight_run.h and docs/renderer.md.
+#include <clipstream/eval/flight_run.h>
+
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/gl_context.h>
+#include <clipstream/store/process_memory.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <thread>
+#include <unordered_set>
+
+namespace clipstream {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point a) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - a).count();
+}
+
+// Counts fetches made on one thread (the render thread) while armed: the
+// streamer must only ever fetch on its workers.
+class ThreadWatchSource final : public TileSource {
+ public:
+  explicit ThreadWatchSource(std::shared_ptr<TileSource> inner)
+      : m_inner(std::move(inner)), m_render_thread(std::this_thread::get_id()) {}
+  const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    note();
+    return m_inner->fetch(key, rgba);
+  }
+  Status fetchWithInfo(const TileKey& key, std::vector<uint8_t>* rgba, FetchInfo* info) override {
+    note();
+    return m_inner->fetchWithInfo(key, rgba, info);
+  }
+  std::string describe() const override { return m_inner->describe(); }
+  void arm(bool on) { m_armed.store(on); }
+  uint64_t renderThreadFetches() const { return m_count.load(); }
+
+ private:
+  void note() {
+    if (m_armed.load() && std::this_thread::get_id() == m_render_thread) m_count.fetch_add(1);
+  }
+  std::shared_ptr<TileSource> m_inner;
+  std::thread::id m_render_thread;
+  std::atomic<bool> m_armed{false};
+  std::atomic<uint64_t> m_count{0};
+};
+
+FrameRecord recordOf(const FlightRunFrame& f) {
+  FrameRecord r;
+  r.frame = f.sample.frame;
+  r.cut = f.sample.cut;
+  r.has_error = f.accuracy.measured;
+  r.psnr_db = f.accuracy.error.psnr_db;
+  r.max_abs_error = f.accuracy.error.max_abs_error;
+  r.frame_ms = f.sample.frame_ms;
+  r.bytes_read = f.sample.total.bytes_read;
+  r.tiles_uploaded = f.sample.tiles_uploaded;
+  r.tiles_loaded = f.sample.tiles_loaded;
+  r.ram_hits = f.sample.total.ram_hits;
+  r.ram_misses = f.sample.total.ram_misses;
+  r.gpu_hits = f.sample.total.gpu_hits;
+  r.gpu_misses = f.sample.total.gpu_misses;
+  return r;
+}
+
+}  // namespace
+
+Status runFlight(const FlightRunOptions& o, FlightRun* run) {
+  *run = FlightRun{};
+  if (!o.source) return Status::error(ErrorCode::kInvalidArgument, "flight: no tile source");
+  if (o.frames == 0) return Status::error(ErrorCode::kInvalidArgument, "flight: no frames to fly");
+  run->gl = currentGlDescription();
+  run->source = o.source->describe();
+  const PyramidGeometry& geometry = o.source->geometry();
+  const double speed = o.speed > 0.0 ? o.speed : 1.0;
+  const uint32_t total = o.frames + o.rest_frames;
+
+  // Path time of recorded frame `frame` (fractional for the hint): held at
+  // the last pose through the rest frames.
+  auto pathTimeOfFrame = [&](double frame) {
+    double t = std::clamp(frame, 0.0, double(o.frames - 1)) * renderer_config::kSimulatedFrameSeconds * speed;
+    if (o.loop && o.path.durationS() > 0.0) t = std::fmod(t, o.path.durationS());
+    return t;
+  };
+
+  auto watched = std::make_shared<ThreadWatchSource>(o.source);
+  FlightConfig fc;
+  fc.viewport = o.viewport;
+  fc.streamer = o.streamer;
+  fc.upload_tiles = o.upload_tiles;
+  fc.buffering = o.buffering;
+  fc.overlay = o.overlay;
+  fc.warmup_frames = o.warmup_frames;
+  std::unique_ptr<Flight> flight;
+  if (Status s = Flight::create(watched, fc, o.path.sample(0.0), &flight); !s) return s;
+  run->clip_tiles = flight->firstPlan().clip_tiles;
+  run->pyramid_level = flight->firstPlan().pyramid_level;
+  run->texture_bytes = flight->renderer().textureBytes();
+  run->preload_ms = flight->preloadMs();
+  // A run that fails from here on publishes no trace.
+  struct DiscardTraceUnlessDone {
+    Flight& flight;
+    bool done = false;
+    ~DiscardTraceUnlessDone() {
+      if (!done) flight.streamer().discardTrace();
+    }
+  } trace_guard{*flight};
+  if (o.path_hint) {
+    // The streamer's clock runs from the first warm-up frame, so recorded
+    // frame 0 is at clock0_s.
+    const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
+    PathHint hint;
+    hint.camera_at = [&o, clock0_s, pathTimeOfFrame](double clock_s) {
+      return o.path.sample(pathTimeOfFrame((clock_s - clock0_s) / renderer_config::kSimulatedFrameSeconds));
+    };
+    flight->streamer().setPathHint(std::move(hint));
+  }
+
+  std::unique_ptr<FlyAccuracy> accuracy;
+  if (o.reference_every > 0 || o.sample_tiles) {
+    AccuracyOptions ao;
+    ao.ground_truth = o.ground_truth_every > 0;
+    ao.sample_tiles = o.sample_tiles;
+    ao.reference = o.reference_every > 0;
+    if (Status s = FlyAccuracy::create(o.source, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
+  }
+  if (o.on_start)
+    if (Status s = o.on_start(); !s) return s;
+  struct Candidate {
+    double psnr_db;
+    Camera camera;
+    Viewport viewport;
+    std::vector<uint8_t> rgba;
+  };
+  std::vector<Candidate> candidates;
+  run->frames.reserve(std::min<uint32_t>(total, 100000));  // grows past that as frames come
+  const auto run_start = Clock::now();
+  watched->arm(true);
+
+  for (uint32_t w = 0; w < o.warmup_frames; ++w) {
+    // Start-up excluded from the statistics: the camera holds its first
+    // position while the streamer fills the first windows. Warm-up frames
+    // count in the over-fetch ratio (loads and sampled tiles alike).
+    const Camera camera = o.path.sample(0.0);
+    flight->step(camera);
+    AccuracyFrame ignored;
+    if (accuracy)
+      if (Status s = accuracy->measure(camera, *flight->target(), false, false, &ignored); !s) return s;
+  }
+  run->warmup_loads = flight->warmupLoads();
+
+  Camera previous = o.path.sample(0.0);
+  for (uint32_t i = 0; i < total; ++i) {
+    if (o.resize_at_frame > 0 && i == o.resize_at_frame && o.resize_to.width_px > 0) {
+      watched->arm(false);
+      if (Status s = flight->resize(o.resize_to, previous); !s) return s;
+      if (accuracy)
+        if (Status s = accuracy->resize(o.resize_to); !s) return s;
+      watched->arm(true);
+    }
+    FlightRunFrame f;
+    f.t_s = pathTimeOfFrame(double(i));
+    const Camera camera = o.path.sample(f.t_s);
+    previous = camera;
+    const auto t0 = Clock::now();
+    f.sample = flight->step(camera);
+    if (o.on_frame) {
+      const auto t_saved = Clock::now();
+      if (Status s = o.on_frame(f.sample, *flight->target()); !s) return s;
+      f.readback_ms = msSince(t_saved);
+    }
+    // Judged after the frame is timed: the reference fetches synchronously.
+    if (accuracy) {
+      const bool compare =
+          o.reference_every > 0 && (i % o.reference_every == 0 || i >= o.frames || i + 1 == total);
+      const bool truth = compare && o.ground_truth_every > 0 && i % o.ground_truth_every == 0;
+      if (Status s = accuracy->measure(camera, *flight->target(), compare, truth, &f.accuracy); !s) return s;
+      const AccuracyFrame& a = f.accuracy;
+      if (a.measured) {
+        if (i + 1 == total) run->final_max_abs_error = a.error.max_abs_error;
+        if (a.hole_pixels > 0) ++run->frames_with_holes;
+        if (o.garbage_checks > 0 && a.error.psnr_db < kSharpPsnrDb) {
+          candidates.push_back({a.error.psnr_db, camera, flight->viewport(), accuracy->lastStreamed()});
+          std::sort(candidates.begin(), candidates.end(),
+                    [](const Candidate& x, const Candidate& y) { return x.psnr_db < y.psnr_db; });
+          if (candidates.size() > o.garbage_checks) candidates.pop_back();
+        }
+      }
+      if (a.ground_truth_measured) {
+        run->ground_truth_psnr_min_db = run->ground_truth_frames == 0
+                                            ? a.ground_truth.psnr_db
+                                            : std::min(run->ground_truth_psnr_min_db, a.ground_truth.psnr_db);
+        run->ground_truth_psnr_mean_db += a.ground_truth.psnr_db;
+        ++run->ground_truth_frames;
+      }
+    }
+    run->frames.push_back(std::move(f));
+    if (i == total / 4) run->rss_after_warmup_bytes = currentRssBytes();
+    // Rest frames at display pace: a slow source gets real time to land.
+    if (i >= o.frames && o.rest_frame_ms > 0.0) {
+      const double left = o.rest_frame_ms - msSince(t0);
+      if (left > 0.0) std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(left));
+    }
+  }
+  watched->arm(false);
+  run->run_ms = msSince(run_start);
+  if (run->ground_truth_frames > 0) run->ground_truth_psnr_mean_db /= run->ground_truth_frames;
+
+  if (!candidates.empty()) {
+    const TexelFunction texels = o.garbage_texels ? o.garbage_texels : texelsFromSource(o.source);
+    for (const Candidate& c : candidates) {
+      ++run->garbage_checked_frames;
+      run->garbage_pixels_max = std::max(
+          run->garbage_pixels_max,
+          countGarbagePixels(c.rgba, geometry, texels, c.camera, c.viewport, o.garbage_tolerance));
+    }
+  }
+  run->resizes = flight->resizes();
+  run->preload_failures = flight->preloadFailures();
+  if (o.before_finish)
+    if (Status s = o.before_finish(); !s) return s;
+  trace_guard.done = true;
+  run->streamer = flight->finish();
+  run->trace_status = flight->streamer().traceStatus();
+  run->render_thread_fetches = watched->renderThreadFetches();
+  run->tile_failures = run->streamer.total.failures + run->preload_failures;
+  run->rss_end_bytes = currentRssBytes();
+
+  std::vector<FrameRecord> records;
+  records.reserve(run->frames.size());
+  for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
+  run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : 0, peakRssBytes());
+  if (run->summary.tiles_sampled > 0)
+    run->summary.over_fetch_ratio =
+        double(run->summary.tiles_loaded + run->warmup_loads) / double(run->summary.tiles_sampled);
+  return Status::ok();
+}
+
+}  // namespace clipstream

@@ -1,0 +1,280 @@
+// The clipstream-fly frame loop. See fly.h and docs/renderer.md.
+#include <clipstream/eval/fly.h>
+
+#include <clipstream/streamer/flight_path.h>
+#include <clipstream/eval/flight_run.h>
+#include <clipstream/eval/frame_writer.h>
+#include <clipstream/eval/report.h>
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/gl_context.h>
+#include <clipstream/store/output_file.h>
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <thread>
+
+#include <unistd.h>
+
+namespace clipstream {
+namespace {
+
+// The run's statistics files, under OutputFile's rule, published together
+// and only when every one was written (and the frames before them): a failed
+// run leaves no statistics that look complete. --out was emptied of an
+// earlier run's files first (prepareOutDir), so nothing is replaced.
+Status writeRunFiles(const std::vector<std::pair<std::string, std::string>>& files) {
+  OutputOptions options;
+  options.fsync = false;  // measurements a rerun remakes; atomicity is what matters
+  std::vector<std::unique_ptr<OutputFile>> outputs(files.size());
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (Status s = OutputFile::create(files[i].first, options, &outputs[i]); !s) return s;
+    if (Status s = outputs[i]->append(files[i].second); !s) return s;
+  }
+  for (std::unique_ptr<OutputFile>& output : outputs)
+    if (Status s = output->commit(); !s) return s;
+  return Status::ok();
+}
+
+// "frame_NNNNN.png" exactly as the frame loop names frames ("%05u"): five
+// digits, or more without a leading zero.
+bool isFrameName(const std::string& name) {
+  if (name.size() < 15 || name.compare(0, 6, "frame_") != 0 ||
+      name.compare(name.size() - 4, 4, ".png") != 0)
+    return false;
+  const std::string digits = name.substr(6, name.size() - 10);
+  if (digits.size() > 10 || digits.find_first_not_of("0123456789") != std::string::npos) return false;
+  return digits.size() == 5 || (digits[0] != '0' && std::stoull(digits) <= UINT32_MAX);
+}
+
+bool isRunFileName(const std::string& name) {
+  return isFrameName(name) || name == "frames.csv" || name == "frames.json" || name == "summary.tsv";
+}
+
+// --trace must not be an input (the store, the path file) nor one of the
+// run's own files in --out; the inputs must not sit in --out under a name the
+// run removes. Compared as files (links included) and as paths.
+Status checkFlyOutputs(const FlyOptions& o) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  auto canonical = [&](const std::string& p) { return fs::weakly_canonical(p, ec).string(); };
+  const std::string out_dir = canonical(o.out_dir);
+  for (const std::string& input : {o.store_path, o.path}) {
+    if (input.empty() || !fs::exists(input, ec)) continue;
+    if (!o.trace_path.empty() && (sameFile(input, o.trace_path) || canonical(input) == canonical(o.trace_path)))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--trace " + o.trace_path + " is the input " + input + "; refusing to overwrite it");
+    const fs::path in = canonical(input);
+    if (in.parent_path().string() == out_dir && isRunFileName(in.filename().string()))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           input + " is in --out " + o.out_dir + " under a name the run replaces");
+  }
+  if (!o.trace_path.empty()) {
+    const fs::path trace = canonical(o.trace_path);
+    if (trace.parent_path().string() == out_dir && isRunFileName(trace.filename().string()))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--trace " + o.trace_path + " is one of the run's own files in --out");
+    OutputOptions trace_options;
+    trace_options.existing = ExistingOutput::kReplaceRegular;
+    if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
+  }
+  return Status::ok();
+}
+
+// --out holds one run: creates it if needed, then removes what an earlier run
+// wrote there (frame_NNNNN.png, frames.csv, frames.json, summary.tsv; regular
+// files only) and the temporaries of killed runs, so a reader never mixes
+// two runs. Appends what it swept to *swept.
+Status prepareOutDir(const std::string& dir, std::vector<std::string>* swept) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::error(ErrorCode::kIo, "cannot create --out " + dir + ": " + ec.message());
+  if (!fs::is_directory(dir, ec))
+    return Status::error(ErrorCode::kInvalidArgument, "--out " + dir + " is not a directory");
+  std::vector<std::string> stale;
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (isRunFileName(name)) {
+      if (!entry.is_regular_file(ec) || entry.is_symlink(ec))
+        return Status::error(ErrorCode::kInvalidArgument,
+                             entry.path().string() + " is not a regular file; the run would write there");
+      stale.push_back(entry.path().string());
+    }
+    // ".NAME.tmp-..." of one of our names: its writer may be dead.
+    const size_t tmp = name.find(".tmp-");
+    if (name.size() > 1 && name[0] == '.' && tmp != std::string::npos) {
+      const std::string final_name = name.substr(1, tmp - 1);
+      if (isRunFileName(final_name)) sweepOutputTemporaries(dir + "/" + final_name, swept);
+    }
+  }
+  if (ec) return Status::error(ErrorCode::kIo, "cannot list --out " + dir + ": " + ec.message());
+  for (const std::string& path : stale) {
+    if (::unlink(path.c_str()) != 0 && errno != ENOENT)
+      return Status::error(ErrorCode::kIo, "cannot remove " + path + " of an earlier run: " +
+                                               std::strerror(errno));
+  }
+  return Status::ok();
+}
+
+// Library-side guard for values a program's command line already bounds
+// (docs/cli.md): non-finite or absurd numbers would hang or mislead.
+Status checkFlyOptions(const FlyOptions& o) {
+  auto bad = [](const std::string& what) { return Status::error(ErrorCode::kInvalidArgument, what); };
+  if (!std::isfinite(o.speed) || o.speed <= 0.0 || o.speed > kMaxFlySpeed)
+    return bad("speed must be a number from 0.001 to " + std::to_string(int(kMaxFlySpeed)));
+  if (o.cache_mb == 0) return bad("the RAM budget (cache MiB) must be at least 1");
+  if (o.upload_tiles == 0) return bad("uploads per frame must be at least 1");
+  if (o.io_threads > kMaxIoThreads)
+    return bad("io threads must be at most " + std::to_string(kMaxIoThreads));
+  if (!std::isfinite(o.fault_latency_ms) || o.fault_latency_ms < 0.0 || o.fault_latency_ms > kMaxFlyDelayMs)
+    return bad("fault latency must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
+  if (!std::isfinite(o.rest_frame_ms) || o.rest_frame_ms < 0.0 || o.rest_frame_ms > kMaxFlyDelayMs)
+    return bad("rest frame time must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
+  if (!(o.fault_corrupt_fraction >= 0.0 && o.fault_corrupt_fraction <= 1.0))
+    return bad("fault corrupt fraction must be from 0 to 1");
+  return Status::ok();
+}
+
+}  // namespace
+
+Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
+  if (Status s = checkFlyOptions(o); !s) return s;
+  // Source.
+  std::shared_ptr<TileSource> source;
+  if (o.procedural_px > 0) {
+    ProceduralSpec spec;
+    spec.width_px = spec.height_px = o.procedural_px;
+    source = makeProceduralSource(spec);
+    if (!source)
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "procedural size " + std::to_string(o.procedural_px) + " not supported");
+  } else {
+    Status s;
+    source = openStoreSource(o.store_path, &s);
+    if (!source) return s.isOk() ? Status::error(ErrorCode::kIo, "cannot open " + o.store_path) : s;
+  }
+  if (o.fault_latency_ms > 0.0 || o.fault_corrupt_fraction > 0.0) {
+    FaultSpec fault;
+    fault.latency_ms = o.fault_latency_ms;
+    fault.fail_fraction = o.fault_corrupt_fraction;
+    fault.fail_code = ErrorCode::kCorruptTile;
+    source = makeFaultySource(source, fault);
+  }
+  const PyramidGeometry geometry = source->geometry();
+
+  FlightRunOptions r;
+  r.source = source;
+  {
+    const auto names = FlightPath::builtinNames();
+    Status s = std::find(names.begin(), names.end(), o.path) != names.end()
+                   ? FlightPath::builtin(o.path, geometry, &r.path, std::max(1u, o.teleport_frames))
+                   : FlightPath::load(o.path, &r.path);
+    if (!s) return s;
+  }
+  r.speed = o.speed;
+  // The whole path at this speed, bounded like --frames: a long path flown
+  // slowly would otherwise ask for billions of frames.
+  const double path_frames =
+      std::ceil(r.path.durationS() / (r.speed * renderer_config::kSimulatedFrameSeconds)) + 1.0;
+  if (o.frames == 0 && !(path_frames <= double(kMaxFlyFrames)))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "the path lasts " + std::to_string(r.path.durationS()) + " s: at speed " +
+                             std::to_string(r.speed) + " that is more than " + std::to_string(kMaxFlyFrames) +
+                             " frames; give a higher speed or --frames");
+  r.frames = o.frames > 0 ? o.frames : uint32_t(path_frames);
+  r.warmup_frames = o.warmup_frames;
+  r.rest_frames = o.rest_frames;
+  r.rest_frame_ms = o.rest_frame_ms;
+  r.loop = o.loop;
+  r.viewport = o.viewport;
+  r.resize_at_frame = o.resize_at_frame;
+  r.resize_to = o.resize_to;
+  r.streamer.ram_budget_bytes = o.cache_mb << 20;
+  r.streamer.io_threads = o.io_threads;
+  r.streamer.throttle = o.throttle;
+  r.streamer.prefetch = o.prefetch;
+  r.streamer.frustum_priority = o.frustum_priority;
+  r.streamer.trace_path = o.trace_path;
+  r.upload_tiles = o.upload_tiles;
+  r.buffering = o.buffering;
+  r.overlay = o.overlay ? Overlay::kLevels : Overlay::kOff;
+  r.path_hint = o.path_hint;
+  r.reference_every = o.reference ? std::max(1u, o.reference_every) : 0;
+  r.ground_truth_every = o.reference ? o.ground_truth_every : 0;
+  r.sample_tiles = o.reference;
+
+  // Outputs are checked before any work, and none of them may be an input.
+  if (Status s = checkFlyOutputs(o); !s) return s;
+
+  std::unique_ptr<HeadlessContext> context;
+  if (Status s = HeadlessContext::create(&context); !s) return s;
+
+  // Everything that can fail before the first frame has been tried when
+  // on_start runs: only then are an earlier run's files in --out removed.
+  std::vector<std::string> swept;
+  r.on_start = [&]() -> Status {
+    if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
+    if (!o.trace_path.empty()) sweepOutputTemporaries(o.trace_path, &swept);
+    return Status::ok();
+  };
+  FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
+  const uint32_t total_frames = r.frames + r.rest_frames;
+  r.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target) -> Status {
+    const uint32_t i = frame.frame;
+    if (o.save_every == 0 || !(i % o.save_every == 0 || i + 1 == total_frames)) return Status::ok();
+    std::vector<uint8_t> rgba;
+    target.readRgba(&rgba);
+    char name[64];
+    std::snprintf(name, sizeof name, "/frame_%05u.png", i);
+    writer.submit(o.out_dir + name, target.viewport().width_px, target.viewport().height_px, std::move(rgba));
+    return Status::ok();
+  };
+  // The frames are written before the streamer publishes its trace: a
+  // frame that failed leaves no trace.
+  r.before_finish = [&]() { return writer.close(); };
+
+  FlightRun run;
+  if (Status s = runFlight(r, &run); !s) return s;
+  if (!run.trace_status) return run.trace_status;
+
+  RunDescription d;
+  d.path = o.path;
+  d.speed = r.speed;
+  d.viewport = o.viewport;
+  d.buffering = o.buffering;
+  d.upload_tiles = o.upload_tiles;
+  d.cache_mb = o.cache_mb;
+  d.warmup_frames = o.warmup_frames;
+  d.reference = o.reference;
+  d.throttle = o.throttle;
+  d.prefetch = o.prefetch;
+  d.frustum_priority = o.frustum_priority;
+  d.path_hint = o.path_hint;
+  d.pngs_written = writer.written();
+  d.pngs_dropped = writer.dropped();
+  if (Status s = writeRunFiles({{o.out_dir + "/frames.csv", framesCsv(run, geometry.levelCount())},
+                                {o.out_dir + "/frames.json", framesJson(run, d)},
+                                {o.out_dir + "/summary.tsv", summaryTsv(run, d)}});
+      !s)
+    return s;
+
+  for (const std::string& line : swept)
+    (warnings ? *warnings : log) << "clipstream-fly: warning: removed a temporary file left by an interrupted "
+                                    "earlier run: " << printableText(line, 300) << "\n";
+  if (!o.quiet) {
+    printSummary(log, run, d);
+    log << "wrote " << o.out_dir << "/frames.csv, frames.json\n";
+  }
+  return Status::ok();
+}
+
+}  // namespace clipstream

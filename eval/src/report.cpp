@@ -1,0 +1,253 @@
+// Report formats of a measured flight. See report.h and docs/renderer.md.
+#include <clipstream/eval/report.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ostream>
+
+namespace clipstream {
+namespace {
+
+std::string dbText(bool measured, double db) {
+  if (!measured) return "";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f", db);
+  return buf;
+}
+
+double mib(uint64_t bytes) { return double(bytes) / 1048576.0; }
+
+struct Means {
+  double frame = 0.0, streamer = 0.0, upload = 0.0, draw = 0.0;
+};
+
+Means meansOf(const FlightRun& run) {
+  Means m;
+  const double n = double(std::max<size_t>(run.frames.size(), 1));
+  for (const FlightRunFrame& f : run.frames) {
+    m.frame += f.sample.frame_ms / n;
+    m.streamer += f.sample.streamer_ms / n;
+    m.upload += f.sample.upload_ms / n;
+    m.draw += f.sample.draw_ms / n;
+  }
+  return m;
+}
+
+std::string viewportText(const Viewport& v) {
+  return std::to_string(v.width_px) + "x" + std::to_string(v.height_px);
+}
+
+}  // namespace
+
+std::string framesCsv(const FlightRun& run, uint32_t levels) {
+  std::string csv =
+      "frame,t_s,frame_ms,streamer_ms,upload_ms,draw_ms,readback_ms,tiles_uploaded,second_copies,max_texture_lod,"
+      "finest_needed,queue_depth,in_flight,ram_bytes,bytes_read,ram_hits,ram_misses,gpu_hits,"
+      "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error";
+  for (uint32_t l = 0; l < levels; ++l)
+    for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
+      csv += ",L" + std::to_string(l) + "_" + f;
+  csv += "\n";
+  for (const FlightRunFrame& f : run.frames) {
+    const FrameSample& r = f.sample;
+    char buf[512];
+    std::snprintf(buf, sizeof buf, "%u,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%u,%u,%u,%u,%llu,%llu,%llu,%llu,%llu,%llu,%u,%u",
+                  r.frame, f.t_s, r.frame_ms, r.streamer_ms, r.upload_ms, r.draw_ms, f.readback_ms,
+                  r.tiles_uploaded,
+                  r.second_copies, r.max_texture_lod, r.finest_needed, (unsigned long long)r.queue_depth,
+                  (unsigned long long)r.in_flight, (unsigned long long)r.ram_bytes,
+                  (unsigned long long)r.total.bytes_read, (unsigned long long)r.total.ram_hits,
+                  (unsigned long long)r.total.ram_misses, r.total.gpu_hits, r.total.gpu_misses);
+    csv += buf;
+    const AccuracyFrame& a = f.accuracy;
+    csv += "," + std::to_string(r.tiles_loaded) + "," + (r.cut ? "1" : "0") + "," +
+           dbText(a.measured, a.error.psnr_db) + "," + (a.measured ? std::to_string(a.error.max_abs_error) : "") +
+           "," + (a.measured ? std::to_string(a.hole_pixels) : "") + "," +
+           dbText(a.ground_truth_measured, a.ground_truth.psnr_db) + "," +
+           (a.ground_truth_measured ? std::to_string(a.ground_truth.max_abs_error) : "");
+    for (uint32_t l = 0; l < levels; ++l) {
+      const LevelFrame lf = l < r.levels.size() ? r.levels[l] : LevelFrame{};
+      csv += "," + std::to_string(lf.ram_hits) + "," + std::to_string(lf.ram_misses) + "," +
+             std::to_string(lf.gpu_hits) + "," + std::to_string(lf.gpu_misses);
+    }
+    csv += "\n";
+  }
+  return csv;
+}
+
+std::string framesJson(const FlightRun& run, const RunDescription& d) {
+  nlohmann::json jframes = nlohmann::json::array();
+  for (const FlightRunFrame& f : run.frames) {
+    const FrameSample& r = f.sample;
+    nlohmann::json jl = nlohmann::json::array();
+    for (const LevelFrame& lf : r.levels)
+      jl.push_back({{"ram_hits", lf.ram_hits}, {"ram_misses", lf.ram_misses}, {"gpu_hits", lf.gpu_hits},
+                    {"gpu_misses", lf.gpu_misses}, {"bytes_read", lf.bytes_read}});
+    nlohmann::json j = {{"frame", r.frame}, {"t_s", f.t_s}, {"frame_ms", r.frame_ms},
+                        {"streamer_ms", r.streamer_ms}, {"upload_ms", r.upload_ms},
+                        {"draw_ms", r.draw_ms}, {"readback_ms", f.readback_ms},
+                        {"tiles_uploaded", r.tiles_uploaded},
+                        {"second_copies", r.second_copies}, {"max_texture_lod", r.max_texture_lod},
+                        {"finest_needed", r.finest_needed}, {"queue_depth", r.queue_depth},
+                        {"in_flight", r.in_flight}, {"ram_bytes", r.ram_bytes},
+                        {"bytes_read", r.total.bytes_read}, {"ram_hits", r.total.ram_hits},
+                        {"ram_misses", r.total.ram_misses}, {"gpu_hits", r.total.gpu_hits},
+                        {"gpu_misses", r.total.gpu_misses}, {"tiles_loaded", r.tiles_loaded},
+                        {"cut", r.cut}, {"levels", jl}};
+    if (f.accuracy.measured) {
+      j["psnr_db"] = f.accuracy.error.psnr_db;
+      j["max_abs_error"] = f.accuracy.error.max_abs_error;
+      j["hole_pixels"] = f.accuracy.hole_pixels;
+    }
+    if (f.accuracy.ground_truth_measured) {
+      j["gt_psnr_db"] = f.accuracy.ground_truth.psnr_db;
+      j["gt_max_abs_error"] = f.accuracy.ground_truth.max_abs_error;
+    }
+    jframes.push_back(std::move(j));
+  }
+  const RunSummary& s = run.summary;
+  nlohmann::json acc = nlohmann::json::parse(s.toJson(), nullptr, false);
+  acc["reference"] = d.reference;
+  acc["frames_with_holes"] = run.frames_with_holes;
+  acc["ground_truth_frames"] = run.ground_truth_frames;
+  acc["ground_truth_psnr_mean_db"] = run.ground_truth_psnr_mean_db;
+  acc["ground_truth_psnr_min_db"] = run.ground_truth_psnr_min_db;
+  acc["resizes"] = run.resizes;
+  acc["warmup_frames"] = d.warmup_frames;
+  acc["warmup_tiles_loaded"] = run.warmup_loads;
+  acc["ram_peak_bytes"] = run.streamer.ram_peak_bytes;
+  acc["ram_budget_bytes"] = run.streamer.ram_budget_bytes;
+  acc["tile_failures"] = run.tile_failures;
+  acc["throttle"] = d.throttle;
+  acc["prefetch"] = d.prefetch;
+  acc["frustum_priority"] = d.frustum_priority;
+  acc["path_hint"] = d.path_hint;
+  acc["path_hint_frames"] = run.streamer.path_hint_frames;
+  acc["path_hint_ignored_frames"] = run.streamer.path_hint_ignored_frames;
+  acc["upload_tiles"] = d.upload_tiles;
+  acc["cache_mb"] = d.cache_mb;
+  const Means m = meansOf(run);
+  nlohmann::json summary = {
+      {"source", run.source},
+      {"path", d.path},
+      {"frames", run.frames.size()},
+      {"viewport", viewportText(d.viewport)},
+      {"speed", d.speed},
+      {"buffering", bufferingName(d.buffering)},
+      {"clip_tiles", run.clip_tiles},
+      {"pyramid_level", run.pyramid_level},
+      {"gl", run.gl},
+      {"texture_bytes", run.texture_bytes},
+      {"preload_ms", run.preload_ms},
+      {"preload_failures", run.preload_failures},
+      {"run_ms", run.run_ms},
+      {"frame_ms_mean", m.frame},
+      {"streamer_ms_mean", m.streamer},
+      {"upload_ms_mean", m.upload},
+      {"draw_ms_mean", m.draw},
+      {"frame_ms_p50", s.frame_ms_p50},
+      {"frame_ms_p99", s.frame_ms_p99},
+      {"frame_ms_max", s.frame_ms_max},
+      {"tiles_uploaded", s.tiles_uploaded},
+      {"gpu_hit_rate", s.gpu_hit_rate},
+      {"render_thread_fetches", run.render_thread_fetches},
+      {"pngs_written", d.pngs_written},
+      {"pngs_dropped", d.pngs_dropped},
+      {"streamer", nlohmann::json::parse(run.streamer.toJson(), nullptr, false)},
+      {"accuracy", acc}};
+  return nlohmann::json{{"summary", summary}, {"frames", jframes}}.dump(1) + "\n";
+}
+
+std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
+  const RunSummary& s = run.summary;
+  std::string keys, values;
+  auto add = [&](const std::string& k, const std::string& v) {
+    keys += (keys.empty() ? "" : "\t") + k;
+    values += (values.empty() ? "" : "\t") + v;
+  };
+  auto num = [](double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.4f", std::isfinite(v) ? v : 0.0);
+    return std::string(b);
+  };
+  add("frames", std::to_string(s.frames));
+  add("speed", num(d.speed));
+  add("upload_tiles", std::to_string(d.upload_tiles));
+  add("cache_mb", std::to_string(d.cache_mb));
+  add("psnr_mean_db", num(s.psnr_mean_db));
+  add("psnr_min_db", num(s.psnr_min_db));
+  add("frames_below_30db", std::to_string(s.frames_below_30db));
+  add("identical_frames", std::to_string(s.identical_frames));
+  add("time_to_sharp_mean", num(s.time_to_sharp_mean));
+  add("time_to_sharp_max", std::to_string(s.time_to_sharp_max));
+  add("frame_ms_mean", num(s.frame_ms_mean));
+  add("frame_ms_p50", num(s.frame_ms_p50));
+  add("frame_ms_p99", num(s.frame_ms_p99));
+  add("frame_ms_max", num(s.frame_ms_max));
+  add("bytes_read", std::to_string(s.bytes_read));
+  add("tiles_uploaded", std::to_string(s.tiles_uploaded));
+  add("tiles_loaded", std::to_string(s.tiles_loaded));
+  add("tiles_sampled", std::to_string(s.tiles_sampled));
+  add("over_fetch_ratio", num(s.over_fetch_ratio));
+  add("ram_hit_rate", num(s.ram_hit_rate));
+  add("gpu_hit_rate", num(s.gpu_hit_rate));
+  add("peak_rss_mib", num(mib(s.peak_rss_bytes)));
+  add("ram_peak_mib", num(mib(run.streamer.ram_peak_bytes)));
+  add("ram_budget_mib", num(mib(run.streamer.ram_budget_bytes)));
+  add("frames_with_holes", std::to_string(run.frames_with_holes));
+  // Empty: not measured.
+  add("ground_truth_psnr_mean_db", run.ground_truth_frames ? num(run.ground_truth_psnr_mean_db) : std::string());
+  add("tile_failures", std::to_string(run.tile_failures));
+  return keys + "\n" + values + "\n";
+}
+
+void printSummary(std::ostream& out, const FlightRun& run, const RunDescription& d) {
+  const RunSummary& s = run.summary;
+  const Means m = meansOf(run);
+  char buf[256];
+  out << "clipstream-fly: " << run.source << ", path " << d.path << ", " << run.frames.size()
+      << " frames at " << viewportText(d.viewport) << " on " << run.gl << "\n";
+  out << "metric\tvalue\n";
+  auto row = [&](const char* name, double v, const char* fmt) {
+    std::snprintf(buf, sizeof buf, fmt, v);
+    out << name << "\t" << buf << "\n";
+  };
+  row("frame_ms_mean", m.frame, "%.2f");
+  row("streamer_ms_mean", m.streamer, "%.2f");
+  row("upload_ms_mean", m.upload, "%.2f");
+  row("draw_ms_mean", m.draw, "%.2f");
+  row("frame_ms_p50", s.frame_ms_p50, "%.2f");
+  row("frame_ms_p99", s.frame_ms_p99, "%.2f");
+  row("frame_ms_max", s.frame_ms_max, "%.2f");
+  row("preload_ms", run.preload_ms, "%.1f");
+  row("tiles_uploaded", double(s.tiles_uploaded), "%.0f");
+  row("gpu_hit_rate", s.gpu_hit_rate, "%.4f");
+  row("ram_hits", double(run.streamer.total.ram_hits), "%.0f");
+  row("ram_misses", double(run.streamer.total.ram_misses), "%.0f");
+  row("bytes_read_mib", mib(run.streamer.total.bytes_read), "%.1f");
+  row("tile_failures", double(run.tile_failures), "%.0f");
+  if (d.path_hint) {
+    row("path_hint_frames", double(run.streamer.path_hint_frames), "%.0f");
+    row("path_hint_ignored_frames", double(run.streamer.path_hint_ignored_frames), "%.0f");
+  }
+  row("ram_peak_mib", mib(run.streamer.ram_peak_bytes), "%.1f");
+  row("pngs_written", double(d.pngs_written), "%.0f");
+  row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
+  row("tiles_loaded", double(s.tiles_loaded), "%.0f");
+  if (d.reference) {
+    row("psnr_mean_db", s.psnr_mean_db, "%.2f");
+    row("psnr_min_db", s.psnr_min_db, "%.2f");
+    row("frames_below_30db", double(s.frames_below_30db), "%.0f");
+    row("identical_frames", double(s.identical_frames), "%.0f");
+    row("time_to_sharp_mean", s.time_to_sharp_mean, "%.1f");
+    row("time_to_sharp_max", double(s.time_to_sharp_max), "%.0f");
+    row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+    row("frames_with_holes", double(run.frames_with_holes), "%.0f");
+    if (run.ground_truth_frames > 0) row("ground_truth_psnr_mean_db", run.ground_truth_psnr_mean_db, "%.2f");
+  }
+}
+
+}  // namespace clipstream

@@ -1,0 +1,109 @@
+// clipstream-fly: headless flythrough with per-frame statistics.
+// Usage and output formats: docs/renderer.md; exit codes: docs/cli.md.
+#include <clipstream/cli/cli.h>
+#include <clipstream/cli/sizes.h>
+#include <clipstream/eval/fly.h>
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <iostream>
+#include <new>
+#include <system_error>
+
+int main(int argc, char** argv) {
+  using namespace clipstream;
+  CLI::App app{"Headless clipmap flythrough: renders a flight path over a tile store and "
+               "writes per-frame statistics (CSV, JSON) and PNG frames.",
+               "clipstream-fly"};
+  FlyOptions o;
+  std::string size = "1280x720", buffering = bufferingName(o.buffering);
+  const auto frames = cli::wholeInRange(1, kMaxFlyFrames);
+  const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
+  app.add_option("store", o.store_path, "Tile store file (omit with --procedural)");
+  app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom) or JSON file");
+  app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
+      ->transform(frames);
+  app.add_option("--size", size, "Viewport WIDTHxHEIGHT");
+  app.add_option("--speed", o.speed, "Path seconds per simulated second")
+      ->transform(cli::inRange(0.001, kMaxFlySpeed));
+  app.add_option("--cache-mb", o.cache_mb, "Streamer RAM budget in MiB")
+      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
+  app.add_option("--upload-tiles", o.upload_tiles, "GPU tile uploads per frame")
+      ->transform(cli::wholeInRange(1, 1000000));
+  app.add_option("--io-threads", o.io_threads, "Loader threads (0 = cores)")
+      ->transform(cli::wholeInRange(0, kMaxIoThreads));
+  app.add_option("--out", o.out_dir,
+                 "Output directory (holds one run: an earlier run's frames and statistics there are "
+                 "removed first)");
+  app.add_option("--save-frames", o.save_every, "Save every Nth frame as PNG (0 = none)")
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+  app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
+      ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
+  app.add_option("--buffering", buffering, "single, double-upload or double-copy");
+  app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
+  std::string resize;
+  bool no_throttle = false, no_prefetch = false, no_frustum = false;
+  app.add_flag("--reference", o.reference,
+               "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
+  app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
+      ->transform(frames);
+  app.add_option("--ground-truth-every", o.ground_truth_every,
+                 "Also compare the reference with the CPU ground truth every Nth frame (0 = never)")
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+  app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
+  app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
+  app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
+  app.add_flag("--path-hint", o.path_hint,
+               "Tell the streamer the scripted path: eviction keeps what the path comes back to, and "
+               "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
+               "an interactive flight");
+  app.add_option("--fault-latency-ms", o.fault_latency_ms, "Added latency per tile read (ms)")
+      ->transform(delay_ms);
+  app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")
+      ->transform(cli::inRange(0.0, 1.0));
+  app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
+  app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames")
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+  app.add_option("--warmup-frames", o.warmup_frames,
+                 "First hold the first camera for N frames that are not recorded (start-up excluded)")
+      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+  app.add_option("--rest-frame-ms", o.rest_frame_ms, "Rest frames last at least this wall time (ms)")
+      ->transform(delay_ms);
+  app.add_flag("--loop", o.loop, "Wrap path time instead of stopping at the path's end");
+  app.add_option("--teleport-frames", o.teleport_frames, "Frames between jumps of the teleport path")
+      ->transform(frames);
+  app.add_option("--trace", o.trace_path, "Record the streamer's request trace (clipstream-trace)");
+  app.footer(
+      "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written;\n"
+      "nothing half-written is left), 2 command-line mistake, killed by INT/TERM/HUP after\n"
+      "removing its temporaries (shell status 128+N). docs/cli.md.");
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+
+  if (o.store_path.empty() && o.procedural_px == 0)
+    return cli::usageError(app, "give a STORE or --procedural SIDE");
+  if (!o.store_path.empty() && o.procedural_px > 0)
+    return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
+  Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
+  if (s) s = bufferingFromName(buffering, &o.buffering);
+  if (s && !resize.empty())
+    s = cli::parseResize(resize, kMaxFlyFrames, &o.resize_at_frame, &o.resize_to.width_px,
+                         &o.resize_to.height_px);
+  if (!s) return cli::usageError(app, s.message);
+  o.throttle = !no_throttle;
+  o.prefetch = !no_prefetch;
+  o.frustum_priority = !no_frustum;
+
+  cli::installSignalHandlers();
+  try {
+    s = runFly(o, std::cout, &std::cerr);
+  } catch (const std::bad_alloc&) {
+    s = Status::error(ErrorCode::kOutOfMemory, "out of memory");  // temporaries removed while unwinding
+  } catch (const std::system_error& e) {
+    s = Status::error(ErrorCode::kIo, std::string("cannot start a thread: ") + e.what());
+  }
+  if (!s) {
+    cli::printError(app, s.toString());
+    return cli::finish(app, cli::kExitFailure);
+  }
+  return cli::finish(app, cli::kExitOk);
+}

@@ -1,0 +1,150 @@
+// The frame loop's one step: a streamer and a clipmap renderer driven
+// together, one frame per step(), with the frame's timings, per-level
+// counter deltas and GPU hits. clipstream-fly, the evaluation runs,
+// clipstream-view and the benchmarks all fly through this class; a host that
+// wants its own loop uses Streamer and ClipmapRenderer directly
+// (docs/api.md), as Flight does.
+//
+// The rules every flight follows (docs/renderer.md, "The frame loop"):
+// - Clock: step n (counted from the first step, warm-up included) runs the
+//   streamer at n * kSimulatedFrameSeconds unless the host passes its own
+//   clock (an interactive viewer passes wall time).
+// - Warm-up: the first FlightConfig::warmup_frames steps are warm-up: they
+//   stream and draw like any frame but are flagged, and their counters are
+//   folded into warmupLoads() rather than a recorded frame.
+// - Cut: a recorded frame is a cut when it is the first recorded frame and
+//   no warm-up preceded it, or when isCut() says the camera jumped.
+//
+// Thread rule: owned by the GL thread, like ClipmapRenderer: create it and
+// call every method on the thread whose context is current. The streamer's
+// workers read tiles; no step waits on I/O.
+#pragma once
+
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/planner.h>
+#include <clipstream/streamer/stats.h>
+#include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace clipstream {
+
+// Whether the camera jumped between two consecutive frames: it moved more
+// than half its height above the ground AND more than 8 times the previous
+// frame's movement (with at least one texel of that). A continuous path at
+// any speed moves about as much each frame, so it never counts; a teleport
+// (a step path) does.
+bool isCut(const Camera& previous, const Camera& current, double previous_step_texels);
+
+// The set-up every loop shares: plans the first frame for `camera`, creates
+// the renderer with the plan's clip size and pyramid level, and loads the
+// coarse pyramid from `source` on this thread before any frame, so every
+// frame has something correct to draw (a tile that fails is filled from its
+// ancestor and counted in *failures). GL thread only.
+Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
+                             const PlannerConfig& planner, Buffering buffering,
+                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures);
+
+struct FlightConfig {
+  Viewport viewport{1280, 720};
+  StreamerConfig streamer;
+  uint32_t upload_tiles = 16;          // tiles handed to the GPU per frame
+  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Overlay overlay = Overlay::kOff;
+  uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
+  // true: draw into the flight's own OffscreenTarget (headless); false: into
+  // the default framebuffer (a window) of size `framebuffer` (0x0: the
+  // viewport), which the host presents.
+  bool offscreen = true;
+  Viewport framebuffer{0, 0};
+};
+
+// Counters of one level, or all levels, for one frame.
+struct LevelFrame {
+  uint64_t ram_hits = 0, ram_misses = 0, bytes_read = 0;
+  uint32_t gpu_hits = 0, gpu_misses = 0;  // visible tiles of needed levels usable / not
+};
+
+// One frame. Counters are this frame's deltas, not running totals.
+struct FrameSample {
+  uint32_t frame = 0;         // recorded frame index (warm-up steps: 0-based warm-up index)
+  bool warmup = false;
+  bool cut = false;
+  double clock_s = 0.0;       // the streamer's clock for this frame
+  double frame_ms = 0.0;      // update .. draw finished on the GPU (glFinish)
+  double streamer_ms = 0.0;   // update + takeReady
+  double upload_ms = 0.0;     // the renderer's texture work
+  double draw_ms = 0.0;       // draw until the GPU finished
+  uint32_t tiles_uploaded = 0, second_copies = 0;
+  uint32_t max_texture_lod = 0, finest_needed = 0;
+  uint64_t queue_depth = 0, in_flight = 0, ram_bytes = 0;
+  uint64_t tiles_loaded = 0;  // tiles the loader read into RAM this frame
+  std::vector<LevelFrame> levels;  // index = level
+  LevelFrame total;
+};
+
+class Flight {
+ public:
+  // Creates the renderer for `first` (createClipmapRenderer()), the
+  // offscreen target when asked, and the streamer. Errors: as from
+  // ClipmapRenderer::create and OffscreenTarget::create.
+  static Status create(std::shared_ptr<TileSource> source, const FlightConfig& config,
+                       const Camera& first, std::unique_ptr<Flight>* out);
+  ~Flight();
+  Flight(const Flight&) = delete;
+  Flight& operator=(const Flight&) = delete;
+
+  // One frame on the simulated clock: streamer update and handoff, uploads,
+  // draw, glFinish. With an offscreen target the frame is left there.
+  FrameSample step(const Camera& camera);
+  // The same on the host's clock (seconds, non-decreasing).
+  FrameSample step(const Camera& camera, double clock_s);
+
+  // A new viewport: a new renderer (the clip size follows the viewport) and
+  // target, the pyramid loaded again, the streamer told that the GPU holds
+  // nothing. `camera` is where the next frame looks from.
+  Status resize(const Viewport& viewport, const Camera& camera);
+
+  // Stops the streamer (joins its workers, publishes its trace) and returns
+  // its final statistics. Steps after this are not allowed.
+  StreamerStats finish();
+
+  Streamer& streamer() { return *m_streamer; }
+  const Streamer& streamer() const { return *m_streamer; }
+  ClipmapRenderer& renderer() { return *m_renderer; }
+  const OffscreenTarget* target() const { return m_target.get(); }  // null unless offscreen
+  const Viewport& viewport() const { return m_config.viewport; }
+  const ClipmapPlan& firstPlan() const { return m_first_plan; }  // of create() or the last resize()
+  const FlightConfig& config() const { return m_config; }
+  double preloadMs() const { return m_preload_ms; }          // the first pyramid load
+  uint32_t preloadFailures() const { return m_preload_failures; }  // every pyramid load
+  uint32_t resizes() const { return m_resizes; }
+  uint64_t warmupLoads() const { return m_warmup_loads; }    // tiles read during warm-up
+  uint32_t steps() const { return m_steps; }
+
+ private:
+  Flight() = default;
+  Status makeRenderer(const Camera& camera);
+
+  std::shared_ptr<TileSource> m_source;
+  FlightConfig m_config;
+  std::unique_ptr<ClipmapRenderer> m_renderer;
+  std::unique_ptr<OffscreenTarget> m_target;
+  std::unique_ptr<Streamer> m_streamer;
+  ClipmapPlan m_first_plan;
+  StreamerStats m_before;
+  Camera m_previous;
+  double m_previous_step = 0.0;
+  double m_preload_ms = 0.0;
+  uint32_t m_preload_failures = 0;
+  uint32_t m_resizes = 0;
+  uint32_t m_steps = 0;
+  uint64_t m_warmup_loads = 0;
+};
+
+}  // namespace clipstream

@@ -1,0 +1,186 @@
+// The frame loop's one step. See flight.h and docs/renderer.md.
+#include <clipstream/renderer/flight.h>
+
+#include "gl.h"
+
+#include <clipstream/renderer/config.h>
+
+#include <algorithm>
+#include <chrono>
+
+namespace clipstream {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msBetween(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+}  // namespace
+
+bool isCut(const Camera& previous, const Camera& current, double previous_step_texels) {
+  const double step = glm::length(current.position - previous.position);
+  return step > 0.5 * std::max(previous.position.y, 1.0) &&
+         step > 8.0 * std::max(previous_step_texels, 1.0);
+}
+
+Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
+                             const PlannerConfig& planner, Buffering buffering,
+                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures) {
+  out->reset();
+  const ClipmapPlan first = planClipmap(source.geometry(), viewport, camera, planner);
+  std::unique_ptr<ClipmapRenderer> renderer;
+  RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering};
+  if (Status s = ClipmapRenderer::create(source.geometry(), rc, &renderer); !s) return s;
+  renderer->beginFrame();
+  const uint32_t missing = renderer->loadPyramid(
+      [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        if (!source.fetch(key, px.get()).isOk()) return nullptr;  // filled from its ancestor
+        return px;
+      });
+  renderer->endUploads();
+  if (failures != nullptr) *failures += missing;
+  *out = std::move(renderer);
+  return Status::ok();
+}
+
+Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& config,
+                      const Camera& first, std::unique_ptr<Flight>* out) {
+  out->reset();
+  if (!source) return Status::error(ErrorCode::kInvalidArgument, "flight: no tile source");
+  if (config.upload_tiles == 0)
+    return Status::error(ErrorCode::kInvalidArgument, "flight: uploads per frame must be at least 1");
+  std::unique_ptr<Flight> f(new Flight());
+  f->m_source = std::move(source);
+  f->m_config = config;
+  const auto start = Clock::now();
+  if (Status s = f->makeRenderer(first); !s) return s;
+  f->m_preload_ms = msBetween(start, Clock::now());
+  f->m_streamer = std::make_unique<Streamer>(f->m_source, config.streamer);
+  f->m_before = f->m_streamer->stats();
+  f->m_previous = first;
+  *out = std::move(f);
+  return Status::ok();
+}
+
+Flight::~Flight() {
+  // The streamer first: its workers may still hold the source.
+  m_streamer.reset();
+}
+
+Status Flight::makeRenderer(const Camera& camera) {
+  m_renderer.reset();
+  m_target.reset();
+  if (m_config.offscreen)
+    if (Status s = OffscreenTarget::create(m_config.viewport, &m_target); !s) return s;
+  if (Status s = createClipmapRenderer(*m_source, m_config.viewport, camera, m_config.streamer.planner,
+                                       m_config.buffering, &m_renderer, &m_preload_failures);
+      !s)
+    return s;
+  m_first_plan = planClipmap(m_source->geometry(), m_config.viewport, camera, m_config.streamer.planner);
+  m_renderer->setOverlay(m_config.overlay);
+  return Status::ok();
+}
+
+Status Flight::resize(const Viewport& viewport, const Camera& camera) {
+  m_config.viewport = viewport;
+  if (Status s = makeRenderer(camera); !s) return s;
+  m_streamer->resetGpuResidency();
+  ++m_resizes;
+  return Status::ok();
+}
+
+FrameSample Flight::step(const Camera& camera) {
+  return step(camera, double(m_steps) * renderer_config::kSimulatedFrameSeconds);
+}
+
+FrameSample Flight::step(const Camera& camera, double clock_s) {
+  FrameSample f;
+  f.warmup = m_steps < m_config.warmup_frames;
+  f.frame = f.warmup ? m_steps : m_steps - m_config.warmup_frames;
+  f.clock_s = clock_s;
+  const double step_texels = glm::length(camera.position - m_previous.position);
+  if (!f.warmup)
+    f.cut = f.frame == 0 ? m_config.warmup_frames == 0 : isCut(m_previous, camera, m_previous_step);
+  m_previous_step = step_texels;
+  m_previous = camera;
+  ++m_steps;
+
+  const auto t0 = Clock::now();
+  m_streamer->update(camera, m_config.viewport, clock_s);
+  const FrameHandoff handoff = m_streamer->takeReady(m_config.upload_tiles);
+  const auto t_streamer = Clock::now();
+  m_renderer->applyHandoff(handoff);
+  const auto t_upload = Clock::now();
+  if (m_target) {
+    m_target->bind();
+  } else {
+    const Viewport fb = m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
+    bindWindowFramebuffer(fb);
+  }
+  ClipmapRenderer::clearSky();
+  m_renderer->draw(camera, m_config.viewport);
+  glFinish();  // frame time includes the GPU's (llvmpipe's) work
+  const auto t1 = Clock::now();
+  f.frame_ms = msBetween(t0, t1);
+  f.streamer_ms = msBetween(t0, t_streamer);
+  f.draw_ms = msBetween(t_upload, t1);
+  const UploadStats& uploads = m_renderer->lastUploads();
+  f.upload_ms = uploads.upload_ms;
+  f.tiles_uploaded = uploads.tiles;
+  f.second_copies = uploads.second_copies;
+  f.max_texture_lod = handoff.max_texture_lod;
+  const ClipmapPlan& plan = m_streamer->plan();
+  f.finest_needed = plan.finest_level;
+
+  const StreamerStats now = m_streamer->stats();
+  f.queue_depth = now.queue_depth;
+  f.in_flight = now.in_flight;
+  f.ram_bytes = now.ram_bytes;
+  f.tiles_loaded = now.total.loads - m_before.total.loads;
+  const uint32_t levels = m_source->geometry().levelCount();
+  f.levels.resize(levels);
+  for (uint32_t l = 0; l < levels; ++l) {
+    const LevelCounters c = l < now.levels.size() ? now.levels[l] : LevelCounters{};
+    const LevelCounters b = l < m_before.levels.size() ? m_before.levels[l] : LevelCounters{};
+    LevelFrame& lf = f.levels[l];
+    lf.ram_hits = c.ram_hits - b.ram_hits;
+    lf.ram_misses = c.ram_misses - b.ram_misses;
+    lf.bytes_read = c.bytes_read - b.bytes_read;
+  }
+  // GPU hits: visible tiles of the needed stack levels the shader may sample
+  // (usable) this frame; misses draw from a coarser level.
+  const UsableMap& usable = m_renderer->usableMap();
+  for (const ClipLevelPlan& lp : plan.stack) {
+    if (!lp.needed || lp.level >= usable.usable.size() || lp.level >= levels) continue;
+    LevelFrame& lf = f.levels[lp.level];
+    for (int64_t y = lp.visible.y0; y < lp.visible.y1; ++y)
+      for (int64_t x = lp.visible.x0; x < lp.visible.x1; ++x) {
+        const bool ok =
+            usable.windows[lp.level].contains(x, y) &&
+            usable.usable[lp.level][size_t(toroidalSlot(y, usable.clip_tiles)) * usable.clip_tiles +
+                                    toroidalSlot(x, usable.clip_tiles)] != 0;
+        (ok ? lf.gpu_hits : lf.gpu_misses)++;
+      }
+  }
+  for (const LevelFrame& lf : f.levels) {
+    f.total.ram_hits += lf.ram_hits;
+    f.total.ram_misses += lf.ram_misses;
+    f.total.bytes_read += lf.bytes_read;
+    f.total.gpu_hits += lf.gpu_hits;
+    f.total.gpu_misses += lf.gpu_misses;
+  }
+  if (f.warmup) m_warmup_loads += f.tiles_loaded;
+  m_before = now;
+  return f;
+}
+
+StreamerStats Flight::finish() {
+  const StreamerStats final_stats = m_streamer->stats();
+  m_streamer->shutdown();
+  return final_stats;
+}
+
+}  // namespace clipstream
