@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh Debian 12 machine: installs what is
-# missing, builds, runs every test, then builds the concurrent components
+# missing, builds, runs every test, installs into a temporary prefix and
+# builds and runs the embedding example against it (find_package and
+# pkg-config) and builds the Debian package, then builds the concurrent components
 # (store, streamer) under ThreadSanitizer and runs their tests again, then
 # builds the renderer tests under AddressSanitizer + UBSan and runs the
 # stability scenarios (with the shortened soak) with leak checking, then
@@ -13,6 +15,35 @@ jobs=$(nproc)
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
 cmake --build build -j "$jobs"
 ctest --test-dir build --output-on-failure -j "$jobs" --timeout 900
+
+# clipstream as another program sees it (docs/api.md): install build/ into a
+# temporary prefix; tile the sample image with the installed clipstream-tile
+# (it loads the installed OpenImageIO module) and verify the store; build
+# examples/embed against the prefix with find_package(clipstream) and fly it
+# headless over that store; link it again from pkg-config's flags alone and
+# fly it over the procedural texture; build the Debian package and list it.
+echo "== Install, embedding example (find_package, pkg-config), Debian package =="
+prefix=$(mktemp -d)
+trap 'rm -rf "$prefix"' EXIT
+cmake --install build --prefix "$prefix" >/dev/null
+"$prefix/bin/clipstream-tile" -q --no-fsync data/autzen.jpg "$prefix/autzen.cst"
+"$prefix/bin/clipstream-info" --verify "$prefix/autzen.cst" | tail -n 1
+rm -rf build/embed
+cmake -S examples/embed -B build/embed -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+cmake --build build/embed
+build/embed/clipstream-embed "$prefix/autzen.cst"
+pc_flags=$(PKG_CONFIG_PATH="$prefix/lib/pkgconfig" pkg-config --cflags --libs clipstream)
+echo "pkg-config --cflags --libs clipstream: $pc_flags"
+# shellcheck disable=SC2086  # the flags are words
+c++ -std=c++20 examples/embed/main.cpp $pc_flags -o build/embed/clipstream-embed-pkgconfig
+build/embed/clipstream-embed-pkgconfig --frames 60
+rm -f build/clipstream_*.deb
+(cd build && cpack -G DEB) | grep -F 'package:'
+dpkg-deb --field build/clipstream_*.deb Package Version Maintainer Depends
+dpkg-deb --contents build/clipstream_*.deb
+rm -rf "$prefix"
+trap - EXIT
 
 echo "== ThreadSanitizer build of the store and streamer tests =="
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
