@@ -44,14 +44,8 @@ std::shared_ptr<const std::vector<uint8_t>> IdealReference::tile(const TileKey& 
   auto it = m_cache.find(packed);
   if (it != m_cache.end()) return it->second;
   auto px = std::make_shared<std::vector<uint8_t>>();
-  ++m_fetched;
   std::shared_ptr<const std::vector<uint8_t>> value;
-  if (m_source->fetch(key, px.get()).isOk()) {
-    m_cached_bytes += px->size();
-    value = std::move(px);
-  } else {
-    ++m_failures;
-  }
+  if (m_source->fetch(key, px.get()).isOk()) value = std::move(px);
   m_cache.emplace(packed, value);
   return value;
 }

@@ -81,10 +81,13 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   const uint32_t total = o.frames + o.rest_frames;
 
   // Path time of recorded frame `frame` (fractional for the hint): held at
-  // the last pose through the rest frames.
-  auto pathTimeOfFrame = [&](double frame) {
-    double t = std::clamp(frame, 0.0, double(o.frames - 1)) * renderer_config::kSimulatedFrameSeconds * speed;
-    if (o.loop && o.path.durationS() > 0.0) t = std::fmod(t, o.path.durationS());
+  // the last pose through the rest frames. Captures values only: the path
+  // hint keeps a copy for the streamer's lifetime.
+  const double last_frame = double(o.frames - 1);
+  const double duration_s = o.loop ? o.path.durationS() : 0.0;
+  auto pathTimeOfFrame = [last_frame, speed, duration_s](double frame) {
+    double t = std::clamp(frame, 0.0, last_frame) * renderer_config::kSimulatedFrameSeconds * speed;
+    if (duration_s > 0.0) t = std::fmod(t, duration_s);
     return t;
   };
 
@@ -96,11 +99,9 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   fc.buffering = o.buffering;
   fc.overlay = o.overlay;
   fc.warmup_frames = o.warmup_frames;
+  fc.offscreen = true;  // frames are judged and saved from the flight's own target
   std::unique_ptr<Flight> flight;
   if (Status s = Flight::create(watched, fc, o.path.sample(0.0), &flight); !s) return s;
-  run->clip_tiles = flight->firstPlan().clip_tiles;
-  run->pyramid_level = flight->firstPlan().pyramid_level;
-  run->texture_bytes = flight->renderer().textureBytes();
   run->preload_ms = flight->preloadMs();
   // A run that fails from here on publishes no trace.
   struct DiscardTraceUnlessDone {
@@ -115,8 +116,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     // frame 0 is at clock0_s.
     const double clock0_s = o.warmup_frames * renderer_config::kSimulatedFrameSeconds;
     PathHint hint;
-    hint.camera_at = [&o, clock0_s, pathTimeOfFrame](double clock_s) {
-      return o.path.sample(pathTimeOfFrame((clock_s - clock0_s) / renderer_config::kSimulatedFrameSeconds));
+    hint.camera_at = [path = o.path, clock0_s, pathTimeOfFrame](double clock_s) {
+      return path.sample(pathTimeOfFrame((clock_s - clock0_s) / renderer_config::kSimulatedFrameSeconds));
     };
     flight->streamer().setPathHint(std::move(hint));
   }
@@ -169,11 +170,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     previous = camera;
     const auto t0 = Clock::now();
     f.sample = flight->step(camera);
-    if (o.on_frame) {
-      const auto t_saved = Clock::now();
-      if (Status s = o.on_frame(f.sample, *flight->target()); !s) return s;
-      f.readback_ms = msSince(t_saved);
-    }
+    if (o.on_frame)
+      if (Status s = o.on_frame(f.sample, *flight->target(), &f.readback_ms); !s) return s;
     // Judged after the frame is timed: the reference fetches synchronously.
     if (accuracy) {
       const bool compare =
@@ -220,12 +218,19 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
           countGarbagePixels(c.rgba, geometry, texels, c.camera, c.viewport, o.garbage_tolerance));
     }
   }
+  // The renderer in use at the end (after a resize, the new one).
+  run->clip_tiles = flight->firstPlan().clip_tiles;
+  run->pyramid_level = flight->firstPlan().pyramid_level;
+  run->texture_bytes = flight->renderer().textureBytes();
   run->resizes = flight->resizes();
   run->preload_failures = flight->preloadFailures();
+  // The run's statistics end with its last frame: reads that land while the
+  // PNG writer drains are not the run's.
+  run->streamer = flight->streamer().stats();
   if (o.before_finish)
     if (Status s = o.before_finish(); !s) return s;
   trace_guard.done = true;
-  run->streamer = flight->finish();
+  flight->finish();
   run->trace_status = flight->streamer().traceStatus();
   run->render_thread_fetches = watched->renderThreadFetches();
   run->tile_failures = run->streamer.total.failures + run->preload_failures;

@@ -1,4 +1,5 @@
-// The clipstream-fly frame loop. See fly.h and docs/renderer.md.
+// clipstream-fly's run: options, outputs and reports around runFlight(). See
+// fly.h and docs/renderer.md.
 #include <clipstream/eval/fly.h>
 
 #include <clipstream/streamer/flight_path.h>
@@ -8,7 +9,6 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
 #include <clipstream/store/output_file.h>
-#include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <algorithm>
@@ -18,9 +18,7 @@
 #include <cstring>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <ostream>
-#include <thread>
 
 #include <unistd.h>
 
@@ -226,16 +224,18 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     if (!o.trace_path.empty()) sweepOutputTemporaries(o.trace_path, &swept);
     return Status::ok();
   };
-  FrameWriter writer(renderer_config::kMaxQueuedPngFrames);
+  FrameWriter writer(kMaxQueuedPngFrames);
   const uint32_t total_frames = r.frames + r.rest_frames;
-  r.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target) -> Status {
+  r.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target, double* readback_ms) -> Status {
     const uint32_t i = frame.frame;
     if (o.save_every == 0 || !(i % o.save_every == 0 || i + 1 == total_frames)) return Status::ok();
+    const auto start = std::chrono::steady_clock::now();
     std::vector<uint8_t> rgba;
     target.readRgba(&rgba);
     char name[64];
     std::snprintf(name, sizeof name, "/frame_%05u.png", i);
     writer.submit(o.out_dir + name, target.viewport().width_px, target.viewport().height_px, std::move(rgba));
+    *readback_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return Status::ok();
   };
   // The frames are written before the streamer publishes its trace: a

@@ -211,11 +211,4 @@ double psnrRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b,
   return 10.0 * std::log10(255.0 * 255.0 / (sum / double(count)));
 }
 
-int maxAbsDiffRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
-  int worst = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i)
-    if (i % 4 != 3) worst = std::max(worst, std::abs(int(a[i]) - int(b[i])));
-  return worst;
-}
-
 }  // namespace clipstream

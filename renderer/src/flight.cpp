@@ -55,9 +55,7 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   std::unique_ptr<Flight> f(new Flight());
   f->m_source = std::move(source);
   f->m_config = config;
-  const auto start = Clock::now();
-  if (Status s = f->makeRenderer(first); !s) return s;
-  f->m_preload_ms = msBetween(start, Clock::now());
+  if (Status s = f->makeRenderer(config.viewport, first, &f->m_preload_ms); !s) return s;
   f->m_streamer = std::make_unique<Streamer>(f->m_source, config.streamer);
   f->m_before = f->m_streamer->stats();
   f->m_previous = first;
@@ -70,23 +68,35 @@ Flight::~Flight() {
   m_streamer.reset();
 }
 
-Status Flight::makeRenderer(const Camera& camera) {
-  m_renderer.reset();
-  m_target.reset();
+Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, double* preload_ms) {
+  std::unique_ptr<OffscreenTarget> target;
   if (m_config.offscreen)
-    if (Status s = OffscreenTarget::create(m_config.viewport, &m_target); !s) return s;
-  if (Status s = createClipmapRenderer(*m_source, m_config.viewport, camera, m_config.streamer.planner,
-                                       m_config.buffering, &m_renderer, &m_preload_failures);
+    if (Status s = OffscreenTarget::create(viewport, &target); !s) return s;
+  // The old renderer's textures go first: two clipmaps need not fit at once.
+  m_renderer.reset();
+  std::unique_ptr<ClipmapRenderer> renderer;
+  const auto start = Clock::now();
+  if (Status s = createClipmapRenderer(*m_source, viewport, camera, m_config.streamer.planner,
+                                       m_config.buffering, &renderer, &m_preload_failures);
       !s)
     return s;
-  m_first_plan = planClipmap(m_source->geometry(), m_config.viewport, camera, m_config.streamer.planner);
-  m_renderer->setOverlay(m_config.overlay);
+  *preload_ms = msBetween(start, Clock::now());
+  renderer->setOverlay(m_config.overlay);
+  m_renderer = std::move(renderer);
+  m_target = std::move(target);
+  m_first_plan = planClipmap(m_source->geometry(), viewport, camera, m_config.streamer.planner);
   return Status::ok();
 }
 
-Status Flight::resize(const Viewport& viewport, const Camera& camera) {
+Status Flight::resize(const Viewport& viewport, const Camera& camera, const Viewport& framebuffer) {
+  double preload_ms = 0.0;
+  if (Status s = makeRenderer(viewport, camera, &preload_ms); !s) {
+    // Without a renderer there is nothing to step: put one back for the old viewport.
+    if (!m_renderer) (void)makeRenderer(m_config.viewport, camera, &preload_ms);
+    return s;
+  }
   m_config.viewport = viewport;
-  if (Status s = makeRenderer(camera); !s) return s;
+  m_config.framebuffer = framebuffer;
   m_streamer->resetGpuResidency();
   ++m_resizes;
   return Status::ok();

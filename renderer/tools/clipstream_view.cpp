@@ -164,8 +164,6 @@ int main(int argc, char** argv) {
     glfwTerminate();
     return cli::kExitFailure;
   }
-  ClipmapRenderer& renderer = flight->renderer();
-
   FlightPath recording;
   bool recording_on = false;
   double last_key_s = -1.0;
@@ -198,6 +196,7 @@ int main(int argc, char** argv) {
     camera.position.y = std::max(camera.position.y, 1.0);
 
     if (input.overlay_toggled) {
+      ClipmapRenderer& renderer = flight->renderer();
       renderer.setOverlay(renderer.overlay() == Overlay::kOff ? Overlay::kLevels : Overlay::kOff);
       input.overlay_toggled = false;
     }
@@ -237,7 +236,7 @@ int main(int argc, char** argv) {
                     "clipstream-view | %.1f ms | lod %u | queue %llu | RAM %.0f MiB | speed %.0f/s%s%s",
                     frame_ms_avg, st.max_texture_lod, (unsigned long long)st.queue_depth,
                     double(st.ram_bytes) / (1 << 20), speed,
-                    renderer.overlay() == Overlay::kOff ? "" : " | overlay",
+                    flight->renderer().overlay() == Overlay::kOff ? "" : " | overlay",
                     recording_on ? " | REC" : "");
       glfwSetWindowTitle(window, title);
     }

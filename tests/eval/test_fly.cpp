@@ -71,6 +71,17 @@ TEST(ClipstreamFly, WritesCsvJsonAndPngForATinyStore) {
   ASSERT_FALSE(doc.is_discarded());
   EXPECT_EQ(doc["frames"].size(), 30u);
   EXPECT_EQ(doc["summary"]["pngs_written"].get<int>(), 4);
+  // Readback time belongs to saved frames only; the summary's keys are the
+  // report's (gpu_hit_rate, not a ratio).
+  for (const nlohmann::json& f : doc["frames"]) {
+    const int i = f["frame"].get<int>();
+    const bool saved = i % 10 == 0 || i == 29;
+    if (saved) EXPECT_GT(f["readback_ms"].get<double>(), 0.0) << "frame " << i;
+    else EXPECT_EQ(f["readback_ms"].get<double>(), 0.0) << "frame " << i;
+  }
+  EXPECT_TRUE(doc["summary"].contains("gpu_hit_rate"));
+  EXPECT_FALSE(doc["summary"].contains("gpu_hit_ratio"));
+  EXPECT_EQ(doc["summary"]["render_thread_fetches"].get<int>(), 0);
   fs::remove_all(dir);
 }
 

@@ -1,5 +1,5 @@
 // clipstream-tile: builds a tile store from an image. Thin: argument
-// parsing, signal handling and the summary; the work is in clipstream::tiler.
+// parsing, signal handling and the summary; the work is in the tiler library (tiler.h).
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
 #include <clipstream/store/output_file.h>

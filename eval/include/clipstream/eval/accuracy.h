@@ -50,10 +50,6 @@ class IdealReference {
   // follows the viewport); the tile cache is kept.
   Status resize(const Viewport& viewport);
 
-  uint64_t tilesFetched() const { return m_fetched; }
-  uint64_t fetchFailures() const { return m_failures; }
-  uint64_t cachedBytes() const { return m_cached_bytes; }
-  const ClipmapPlan& lastPlan() const { return m_plan; }
 
  private:
   IdealReference() = default;
@@ -70,11 +66,9 @@ class IdealReference {
   // Packed key -> pixels; null = the fetch failed (not retried).
   std::unordered_map<uint64_t, std::shared_ptr<const std::vector<uint8_t>>> m_cache;
   ClipmapPlan m_plan;
-  uint64_t m_fetched = 0, m_failures = 0, m_cached_bytes = 0;
 };
 
-
-// Per-frame measurement for clipstream-fly --reference: compares the
+// Per-frame measurement of a measured flight (runFlight): compares the
 // streamed frame in `target` against the IdealReference and, every Nth
 // frame, the reference against the CPU ground truth (renderReference() over
 // the full pyramid), which separates the clipmap's own approximation error
@@ -107,7 +101,6 @@ class FlyAccuracy {
                  bool ground_truth, AccuracyFrame* out);
   Status resize(const Viewport& viewport);
   uint64_t tilesSampled() const { return m_sampled.size(); }
-  const IdealReference* reference() const { return m_reference.get(); }  // null without one
   // The streamed frame the last comparing measure() read back.
   const std::vector<uint8_t>& lastStreamed() const { return m_streamed; }
 

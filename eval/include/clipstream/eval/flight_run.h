@@ -18,6 +18,7 @@
 #include <clipstream/streamer/flight_path.h>
 #include <clipstream/eval/metrics.h>
 #include <clipstream/eval/reference.h>
+#include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
@@ -48,7 +49,7 @@ struct FlightRunOptions {
   uint32_t resize_at_frame = 0;  // > 0: switch to resize_to before this recorded frame
   Viewport resize_to{0, 0};
   StreamerConfig streamer;
-  uint32_t upload_tiles = 16;
+  uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;
   Buffering buffering = Buffering::kDoubleUploadTwice;
   Overlay overlay = Overlay::kOff;
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
@@ -70,9 +71,11 @@ struct FlightRunOptions {
   // error stops the run.
   std::function<Status()> on_start;
   // Called after each recorded frame is drawn and timed, before it is
-  // judged, with the flight's target (e.g. to save the frame). An error
+  // judged, with the flight's target (e.g. to save the frame); a hook that
+  // reads the frame back sets *readback_ms (left 0 otherwise). An error
   // stops the run.
-  std::function<Status(const FrameSample& frame, const OffscreenTarget& target)> on_frame;
+  std::function<Status(const FrameSample& frame, const OffscreenTarget& target, double* readback_ms)>
+      on_frame;
   // Called after the last frame, before the streamer stops and publishes its
   // trace (e.g. to finish writing frames). An error fails the run, and a
   // failed run publishes no trace.
@@ -82,17 +85,17 @@ struct FlightRunOptions {
 struct FlightRunFrame {
   FrameSample sample;
   double t_s = 0.0;            // path time shown
-  double readback_ms = 0.0;    // time in FlightRunOptions::on_frame (saving the frame)
+  double readback_ms = 0.0;    // reading a saved frame back (FlightRunOptions::on_frame); 0 if not saved
   AccuracyFrame accuracy;      // when judged
 };
 
 struct FlightRun {
   std::vector<FlightRunFrame> frames;  // recorded frames only
   RunSummary summary;                  // over the recorded frames (warm-up loads in over-fetch)
-  StreamerStats streamer;              // final statistics of the streamer
+  StreamerStats streamer;              // the streamer's statistics after the last frame
   std::string gl;                      // GL_RENDERER / GL_VERSION
   std::string source;                  // TileSource::describe()
-  uint32_t clip_tiles = 0, pyramid_level = 0;  // the first plan's
+  uint32_t clip_tiles = 0, pyramid_level = 0;  // the renderer's at the end (after a resize, the new one)
   uint64_t texture_bytes = 0;
   double preload_ms = 0.0;             // the first synchronous pyramid load
   uint32_t preload_failures = 0;       // pyramid tiles that could not be read, every load

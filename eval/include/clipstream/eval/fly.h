@@ -7,6 +7,7 @@
 // thread encodes PNGs. Nothing in a frame waits on I/O.
 #pragma once
 
+#include <clipstream/renderer/config.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
@@ -31,7 +32,7 @@ struct FlyOptions {
   Viewport viewport{1280, 720};
   double speed = 1.0;              // path seconds per simulated second
   uint64_t cache_mb = 256;         // streamer RAM budget
-  uint32_t upload_tiles = 16;      // GPU uploads per frame
+  uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // GPU uploads per frame
   unsigned io_threads = 0;         // 0 = cores
   std::string out_dir = "fly-out";
   uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)

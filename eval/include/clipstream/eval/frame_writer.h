@@ -19,6 +19,10 @@
 
 namespace clipstream {
 
+// Frames kept in flight between the render thread and the PNG writer
+// thread; a slower disk makes the render thread skip saving, never wait.
+inline constexpr uint32_t kMaxQueuedPngFrames = 4;
+
 class FrameWriter {
  public:
   // `max_queued` frames may wait; more are dropped (and counted), never waited for.

@@ -125,7 +125,4 @@ uint32_t countGarbagePixels(const std::vector<uint8_t>& streamed, const PyramidG
 double psnrRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b,
                const std::vector<uint8_t>* mask = nullptr);
 
-// Largest absolute difference of any RGB channel.
-int maxAbsDiffRgb(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b);
-
 }  // namespace clipstream

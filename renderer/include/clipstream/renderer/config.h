@@ -17,16 +17,13 @@ inline constexpr uint32_t kMaxLevels = 32;
 // RGBA8 are 1 MiB, about 1.5 ms of glTexSubImage3D on llvmpipe.
 inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
 
-// Simulated frame pacing for clipstream-fly: every frame advances path time
-// by this much, whatever the real render time, so runs are deterministic.
+// The simulated clock of a Flight (flight.h): every step advances the
+// streamer's clock, and a scripted path's time, by this much whatever the
+// real render time, so runs are deterministic.
 inline constexpr double kSimulatedFrameSeconds = 1.0 / 60.0;
 
 // Colour written where the view ray misses the textured ground (sky, or
 // outside the texture). Tests compare against the same constant.
 inline constexpr uint8_t kSkyRgba[4] = {46, 51, 64, 255};
-
-// Frames kept in flight between the render thread and the PNG writer
-// thread; a slower disk makes the render thread skip saving, never wait.
-inline constexpr uint32_t kMaxQueuedPngFrames = 4;
 
 }  // namespace clipstream::renderer_config

@@ -1,11 +1,11 @@
 // The frame loop's one step: a streamer and a clipmap renderer driven
 // together, one frame per step(), with the frame's timings, per-level
-// counter deltas and GPU hits. clipstream-fly, the evaluation runs,
-// clipstream-view and the benchmarks all fly through this class; a host that
-// wants its own loop uses Streamer and ClipmapRenderer directly
-// (docs/api.md), as Flight does.
+// counter deltas and GPU hits. clipstream-fly, the stability scenarios and
+// the sweep (through eval's runFlight) and clipstream-view fly through this
+// class; a host that wants its own loop uses Streamer and ClipmapRenderer
+// directly (docs/api.md), as Flight does.
 //
-// The rules every flight follows (docs/renderer.md, "The frame loop"):
+// The rules every flight follows (docs/architecture.md, "Frame loop"):
 // - Clock: step n (counted from the first step, warm-up included) runs the
 //   streamer at n * kSimulatedFrameSeconds unless the host passes its own
 //   clock (an interactive viewer passes wall time).
@@ -14,12 +14,16 @@
 //   folded into warmupLoads() rather than a recorded frame.
 // - Cut: a recorded frame is a cut when it is the first recorded frame and
 //   no warm-up preceded it, or when isCut() says the camera jumped.
+// - Counters: a frame's streamer counters are sampled right after its
+//   glFinish, before anything reads the frame back or judges it; reads that
+//   land later count in the next frame.
 //
 // Thread rule: owned by the GL thread, like ClipmapRenderer: create it and
 // call every method on the thread whose context is current. The streamer's
 // workers read tiles; no step waits on I/O.
 #pragma once
 
+#include <clipstream/renderer/config.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
@@ -45,7 +49,7 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 // the renderer with the plan's clip size and pyramid level, and loads the
 // coarse pyramid from `source` on this thread before any frame, so every
 // frame has something correct to draw (a tile that fails is filled from its
-// ancestor and counted in *failures). GL thread only.
+// ancestor and added to *failures, which may be null). GL thread only.
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures);
@@ -53,7 +57,7 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
 struct FlightConfig {
   Viewport viewport{1280, 720};
   StreamerConfig streamer;
-  uint32_t upload_tiles = 16;          // tiles handed to the GPU per frame
+  uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // tiles handed to the GPU per frame
   Buffering buffering = Buffering::kDoubleUploadTwice;
   Overlay overlay = Overlay::kOff;
   uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
@@ -107,8 +111,11 @@ class Flight {
 
   // A new viewport: a new renderer (the clip size follows the viewport) and
   // target, the pyramid loaded again, the streamer told that the GPU holds
-  // nothing. `camera` is where the next frame looks from.
-  Status resize(const Viewport& viewport, const Camera& camera);
+  // nothing. `camera` is where the next frame looks from; `framebuffer` is
+  // the window's new size when not offscreen (0x0: the viewport). On an
+  // error the flight keeps its old viewport and target, with a renderer
+  // for them made again; if even that fails, it must not be stepped again.
+  Status resize(const Viewport& viewport, const Camera& camera, const Viewport& framebuffer = {0, 0});
 
   // Stops the streamer (joins its workers, publishes its trace) and returns
   // its final statistics. Steps after this are not allowed.
@@ -116,20 +123,21 @@ class Flight {
 
   Streamer& streamer() { return *m_streamer; }
   const Streamer& streamer() const { return *m_streamer; }
+  // Replaced by resize(): do not keep the reference across one.
   ClipmapRenderer& renderer() { return *m_renderer; }
   const OffscreenTarget* target() const { return m_target.get(); }  // null unless offscreen
   const Viewport& viewport() const { return m_config.viewport; }
   const ClipmapPlan& firstPlan() const { return m_first_plan; }  // of create() or the last resize()
-  const FlightConfig& config() const { return m_config; }
   double preloadMs() const { return m_preload_ms; }          // the first pyramid load
   uint32_t preloadFailures() const { return m_preload_failures; }  // every pyramid load
   uint32_t resizes() const { return m_resizes; }
   uint64_t warmupLoads() const { return m_warmup_loads; }    // tiles read during warm-up
-  uint32_t steps() const { return m_steps; }
 
  private:
   Flight() = default;
-  Status makeRenderer(const Camera& camera);
+  // A renderer (and target) for `viewport`, into the members only when both
+  // were made. Sets *preload_ms to the pyramid load's time.
+  Status makeRenderer(const Viewport& viewport, const Camera& camera, double* preload_ms);
 
   std::shared_ptr<TileSource> m_source;
   FlightConfig m_config;

@@ -67,8 +67,8 @@ class ClipmapRenderer {
   // brings the back set up to date with the front (double-buffered modes).
   void beginFrame();
 
-  // Uploads one RGBA8 tile (tile_px^2 * 4 bytes; other sizes are ignored and
-  // counted). Stack levels go to the slot toroidalSlot() names; levels at or
+  // Uploads one RGBA8 tile (tile_px^2 * 4 bytes; other sizes, and keys outside
+  // the pyramid, are ignored). Stack levels go to the slot toroidalSlot() names; levels at or
   // above pyramid_level go to the pyramid layer's mip chain, in every set,
   // once (a pyramid tile already loaded is skipped).
   void uploadTile(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba);
@@ -107,15 +107,10 @@ class ClipmapRenderer {
       std::function<std::shared_ptr<const std::vector<uint8_t>>(const TileKey& key)>;
   uint32_t loadPyramid(const PyramidTileFn& tile);
 
-  // True once every tile of every level >= pyramid_level was uploaded.
-  bool pyramidComplete() const { return m_pyramid_missing == 0; }
-  uint32_t pyramidTilesMissing() const { return m_pyramid_missing; }
 
   const UsableMap& usableMap() const { return m_front_map; }
   const UploadStats& lastUploads() const { return m_stats; }
   uint64_t textureBytes() const { return m_texture_bytes; }
-  uint32_t rejectedTiles() const { return m_rejected_tiles; }
-  const RendererConfig& config() const { return m_config; }
 
  private:
   // Fills every pyramid tile that was never uploaded: the tile is
@@ -166,7 +161,6 @@ class ClipmapRenderer {
   std::vector<uint8_t> m_pyramid_have;  // per pyramid tile, 1 = uploaded
   std::vector<size_t> m_pyramid_first;  // index of each pyramid level's first tile
   uint32_t m_pyramid_missing = 0;
-  uint32_t m_rejected_tiles = 0;
   uint64_t m_texture_bytes = 0;
   UploadStats m_stats;
   double m_issue_ms = 0.0;

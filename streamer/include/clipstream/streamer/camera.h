@@ -1,6 +1,8 @@
 // World and camera conventions shared by the streamer (planning) and the
 // renderer (drawing). Pure data and functions; no GL.
 //
+// Thread rule: plain values and pure functions, safe from any thread.
+//
 // World space: the texture lies on the ground plane y = 0. World x is the
 // level-0 texel column, world z the level-0 texel row (both grow from the
 // texture's top-left corner), y is height above the ground in level-0 texel

@@ -1,6 +1,8 @@
 // Clipmap planning: which tiles of which levels a view needs. Pure functions
 // over plain data; no threads, no I/O, no GL.
 //
+// Thread rule: pure, safe from any thread.
+//
 // The clipmap (Tanner et al. 1998) is a stack of clip levels, each a
 // clip_tiles x clip_tiles window of its pyramid level centred under the
 // camera, plus the "pyramid": every level small enough to fit whole in one

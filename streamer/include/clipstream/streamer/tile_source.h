@@ -68,8 +68,9 @@ std::shared_ptr<TileSource> makeProceduralSource(const ProceduralSpec& spec);
 
 // An in-memory TileSource over an RGBA8 image (top row first): level 0 is
 // the image, each coarser level the 2x2 box average of the one below (edge
-// texels repeated for odd sizes), tile padding is black. For tests,
-// benchmarks and clipstream-view's demo mode.
+// texels repeated for odd sizes), tile padding is black: an image a
+// program already holds in memory, streamed like a store (the tests and the
+// frame benchmark use it).
 std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t width_px,
                                             uint32_t height_px, uint32_t tile_px);
 
