@@ -27,7 +27,8 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
-                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures) {
+                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
+                             ClipmapPlan* plan) {
   out->reset();
   const ClipmapPlan first = planClipmap(source.geometry(), viewport, camera, planner);
   std::unique_ptr<ClipmapRenderer> renderer;
@@ -42,6 +43,7 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
       });
   renderer->endUploads();
   if (failures != nullptr) *failures += missing;
+  if (plan != nullptr) *plan = first;
   *out = std::move(renderer);
   return Status::ok();
 }
@@ -75,16 +77,17 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
   // The old renderer's textures go first: two clipmaps need not fit at once.
   m_renderer.reset();
   std::unique_ptr<ClipmapRenderer> renderer;
+  ClipmapPlan plan;
   const auto start = Clock::now();
   if (Status s = createClipmapRenderer(*m_source, viewport, camera, m_config.streamer.planner,
-                                       m_config.buffering, &renderer, &m_preload_failures);
+                                       m_config.buffering, &renderer, &m_preload_failures, &plan);
       !s)
     return s;
   *preload_ms = msBetween(start, Clock::now());
   renderer->setOverlay(m_config.overlay);
   m_renderer = std::move(renderer);
   m_target = std::move(target);
-  m_first_plan = planClipmap(m_source->geometry(), viewport, camera, m_config.streamer.planner);
+  m_first_plan = std::move(plan);
   return Status::ok();
 }
 

@@ -49,10 +49,12 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 // the renderer with the plan's clip size and pyramid level, and loads the
 // coarse pyramid from `source` on this thread before any frame, so every
 // frame has something correct to draw (a tile that fails is filled from its
-// ancestor and added to *failures, which may be null). GL thread only.
+// ancestor and added to *failures, which may be null). The first frame's
+// plan goes to *plan when given. GL thread only.
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
-                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures);
+                             std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
+                             ClipmapPlan* plan = nullptr);
 
 struct FlightConfig {
   Viewport viewport{1280, 720};
