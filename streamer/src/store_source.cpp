@@ -98,6 +98,11 @@ Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t*
     case PixelFormat::kRGBA8:
       std::copy(s, s + pixel_count * 4, dst);
       break;
+    case PixelFormat::kI16:
+    case PixelFormat::kF32:
+      return Status::error(ErrorCode::kUnsupported,
+                           std::string("pixel format ") + pixelFormatName(format) +
+                               " holds heights, not colour");
   }
   return Status::ok();
 }
@@ -106,6 +111,12 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* sta
   std::unique_ptr<TileStoreReader> reader;
   *status = TileStoreReader::open(path, &reader);
   if (!*status) return nullptr;
+  if (reader->info().elevation.present) {
+    *status = Status::error(ErrorCode::kUnsupported,
+                            path + " is an elevation store (heights), not a colour image: give it "
+                                   "as the scene's elevation layer (--elevation)");
+    return nullptr;
+  }
   return std::make_shared<StoreSource>(std::move(reader), path);
 }
 
