@@ -139,6 +139,8 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   r->m_texture_bytes = uint64_t(period) * period * 4 * uint64_t(layers);
   r->m_slot_tile.assign(heights.levelCount(),
                         std::vector<uint64_t>(size_t(r->m_slots) * r->m_slots, kNoTile));
+  r->m_slot_heights.assign(heights.levelCount(),
+                           std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
   if (glGetError() != GL_NO_ERROR) {
     return Status::error(ErrorCode::kUnavailable, "terrain: GL error while creating the height stack");
   }
@@ -166,15 +168,53 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   const uint32_t sx = slotOf(key.x), sy = slotOf(key.y);
   glTextureSubImage3D(m_heights, 0, GLint(sx * tile), GLint(sy * tile), GLint(key.level),
                       GLsizei(tile), GLsizei(tile), 1, GL_RED, GL_FLOAT, heights);
-  m_slot_tile[key.level][size_t(sy) * m_slots + sx] = uint64_t(key.x) | (uint64_t(key.y) << 32);
+  const size_t slot = size_t(sy) * m_slots + sx;
+  m_slot_tile[key.level][slot] = uint64_t(key.x) | (uint64_t(key.y) << 32);
+  m_slot_heights[key.level][slot].assign(heights, heights + size_t(tile) * tile);
+}
+
+bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
+                                   uint32_t* level_used) const {
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
+  const int64_t tile = m_geometry.tile_px;
+  for (uint32_t level = 0; level < m_geometry.levelCount(); ++level) {
+    const LevelInfo& info = m_geometry.levels[level];
+    const glm::dvec2 s = s0 / std::ldexp(1.0, int(level));
+    const double fx = std::clamp(s.x, 0.0, double(info.width_px - 1));
+    const double fz = std::clamp(s.y, 0.0, double(info.height_px - 1));
+    const int64_t i0 = int64_t(std::floor(fx)), j0 = int64_t(std::floor(fz));
+    const int64_t i1 = std::min<int64_t>(i0 + 1, int64_t(info.width_px) - 1);
+    const int64_t j1 = std::min<int64_t>(j0 + 1, int64_t(info.height_px) - 1);
+    bool have = true;
+    auto at = [&](int64_t i, int64_t j) -> double {
+      const int64_t tx = i / tile, ty = j / tile;
+      const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+      if (m_slot_tile[level][slot] != (uint64_t(tx) | (uint64_t(ty) << 32))) {
+        have = false;
+        return 0.0;
+      }
+      return m_slot_heights[level][slot][size_t(j - ty * tile) * tile + size_t(i - tx * tile)];
+    };
+    const double h00 = at(i0, j0), h10 = at(i1, j0), h01 = at(i0, j1), h11 = at(i1, j1);
+    if (!have) continue;
+    // The triangle of the cell (diagonal (i0, j0)-(i1, j1)) the point is in.
+    const double u = fx - double(i0), v = fz - double(j0);
+    const double h = u >= v ? h00 + u * (h10 - h00) + v * (h11 - h10)
+                            : h00 + v * (h01 - h00) + u * (h11 - h01);
+    *height = h * m.world_per_height;
+    if (level_used != nullptr) *level_used = level;
+    return true;
+  }
+  return false;
 }
 
 bool TerrainRenderer::levelResident(uint32_t ring_level, const glm::i64vec2& ring_origin) const {
   // Samples the ring reads: its (n + 1)^2 vertices and one more on each
   // side (normals), clamped to the level; a ring past the last stored
   // level reads that level's samples 2^k apart.
-  const uint32_t last = m_geometry.levelCount() - 1;
-  const uint32_t level = std::min(ring_level, last);
+  const uint32_t last_level = m_geometry.levelCount() - 1;
+  const uint32_t level = std::min(ring_level, last_level);
   const int shift = int(ring_level - level);
   const glm::i64vec2 origin = ring_origin * (int64_t(1) << shift);
   const LevelInfo& info = m_geometry.levels[level];

@@ -307,5 +307,26 @@ TEST(Terrain, VertexHeightsAndNormalsMatchTheCpu) {
   }
 }
 
+TEST(Terrain, GroundHeightFollowsTheFinestResidentLevel) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera camera = overField(1001.0, 777.0, 150.0, 0.0, -0.5);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  double h = 0.0;
+  uint32_t level = 99;
+  EXPECT_FALSE(s.terrain->groundHeight({1001.0, 777.0}, &h));
+  uploadRings(*s.terrain, s.field, camera, 1);
+  ASSERT_TRUE(s.terrain->groundHeight({1001.0, 777.0}, &h, &level));
+  EXPECT_EQ(level, 1u);
+  uploadRings(*s.terrain, s.field, camera, 0);
+  // World (1001, 777) is sample (500, 388) exactly: the level-0 sample.
+  ASSERT_TRUE(s.terrain->groundHeight({1001.0, 777.0}, &h, &level));
+  EXPECT_EQ(level, 0u);
+  EXPECT_FLOAT_EQ(float(h), s.field.at(0, 500, 388));
+  // Half-way along x between two samples: their mean (on the cell's edge).
+  ASSERT_TRUE(s.terrain->groundHeight({1002.0, 777.0}, &h));
+  EXPECT_NEAR(h, 0.5 * (s.field.at(0, 500, 388) + s.field.at(0, 501, 388)), 1e-4);
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -73,6 +73,12 @@ class TerrainRenderer {
   // missing height tile coarsens the geometry, never opens a hole.
   void draw(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour);
 
+  // The ground height (world units) at world point (x, z), from the finest
+  // level whose tile there is in the stack, on the surface the rings draw
+  // (cells cut along the same diagonal); false when no level holds it.
+  // `level` (optional) receives the level used.
+  bool groundHeight(const glm::dvec2& world_xz, double* height, uint32_t* level = nullptr) const;
+
   const TerrainFrame& lastFrame() const { return m_frame; }
   // Bytes of the height stack texture (video memory).
   uint64_t textureBytes() const { return m_texture_bytes; }
@@ -113,6 +119,8 @@ class TerrainRenderer {
   // Which tile each slot holds, per level (x | y << 32, or kNoTile).
   static constexpr uint64_t kNoTile = ~uint64_t(0);
   std::vector<std::vector<uint64_t>> m_slot_tile;
+  // CPU copies of the same tiles, for groundHeight() (per level, per slot).
+  std::vector<std::vector<std::vector<float>>> m_slot_heights;
   uint64_t m_texture_bytes = 0;
   TerrainFrame m_frame;
 };
