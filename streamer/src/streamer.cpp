@@ -126,27 +126,35 @@ const ClipmapPlan kNoPlan{};
 
 }  // namespace
 
+namespace {
+
+// checkStreamLayers() for one layer, named by its index in the scene.
+Status checkLayer(const StreamLayer& l, size_t index) {
+  const std::string name = "scene layer " + std::to_string(index);
+  if (!l.source) return Status::error(ErrorCode::kInvalidArgument, name + " has no source");
+  const std::string what = name + " (" + l.source->describe() + ")";
+  if (!finitePositive(l.texels_per_unit.x) || !finitePositive(l.texels_per_unit.y))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + ": texels per world unit (" + std::to_string(l.texels_per_unit.x) +
+                             ", " + std::to_string(l.texels_per_unit.y) +
+                             ") must be finite and positive");
+  if (!std::isfinite(l.origin_texel.x) || !std::isfinite(l.origin_texel.y))
+    return Status::error(ErrorCode::kInvalidArgument, what + ": the origin texel is not finite");
+  const TileContent content = l.source->content();
+  if (l.role == LayerRole::kColour && content != TileContent::kRgba8)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " is a colour layer but its source hands out heights");
+  if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " is an elevation layer but its source hands out colour");
+  return Status::ok();
+}
+
+}  // namespace
+
 Status checkStreamLayers(const std::vector<StreamLayer>& layers) {
-  for (size_t i = 0; i < layers.size(); ++i) {
-    const StreamLayer& l = layers[i];
-    const std::string name = "scene layer " + std::to_string(i);
-    if (!l.source) return Status::error(ErrorCode::kInvalidArgument, name + " has no source");
-    const std::string what = name + " (" + l.source->describe() + ")";
-    if (!finitePositive(l.texels_per_unit.x) || !finitePositive(l.texels_per_unit.y))
-      return Status::error(ErrorCode::kInvalidArgument,
-                           what + ": texels per world unit (" + std::to_string(l.texels_per_unit.x) +
-                               ", " + std::to_string(l.texels_per_unit.y) +
-                               ") must be finite and positive");
-    if (!std::isfinite(l.origin_texel.x) || !std::isfinite(l.origin_texel.y))
-      return Status::error(ErrorCode::kInvalidArgument, what + ": the origin texel is not finite");
-    const TileContent content = l.source->content();
-    if (l.role == LayerRole::kColour && content != TileContent::kRgba8)
-      return Status::error(ErrorCode::kInvalidArgument,
-                           what + " is a colour layer but its source hands out heights");
-    if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
-      return Status::error(ErrorCode::kInvalidArgument,
-                           what + " is an elevation layer but its source hands out colour");
-  }
+  for (size_t i = 0; i < layers.size(); ++i)
+    if (Status s = checkLayer(layers[i], i); !s) return s;
   return Status::ok();
 }
 
@@ -683,10 +691,9 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     Impl::Layer& layer = s.layers[i];
     layer.spec = std::move(layers[i]);
     if (layer.spec.source) {
-      const Status check = checkStreamLayers({layer.spec});
+      const Status check = checkLayer(layer.spec, i);
       if (!check) {
-        // The message names "scene layer 0": say which one it is here.
-        std::fprintf(stderr, "clipstream: scene layer %zu left empty: %s\n", i, check.toString().c_str());
+        std::fprintf(stderr, "clipstream: %s; the layer stays empty\n", check.toString().c_str());
         layer.spec.source = nullptr;
       }
     }
