@@ -375,6 +375,45 @@ TEST(SceneStreamer, OneHardBudgetHoldsForBothLayersTogether) {
   expectCountersAddUp(st);
 }
 
+TEST(SceneStreamer, PathHintServesTheSceneAndIsIgnoredWhenWrong) {
+  Scene scene;
+  StreamerConfig cfg = sceneConfig(2);
+  cfg.prefetch = true;
+  cfg.ram_budget_bytes = 6u << 20;  // eviction by the hinted return runs too
+  auto cameraAt = [](double t_s) {
+    Camera c = sceneCamera();
+    c.position.x = 1000.0 + 5400.0 * t_s;
+    return c;
+  };
+  Streamer s(scene.layers(scene.colour, scene.dem), cfg);
+  PathHint hint;
+  hint.camera_at = cameraAt;
+  s.setPathHint(hint);
+  const Viewport vp{640, 480};
+  for (int frame = 0; frame < 40; ++frame) {
+    s.update(cameraAt(frame / 60.0), vp, frame / 60.0);
+    (void)s.takeReadyAll(16);
+  }
+  ASSERT_TRUE(waitIdle(s));
+  StreamerStats st = s.stats();
+  EXPECT_EQ(st.path_hint_frames, 40u);
+  EXPECT_EQ(st.path_hint_ignored_frames, 0u);
+  EXPECT_GT(st.layers[1].total.loads, 0u);
+  expectCountersAddUp(st);
+
+  // A hint 3000 world units off (windows of both layers elsewhere) is ignored.
+  hint.camera_at = [&](double t_s) {
+    Camera c = cameraAt(t_s);
+    c.position.z += 3000.0;
+    return c;
+  };
+  s.setPathHint(hint);
+  for (int frame = 40; frame < 50; ++frame) s.update(cameraAt(frame / 60.0), vp, frame / 60.0);
+  st = s.stats();
+  EXPECT_EQ(st.path_hint_frames, 40u);
+  EXPECT_EQ(st.path_hint_ignored_frames, 10u);
+}
+
 // Records every fetch of every layer in one list, in call order.
 struct FetchLog {
   std::mutex mutex;
