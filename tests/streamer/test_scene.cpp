@@ -520,6 +520,76 @@ TEST(SceneStreamer, LoadsAndHandsOffInOneOrderInterleavingLayersByWorldCoarsenes
   EXPECT_TRUE(s.settled());
 }
 
+TEST(SceneStreamer, BudgetBelowTheSceneLoadsWhatFitsInTheOneOrder) {
+  // With nothing handed off every loaded tile stays wanted and pinned, so a
+  // budget below the scene's needed set keeps the head of the one order:
+  // walking it, each tile is loaded if its layer's entry still fits, else
+  // skipped (a later, smaller DEM tile may still fit after a colour tile
+  // did not).
+  Scene scene;
+  auto log = std::make_shared<FetchLog>();
+  StreamerConfig cfg = sceneConfig(1);
+  // Runs out inside colour level 3 (the last pyramid level) with room left
+  // for a few of the DEM stack tiles that follow.
+  cfg.ram_budget_bytes = 3765000;
+  Streamer s(scene.layers(std::make_shared<LoggingSource>(scene.colour, 0, log),
+                          std::make_shared<LoggingSource>(scene.dem, 1, log)),
+             cfg);
+  s.update(sceneCamera(), Viewport{640, 480}, 0.0);
+  ASSERT_TRUE(waitIdle(s));
+  const std::vector<LayerTile> order = documentedOrder(s);
+  std::vector<LayerTile> expected;
+  uint64_t bytes = 0;
+  bool skipped_colour = false, dem_after_skip = false;
+  for (const LayerTile& t : order) {
+    const uint64_t entry = uint64_t(s.geometry(t.layer).tile_px) * s.geometry(t.layer).tile_px * 4 +
+                           kCacheEntryOverheadBytes;
+    if (bytes + entry > cfg.ram_budget_bytes) {
+      skipped_colour = skipped_colour || t.layer == 0;
+      continue;
+    }
+    dem_after_skip = dem_after_skip || (skipped_colour && t.layer == 1);
+    bytes += entry;
+    expected.push_back(t);
+  }
+  ASSERT_LT(expected.size(), order.size()) << "the budget holds the whole scene: no test";
+  std::vector<LayerTile> fetched;
+  {
+    std::lock_guard<std::mutex> lock(log->mutex);
+    fetched = log->fetched;
+  }
+  EXPECT_EQ(fetched, expected);
+  EXPECT_TRUE(dem_after_skip) << "no DEM tile after the first colour tile that did not fit";
+  const StreamerStats st = s.stats();
+  EXPECT_EQ(st.ram_bytes, bytes);
+  EXPECT_EQ(st.total.budget_skips, order.size() - expected.size());
+  expectCountersAddUp(st);
+}
+
+TEST(SceneStreamer, ResetGpuResidencyHandsEveryLayerOffAgain) {
+  Scene scene;
+  Streamer s(scene.layers(scene.colour, scene.dem), sceneConfig(2));
+  const Viewport vp{640, 480};
+  auto settle = [&](std::vector<size_t>* counts) {
+    counts->assign(2, 0);
+    for (int frame = 0; frame < 50 && !s.settled(); ++frame) {
+      s.update(sceneCamera(), vp, frame / 60.0);
+      EXPECT_TRUE(waitIdle(s));
+      for (const FrameHandoff& h : s.takeReadyAll(1000)) (*counts)[h.layer] += h.tiles.size();
+    }
+    EXPECT_TRUE(s.settled());
+  };
+  std::vector<size_t> first, again;
+  settle(&first);
+  s.resetGpuResidency();
+  EXPECT_FALSE(s.settled());
+  settle(&again);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(again[i], rankPlanTiles(s.geometry(i), s.plan(i)).size()) << "layer " << i;
+    EXPECT_EQ(first[i], again[i]) << "layer " << i;
+  }
+}
+
 void expectSameHandoff(const FrameHandoff& a, const FrameHandoff& b, int frame) {
   ASSERT_EQ(a.tiles.size(), b.tiles.size()) << "frame " << frame;
   for (size_t i = 0; i < a.tiles.size(); ++i) {
