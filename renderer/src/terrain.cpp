@@ -173,6 +173,25 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   m_slot_heights[key.level][slot].assign(heights, heights + size_t(tile) * tile);
 }
 
+uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
+  uint32_t missing = 0;
+  const size_t floats = size_t(m_geometry.tile_px) * m_geometry.tile_px;
+  for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
+    const LevelInfo& info = m_geometry.levels[l];
+    if (info.tiles_x > m_slots || info.tiles_y > m_slots) continue;
+    for (uint32_t y = 0; y < info.tiles_y; ++y)
+      for (uint32_t x = 0; x < info.tiles_x; ++x) {
+        const std::shared_ptr<const std::vector<uint8_t>> bytes = tile(TileKey{l, x, y});
+        if (!bytes || bytes->size() != floats * sizeof(float)) {
+          ++missing;
+          continue;
+        }
+        uploadTile(TileKey{l, x, y}, reinterpret_cast<const float*>(bytes->data()));
+      }
+  }
+  return missing;
+}
+
 bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
                                    uint32_t* level_used) const {
   const TerrainMapping& m = m_config.mapping;

@@ -138,7 +138,11 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
     out->warnings.push_back(std::string("the elevation store is stretched over the colour image") +
                             (stretch ? " (asked for)" : " (one of them has no georeference)") +
                             "; its heights keep its own proportions");
-    if (assumed) out->warnings.push_back("horizontal units unknown: a sample is taken as 1 m");
+    if (assumed) {
+      out->warnings.push_back(std::string("the ") + (eg.present ? "elevation" : "colour") +
+                              " store's coordinate unit is not known here; metres assumed for the "
+                              "vertical scale");
+    }
   }
   // World units are square texels: heights use the mean texel size.
   const double metres_per_world = 0.5 * (out->metres_per_world.x + out->metres_per_world.y);

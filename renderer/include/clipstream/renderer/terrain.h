@@ -19,6 +19,7 @@
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -64,6 +65,15 @@ class TerrainRenderer {
   // other sizes and keys outside the pyramid are ignored) into its level's
   // toroidal slot, replacing whatever tile had the slot.
   void uploadTile(const TileKey& key, const float* heights);
+
+  // Uploads every tile of every level small enough to stay whole in the
+  // stack (its tile grid fits the slots), asking `tile` for each (null: the
+  // tile cannot be had). These levels are the outer rings' and the
+  // fallback of every finer one; loading them before the first frame means
+  // the terrain is drawn from the first frame on. Returns the tiles `tile`
+  // could not give (their rings are not drawn until they arrive).
+  using HeightTileFn = std::function<std::shared_ptr<const std::vector<uint8_t>>(const TileKey&)>;
+  uint32_t preloadCoarseLevels(const HeightTileFn& tile);
 
   // Draws the terrain seen by `camera`, textured and lit, into the bound
   // framebuffer (depth test on; the caller clears colour and depth, e.g.
