@@ -459,6 +459,20 @@ std::vector<LayerTile> Streamer::Impl::rankScene() const {
     uint32_t layer;
     LayerTile tile;
   };
+  size_t active = 0;
+  for (const Layer& layer : layers) active += layer.active() ? 1 : 0;
+  if (active == 1) {
+    // rankPlanTiles() already lists one layer in this order: skip the sort.
+    std::vector<LayerTile> out;
+    for (uint32_t i = 0; i < layers.size(); ++i) {
+      if (!layers[i].active()) continue;
+      const std::vector<TileKey> keys =
+          rankPlanTiles(layers[i].geometry, layers[i].plan, config.frustum_priority);
+      out.reserve(keys.size());
+      for (const TileKey& k : keys) out.push_back({i, k});
+    }
+    return out;
+  }
   std::vector<Ranked> ranked;
   for (uint32_t i = 0; i < layers.size(); ++i) {
     const Layer& layer = layers[i];

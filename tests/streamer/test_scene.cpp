@@ -11,6 +11,7 @@
 #include <clipstream/testing/temp_dir.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <atomic>
 #include <cmath>
@@ -337,6 +338,11 @@ TEST(SceneStreamer, PlansEachLayerInItsTexelsAndHandsOffBothLayersTiles) {
   EXPECT_EQ(st.layers[1].ram_bytes, st.layers[1].ram_entries * (32 * 32 * 4 + kCacheEntryOverheadBytes));
   EXPECT_EQ(st.layers[0].ram_bytes, st.layers[0].ram_entries * (128 * 128 * 4 + kCacheEntryOverheadBytes));
   expectCountersAddUp(st);
+  const nlohmann::json j = nlohmann::json::parse(st.toJson());
+  ASSERT_EQ(j["layers"].size(), 2u);
+  EXPECT_EQ(j["layers"][1]["total"]["loads"], st.layers[1].total.loads);
+  EXPECT_EQ(j["layers"][1]["levels"].size(), s.geometry(1).levelCount());
+  EXPECT_EQ(j["layers"][0]["ram_bytes"], st.layers[0].ram_bytes);
 }
 
 TEST(SceneStreamer, OneHardBudgetHoldsForBothLayersTogether) {

@@ -13,7 +13,8 @@
 // resetGpuResidency(), plan() and settled() are for the render thread only
 // and never block on I/O (no source call ever runs on it; nor does
 // PathHint::camera_at run anywhere else). stats(), queuedTiles() and
-// queuedLayerTiles() are thread-safe.
+// queuedLayerTiles() are thread-safe; layerCount(), layer() and geometry()
+// return what the constructor fixed, on any thread.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
