@@ -112,6 +112,9 @@ Status Flight::makeTerrain() {
   }
   TerrainConfig tc;
   tc.ring_cells = t.ring_cells;
+  tc.clip_tiles = m_config.streamer.planner.clip_tiles != 0
+                      ? m_config.streamer.planner.clip_tiles
+                      : chooseClipTiles(m_config.viewport, t.source->geometry().tile_px);
   tc.mapping.world_per_sample = t.alignment.world_per_sample;
   tc.mapping.sample0_world = t.alignment.sample0_world;
   tc.mapping.world_per_height = t.alignment.world_per_height;
@@ -142,6 +145,9 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
   }
   m_config.viewport = viewport;
   m_config.framebuffer = framebuffer;
+  // The height stack follows the clip size too (TerrainConfig::clip_tiles).
+  if (m_terrain)
+    if (Status s = makeTerrain(); !s) return s;
   m_streamer->resetGpuResidency();
   ++m_resizes;
   return Status::ok();

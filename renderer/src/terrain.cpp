@@ -67,7 +67,9 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   // which touches at most ceil((n + 3) / tile) + 1 tiles a side; one more
   // slot keeps a tile that just left from sharing a slot with one needed.
   const uint32_t tile = heights.tile_px;
-  r->m_slots = (n + 3 + tile - 1) / tile + 2;
+  // ... and at least the streamer's window plus two (as the colour stack),
+  // so no two tiles it hands over share a slot.
+  r->m_slots = std::max((n + 3 + tile - 1) / tile + 2, (config.clip_tiles / 2) * 2 + 2);
   // The outermost ring: the first level whose ring covers every sample.
   // Rings may be coarser than the pyramid's last level (its one tile,
   // decimated further in the shader), so the outermost ring always covers

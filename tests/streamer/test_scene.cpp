@@ -364,7 +364,9 @@ TEST(SceneStreamer, OneHardBudgetHoldsForBothLayersTogether) {
   for (int frame = 0; frame < 60; ++frame) {
     cam.position.x = 1000.0 + 90.0 * frame;
     s.update(cam, vp, frame / 60.0);
-    if (frame % 4 == 0) ASSERT_TRUE(waitIdle(s));
+    if (frame % 4 == 0) {
+      ASSERT_TRUE(waitIdle(s));
+    }
     (void)s.takeReadyAll(16);
   }
   ASSERT_TRUE(waitIdle(s));

@@ -38,6 +38,10 @@ struct TerrainMapping {
 struct TerrainConfig {
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
   TerrainMapping mapping;
+  // The streamer's clip size for the height layer (tiles a side), so that
+  // every tile of a window it hands over has a slot of its own; 0: only
+  // what the rings read.
+  uint32_t clip_tiles = 0;
 };
 
 // What the last draw() drew.
