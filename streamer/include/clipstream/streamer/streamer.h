@@ -143,6 +143,11 @@ struct StreamLayer {
   LayerRole role = LayerRole::kColour;
   glm::dvec2 texels_per_unit{1.0, 1.0};
   glm::dvec2 origin_texel{0.0, 0.0};
+  // Clip size of this layer's windows (tiles a side); 0: the streamer's
+  // PlannerConfig::clip_tiles. A renderer that reads less than a
+  // viewport's worth of a layer (the terrain's rings read about n samples
+  // per level) asks for less, and the layer costs that much less memory.
+  uint32_t clip_tiles = 0;
 };
 
 // Ok when every layer can be streamed: a source; a finite, positive map;
