@@ -208,7 +208,12 @@ glm::vec2 TerrainRenderer::heightBounds(uint32_t ring_level, glm::i64vec2 s0, gl
   glm::vec2 b(INFINITY, -INFINITY);
   for (int64_t ty = ty0; ty <= ty1; ++ty)
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
-      const glm::vec2 t = m_slot_bounds[level][size_t(slotOf(ty)) * m_slots + slotOf(tx)];
+      const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+      if (m_slot_tile[level][slot] != (uint64_t(tx) | (uint64_t(ty) << 32))) {
+        // Not resident (the ring does not read it): no bound, never culled.
+        return {-INFINITY, INFINITY};
+      }
+      const glm::vec2 t = m_slot_bounds[level][slot];
       b = {std::min(b.x, t.x), std::max(b.y, t.y)};
     }
   return b;
@@ -431,7 +436,8 @@ void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
       // the tiles under it.
       const glm::i64vec2 c0 = o + glm::i64vec2((b % kBlocks) * block_cells, (b / kBlocks) * block_cells);
       const glm::i64vec2 c1 = c0 + glm::i64vec2(block_cells, block_cells);
-      const glm::vec2 h = heightBounds(l, c0 - int64_t(2), c1 + int64_t(2));
+      const glm::vec2 h = heightBounds(l, glm::max(c0 - int64_t(2), o - int64_t(1)),
+                                       glm::min(c1 + int64_t(2), o + int64_t(n + 1)));
       const glm::dvec2 x0 = (glm::dvec2(c0) * spacing - cam) * m.world_per_sample;
       const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
       const double y0 = double(h.x) * m.world_per_height - camera.position.y;
