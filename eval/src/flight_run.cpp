@@ -129,6 +129,10 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     first = cameraAboveGround(first, o.terrain->source->elevationInfo().max_height *
                                          o.terrain->alignment.world_per_height);
   }
+  std::unique_ptr<ReferenceSurface> surface;
+  if (o.terrain && o.terrain->source && o.reference_every > 0) {
+    if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, &surface); !s) return s;
+  }
   std::unique_ptr<Flight> flight;
   if (Status s = Flight::create(watched, fc, first, &flight); !s) return s;
   auto onGround = [&](const Camera& path_camera) {
@@ -200,6 +204,25 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     f.sample = flight->step(camera);
     if (o.on_frame)
       if (Status s = o.on_frame(f.sample, *flight->target(), &f.readback_ms); !s) return s;
+    if (surface && flight->terrain() &&
+        (i % o.reference_every == 0 || i >= o.frames || i + 1 == total)) {
+      std::vector<float> xyzw;
+      flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw);
+      f.geometry = geometricError(xyzw, camera, flight->viewport(), *surface);
+      if (f.geometry.pixels > 0) {
+        const bool rest = i >= o.frames;
+        run->geometry_frames += 1;
+        run->geometry_mean_px += f.geometry.mean_px;
+        run->geometry_p95_px += f.geometry.p95_px;
+        run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
+        if (rest) {
+          run->geometry_rest_frames += 1;
+          run->geometry_rest_mean_px += f.geometry.mean_px;
+          run->geometry_rest_p95_px += f.geometry.p95_px;
+          run->geometry_rest_max_px = std::max(run->geometry_rest_max_px, f.geometry.max_px);
+        }
+      }
+    }
     // Judged after the frame is timed: the reference fetches synchronously.
     if (accuracy) {
       const bool compare =
@@ -268,6 +291,14 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   records.reserve(run->frames.size());
   for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
   run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : 0, peakRssBytes());
+  if (run->geometry_frames > 0) {
+    run->geometry_mean_px /= run->geometry_frames;
+    run->geometry_p95_px /= run->geometry_frames;
+  }
+  if (run->geometry_rest_frames > 0) {
+    run->geometry_rest_mean_px /= run->geometry_rest_frames;
+    run->geometry_rest_p95_px /= run->geometry_rest_frames;
+  }
   if (o.terrain && !run->frames.empty()) {
     double triangles = 0.0;
     for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);

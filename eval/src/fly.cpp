@@ -203,8 +203,9 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     for (const std::string& w : terrain.alignment.warnings)
       (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
     if (o.reference)
-      (warnings ? *warnings : log) << "clipstream-fly: warning: --reference compares with the flat "
-                                      "plane; over terrain it is not run (docs/terrain.md)\n";
+      (warnings ? *warnings : log) << "clipstream-fly: warning: over terrain --reference measures the "
+                                      "geometric error against the full-resolution mesh; the image "
+                                      "(PSNR) reference is not run yet (docs/terrain.md)\n";
     r.terrain = std::move(terrain);
   }
   {

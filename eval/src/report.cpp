@@ -46,7 +46,8 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
       "frame,t_s,frame_ms,streamer_ms,upload_ms,draw_ms,readback_ms,tiles_uploaded,second_copies,max_texture_lod,"
       "finest_needed,queue_depth,in_flight,ram_bytes,bytes_read,ram_hits,ram_misses,gpu_hits,"
       "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error,"
-      "terrain_triangles,terrain_rings,terrain_finest_level,height_tiles_uploaded,ground_height";
+      "terrain_triangles,terrain_rings,terrain_finest_level,height_tiles_uploaded,ground_height,"
+      "geo_error_mean_px,geo_error_p95_px,geo_error_max_px";
   for (uint32_t l = 0; l < levels; ++l)
     for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
       csv += ",L" + std::to_string(l) + "_" + f;
@@ -71,6 +72,12 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
     std::snprintf(buf, sizeof buf, ",%llu,%u,%u,%u,%.3f", (unsigned long long)r.terrain_triangles,
                   r.terrain_rings, r.terrain_finest_level, r.height_tiles_uploaded, r.ground_height);
     csv += buf;
+    if (f.geometry.measured) {
+      std::snprintf(buf, sizeof buf, ",%.4f,%.4f,%.4f", f.geometry.mean_px, f.geometry.p95_px, f.geometry.max_px);
+      csv += buf;
+    } else {
+      csv += ",,,";
+    }
     for (uint32_t l = 0; l < levels; ++l) {
       const LevelFrame lf = l < r.levels.size() ? r.levels[l] : LevelFrame{};
       csv += "," + std::to_string(lf.ram_hits) + "," + std::to_string(lf.ram_misses) + "," +
@@ -100,6 +107,11 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
                         {"ram_misses", r.total.ram_misses}, {"gpu_hits", r.total.gpu_hits},
                         {"gpu_misses", r.total.gpu_misses}, {"tiles_loaded", r.tiles_loaded},
                         {"cut", r.cut}, {"levels", jl}};
+    if (f.geometry.measured) {
+      j["geo_error_mean_px"] = f.geometry.mean_px;
+      j["geo_error_p95_px"] = f.geometry.p95_px;
+      j["geo_error_max_px"] = f.geometry.max_px;
+    }
     if (r.terrain_rings > 0 || r.height_tiles_uploaded > 0) {
       j["terrain_triangles"] = r.terrain_triangles;
       j["terrain_rings"] = r.terrain_rings;
@@ -142,6 +154,14 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
   acc["height_texture_bytes"] = run.height_texture_bytes;
+  acc["geometry_frames"] = run.geometry_frames;
+  acc["geo_error_mean_px"] = run.geometry_mean_px;
+  acc["geo_error_p95_px"] = run.geometry_p95_px;
+  acc["geo_error_max_px"] = run.geometry_max_px;
+  acc["geometry_rest_frames"] = run.geometry_rest_frames;
+  acc["geo_error_rest_mean_px"] = run.geometry_rest_mean_px;
+  acc["geo_error_rest_p95_px"] = run.geometry_rest_p95_px;
+  acc["geo_error_rest_max_px"] = run.geometry_rest_max_px;
   const Means m = meansOf(run);
   nlohmann::json summary = {
       {"source", run.source},
@@ -216,6 +236,11 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("tile_failures", std::to_string(run.tile_failures));
   add("terrain_triangles_mean", num(run.terrain_triangles_mean));
   add("height_texture_mib", num(mib(run.height_texture_bytes)));
+  add("geo_error_mean_px", run.geometry_frames ? num(run.geometry_mean_px) : std::string());
+  add("geo_error_p95_px", run.geometry_frames ? num(run.geometry_p95_px) : std::string());
+  add("geo_error_max_px", run.geometry_frames ? num(run.geometry_max_px) : std::string());
+  add("geo_error_rest_mean_px", run.geometry_rest_frames ? num(run.geometry_rest_mean_px) : std::string());
+  add("geo_error_rest_p95_px", run.geometry_rest_frames ? num(run.geometry_rest_p95_px) : std::string());
   return keys + "\n" + values + "\n";
 }
 
@@ -255,6 +280,15 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   if (run.height_texture_bytes > 0) {
     row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
     row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
+    if (run.geometry_frames > 0) {
+      row("geo_error_mean_px", run.geometry_mean_px, "%.3f");
+      row("geo_error_p95_px", run.geometry_p95_px, "%.3f");
+      row("geo_error_max_px", run.geometry_max_px, "%.2f");
+    }
+    if (run.geometry_rest_frames > 0) {
+      row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");
+      row("geo_error_rest_p95_px", run.geometry_rest_p95_px, "%.3f");
+    }
   }
   if (d.reference) {
     row("psnr_mean_db", s.psnr_mean_db, "%.2f");

@@ -30,6 +30,7 @@ out vec2 vRel;      // camera-relative ground position, world units (x, z)
 out vec3 vNormal;   // world-space normal
 out float vMorph;   // transition weight (overlay)
 out float vHeight;  // height in the store's units after the transition (tests)
+out float vRelY;    // camera-relative height, world units (position pass)
 
 float heightAt(int level, ivec2 s) {
   if (level >= uStoredLevels) {
@@ -86,5 +87,6 @@ void main() {
   vMorph = alpha;
   vHeight = h;
   float y = h * uWorldPerHeight - uCamY;
+  vRelY = y;
   gl_Position = uViewProj * vec4(vRel.x, y, vRel.y, 1.0);
 }

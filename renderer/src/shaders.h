@@ -7,4 +7,5 @@ extern const char* const k_ground_ray_glsl;
 extern const char* const k_ground_clipmap_frag;
 extern const char* const k_terrain_vert;
 extern const char* const k_terrain_ground_glsl;
+extern const char* const k_terrain_position_frag;
 }  // namespace clipstream::shaders

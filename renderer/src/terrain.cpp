@@ -94,6 +94,9 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   Status fs = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &r->m_feedback_program,
                                     "#define TERRAIN 1\n", {"vNormal", "vHeight"});
   if (!fs) return fs;
+  fs = gl_util::buildProgram(shaders::k_terrain_vert, shaders::k_terrain_position_frag,
+                             &r->m_position_program);
+  if (!fs) return fs;
 
   // One vertex grid; five index patterns (no hole, four hole offsets).
   std::vector<int32_t> grid;
@@ -170,6 +173,10 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
 TerrainRenderer::~TerrainRenderer() {
   for (uint32_t p : m_program) glDeleteProgram(p);
   glDeleteProgram(m_feedback_program);
+  glDeleteProgram(m_position_program);
+  glDeleteFramebuffers(1, &m_position_fbo);
+  glDeleteRenderbuffers(1, &m_position_color);
+  glDeleteRenderbuffers(1, &m_position_depth);
   glDeleteVertexArrays(1, &m_vao);
   glDeleteBuffers(1, &m_vertices);
   glDeleteBuffers(1, &m_indices);
@@ -384,6 +391,51 @@ std::vector<glm::vec4> TerrainRenderer::ringVertices(const Camera& camera, const
 
 void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
                            const ClipmapRenderer& colour) {
+  const GLuint p = m_program[colour.overlay() == Overlay::kOff ? 0 : 1];
+  colour.bindColour(p, camera, viewport);
+  setFrameUniforms(p, camera, viewport);
+  drawRings(p, camera, viewport);
+}
+
+void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewport,
+                                    const ClipmapRenderer& colour, std::vector<float>* xyzw) {
+  if (m_position_size.width_px != viewport.width_px || m_position_size.height_px != viewport.height_px) {
+    glDeleteFramebuffers(1, &m_position_fbo);
+    glDeleteRenderbuffers(1, &m_position_color);
+    glDeleteRenderbuffers(1, &m_position_depth);
+    glCreateRenderbuffers(1, &m_position_color);
+    glNamedRenderbufferStorage(m_position_color, GL_RGBA32F, GLsizei(viewport.width_px), GLsizei(viewport.height_px));
+    glCreateRenderbuffers(1, &m_position_depth);
+    glNamedRenderbufferStorage(m_position_depth, GL_DEPTH_COMPONENT24, GLsizei(viewport.width_px),
+                               GLsizei(viewport.height_px));
+    glCreateFramebuffers(1, &m_position_fbo);
+    glNamedFramebufferRenderbuffer(m_position_fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, m_position_color);
+    glNamedFramebufferRenderbuffer(m_position_fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_position_depth);
+    m_position_size = viewport;
+  }
+  GLint previous_fbo = 0;
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &previous_fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, m_position_fbo);
+  glViewport(0, 0, GLsizei(viewport.width_px), GLsizei(viewport.height_px));
+  const float none[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+  glClearNamedFramebufferfv(m_position_fbo, GL_COLOR, 0, none);
+  glClearNamedFramebufferfi(m_position_fbo, GL_DEPTH_STENCIL, 0, 1.0f, 0);
+  const GLuint p = m_position_program;
+  colour.bindColour(p, camera, viewport);  // the image's extent (uImageRel)
+  setFrameUniforms(p, camera, viewport);
+  drawRings(p, camera, viewport);
+  xyzw->resize(size_t(viewport.width_px) * viewport.height_px * 4);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  glReadPixels(0, 0, GLsizei(viewport.width_px), GLsizei(viewport.height_px), GL_RGBA, GL_FLOAT, xyzw->data());
+  // GL rows run bottom to top: put the top row first, like OffscreenTarget.
+  const size_t row = size_t(viewport.width_px) * 4;
+  for (uint32_t y = 0; y < viewport.height_px / 2; ++y)
+    std::swap_ranges(xyzw->begin() + long(y * row), xyzw->begin() + long((y + 1) * row),
+                     xyzw->begin() + long((viewport.height_px - 1 - y) * row));
+  glBindFramebuffer(GL_FRAMEBUFFER, GLuint(previous_fbo));
+}
+
+void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport& viewport) {
   m_frame = TerrainFrame{};
   const uint32_t n = m_config.ring_cells;
   const uint32_t coarsest = m_coarsest;
@@ -398,9 +450,6 @@ void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
   }
   if (finest < 0) return;
 
-  const GLuint p = m_program[colour.overlay() == Overlay::kOff ? 0 : 1];
-  colour.bindColour(p, camera, viewport);
-  setFrameUniforms(p, camera, viewport);
   glUseProgram(p);
   glBindVertexArray(m_vao);
   glEnable(GL_DEPTH_TEST);

@@ -226,3 +226,105 @@ TEST(TerrainStability, DemMuchCoarserOrFinerThanTheTexture) {
 
 }  // namespace
 }  // namespace clipstream
+
+namespace clipstream {
+namespace {
+
+TEST(TerrainAccuracy, GeometricErrorIsZeroOnTheSurfaceAndGrowsOffIt) {
+  test::TempDir dir;
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  Status s;
+  auto heights = openElevationSource(dir.file("dem.cst"), &s);
+  ASSERT_TRUE(heights) << s.toString();
+  LayerAlignment a;
+  a.world_per_sample = {4.0, 4.0};
+  a.sample0_world = {2.0, 2.0};
+  a.world_per_height = 1.0;
+  std::unique_ptr<ReferenceSurface> surface;
+  ASSERT_TRUE(ReferenceSurface::load(*heights, a, &surface).isOk());
+  // A sample's centre is the sample; half-way between two, their mean.
+  EXPECT_FLOAT_EQ(float(surface->heightAt(2.0 + 4.0 * 100, 2.0 + 4.0 * 77)), demHeight(100, 77, false));
+  EXPECT_NEAR(surface->heightAt(2.0 + 4.0 * 100.5, 2.0 + 4.0 * 77),
+              0.5 * (demHeight(100, 77, false) + demHeight(101, 77, false)), 1e-4);
+
+  // Positions on the surface (each pixel's ray marched to it): no error.
+  Camera camera;
+  camera.position = {900.0, 250.0, 1100.0};
+  camera.heading_rad = 0.7;
+  camera.pitch_rad = -0.6;
+  const Viewport vp{96, 64};
+  // Each pixel's ray marched to the surface raised by `lift` (0: the
+  // surface itself), as a renderer of that geometry would show it.
+  auto positions = [&](double lift) {
+    std::vector<float> xyzw(size_t(vp.width_px) * vp.height_px * 4, 0.0f);
+    const double tan_half = std::tan(camera.vfov_rad * 0.5), aspect = double(vp.width_px) / vp.height_px;
+    for (uint32_t py = 0; py < vp.height_px; ++py)
+      for (uint32_t px = 0; px < vp.width_px; ++px) {
+        const double nx = 2.0 * (px + 0.5) / vp.width_px - 1.0, ny = 1.0 - 2.0 * (py + 0.5) / vp.height_px;
+        const glm::dvec3 d = glm::normalize(camera.forward() + camera.right() * (nx * tan_half * aspect) +
+                                            camera.up() * (ny * tan_half));
+        auto below = [&](double t) {
+          const glm::dvec3 p = camera.position + d * t;
+          return p.y <= surface->heightAt(p.x, p.z) + lift;
+        };
+        double t0 = 0.0, t1 = 0.0;
+        for (double t = 1.0; t < 5000.0; t += 1.0) {  // march, then bisect
+          if (below(t)) {
+            t0 = t - 1.0, t1 = t;
+            break;
+          }
+        }
+        if (t1 == 0.0) continue;
+        for (int k = 0; k < 60; ++k) {
+          const double t = 0.5 * (t0 + t1);
+          (below(t) ? t1 : t0) = t;
+        }
+        const glm::dvec3 rel = d * t1;
+        float* o = xyzw.data() + (size_t(py) * vp.width_px + px) * 4;
+        o[0] = float(rel.x), o[1] = float(rel.y), o[2] = float(rel.z), o[3] = 1.0f;
+      }
+    return xyzw;
+  };
+  const std::vector<float> on = positions(0.0), off = positions(5.0);
+  const GeometryError exact = geometricError(on, camera, vp, *surface);
+  ASSERT_TRUE(exact.measured);
+  ASSERT_GT(exact.pixels, vp.width_px * vp.height_px / 2);
+  EXPECT_LT(exact.max_px, 0.05);
+  const GeometryError lifted = geometricError(off, camera, vp, *surface);
+  EXPECT_GT(lifted.mean_px, 0.5);
+  EXPECT_GT(lifted.max_px, lifted.mean_px);
+  EXPECT_GE(lifted.p95_px, lifted.mean_px);
+}
+
+TEST(TerrainAccuracy, AtRestTheGeometricErrorMeetsTheTarget) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir;
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  Status s;
+  TerrainLayerConfig terrain;
+  terrain.source = openElevationSource(dir.file("dem.cst"), &s);
+  ASSERT_TRUE(terrain.source) << s.toString();
+  terrain.alignment.world_per_sample = {4.0, 4.0};
+  terrain.alignment.sample0_world = {2.0, 2.0};
+  terrain.alignment.world_per_height = 1.0;
+  FlightRunOptions o;
+  o.source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
+  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
+  o.frames = 20;
+  o.rest_frames = 20;
+  o.viewport = kViewport;
+  o.reference_every = 5;
+  o.sample_tiles = false;
+  o.terrain = terrain;  // default ring size
+  FlightRun run;
+  s = runFlight(o, &run);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_GT(run.geometry_rest_frames, 0u);
+  EXPECT_LE(run.geometry_rest_mean_px, 0.5);
+  EXPECT_LE(run.geometry_rest_p95_px, 1.0);
+  std::printf("  geometric error at rest: mean %.3f px, p95 %.3f px, max %.2f px\n",
+              run.geometry_rest_mean_px, run.geometry_rest_p95_px, run.geometry_rest_max_px);
+}
+
+}  // namespace
+}  // namespace clipstream

@@ -18,6 +18,7 @@
 #include <clipstream/streamer/flight_path.h>
 #include <clipstream/eval/metrics.h>
 #include <clipstream/eval/reference.h>
+#include <clipstream/eval/terrain_accuracy.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/renderer.h>
@@ -56,7 +57,8 @@ struct FlightRunOptions {
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
   // Terrain under the colour layer (FlightConfig::terrain). Path heights
   // then mean heights above the ground under the camera, never less than
-  // kTerrainClearance; the accuracy reference (flat) is not run.
+  // kTerrainClearance; the flat image reference is not run, and judged
+  // frames (reference_every) measure the geometric error instead.
   std::optional<TerrainLayerConfig> terrain;
 
   // Measurement.
@@ -92,6 +94,7 @@ struct FlightRunFrame {
   double t_s = 0.0;            // path time shown
   double readback_ms = 0.0;    // reading a saved frame back (FlightRunOptions::on_frame); 0 if not saved
   AccuracyFrame accuracy;      // when judged
+  GeometryError geometry;      // over terrain, when judged (reference_every)
 };
 
 struct FlightRun {
@@ -125,6 +128,12 @@ struct FlightRun {
   // triangles drawn per recorded frame.
   uint64_t height_texture_bytes = 0;
   double terrain_triangles_mean = 0.0;
+  // Geometric error over the judged frames (terrain with reference_every):
+  // means of the per-frame mean and p95, and the largest; the same over
+  // the rest frames alone (the camera still). 0 when not measured.
+  uint32_t geometry_frames = 0, geometry_rest_frames = 0;
+  double geometry_mean_px = 0.0, geometry_p95_px = 0.0, geometry_max_px = 0.0;
+  double geometry_rest_mean_px = 0.0, geometry_rest_p95_px = 0.0, geometry_rest_max_px = 0.0;
 };
 
 // Least height above the ground a terrain flight keeps the camera (world

@@ -149,6 +149,7 @@ class Flight {
   ClipmapRenderer& renderer() { return *m_renderer; }
   // Null without terrain.
   const TerrainRenderer* terrain() const { return m_terrain.get(); }
+  TerrainRenderer* terrain() { return m_terrain.get(); }
   // The ground height (world units) at world (x, z) from the heights the
   // GPU holds (TerrainRenderer::groundHeight()); 0 and false without
   // terrain. The coarse height levels are loaded at create(), so over the

@@ -94,6 +94,16 @@ class TerrainRenderer {
   // `level` (optional) receives the level used.
   bool groundHeight(const glm::dvec2& world_xz, double* height, uint32_t* level = nullptr) const;
 
+  // The camera-relative world position (x, y, z) each pixel shows, 4
+  // floats a pixel (w = 1 on terrain, 0 elsewhere), top row first, drawn
+  // with the same rings, culling and residency as draw() into the
+  // renderer's own float target. For measuring the geometric error; it
+  // replaces lastFrame(). GL thread.
+  // `colour` gives the image's extent (ground outside it is left out, as
+  // draw() leaves it).
+  void readPositions(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
+                     std::vector<float>* xyzw);
+
   const TerrainFrame& lastFrame() const { return m_frame; }
   // Bytes of the height stack texture (video memory).
   uint64_t textureBytes() const { return m_texture_bytes; }
@@ -124,6 +134,9 @@ class TerrainRenderer {
   TerrainRenderer() = default;
   void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
   double farDistance(const Camera& camera) const;
+  // Draws the resident rings with `program` (its uniforms set by the caller
+  // for the frame), culling blocks; fills m_frame.
+  void drawRings(uint32_t program, const Camera& camera, const Viewport& viewport);
   void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
                        const glm::i64vec2& origin) const;
   bool levelResident(uint32_t level, const glm::i64vec2& origin) const;
@@ -138,6 +151,9 @@ class TerrainRenderer {
   uint32_t m_coarsest = 0;     // outermost ring level: covers the whole height field
   uint32_t m_program[2] = {0, 0};  // without / with the overlay
   uint32_t m_feedback_program = 0; // ringVertices()
+  uint32_t m_position_program = 0; // readPositions()
+  uint32_t m_position_fbo = 0, m_position_color = 0, m_position_depth = 0;
+  Viewport m_position_size{0, 0};
   uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
   uint32_t m_heights = 0;      // R32F array texture
   // Index buffer ranges: [0] no hole, [1 + hx + 2 hy] hole at (n/4 + hx, n/4 + hy).
