@@ -333,5 +333,106 @@ TEST(Terrain, GroundHeightFollowsTheFinestResidentLevel) {
   EXPECT_NEAR(h, 0.5 * (s.field.at(0, 500, 388) + s.field.at(0, 501, 388)), 1e-4);
 }
 
+// Uploads, for this camera, the tiles every ring reads, fetched from a
+// height source.
+void uploadRingsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera& camera) {
+  const PyramidGeometry& g = heights.geometry();
+  const uint32_t n = terrain.config().ring_cells;
+  const int64_t t = g.tile_px;
+  std::vector<uint8_t> bytes;
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    const glm::i64vec2 o = TerrainRenderer::ringOrigin(terrain.config(), camera, l);
+    const LevelInfo& info = g.levels[l];
+    auto clampTile = [&](int64_t v, uint64_t size) { return std::clamp<int64_t>(v, 0, int64_t(size) - 1) / t; };
+    for (int64_t ty = clampTile(o.y - 1, info.height_px); ty <= clampTile(o.y + n + 1, info.height_px); ++ty)
+      for (int64_t tx = clampTile(o.x - 1, info.width_px); tx <= clampTile(o.x + n + 1, info.width_px); ++tx) {
+        const TileKey key{l, uint32_t(tx), uint32_t(ty)};
+        ASSERT_TRUE(heights.fetch(key, &bytes).isOk());
+        terrain.uploadTile(key, reinterpret_cast<const float*>(bytes.data()));
+      }
+  }
+}
+
+TEST(Terrain, PlanetSizedTerrainNearItsFarCornerHasNoCrackOrJitter) {
+  CLIPSTREAM_REQUIRE_GL();
+  const uint64_t side = uint64_t(1) << 26;
+  ProceduralSpec spec;
+  spec.width_px = spec.height_px = side;
+  auto heights = makeProceduralHeightSource(spec);
+  ASSERT_TRUE(heights);
+  // World = the planet's samples, one colour texel each (the procedural
+  // texture): camera coordinates near 6.7e7, where float positions would
+  // be off by whole texels.
+  ProceduralSpec colour_spec = spec;
+  auto colour = makeProceduralSource(colour_spec);
+  const double x = double(side) - 3000.25, z = double(side) - 2000.75;
+  Camera world;
+  world.position = {x, proceduralHeight(spec, uint64_t(x), uint64_t(z)) + 150.0, z};
+  world.heading_rad = 0.8;
+  world.pitch_rad = -0.35;
+  TerrainConfig tc;
+  tc.ring_cells = 64;
+  tc.mapping.world_per_sample = {1.0, 1.0};
+  tc.mapping.sample0_world = {0.5, 0.5};
+  tc.mapping.world_per_height = 1.0;
+  std::unique_ptr<TerrainRenderer> terrain;
+  ASSERT_TRUE(TerrainRenderer::create(heights->geometry(), tc, &terrain).isOk());
+  const ClipmapPlan plan = planClipmap(colour->geometry(), kViewport, world, {});
+  std::unique_ptr<ClipmapRenderer> colour_renderer;
+  ASSERT_TRUE(ClipmapRenderer::create(colour->geometry(), {plan.clip_tiles, plan.pyramid_level, Buffering::kSingle},
+                                      &colour_renderer).isOk());
+  test::loadPlan(*colour_renderer, *colour, plan);
+  std::unique_ptr<OffscreenTarget> target;
+  ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).isOk());
+  uploadRingsFrom(*terrain, *heights, world);
+
+  auto draw = [&](const Camera& c) {
+    target->bind();
+    ClipmapRenderer::clearSky();
+    terrain->draw(c, kViewport, *colour_renderer);
+    std::vector<uint8_t> rgba;
+    target->readRgba(&rgba);
+    return rgba;
+  };
+  const std::vector<uint8_t> a = draw(world);
+  ASSERT_GT(terrain->lastFrame().rings, 3u);
+  EXPECT_EQ(terrain->lastFrame().finest_level, 0u);
+  // Heights of the finest ring are the procedural samples exactly.
+  target->bind();
+  const std::vector<glm::vec4> v = terrain->ringVertices(world, kViewport, 0);
+  const glm::i64vec2 o = TerrainRenderer::ringOrigin(tc, world, 0);
+  for (uint32_t j = 20; j <= 44; j += 6)
+    for (uint32_t i = 20; i <= 44; i += 6)
+      EXPECT_EQ(v[size_t(j) * 65 + i].w, float(proceduralHeight(spec, uint64_t(o.x + i), uint64_t(o.y + j))));
+  // No crack: every pixel whose ray meets the plane of the lowest ground
+  // (proceduralHeight >= 345) inside the planet shows terrain.
+  Camera lowered = world;
+  lowered.position.y -= 340.0;
+  size_t cracks = 0, ground = 0;
+  for (uint32_t py = 0; py < kViewport.height_px; ++py)
+    for (uint32_t px = 0; px < kViewport.width_px; ++px) {
+      const uint8_t* p = a.data() + (size_t(py) * kViewport.width_px + px) * 4;
+      const bool sky = std::equal(p, p + 3, renderer_config::kSkyRgba);
+      ground += sky ? 0 : 1;
+      glm::dvec2 hit;
+      if (!groundHit(lowered, kViewport, px + 0.5, py + 0.5, &hit)) continue;
+      if (hit.x > double(side) - 1.0 || hit.y > double(side) - 1.0) continue;
+      if (sky) ++cracks;
+    }
+  EXPECT_GT(ground, size_t(kViewport.width_px) * kViewport.height_px / 3);
+  EXPECT_EQ(cracks, 0u);
+  // No jitter: a hundredth of a sample sideways moves the picture by far
+  // less than a pixel, so the frames barely differ (float positions near
+  // 2^26 would snap vertices by whole samples and scramble them).
+  Camera nudged = world;
+  nudged.position.x += 0.01;
+  const std::vector<uint8_t> b = draw(nudged);
+  double diff = 0.0;
+  for (size_t i = 0; i < a.size(); i += 4) diff += std::abs(int(a[i]) - int(b[i]));
+  diff /= double(a.size() / 4);
+  std::printf("  mean grey change for a 0.01-sample move: %.4f\n", diff);
+  EXPECT_LT(diff, 0.5);
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -117,6 +117,16 @@ std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t 
 void proceduralTexel(const ProceduralSpec& spec, uint32_t level, uint64_t tx, uint64_t ty,
                      uint8_t rgba[4]);
 
+// Deterministic procedural heights (a kHeightF32 source, metres) of any
+// size up to kMaxProceduralSidePx samples a side, computed per tile:
+// rolling value noise over five octaves (cells of 2^13 down to 2^5
+// samples) and a 120-unit cliff on every other band of 2^14 columns. Every
+// sample is proceduralHeight() of its level-0 coordinates, and level L's
+// sample (i, j) is level 0's (i 2^L, j 2^L), as the tiler decimates. Null
+// for an empty or too large size.
+std::shared_ptr<TileSource> makeProceduralHeightSource(const ProceduralSpec& spec);
+double proceduralHeight(const ProceduralSpec& spec, uint64_t x, uint64_t y);
+
 // Test/benchmark wrapper: adds latency to every fetch and fails a chosen
 // fraction of tiles (deterministically by key) or all of them.
 struct FaultSpec {
