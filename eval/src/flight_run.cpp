@@ -15,7 +15,7 @@
 namespace clipstream {
 
 Camera cameraAboveGround(Camera path_camera, double ground) {
-  path_camera.position.y = ground + std::max(path_camera.position.y, kTerrainClearance);
+  path_camera.position.y = ground + std::max(path_camera.position.y, renderer_config::kTerrainClearance);
   return path_camera;
 }
 

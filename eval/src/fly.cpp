@@ -178,30 +178,14 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   FlightRunOptions r;
   r.source = source;
   if (!o.elevation_path.empty()) {
-    Status s;
     TerrainLayerConfig terrain;
-    terrain.source = openElevationSource(o.elevation_path, &s);
-    if (!terrain.source) return s;
-    terrain.ring_cells = o.terrain_ring;
-    // The colour layer's georeference (a procedural texture has none).
-    StoreInfo colour;
-    colour.geometry = geometry;
-    if (o.procedural_px == 0) {
-      std::unique_ptr<TileStoreReader> reader;
-      if (s = TileStoreReader::open(o.store_path, &reader); !s) return s;
-      colour = reader->info();
-    }
-    StoreInfo heights;
-    {
-      std::unique_ptr<TileStoreReader> reader;
-      if (s = TileStoreReader::open(o.elevation_path, &reader); !s) return s;
-      heights = reader->info();
-    }
-    if (s = alignElevation(colour, heights, o.vertical_scale, o.stretch_elevation, &terrain.alignment); !s) {
-      return Status::error(s.code, o.elevation_path + ": " + s.message);
-    }
-    for (const std::string& w : terrain.alignment.warnings)
-      (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
+    std::vector<std::string> notes;
+    if (Status s = openTerrainLayer(o.procedural_px > 0 ? std::string() : o.store_path, geometry,
+                                    o.elevation_path, o.vertical_scale, o.stretch_elevation,
+                                    o.terrain_ring, &terrain, &notes);
+        !s)
+      return s;
+    for (const std::string& w : notes) (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
     if (o.reference)
       (warnings ? *warnings : log) << "clipstream-fly: warning: over terrain --reference measures the "
                                       "geometric error against the full-resolution mesh; the image "

@@ -4,6 +4,8 @@
 #include "gl.h"
 
 #include <clipstream/renderer/config.h>
+#include <clipstream/store/tile_store.h>
+#include <clipstream/streamer/alignment.h>
 
 #include <algorithm>
 #include <chrono>
@@ -45,6 +47,37 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
   if (failures != nullptr) *failures += missing;
   if (plan != nullptr) *plan = first;
   *out = std::move(renderer);
+  return Status::ok();
+}
+
+Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
+                        const std::string& elevation_path, double vertical_scale, bool stretch,
+                        uint32_t ring_cells, TerrainLayerConfig* out,
+                        std::vector<std::string>* warnings) {
+  *out = TerrainLayerConfig{};
+  Status s;
+  out->source = openElevationSource(elevation_path, &s);
+  if (!out->source) return s;
+  out->ring_cells = ring_cells;
+  StoreInfo colour;
+  colour.geometry = colour_geometry;
+  if (!colour_path.empty()) {
+    std::unique_ptr<TileStoreReader> reader;
+    if (s = TileStoreReader::open(colour_path, &reader); !s) return s;
+    colour = reader->info();
+  }
+  StoreInfo heights;
+  {
+    std::unique_ptr<TileStoreReader> reader;
+    if (s = TileStoreReader::open(elevation_path, &reader); !s) return s;
+    heights = reader->info();
+  }
+  if (s = alignElevation(colour, heights, vertical_scale, stretch, &out->alignment); !s) {
+    return Status::error(s.code, elevation_path + ": " + s.message);
+  }
+  if (warnings != nullptr) {
+    warnings->insert(warnings->end(), out->alignment.warnings.begin(), out->alignment.warnings.end());
+  }
   return Status::ok();
 }
 

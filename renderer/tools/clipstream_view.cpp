@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -41,7 +42,9 @@ Input* inputOf(GLFWwindow* w) { return static_cast<Input*>(glfwGetWindowUserPoin
 
 int main(int argc, char** argv) {
   CLI::App app{"Interactive clipmap viewer (GLFW window).", "clipstream-view"};
-  std::string store_path, size = "1280x720", record_path = "recorded_path.json";
+  std::string store_path, size = "1280x720", record_path = "recorded_path.json", elevation_path;
+  double vertical_scale = 1.0;
+  bool stretch_elevation = false;
   uint64_t procedural_px = 0, cache_mb = 512;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
   app.add_option("store", store_path, "Tile store file (omit with --procedural)");
@@ -55,6 +58,11 @@ int main(int argc, char** argv) {
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
   app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
       ->transform(cli::wholeInRange(0, UINT32_MAX));
+  app.add_option("--elevation", elevation_path, "Elevation store under the texture: fly over terrain");
+  app.add_option("--vertical-scale", vertical_scale, "Height exaggeration (with --elevation)")
+      ->transform(cli::inRange(0.001, 1000.0));
+  app.add_flag("--stretch-elevation", stretch_elevation,
+               "Stretch the elevation store over the texture instead of placing it by georeference");
   app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
 
@@ -93,6 +101,20 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE");
   }
   const PyramidGeometry& g = source->geometry();
+  std::optional<TerrainLayerConfig> terrain;
+  if (!elevation_path.empty()) {
+    TerrainLayerConfig layer;
+    std::vector<std::string> notes;
+    if (Status s = openTerrainLayer(procedural_px > 0 ? std::string() : store_path, g, elevation_path,
+                                    vertical_scale, stretch_elevation,
+                                    renderer_config::kTerrainRingCells, &layer, &notes);
+        !s) {
+      cli::printError(app, s.toString());
+      return 1;
+    }
+    for (const std::string& w : notes) cli::printError(app, "warning: " + w);
+    terrain = std::move(layer);
+  }
 
   if (!glfwInit()) {
     std::cerr << "clipstream-view: GLFW could not initialise (no display?)\n";
@@ -143,6 +165,10 @@ int main(int argc, char** argv) {
   camera.position = {double(g.width_px) * 0.5, std::min<double>(std::max(g.width_px, g.height_px) * 0.2, 5000.0),
                      double(g.height_px) * 0.5};
   camera.pitch_rad = -0.6;
+  if (terrain) {
+    // Start above the highest ground; each frame then keeps above the ground.
+    camera.position.y += terrain->source->elevationInfo().max_height * terrain->alignment.world_per_height;
+  }
   input.speed_texels_s = camera.position.y;
 
   // The one frame loop's step, drawing into the window. The coarse pyramid
@@ -152,6 +178,7 @@ int main(int argc, char** argv) {
   fc.streamer.ram_budget_bytes = cache_mb << 20;
   fc.upload_tiles = upload_tiles;
   fc.offscreen = false;
+  fc.terrain = terrain;
   {
     int fb_w = 0, fb_h = 0;
     glfwGetFramebufferSize(window, &fb_w, &fb_h);
@@ -194,6 +221,11 @@ int main(int argc, char** argv) {
     if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
     camera.position += move * (speed * dt);
     camera.position.y = std::max(camera.position.y, 1.0);
+    if (double ground = 0.0; flight->groundHeight({camera.position.x, camera.position.z}, &ground)) {
+      // Over terrain the camera never goes under the ground (nor closer
+      // than the clearance, where the near plane would cut the slope).
+      camera.position.y = std::max(camera.position.y, ground + renderer_config::kTerrainClearance);
+    }
 
     if (input.overlay_toggled) {
       ClipmapRenderer& renderer = flight->renderer();

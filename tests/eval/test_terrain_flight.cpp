@@ -30,41 +30,9 @@ float demHeight(uint64_t x, uint64_t y, bool spikes) {
   return float(v);
 }
 
-// An F32 elevation store of kDemSide^2 samples (decimated levels, each
-// tile's own bounds).
 Status writeDem(const std::string& path, bool spikes) {
-  PyramidGeometry g;
-  if (!makePyramidGeometry(kDemSide, kDemSide, 128, PixelFormat::kF32, &g))
-    return Status::error(ErrorCode::kInvalidArgument, "geometry");
-  WriterOptions options;
-  options.fsync = false;
-  options.encoding.filter = DownsampleFilter::kDecimate;
-  options.elevation.present = true;
-  std::unique_ptr<TileStoreWriter> writer;
-  if (Status s = TileStoreWriter::create(path, g, options, &writer); !s) return s;
-  float lo = INFINITY, hi = -INFINITY;
-  for (uint32_t l = 0; l < g.levelCount(); ++l)
-    for (uint32_t ty = 0; ty < g.levels[l].tiles_y; ++ty)
-      for (uint32_t tx = 0; tx < g.levels[l].tiles_x; ++tx) {
-        std::vector<uint8_t> pixels(g.tileBytes());
-        float tmin = INFINITY, tmax = -INFINITY;
-        for (uint32_t y = 0; y < 128; ++y)
-          for (uint32_t x = 0; x < 128; ++x) {
-            const uint64_t sx = std::min<uint64_t>((uint64_t(tx) * 128 + x) << l, kDemSide - 1);
-            const uint64_t sy = std::min<uint64_t>((uint64_t(ty) * 128 + y) << l, kDemSide - 1);
-            const float h = demHeight(sx, sy, spikes);
-            std::memcpy(pixels.data() + (size_t(y) * 128 + x) * 4, &h, 4);
-            tmin = std::min(tmin, h), tmax = std::max(tmax, h);
-          }
-        lo = std::min(lo, tmin), hi = std::max(hi, tmax);
-        EncodedTile encoded;
-        if (Status s = encodeTile(g, options.encoding, {l, tx, ty}, pixels, &encoded); !s) return s;
-        encoded.location.min_height = tmin;
-        encoded.location.max_height = tmax;
-        if (Status s = writer->write(std::move(encoded)); !s) return s;
-      }
-  if (Status s = writer->setElevationFigures(0, 0.0, lo, hi); !s) return s;
-  return writer->finish();
+  return test::writeElevationStore(path, kDemSide, kDemSide,
+                                   [spikes](uint64_t x, uint64_t y) { return demHeight(x, y, spikes); });
 }
 
 struct Scenario {

@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -33,6 +34,25 @@ TEST(ClipstreamView, RunsUnderXvfb) {
   ss << log.rdbuf();
   EXPECT_EQ(rc, 0) << ss.str();
   fs::remove_all(dir);
+}
+
+// Over terrain: a procedural texture over an elevation store, 20 frames,
+// exit 0 (the camera kept above the ground on the way).
+TEST(ClipstreamView, FliesOverTerrainUnderXvfb) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) GTEST_SKIP() << "no xvfb-run";
+  test::TempDir dir;
+  ASSERT_TRUE(test::writeElevationStore(dir.file("dem.cst"), 300, 200, [](uint64_t x, uint64_t y) {
+                return float(100.0 + 50.0 * std::sin(x * 0.05) * std::cos(y * 0.04));
+              }).isOk());
+  const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(CLIPSTREAM_VIEW_EXE) +
+                          " --procedural 4096 --elevation " + dir.file("dem.cst") +
+                          " --size 320x240 --frames 20 > " + dir.file("log.txt") + " 2>&1";
+  const int rc = std::system(cmd.c_str());
+  std::ifstream log(dir.file("log.txt"));
+  std::stringstream ss;
+  ss << log.rdbuf();
+  EXPECT_EQ(rc, 0) << ss.str();
+  EXPECT_NE(ss.str().find("stretched"), std::string::npos) << "the DEM without georeference is stretched, and said so";
 }
 
 // Third pass: clipstream-view --record-out naming the store being viewed

@@ -1,6 +1,9 @@
 #include <clipstream/testing/synthetic_store.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstring>
 
 namespace clipstream::test {
 namespace {
@@ -110,6 +113,43 @@ Status writeStore(const std::string& path, const PyramidGeometry& geometry,
       }
     }
   }
+  return writer->finish();
+}
+
+Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
+                           const std::function<float(uint64_t x, uint64_t y)>& height) {
+  PyramidGeometry g;
+  if (!makePyramidGeometry(w, h, 128, PixelFormat::kF32, &g))
+    return Status::error(ErrorCode::kInvalidArgument, "writeElevationStore: bad size");
+  WriterOptions options;
+  options.fsync = false;
+  options.encoding.filter = DownsampleFilter::kDecimate;
+  options.elevation.present = true;
+  std::unique_ptr<TileStoreWriter> writer;
+  if (Status s = TileStoreWriter::create(path, g, options, &writer); !s) return s;
+  float lo = INFINITY, hi = -INFINITY;
+  const uint32_t t = g.tile_px;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t ty = 0; ty < g.levels[l].tiles_y; ++ty)
+      for (uint32_t tx = 0; tx < g.levels[l].tiles_x; ++tx) {
+        std::vector<uint8_t> pixels(g.tileBytes());
+        float tmin = INFINITY, tmax = -INFINITY;
+        for (uint32_t y = 0; y < t; ++y)
+          for (uint32_t x = 0; x < t; ++x) {
+            const uint64_t sx = std::min<uint64_t>((uint64_t(tx) * t + x) << l, w - 1);
+            const uint64_t sy = std::min<uint64_t>((uint64_t(ty) * t + y) << l, h - 1);
+            const float v = height(sx, sy);
+            std::memcpy(pixels.data() + (size_t(y) * t + x) * 4, &v, 4);
+            tmin = std::min(tmin, v), tmax = std::max(tmax, v);
+          }
+        lo = std::min(lo, tmin), hi = std::max(hi, tmax);
+        EncodedTile encoded;
+        if (Status s = encodeTile(g, options.encoding, {l, tx, ty}, pixels, &encoded); !s) return s;
+        encoded.location.min_height = tmin;
+        encoded.location.max_height = tmax;
+        if (Status s = writer->write(std::move(encoded)); !s) return s;
+      }
+  if (Status s = writer->setElevationFigures(0, 0.0, lo, hi); !s) return s;
   return writer->finish();
 }
 

@@ -136,13 +136,9 @@ struct FlightRun {
   double geometry_rest_mean_px = 0.0, geometry_rest_p95_px = 0.0, geometry_rest_max_px = 0.0;
 };
 
-// Least height above the ground a terrain flight keeps the camera (world
-// units): a path that asks for less (or for a camera under the ground) is
-// lifted to this, so the near plane never cuts into the slope in front.
-inline constexpr double kTerrainClearance = 2.0;
-
 // The camera of a terrain flight: `path_camera` with its height taken as
-// height above `ground` (world units), at least kTerrainClearance.
+// height above `ground` (world units), at least
+// renderer_config::kTerrainClearance.
 Camera cameraAboveGround(Camera path_camera, double ground);
 
 // Flies the run. kInvalidArgument for a missing source or zero frames;

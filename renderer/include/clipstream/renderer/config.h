@@ -33,6 +33,11 @@ inline constexpr uint32_t kTerrainTransitionDivisor = 10;
 // Share of the light that does not depend on the sun (Lambert + ambient).
 inline constexpr float kTerrainAmbient = 0.35f;
 
+// Least height above the ground a camera keeps over terrain (world units):
+// flights lift a path that asks for less, and clipstream-view stops there,
+// so the near plane never cuts into the slope in front.
+inline constexpr double kTerrainClearance = 2.0;
+
 // Colour written where the view ray misses the textured ground (sky, or
 // outside the texture). Tests compare against the same constant.
 inline constexpr uint8_t kSkyRgba[4] = {46, 51, 64, 255};

@@ -37,6 +37,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace clipstream {
@@ -66,6 +67,17 @@ struct TerrainLayerConfig {
   LayerAlignment alignment;
   uint32_t ring_cells = renderer_config::kTerrainRingCells;
 };
+
+// The terrain layer of a scene of two stores: opens `elevation_path` as a
+// height source, reads both stores' headers and aligns the DEM under the
+// colour layer (alignElevation(); `colour_path` empty: a colour layer of
+// `colour_geometry` without georeference, e.g. a procedural texture).
+// What the user should know (stretching, assumed units) goes to *warnings.
+// Errors name the elevation store.
+Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
+                        const std::string& elevation_path, double vertical_scale, bool stretch,
+                        uint32_t ring_cells, TerrainLayerConfig* out,
+                        std::vector<std::string>* warnings);
 
 struct FlightConfig {
   Viewport viewport{1280, 720};

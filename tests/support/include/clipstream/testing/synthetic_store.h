@@ -67,6 +67,12 @@ using TileFill = std::function<Status(const TileKey& key, std::vector<uint8_t>* 
 Status writeStore(const std::string& path, const PyramidGeometry& geometry,
                   const WriterOptions& options, const TileFill& fill);
 
+// An F32 elevation store of w x h samples whose level-0 sample (x, y) is
+// height(x, y); levels are decimated (level L's (i, j) is level 0's
+// (i 2^L, j 2^L)) and each tile's bounds are its own samples' min and max.
+Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
+                           const std::function<float(uint64_t x, uint64_t y)>& height);
+
 // writeStore() with syntheticTile(). `options` has no default so that
 // writeSyntheticStore(path, {.width_px = ...}) means the overload below
 // (PyramidGeometry has fields of the same names).
