@@ -208,6 +208,13 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   Camera planning = camera;
   if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, &f.ground_height)) {
     planning.position.y = std::max(camera.position.y - f.ground_height, camera.near_dist);
+    // ... and sees the relief around it: the footprint also covers the
+    // highest and lowest ground in reach (a slope in front loads what the
+    // frame shows of it).
+    double lowest = 0.0, highest = 0.0;
+    if (m_terrain->groundRange(camera, &lowest, &highest)) {
+      m_streamer->setGroundRelief(highest - f.ground_height, f.ground_height - lowest);
+    }
   }
   m_streamer->update(planning, m_config.viewport, clock_s);
   FrameHandoff handoff;

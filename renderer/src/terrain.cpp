@@ -226,6 +226,19 @@ glm::vec2 TerrainRenderer::heightBounds(uint32_t ring_level, glm::i64vec2 s0, gl
   return b;
 }
 
+bool TerrainRenderer::groundRange(const Camera& camera, double* lowest, double* highest) const {
+  for (uint32_t l = std::min(m_frame.finest_level + kReliefRings, m_coarsest); l <= m_coarsest; ++l) {
+    const glm::i64vec2 o = ringOrigin(m_config, camera, l);
+    const int64_t n = m_config.ring_cells;
+    const glm::vec2 b = heightBounds(l, o, o + glm::i64vec2(n, n));
+    if (!std::isfinite(b.x) || !std::isfinite(b.y)) continue;
+    *lowest = double(b.x) * m_config.mapping.world_per_height;
+    *highest = double(b.y) * m_config.mapping.world_per_height;
+    return true;
+  }
+  return false;
+}
+
 uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
   uint32_t missing = 0;
   const size_t floats = size_t(m_geometry.tile_px) * m_geometry.tile_px;

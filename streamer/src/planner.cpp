@@ -158,7 +158,32 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
 
   const glm::dvec2 nadir{camera.position.x, camera.position.z};
   plan.focus_texel = nadir;
-  const Footprint fp = computeFootprint(geometry, viewport, camera);
+  Footprint fp = computeFootprint(geometry, viewport, camera);
+  // Terrain: the union with the footprints on the lowest and highest ground
+  // in view (PlannerConfig::ground_above / ground_below).
+  auto merge = [&](const Footprint& other) {
+    if (!other.any_hit) return;
+    fp.nearest_dist = fp.any_hit ? std::min(fp.nearest_dist, other.nearest_dist) : other.nearest_dist;
+    fp.any_hit = true;
+    fp.points.insert(fp.points.end(), other.points.begin(), other.points.end());
+  };
+  if (config.ground_below > 0.0 && std::isfinite(config.ground_below)) {
+    Camera low = camera;
+    low.position.y += config.ground_below;
+    merge(computeFootprint(geometry, viewport, low));
+  }
+  if (config.ground_above > 0.0 && std::isfinite(config.ground_above)) {
+    Camera high = camera;
+    if (camera.position.y > config.ground_above) {
+      high.position.y -= config.ground_above;
+    } else {
+      // The camera is below the top: the rays that rise meet the upper
+      // plane; mirrored, they are a camera looking down on it.
+      high.position.y = config.ground_above - camera.position.y + 1e-6;
+      high.pitch_rad = -camera.pitch_rad;
+    }
+    merge(computeFootprint(geometry, viewport, high));
+  }
   plan.ground_visible = fp.any_hit;
 
   // Finest level: the nearest visible ground point has the densest texels.

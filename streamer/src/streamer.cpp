@@ -201,6 +201,10 @@ struct Streamer::Impl {
     PlannerConfig planner(const PlannerConfig& base) const {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
+      // Relief in world units, scaled like layerCamera() scales heights.
+      const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
+      c.ground_above *= s;
+      c.ground_below *= s;
       return c;
     }
     // Coarseness of one of this layer's levels in world space: log2 of the
@@ -972,6 +976,12 @@ FrameHandoff Streamer::takeReady(size_t max_tiles, size_t max_bytes) {
 std::vector<FrameHandoff> Streamer::takeReadyAll(size_t max_tiles, size_t max_bytes) {
   Impl& s = *m_impl;
   return s.handOff(s.layers.size(), max_tiles, max_bytes);
+}
+
+void Streamer::setGroundRelief(double above, double below) {
+  Impl& s = *m_impl;
+  s.config.planner.ground_above = std::isfinite(above) ? std::max(above, 0.0) : 0.0;
+  s.config.planner.ground_below = std::isfinite(below) ? std::max(below, 0.0) : 0.0;
 }
 
 void Streamer::setPathHint(PathHint hint) {

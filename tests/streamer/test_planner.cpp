@@ -268,3 +268,57 @@ TEST(Planner, ClipSizeCoversTwiceTheScreenPlusATile) {
 
 }  // namespace
 }  // namespace clipstream
+
+namespace clipstream {
+namespace {
+
+// Height-aware planning (PlannerConfig::ground_above / ground_below): a
+// camera low in a valley looking up at a slope sees no ground on its own
+// plane, but the slope's top plane gives it a footprint, windows with
+// visible tiles and a finest level; the flat case is unchanged.
+TEST(Planner, ReliefInViewGivesASlopeSeenFromBelowAFootprint) {
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(16384, 16384, 128, PixelFormat::kRGBA8, &g));
+  const Viewport vp{640, 360};
+  Camera c;
+  c.position = {8000.0, 10.0, 8000.0};
+  c.pitch_rad = 0.6;  // every ray rises
+  PlannerConfig flat;
+  const ClipmapPlan none = planClipmap(g, vp, c, flat);
+  EXPECT_FALSE(none.ground_visible);
+  PlannerConfig relief = flat;
+  relief.ground_above = 500.0;
+  const ClipmapPlan slope = planClipmap(g, vp, c, relief);
+  ASSERT_TRUE(slope.ground_visible);
+  EXPECT_LT(slope.finest_level, slope.pyramid_level);
+  size_t visible = 0;
+  for (const ClipLevelPlan& l : slope.stack) visible += l.needed ? size_t(l.visible.width() * l.visible.height()) : 0;
+  EXPECT_GT(visible, 0u);
+  // Looking down from 100 texels with ground 60 texels below the plane
+  // further away: the union keeps the near ground, so the finest level is
+  // no coarser than the flat plan's, and the footprint no smaller.
+  c.position.y = 100.0;
+  c.pitch_rad = -0.4;
+  const ClipmapPlan plain = planClipmap(g, vp, c, flat);
+  PlannerConfig below = flat;
+  below.ground_below = 60.0;
+  const ClipmapPlan deep = planClipmap(g, vp, c, below);
+  EXPECT_LE(deep.finest_level, plain.finest_level);
+  for (size_t l = 0; l < plain.stack.size(); ++l) {
+    EXPECT_GE(deep.stack[l].visible.width() * deep.stack[l].visible.height(),
+              plain.stack[l].visible.width() * plain.stack[l].visible.height());
+  }
+  // Zero relief is the flat plan exactly.
+  PlannerConfig zero = flat;
+  zero.ground_above = 0.0;
+  zero.ground_below = 0.0;
+  const ClipmapPlan same = planClipmap(g, vp, c, zero);
+  EXPECT_EQ(same.finest_level, plain.finest_level);
+  for (size_t l = 0; l < plain.stack.size(); ++l) {
+    EXPECT_EQ(same.stack[l].window, plain.stack[l].window);
+    EXPECT_EQ(same.stack[l].visible, plain.stack[l].visible);
+  }
+}
+
+}  // namespace
+}  // namespace clipstream

@@ -104,6 +104,14 @@ class TerrainRenderer {
   void readPositions(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
                      std::vector<float>* xyzw);
 
+  // The lowest and highest ground (world units) around the camera: the
+  // bounds of the resident tiles under the ring `kReliefRings` levels
+  // coarser than the finest ring drawn last (or, where that is not all
+  // resident, a coarser ring's). False when no ring is resident. The
+  // streamer's planner takes them as the relief in view.
+  static constexpr uint32_t kReliefRings = 3;
+  bool groundRange(const Camera& camera, double* lowest, double* highest) const;
+
   const TerrainFrame& lastFrame() const { return m_frame; }
   // Bytes of the height stack texture (video memory).
   uint64_t textureBytes() const { return m_texture_bytes; }

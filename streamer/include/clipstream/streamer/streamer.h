@@ -203,6 +203,12 @@ class Streamer {
   // Render thread. Sets (or, with an empty camera_at, clears) the path hint.
   void setPathHint(PathHint hint);
 
+  // Render thread. Terrain: how far the ground within view rises above
+  // and falls below the plane of the camera's ground (world units), for
+  // the next update()s' plans (PlannerConfig::ground_above / ground_below,
+  // scaled into each layer's texels). 0 and 0 (the default): flat.
+  void setGroundRelief(double above, double below);
+
   // Render thread. Layer 0's hand-off: up to max_tiles tiles and max_bytes
   // bytes (0 = no byte limit) of layer 0 that are decoded and needed, in
   // priority order; marks them as resident on the GPU. Also layer 0's
