@@ -57,13 +57,13 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 # third-party code that may leak (docs/accuracy.md, "Leak checking"). Any
 # ASan, UBSan or leak report fails the test and this command. Without a GL
 # context these tests skip; on the CI machine llvmpipe provides one.
-echo "== AddressSanitizer + UBSan build of the renderer's stability scenarios and soak, leak-checked =="
+echo "== AddressSanitizer + UBSan build of the stability scenarios (texture and terrain) and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF
 cmake --build build-asan -j "$jobs" --target test_eval
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
   UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
-  ctest --test-dir build-asan -R '^Stability\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
+  ctest --test-dir build-asan -R '^(Stability|TerrainStability|TerrainFlight|TerrainAccuracy)\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
 
 # A regression guard, not a campaign: the reader's libFuzzer driver for a
 # fixed 60 s with a fixed seed, from the seed stores it writes itself. Any
