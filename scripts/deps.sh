@@ -8,6 +8,8 @@ packages=(
   build-essential cmake ninja-build pkg-config
   dpkg-dev file  # the Debian package: dpkg-shlibdeps, and CPack finds ELF files with file
   libopenimageio-dev libzstd-dev libxxhash-dev
+  libcurl4-openssl-dev  # stores read over HTTP(S)
+  nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   libcli11-dev nlohmann-json3-dev libglm-dev
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -1,14 +1,10 @@
 // TileStoreReader: validates header, level table, page directories and
 // metadata at open; index pages are read on first use, outside any lock,
 // and published with a compare-and-swap (a racing loser frees its copy).
-#include "file_io.h"
+#include "byte_source.h"
 #include "format.h"
 
 #include <clipstream/store/tile_store.h>
-
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -49,7 +45,8 @@ bool valueFits(uint64_t value, size_t bpp) { return bpp >= 8 || (value >> (8 * b
 
 struct TileStoreReader::Impl {
   std::string path;
-  int fd = -1;
+  RemoteOptions remote;
+  std::unique_ptr<ByteSource> source;
   StoreInfo info;
   uint64_t pages_begin = 0;  // index pages region [pages_begin, pages_end)
   uint64_t pages_end = 0;
@@ -63,12 +60,11 @@ struct TileStoreReader::Impl {
       if (!level.pages) continue;
       for (size_t i = 0; i < level.directory.size(); ++i) delete level.pages[i].load();
     }
-    if (fd >= 0) ::close(fd);
   }
 
   Status read(void* data, size_t bytes, uint64_t offset) const {
     bytes_read.fetch_add(bytes, std::memory_order_relaxed);
-    return fileio::preadAll(fd, data, bytes, offset, path);
+    return source->read(data, bytes, offset);
   }
 
   Status bad(ErrorCode code, const std::string& what) const {
@@ -91,29 +87,11 @@ struct TileStoreReader::Impl {
 };
 
 Status TileStoreReader::Impl::openImpl() {
-  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a
-  // writer forever; the regular-file check below comes before any read.
-  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
-  if (fd < 0) {
-    const int err = errno;
-    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
-                         "cannot open " + path + ": " + fileio::errnoText(err));
-  }
-  struct stat file_stat {};
-  if (::fstat(fd, &file_stat) != 0) {
-    return bad(ErrorCode::kIo, std::string("fstat: ") + fileio::errnoText(errno));
-  }
-  if (S_ISDIR(file_stat.st_mode)) return bad(ErrorCode::kIo, "is a directory, not a tile store");
-  if (!S_ISREG(file_stat.st_mode)) {
-    return bad(ErrorCode::kIo, std::string(S_ISFIFO(file_stat.st_mode)   ? "is a FIFO"
-                                           : S_ISCHR(file_stat.st_mode) ? "is a character device"
-                                           : S_ISBLK(file_stat.st_mode) ? "is a block device"
-                                           : S_ISSOCK(file_stat.st_mode) ? "is a socket"
-                                                                          : "is not a regular file") +
-                                   ", not a tile store (only regular files are read)");
-  }
-  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-  const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
+  // A local regular file, or a URL read by HTTP range requests.
+  Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source)
+                                   : openFileSource(path, &source);
+  if (!opened) return opened;
+  const uint64_t actual_bytes = source->size();
 
   // Header.
   uint8_t header_bytes[format::kHeaderBytes];
@@ -229,6 +207,8 @@ Status TileStoreReader::Impl::openImpl() {
       metadata_bytes > format::metadataBytes(format::kMaxCrsBytes)) {
     return bad(ErrorCode::kBadHeader, "metadata block size out of range");
   }
+  // Level table and metadata lie back to back at the end: one read remotely.
+  source->prefetch(table_offset, file_bytes - table_offset);
 
   // Level table (its size was checked against the level count above).
   std::vector<format::LevelEntry> table;
@@ -281,6 +261,7 @@ Status TileStoreReader::Impl::openImpl() {
   pages_begin = index_offset;
   pages_end = index_offset + index_bytes - directories_bytes;
   uint64_t directory_offset = pages_end;
+  source->prefetch(pages_end, table_offset - pages_end);  // every page directory
   for (uint32_t l = 0; l < level_count; ++l) {
     LevelRead& level = levels[l];
     const uint64_t bytes = table[l].directory_bytes;
@@ -472,10 +453,16 @@ TileStoreReader::TileStoreReader() : m_impl(std::make_unique<Impl>()) {}
 TileStoreReader::~TileStoreReader() = default;
 
 Status TileStoreReader::open(const std::string& path, std::unique_ptr<TileStoreReader>* out) {
+  return open(path, RemoteOptions{}, out);
+}
+
+Status TileStoreReader::open(const std::string& path, const RemoteOptions& remote,
+                             std::unique_ptr<TileStoreReader>* out) {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
   out->reset();
   std::unique_ptr<TileStoreReader> reader(new TileStoreReader());
   reader->m_impl->path = path;
+  reader->m_impl->remote = remote;
   Status status = reader->m_impl->openImpl();
   if (!status) return status;
   *out = std::move(reader);
@@ -491,6 +478,12 @@ uint64_t TileStoreReader::bytesRead() const {
 uint64_t TileStoreReader::indexPagesLoaded() const {
   return m_impl->pages_loaded.load(std::memory_order_relaxed);
 }
+
+unsigned TileStoreReader::suggestedReadThreads() const {
+  return m_impl->source->suggestedReadThreads();
+}
+
+RemoteStats TileStoreReader::remoteStats() const { return m_impl->source->remoteStats(); }
 
 Status TileStoreReader::locate(const TileKey& key, TileLocation* out) const {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");

@@ -44,6 +44,7 @@ class StoreSource final : public TileSource {
   }
 
   std::string describe() const override { return "store:" + m_path; }
+  unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;
@@ -103,8 +104,13 @@ Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t*
 }
 
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status) {
+  return openStoreSource(path, RemoteOptions{}, status);
+}
+
+std::shared_ptr<TileSource> openStoreSource(const std::string& path, const RemoteOptions& remote,
+                                            Status* status) {
   std::unique_ptr<TileStoreReader> reader;
-  *status = TileStoreReader::open(path, &reader);
+  *status = TileStoreReader::open(path, remote, &reader);
   if (!*status) return nullptr;
   return std::make_shared<StoreSource>(std::move(reader), path);
 }

@@ -532,7 +532,9 @@ Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& con
     }
   }
   if (!s.source) return;  // nothing to load; update() plans nothing
-  unsigned threads = config.io_threads ? config.io_threads : std::thread::hardware_concurrency();
+  unsigned threads = config.io_threads               ? config.io_threads
+                     : s.source->suggestedLoaderThreads() ? s.source->suggestedLoaderThreads()
+                                                          : std::thread::hardware_concurrency();
   threads = std::clamp(threads, 1u, kMaxIoThreads);
   for (unsigned i = 0; i < threads; ++i) {
     try {

@@ -4,6 +4,7 @@
 // docs/tile-store.md.
 #pragma once
 
+#include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 
 #include <atomic>
@@ -69,12 +70,19 @@ struct LevelStats {
 // small per-level page directories; index pages are read on first use.
 //
 // Thread-safe: all const methods may be called from any number of threads at
-// once. Tile reads are positional (pread) and take no lock around I/O.
+// once. Tile reads are positional (pread, or HTTP range requests for a URL)
+// and take no lock around I/O.
 class TileStoreReader {
  public:
   // Opens and validates header, level table and page directories. On
   // failure *out is left empty and the Status names the problem.
   static Status open(const std::string& path, std::unique_ptr<TileStoreReader>* out);
+  // The same for a path that may be an http:// or https:// URL
+  // (isStoreUrl()), read by range requests with `remote`'s settings; the
+  // first overload uses RemoteOptions{}. A store replaced on the server
+  // after open makes every later read fail (kIo, "changed on the server").
+  static Status open(const std::string& path, const RemoteOptions& remote,
+                     std::unique_ptr<TileStoreReader>* out);
   ~TileStoreReader();
   TileStoreReader(const TileStoreReader&) = delete;
   TileStoreReader& operator=(const TileStoreReader&) = delete;
@@ -106,6 +114,11 @@ class TileStoreReader {
   // Number of index pages loaded so far (a page read twice by racing
   // threads counts once: only the published copy counts).
   uint64_t indexPagesLoaded() const;
+  // Reader threads worth running: RemoteOptions::connections for a URL,
+  // 0 (no preference) for a local file.
+  unsigned suggestedReadThreads() const;
+  // Requests, retries and bytes of a URL store so far (zero for a file).
+  RemoteStats remoteStats() const;
 
   struct Problem {
     TileKey key;

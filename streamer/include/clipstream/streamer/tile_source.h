@@ -3,6 +3,7 @@
 // converted to the GPU layout (RGBA8, tile_px * tile_px * 4 bytes).
 #pragma once
 
+#include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 
 #include <cstdint>
@@ -42,13 +43,23 @@ class TileSource {
 
   // Short human name for logs: "store:path", "procedural:67108864x67108864".
   virtual std::string describe() const = 0;
+
+  // Loader threads worth running against this source when the streamer is
+  // not told a number (StreamerConfig::io_threads = 0): a store read over
+  // HTTP wants one per connection, since each thread waits out a round trip.
+  // 0 = no preference (the streamer runs one per core).
+  virtual unsigned suggestedLoaderThreads() const { return 0; }
 };
 
-// Opens a tile store file as a source. On failure returns null and sets *status.
+// Opens a tile store file, or a URL of one (isStoreUrl()), as a source. On failure returns null and sets *status.
 // Conversion to RGBA8: R8 -> (v, v, v, 255); R16 -> grey of the high byte
 // (v >> 8: a linear rescale, exact for data that uses the full 16-bit range;
 // data sets needing a window belong in the tiler); RGB8 -> A = 255.
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status);
+// The same for a path that may be an http:// or https:// URL, read with
+// `remote`'s settings (the first form uses RemoteOptions{}).
+std::shared_ptr<TileSource> openStoreSource(const std::string& path, const RemoteOptions& remote,
+                                            Status* status);
 
 // Deterministic procedural texture of any size up to 2^31 texels a side,
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)
