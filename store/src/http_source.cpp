@@ -205,6 +205,13 @@ bool isTransient(CURLcode rc) {
   }
 }
 
+// curl's words for a failed transfer, with timeouts named as such.
+std::string failureText(CURLcode rc, const char* error_text) {
+  std::string detail = error_text[0] != '\0' ? error_text : curl_easy_strerror(rc);
+  if (rc == CURLE_OPERATION_TIMEDOUT) detail = "timed out (connect or stall): " + detail;
+  return detail;
+}
+
 bool isTransient(long http_code) {
   return http_code == 408 || http_code == 429 || (http_code >= 500 && http_code <= 599);
 }
@@ -354,6 +361,15 @@ HttpSource::Outcome HttpSource::attempt(CURL* curl, uint8_t* data, size_t bytes,
   *got = t.got;
   const std::string what = "bytes " + range;
 
+  if (opening && code == 200 && rc == CURLE_OK && t.got == 0 && !t.cut_whole_body) {
+    // An empty file: nginx answers a range of it with an empty 200. The
+    // reader reports a 0-byte file as too short to be a store.
+    m_size_at_open = 0;
+    m_etag_at_open = t.etag;
+    m_last_modified_at_open = t.last_modified;
+    *status = Status::ok();
+    return Outcome::kOk;
+  }
   if (code == 200 || t.cut_whole_body) {
     if (opening) {
       *status = fail(ErrorCode::kUnsupported,
@@ -372,7 +388,7 @@ HttpSource::Outcome HttpSource::attempt(CURL* curl, uint8_t* data, size_t bytes,
   }
   if (rc != CURLE_OK && code != 206 && (code == 0 || code < 300 || rc != CURLE_WRITE_ERROR)) {
     // No usable HTTP answer: the connection failed.
-    const std::string detail = error_text[0] != '\0' ? error_text : curl_easy_strerror(rc);
+    const std::string detail = failureText(rc, error_text);
     *status = fail(isTransient(rc) ? ErrorCode::kUnavailable : ErrorCode::kIo,
                    printableText(detail, 300) + " (" + what + ")");
     return isTransient(rc) ? Outcome::kTransient : Outcome::kFailed;
@@ -398,7 +414,7 @@ HttpSource::Outcome HttpSource::attempt(CURL* curl, uint8_t* data, size_t bytes,
   }
   // 206: the range asked for, of the version opened.
   if (rc != CURLE_OK) {
-    const std::string detail = error_text[0] != '\0' ? error_text : curl_easy_strerror(rc);
+    const std::string detail = failureText(rc, error_text);
     *status = fail(isTransient(rc) ? ErrorCode::kUnavailable : ErrorCode::kIo,
                    printableText(detail, 300) + " (" + what + ")");
     return isTransient(rc) ? Outcome::kTransient : Outcome::kFailed;
