@@ -37,6 +37,7 @@ class ThreadWatchSource final : public TileSource {
     return m_inner->fetchWithInfo(key, rgba, info);
   }
   std::string describe() const override { return m_inner->describe(); }
+  unsigned suggestedLoaderThreads() const override { return m_inner->suggestedLoaderThreads(); }
   void arm(bool on) { m_armed.store(on); }
   uint64_t renderThreadFetches() const { return m_count.load(); }
 
