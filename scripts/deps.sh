@@ -17,7 +17,7 @@ packages=(
   clang libclang-rt-dev
 )
 if [[ "${1:-}" == "--bench" ]]; then
-  packages+=(gdal-bin libvips-tools time)
+  packages+=(gdal-bin python3-gdal libvips-tools time)
 fi
 
 missing=()
