@@ -449,6 +449,66 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
   return Status::ok();
 }
 
+void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawTile> out,
+                                   std::span<Status> statuses) const {
+  const Impl& impl = *m_impl;
+  const size_t n = std::min({keys.size(), out.size(), statuses.size()});
+  // Locate everything; payloads to read, in file order.
+  std::vector<size_t> order;
+  for (size_t i = 0; i < n; ++i) {
+    out[i].key = keys[i];
+    out[i].payload.clear();
+    statuses[i] = impl.locate(keys[i], &out[i].location);
+    if (statuses[i] && !out[i].location.constant) order.push_back(i);
+  }
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return out[a].location.offset < out[b].location.offset;
+  });
+  std::vector<uint8_t> buffer;
+  for (size_t first = 0; first < order.size();) {
+    // Grow the run while the next payload starts close to this one's end.
+    const uint64_t begin = out[order[first]].location.offset;
+    uint64_t end = begin + out[order[first]].location.stored_bytes;
+    size_t last = first + 1;
+    while (last < order.size()) {
+      const TileLocation& next = out[order[last]].location;
+      const uint64_t next_end = std::max(end, next.offset + next.stored_bytes);
+      if (next.offset > end + impl.remote.coalesce_gap_bytes ||
+          next_end - begin > impl.remote.coalesce_max_bytes)
+        break;
+      end = next_end;
+      ++last;
+    }
+    if (last == first + 1) {
+      const size_t i = order[first];
+      statuses[i] = impl.readPayload(keys[i], &out[i]);
+      first = last;
+      continue;
+    }
+    buffer.resize(static_cast<size_t>(end - begin));
+    const Status status = impl.read(buffer.data(), buffer.size(), begin);
+    for (size_t k = first; k < last; ++k) {
+      const size_t i = order[k];
+      if (!status) {
+        statuses[i] = Status::error(status.code, format::keyText(keys[i]) + ": " + status.message);
+        continue;
+      }
+      const TileLocation& location = out[i].location;
+      const uint8_t* payload = buffer.data() + (location.offset - begin);
+      out[i].payload.assign(payload, payload + location.stored_bytes);
+      if (format::tileChecksum(out[i].payload.data(), out[i].payload.size()) != location.checksum) {
+        statuses[i] = Status::error(ErrorCode::kCorruptTile,
+                                    format::keyText(keys[i]) + ": payload checksum mismatch");
+      }
+    }
+    first = last;
+  }
+}
+
+unsigned TileStoreReader::suggestedBatchTiles() const {
+  return isStoreUrl(m_impl->path) ? std::max(1u, m_impl->remote.batch_tiles) : 1u;
+}
+
 TileStoreReader::TileStoreReader() : m_impl(std::make_unique<Impl>()) {}
 TileStoreReader::~TileStoreReader() = default;
 

@@ -43,6 +43,29 @@ class StoreSource final : public TileSource {
     return status;
   }
 
+  size_t maxBatch() const override { return m_reader->suggestedBatchTiles(); }
+
+  void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                  std::span<Status> statuses, std::span<FetchInfo> infos) override {
+    const PyramidGeometry& geo = m_reader->geometry();
+    thread_local std::vector<RawTile> raws;
+    raws.resize(keys.size());
+    // Neighbours in the file come in one read (one range request remotely).
+    m_reader->readRawBatch(keys, raws, statuses);
+    for (size_t i = 0; i < keys.size(); ++i) {
+      infos[i] = {};
+      if (!statuses[i]) continue;
+      infos[i].bytes_read = raws[i].payload.size();
+      const auto start = std::chrono::steady_clock::now();
+      rgba[i]->resize(size_t(geo.tile_px) * geo.tile_px * 4);
+      statuses[i] = decodeTileRgba8(geo, m_reader->info().encoding, raws[i],
+                                    std::span<uint8_t>(*rgba[i]));
+      infos[i].decode_ms = std::chrono::duration<double, std::milli>(
+                               std::chrono::steady_clock::now() - start)
+                               .count();
+    }
+  }
+
   std::string describe() const override { return "store:" + m_path; }
   unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
 

@@ -117,6 +117,87 @@ TEST_F(HttpStore, TilesReadOverHttpEqualTheLocalFile) {
   EXPECT_EQ(local->remoteStats().requests, 0u);
 }
 
+TEST_F(HttpStore, BatchReadCoalescesNeighboursIntoOneRequestWithTheSameBytes) {
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  EXPECT_EQ(remote->suggestedBatchTiles(), RemoteOptions{}.batch_tiles);
+  EXPECT_EQ(local->suggestedBatchTiles(), 1u);
+  // The last row of level 0 (beyond the first 64 KiB the open read).
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) keys.push_back({0, x, g.levels[0].tiles_y - 1});
+  size_t payloads = 0;
+  for (const TileKey& key : keys) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(key, &location).isOk());
+    if (!location.constant) ++payloads;
+  }
+  ASSERT_GE(payloads, 3u);
+  {
+    RawTile warm;  // loads the row's index page
+    ASSERT_TRUE(remote->readRaw(keys[0], &warm).isOk());
+  }
+  const uint64_t before = remote->remoteStats().requests;
+  std::vector<RawTile> raws(keys.size());
+  std::vector<Status> statuses(keys.size());
+  remote->readRawBatch(keys, raws, statuses);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+    RawTile expected;
+    ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+    EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
+  }
+  // The row lies together in the file: one request for all its payloads.
+  EXPECT_EQ(remote->remoteStats().requests - before, 1u);
+  // With coalescing off (a gap of 0 and a cap of one tile), one each.
+  RemoteOptions apart;
+  apart.coalesce_gap_bytes = 0;
+  apart.coalesce_max_bytes = 1;
+  std::unique_ptr<TileStoreReader> separate;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), apart, &separate).isOk());
+  {
+    RawTile warm;
+    ASSERT_TRUE(separate->readRaw(keys[0], &warm).isOk());
+  }
+  const uint64_t separate_before = separate->remoteStats().requests;
+  separate->readRawBatch(keys, raws, statuses);
+  for (const Status& st : statuses) EXPECT_TRUE(st.isOk()) << st.toString();
+  EXPECT_EQ(separate->remoteStats().requests - separate_before, payloads);
+}
+
+TEST_F(HttpStore, BatchReadOfADamagedTileFailsThatTileOnly) {
+  // Flip a byte inside one payload of the last row: only that tile fails.
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) keys.push_back({0, x, g.levels[0].tiles_y - 1});
+  size_t damaged = keys.size();
+  TileLocation location;
+  for (size_t i = 0; i < keys.size() && damaged == keys.size(); ++i) {
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant) damaged = i;
+  }
+  ASSERT_LT(damaged, keys.size());
+  local.reset();
+  std::vector<uint8_t> bytes = test::readBytes(m_local);
+  bytes[location.offset + location.stored_bytes / 2] ^= 0x40;
+  test::writeBytes(m_local, bytes);
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  std::vector<RawTile> raws(keys.size());
+  std::vector<Status> statuses(keys.size());
+  remote->readRawBatch(keys, raws, statuses);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    if (i == damaged) {
+      EXPECT_EQ(statuses[i].code, ErrorCode::kCorruptTile) << statuses[i].toString();
+    } else {
+      EXPECT_TRUE(statuses[i].isOk()) << i << ": " << statuses[i].toString();
+    }
+  }
+}
+
 TEST_F(HttpStore, OpeningReadsTheHeaderTableAndDirectoriesOnly) {
   std::unique_ptr<TileStoreReader> remote;
   ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());

@@ -32,6 +32,14 @@ struct RemoteOptions {
   // that, ... before the read fails with kUnavailable.
   uint32_t retries = 2;
   uint32_t retry_base_ms = 100;
+  // Coalescing (TileStoreReader::readRawBatch): tiles the streamer wants
+  // together are read with one range request when their payloads lie at
+  // most coalesce_gap_bytes apart, up to coalesce_max_bytes per request and
+  // batch_tiles tiles per batch. A gap of 64 KiB costs about 5 ms at
+  // 100 Mbit/s, far less than the round trip a second request would.
+  uint32_t batch_tiles = 16;
+  uint32_t coalesce_gap_bytes = 64 << 10;
+  uint32_t coalesce_max_bytes = 2 << 20;
 };
 
 // Most connections a RemoteOptions may ask for (each holds a socket and,

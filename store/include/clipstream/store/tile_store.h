@@ -102,6 +102,18 @@ class TileStoreReader {
   // any thread. kCorruptTile if the payload does not decode to that size.
   Status decode(const RawTile& raw, std::span<uint8_t> pixels) const;
 
+  // readRaw() for several tiles: out[i] and statuses[i] for keys[i] (the
+  // spans are of equal size). Payloads lying close together in the file are
+  // read with one read (RemoteOptions: coalesce_gap_bytes apart at most,
+  // coalesce_max_bytes per read); a failed read fails each of its tiles.
+  // Every payload is verified against its own checksum.
+  void readRawBatch(std::span<const TileKey> keys, std::span<RawTile> out,
+                    std::span<Status> statuses) const;
+  // Tiles worth asking readRawBatch() for at once: RemoteOptions::
+  // batch_tiles for a URL, 1 for a local file (a local read costs no round
+  // trip, so batching gains nothing).
+  unsigned suggestedBatchTiles() const;
+
   // readRaw + decode. `pixels` is resized to tileBytes().
   Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
 

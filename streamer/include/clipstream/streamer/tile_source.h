@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,21 @@ class TileSource {
 
   // Short human name for logs: "store:path", "procedural:67108864x67108864".
   virtual std::string describe() const = 0;
+
+  // Tiles worth fetching together with fetchBatch(): more than 1 for a
+  // source where one read of neighbours costs about what one tile does (a
+  // store over HTTP: one range request instead of several round trips).
+  // The streamer then hands a loader up to this many queued tiles of one
+  // level and row at once. 1 = fetch tiles one by one.
+  virtual size_t maxBatch() const { return 1; }
+
+  // fetchWithInfo() for several tiles: *rgba[i], statuses[i] and infos[i]
+  // for keys[i] (spans of equal size). Same thread rule as fetch(). The
+  // default fetches them one by one.
+  virtual void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                          std::span<Status> statuses, std::span<FetchInfo> infos) {
+    for (size_t i = 0; i < keys.size(); ++i) statuses[i] = fetchWithInfo(keys[i], rgba[i], &infos[i]);
+  }
 
   // Loader threads worth running against this source when the streamer is
   // not told a number (StreamerConfig::io_threads = 0): a store read over
