@@ -13,7 +13,8 @@
 // cannot be predicted).
 //
 // Usage: bench_store_http STORE.cstore [COG.tif] [--rtt 0,20,50,100]
-//                         [--connections 1,4,8,16,32,64] [--teleports 4]
+//                         [--connections 1,4,8,16,32,64] [--teleports 4] [--no-coalesce]
+// --no-coalesce: one range request per tile (RemoteOptions::batch_tiles = 1).
 // COG: made with gdal_translate -of COG (docs/benchmarks.md); the GDAL rows
 // need /usr/bin/python3 with GDAL (python3-gdal) and bench/gdal_read_windows.py.
 #include <clipstream/store/tile_store.h>
@@ -118,12 +119,15 @@ int main(int argc, char** argv) {
   std::vector<double> rtts = {0, 20, 50, 100};
   std::vector<double> connections = {1, 4, 8, 16, 32, 64};
   size_t teleports = 4;
+  bool coalesce = true;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--rtt" && i + 1 < argc) {
       rtts = parseList(argv[++i]);
     } else if (arg == "--connections" && i + 1 < argc) {
       connections = parseList(argv[++i]);
+    } else if (arg == "--no-coalesce") {
+      coalesce = false;
     } else if (arg == "--teleports" && i + 1 < argc) {
       teleports = std::clamp<size_t>(std::strtoul(argv[++i], nullptr, 10), 1, std::size(kPlaces));
     } else if (store_path.empty()) {
@@ -132,13 +136,13 @@ int main(int argc, char** argv) {
       cog_path = arg;
     } else {
       std::fprintf(stderr, "usage: %s STORE.cstore [COG.tif] [--rtt LIST] [--connections LIST] "
-                           "[--teleports N]\n", argv[0]);
+                           "[--teleports N] [--no-coalesce]\n", argv[0]);
       return 2;
     }
   }
   if (store_path.empty()) {
     std::fprintf(stderr, "usage: %s STORE.cstore [COG.tif] [--rtt LIST] [--connections LIST] "
-                         "[--teleports N]\n", argv[0]);
+                         "[--teleports N] [--no-coalesce]\n", argv[0]);
     return 2;
   }
 
@@ -167,11 +171,11 @@ int main(int argc, char** argv) {
   const uint64_t store_bytes = local->info().file_bytes;
   local.reset();
   std::printf("# store %s: %llux%llu %s, tile %u, %u levels, %.1f MiB; %zu teleports, camera %g "
-              "texels up, viewport %ux%u, prefetch off\n",
+              "texels up, viewport %ux%u, prefetch off, coalescing %s\n",
               store_path.c_str(), (unsigned long long)geometry.width_px,
               (unsigned long long)geometry.height_px, pixelFormatName(geometry.format),
               geometry.tile_px, geometry.levelCount(), store_bytes / 1048576.0, teleports, kHeight,
-              kViewport.width_px, kViewport.height_px);
+              kViewport.width_px, kViewport.height_px, coalesce ? "on" : "off");
   std::printf("reader\trtt_ms\tin_flight\topen_ms\topen_requests\tsharp_median_s\tsharp_max_s\t"
               "tiles\ttiles_per_s\trequests\trequests_per_tile\tMiB\n");
 
@@ -192,6 +196,7 @@ int main(int argc, char** argv) {
     for (const double count : connections) {
       RemoteOptions remote;
       remote.connections = unsigned(count);
+      if (!coalesce) remote.batch_tiles = 1;
       size_t log_from = server->requests().size();
       const Clock::time_point open_start = Clock::now();
       Status open_status;

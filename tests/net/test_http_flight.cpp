@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <functional>
@@ -153,6 +155,25 @@ TEST_F(HttpFlight, FramesEqualTheLocalFlight) {
   EXPECT_EQ(http.run.streamer.loader_threads, RemoteOptions{}.connections);
   std::printf("  identical frames: %zu of %zu (the rest differ only while tiles stream in)\n",
               identicalFrames(http, *s_local), http.frames.size());
+}
+
+// The program, as the README runs it: clipstream-fly with a URL.
+TEST_F(HttpFlight, ClipstreamFlyFliesAStoreByUrl) {
+  const std::string out = m_work.file("fly");
+  const std::string command = std::string("'") + CLIPSTREAM_FLY_EXE + "' '" +
+                              m_server->url("store.cstore") + "' --frames 10 --size 160x96 "
+                              "--http-connections 4 --out '" + out + "' 2>&1";
+  std::string output;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  char buffer[4096];
+  size_t got;
+  while ((got = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, got);
+  const int status = ::pclose(pipe);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << output;
+  EXPECT_TRUE(std::filesystem::exists(out + "/frames.csv")) << output;
+  EXPECT_FALSE(m_server->requests().empty());
 }
 
 TEST_F(HttpFlight, NginxStoppedMidFlightDegradesAndRecovers) {

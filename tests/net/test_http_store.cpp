@@ -10,6 +10,7 @@
 #include <clipstream/testing/temp_dir.h>
 
 #include <arpa/inet.h>
+#include <sys/wait.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -394,6 +395,33 @@ TEST_F(HttpStore, AbsurdConnectionCountIsRefused) {
             ErrorCode::kInvalidArgument);
   ::usleep(50000);
   EXPECT_TRUE(m_server->requests().empty());
+}
+
+// The program, not only the library: clipstream-info takes a URL.
+std::pair<int, std::string> runProgram(const std::string& command_line) {
+  std::string output;
+  FILE* pipe = ::popen(("{ CLIPSTREAM_PROGRESS=0 " + command_line + "; } 2>&1").c_str(), "r");
+  if (pipe == nullptr) return {-1, ""};
+  char buffer[4096];
+  size_t got;
+  while ((got = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, got);
+  const int status = ::pclose(pipe);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
+}
+
+TEST_F(HttpStore, InfoToolVerifiesAStoreByUrlAndNamesA404) {
+  const std::string url = m_server->url("store.cstore");
+  const auto [code, output] =
+      runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' --verify '" + url + "'");
+  EXPECT_EQ(code, 0) << output;
+  EXPECT_NE(output.find(url), std::string::npos) << output;
+  EXPECT_NE(output.find("verify: OK"), std::string::npos) << output;
+  const std::string missing = m_server->url("missing.cstore");
+  const auto [missing_code, missing_output] =
+      runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' '" + missing + "'");
+  EXPECT_EQ(missing_code, 1) << missing_output;
+  EXPECT_NE(missing_output.find(missing + ": HTTP 404 Not Found"), std::string::npos)
+      << missing_output;
 }
 
 TEST(StoreUrl, SchemesAreRecognised) {

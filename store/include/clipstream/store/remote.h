@@ -22,7 +22,7 @@ struct RemoteOptions {
   // connection; a reader thread beyond this waits for a free connection.
   // The streamer starts this many loader threads for a URL store unless
   // told otherwise (StreamerConfig::io_threads).
-  unsigned connections = 16;
+  unsigned connections = 32;
   // Connecting (TCP + TLS) may take this long before the attempt fails.
   uint32_t connect_timeout_ms = 5000;
   // A transfer that moves no byte for this long is a stall and fails.
