@@ -86,8 +86,7 @@ std::string httpStatusText(long code) {
   return text;
 }
 
-// The URL as shown in messages: no user:password@ and no query string (a
-// presigned object-store URL carries its signature there).
+// The URL as shown in messages (displayStorePath()).
 std::string displayUrl(const std::string& url) {
   std::string shown = url;
   const size_t query = shown.find_first_of("?#");
@@ -542,6 +541,10 @@ Status HttpSource::read(void* data, size_t bytes, uint64_t offset) const {
 
 bool isStoreUrl(const std::string& path) {
   return startsWithNoCase(path, "http://") || startsWithNoCase(path, "https://");
+}
+
+std::string displayStorePath(const std::string& path) {
+  return isStoreUrl(path) ? displayUrl(path) : path;
 }
 
 Status openHttpSource(const std::string& url, const RemoteOptions& options,

@@ -91,6 +91,7 @@ Status TileStoreReader::Impl::openImpl() {
   Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source)
                                    : openFileSource(path, &source);
   if (!opened) return opened;
+  path = displayStorePath(path);  // from here on `path` only names the store in messages
   const uint64_t actual_bytes = source->size();
 
   // Header.

@@ -135,7 +135,7 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, const Remot
   std::unique_ptr<TileStoreReader> reader;
   *status = TileStoreReader::open(path, remote, &reader);
   if (!*status) return nullptr;
-  return std::make_shared<StoreSource>(std::move(reader), path);
+  return std::make_shared<StoreSource>(std::move(reader), displayStorePath(path));
 }
 
 }  // namespace clipstream

@@ -424,6 +424,24 @@ TEST_F(HttpStore, InfoToolVerifiesAStoreByUrlAndNamesA404) {
       << missing_output;
 }
 
+TEST_F(HttpStore, MessagesHideCredentialsAndQueryStrings) {
+  const std::string url = "http://reader:secret@127.0.0.1:" + std::to_string(m_server->port()) +
+                          "/half.cstore?X-Signature=abcdef";
+  const std::vector<uint8_t> bytes = test::readBytes(m_local);
+  test::writeBytes(m_dir.file("www/half.cstore"),
+                   std::vector<uint8_t>(bytes.begin(), bytes.begin() + bytes.size() / 2));
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kTruncated) << s.toString();
+  EXPECT_EQ(s.message.find("secret"), std::string::npos) << s.message;
+  EXPECT_EQ(s.message.find("abcdef"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("http://127.0.0.1:" + std::to_string(m_server->port()) +
+                           "/half.cstore?..."),
+            std::string::npos)
+      << s.message;
+  EXPECT_EQ(displayStorePath("/data/a.cstore"), "/data/a.cstore");
+}
+
 TEST(StoreUrl, SchemesAreRecognised) {
   EXPECT_TRUE(isStoreUrl("http://host/a.cstore"));
   EXPECT_TRUE(isStoreUrl("HTTPS://host/a.cstore"));

@@ -15,6 +15,11 @@ namespace clipstream {
 // path is read by HTTP range requests instead of from the local disk.
 bool isStoreUrl(const std::string& path);
 
+// A URL as messages and logs show it: without "user:password@" and with
+// its query string replaced by "?..." (a presigned object-store URL carries
+// its signature there); control bytes shown as '?'. Other paths unchanged.
+std::string displayStorePath(const std::string& path);
+
 // Tunables of the URL byte source. The defaults and their reasons are in
 // docs/decisions.md ("Stores over HTTP"); benchmarks in docs/benchmarks.md.
 struct RemoteOptions {
