@@ -131,7 +131,8 @@ std::optional<PixelFormat> parsePixelFormat(const std::string& text) {
   std::string upper = text;
   for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
   for (PixelFormat format :
-       {PixelFormat::kR8, PixelFormat::kR16, PixelFormat::kRGB8, PixelFormat::kRGBA8}) {
+       {PixelFormat::kR8, PixelFormat::kR16, PixelFormat::kRGB8, PixelFormat::kRGBA8,
+        PixelFormat::kI16, PixelFormat::kF32}) {
     if (upper == pixelFormatName(format)) return format;
   }
   return std::nullopt;

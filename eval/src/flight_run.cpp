@@ -13,6 +13,12 @@
 #include <unordered_set>
 
 namespace clipstream {
+
+Camera cameraAboveGround(Camera path_camera, double ground) {
+  path_camera.position.y = ground + std::max(path_camera.position.y, kTerrainClearance);
+  return path_camera;
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -107,21 +113,38 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   fc.overlay = o.overlay;
   fc.warmup_frames = o.warmup_frames;
   fc.offscreen = true;  // frames are judged and saved from the flight's own target
+  fc.terrain = o.terrain;
   // The reference (its own renderer and a synchronous pyramid load) is set
   // up before the flight's streamer exists, as clipstream-fly always did:
   // with the streamer created first, a timing-sensitive flight reached sharp
   // frames 7 frames earlier in 5 of 6 runs (docs/benchmarks.md), a change of
   // results this loop must not make.
   std::unique_ptr<FlyAccuracy> accuracy;
-  if (o.reference_every > 0 || o.sample_tiles) {
+  // The reference draws the flat plane: over terrain it would judge the
+  // wrong picture, so it is not run (docs/terrain.md, "Status").
+  if (!o.terrain && (o.reference_every > 0 || o.sample_tiles)) {
     AccuracyOptions ao;
     ao.ground_truth = o.ground_truth_every > 0;
     ao.sample_tiles = o.sample_tiles;
     ao.reference = o.reference_every > 0;
     if (Status s = FlyAccuracy::create(o.source, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
   }
+  // Before the flight exists no height is known: the first camera is put
+  // above the highest ground, then every frame above the ground under it.
+  Camera first = o.path.sample(0.0);
+  if (o.terrain && o.terrain->source) {
+    first = cameraAboveGround(first, o.terrain->source->elevationInfo().max_height *
+                                         o.terrain->alignment.world_per_height);
+  }
   std::unique_ptr<Flight> flight;
-  if (Status s = Flight::create(watched, fc, o.path.sample(0.0), &flight); !s) return s;
+  if (Status s = Flight::create(watched, fc, first, &flight); !s) return s;
+  auto onGround = [&](const Camera& path_camera) {
+    double ground = 0.0;
+    if (!o.terrain || !flight->groundHeight({path_camera.position.x, path_camera.position.z}, &ground))
+      return path_camera;
+    return cameraAboveGround(path_camera, ground);
+  };
+  run->height_texture_bytes = flight->terrain() ? flight->terrain()->textureBytes() : 0;
   run->preload_ms = flight->preloadMs();
   // A run that fails from here on publishes no trace.
   struct DiscardTraceUnlessDone {
@@ -159,7 +182,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     // Start-up excluded from the statistics: the camera holds its first
     // position while the streamer fills the first windows. Warm-up frames
     // count in the over-fetch ratio (loads and sampled tiles alike).
-    const Camera camera = o.path.sample(0.0);
+    const Camera camera = onGround(o.path.sample(0.0));
     flight->step(camera);
     AccuracyFrame ignored;
     if (accuracy)
@@ -167,7 +190,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   }
   run->warmup_loads = flight->warmupLoads();
 
-  Camera previous = o.path.sample(0.0);
+  Camera previous = onGround(o.path.sample(0.0));
   for (uint32_t i = 0; i < total; ++i) {
     if (o.resize_at_frame > 0 && i == o.resize_at_frame && o.resize_to.width_px > 0) {
       watched->arm(false);
@@ -178,7 +201,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     }
     FlightRunFrame f;
     f.t_s = pathTimeOfFrame(double(i));
-    const Camera camera = o.path.sample(f.t_s);
+    const Camera camera = onGround(o.path.sample(f.t_s));
     previous = camera;
     const auto t0 = Clock::now();
     f.sample = flight->step(camera);
@@ -252,6 +275,11 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   records.reserve(run->frames.size());
   for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
   run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : 0, peakRssBytes());
+  if (o.terrain && !run->frames.empty()) {
+    double triangles = 0.0;
+    for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
+    run->terrain_triangles_mean = triangles / double(run->frames.size());
+  }
   if (run->summary.tiles_sampled > 0)
     run->summary.over_fetch_ratio =
         double(run->summary.tiles_loaded + run->warmup_loads) / double(run->summary.tiles_sampled);

@@ -9,6 +9,8 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
 #include <clipstream/store/output_file.h>
+#include <clipstream/store/tile_store.h>
+#include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <algorithm>
@@ -141,6 +143,10 @@ Status checkFlyOptions(const FlyOptions& o) {
     return bad("rest frame time must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
   if (!(o.fault_corrupt_fraction >= 0.0 && o.fault_corrupt_fraction <= 1.0))
     return bad("fault corrupt fraction must be from 0 to 1");
+  if (!std::isfinite(o.vertical_scale) || o.vertical_scale <= 0.0 || o.vertical_scale > kMaxVerticalScale)
+    return bad("vertical scale must be a number above 0 and at most " + std::to_string(int(kMaxVerticalScale)));
+  if (o.terrain_ring < 16 || o.terrain_ring > 1024 || (o.terrain_ring & (o.terrain_ring - 1)) != 0)
+    return bad("terrain ring must be a power of two from 16 to 1024");
   return Status::ok();
 }
 
@@ -175,6 +181,38 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
 
   FlightRunOptions r;
   r.source = source;
+  if (!o.elevation_path.empty()) {
+    Status s;
+    TerrainLayerConfig terrain;
+    RemoteOptions remote;
+    remote.connections = o.http_connections;
+    terrain.source = openElevationSource(o.elevation_path, remote, &s);
+    if (!terrain.source) return s;
+    terrain.ring_cells = o.terrain_ring;
+    // The colour layer's georeference (a procedural texture has none).
+    StoreInfo colour;
+    colour.geometry = geometry;
+    if (o.procedural_px == 0) {
+      std::unique_ptr<TileStoreReader> reader;
+      if (s = TileStoreReader::open(o.store_path, &reader); !s) return s;
+      colour = reader->info();
+    }
+    StoreInfo heights;
+    {
+      std::unique_ptr<TileStoreReader> reader;
+      if (s = TileStoreReader::open(o.elevation_path, &reader); !s) return s;
+      heights = reader->info();
+    }
+    if (s = alignElevation(colour, heights, o.vertical_scale, o.stretch_elevation, &terrain.alignment); !s) {
+      return Status::error(s.code, o.elevation_path + ": " + s.message);
+    }
+    for (const std::string& w : terrain.alignment.warnings)
+      (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
+    if (o.reference)
+      (warnings ? *warnings : log) << "clipstream-fly: warning: --reference compares with the flat "
+                                      "plane; over terrain it is not run (docs/terrain.md)\n";
+    r.terrain = std::move(terrain);
+  }
   {
     const auto names = FlightPath::builtinNames();
     Status s = std::find(names.begin(), names.end(), o.path) != names.end()
@@ -258,7 +296,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.upload_tiles = o.upload_tiles;
   d.cache_mb = o.cache_mb;
   d.warmup_frames = o.warmup_frames;
-  d.reference = o.reference;
+  d.reference = o.reference && !r.terrain;
   d.throttle = o.throttle;
   d.prefetch = o.prefetch;
   d.frustum_priority = o.frustum_priority;

@@ -45,7 +45,8 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
   std::string csv =
       "frame,t_s,frame_ms,streamer_ms,upload_ms,draw_ms,readback_ms,tiles_uploaded,second_copies,max_texture_lod,"
       "finest_needed,queue_depth,in_flight,ram_bytes,bytes_read,ram_hits,ram_misses,gpu_hits,"
-      "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error";
+      "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error,"
+      "terrain_triangles,terrain_rings,terrain_finest_level,height_tiles_uploaded,ground_height";
   for (uint32_t l = 0; l < levels; ++l)
     for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
       csv += ",L" + std::to_string(l) + "_" + f;
@@ -67,6 +68,9 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
            "," + (a.measured ? std::to_string(a.hole_pixels) : "") + "," +
            dbText(a.ground_truth_measured, a.ground_truth.psnr_db) + "," +
            (a.ground_truth_measured ? std::to_string(a.ground_truth.max_abs_error) : "");
+    std::snprintf(buf, sizeof buf, ",%llu,%u,%u,%u,%.3f", (unsigned long long)r.terrain_triangles,
+                  r.terrain_rings, r.terrain_finest_level, r.height_tiles_uploaded, r.ground_height);
+    csv += buf;
     for (uint32_t l = 0; l < levels; ++l) {
       const LevelFrame lf = l < r.levels.size() ? r.levels[l] : LevelFrame{};
       csv += "," + std::to_string(lf.ram_hits) + "," + std::to_string(lf.ram_misses) + "," +
@@ -96,6 +100,13 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
                         {"ram_misses", r.total.ram_misses}, {"gpu_hits", r.total.gpu_hits},
                         {"gpu_misses", r.total.gpu_misses}, {"tiles_loaded", r.tiles_loaded},
                         {"cut", r.cut}, {"levels", jl}};
+    if (r.terrain_rings > 0 || r.height_tiles_uploaded > 0) {
+      j["terrain_triangles"] = r.terrain_triangles;
+      j["terrain_rings"] = r.terrain_rings;
+      j["terrain_finest_level"] = r.terrain_finest_level;
+      j["height_tiles_uploaded"] = r.height_tiles_uploaded;
+      j["ground_height"] = r.ground_height;
+    }
     if (f.accuracy.measured) {
       j["psnr_db"] = f.accuracy.error.psnr_db;
       j["max_abs_error"] = f.accuracy.error.max_abs_error;
@@ -128,6 +139,9 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["path_hint_ignored_frames"] = run.streamer.path_hint_ignored_frames;
   acc["upload_tiles"] = d.upload_tiles;
   acc["cache_mb"] = d.cache_mb;
+  acc["terrain"] = run.height_texture_bytes > 0;
+  acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
+  acc["height_texture_bytes"] = run.height_texture_bytes;
   const Means m = meansOf(run);
   nlohmann::json summary = {
       {"source", run.source},
@@ -200,6 +214,8 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   // Empty: not measured.
   add("ground_truth_psnr_mean_db", run.ground_truth_frames ? num(run.ground_truth_psnr_mean_db) : std::string());
   add("tile_failures", std::to_string(run.tile_failures));
+  add("terrain_triangles_mean", num(run.terrain_triangles_mean));
+  add("height_texture_mib", num(mib(run.height_texture_bytes)));
   return keys + "\n" + values + "\n";
 }
 
@@ -236,6 +252,10 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   row("pngs_written", double(d.pngs_written), "%.0f");
   row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
+  if (run.height_texture_bytes > 0) {
+    row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
+    row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
+  }
   if (d.reference) {
     row("psnr_mean_db", s.psnr_mean_db, "%.2f");
     row("psnr_min_db", s.psnr_min_db, "%.2f");

@@ -77,6 +77,14 @@ int main(int argc, char** argv) {
   app.add_option("--teleport-frames", o.teleport_frames, "Frames between jumps of the teleport path")
       ->transform(frames);
   app.add_option("--trace", o.trace_path, "Record the streamer's request trace (clipstream-trace)");
+  app.add_option("--elevation", o.elevation_path,
+                 "Elevation store (clipstream-tile DEM.tif) under the colour layer: fly over terrain");
+  app.add_option("--vertical-scale", o.vertical_scale, "Height exaggeration (with --elevation)")
+      ->transform(cli::inRange(0.001, kMaxVerticalScale));
+  app.add_flag("--stretch-elevation", o.stretch_elevation,
+               "Stretch the elevation store over the colour image instead of placing it by georeference");
+  app.add_option("--terrain-ring", o.terrain_ring, "Cells per geometry clipmap ring side (power of two, 16..1024)")
+      ->transform(cli::wholeInRange(16, 1024));
   app.footer(
       "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written;\n"
       "nothing half-written is left), 2 command-line mistake, killed by INT/TERM/HUP after\n"

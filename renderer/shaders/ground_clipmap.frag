@@ -86,5 +86,11 @@ void main() {
     }
   }
 #endif
+#ifdef TERRAIN
+  color.rgb = shadeTerrain(color.rgb);
+#ifdef OVERLAY
+  color.rgb = mix(color.rgb, vec3(1.0, 0.0, 1.0), 0.5 * vMorph);  // transition bands
+#endif
+#endif
   outColor = vec4(color.rgb, 1.0);
 }

@@ -58,7 +58,21 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   f->m_source = std::move(source);
   f->m_config = config;
   if (Status s = f->makeRenderer(config.viewport, first, &f->m_preload_ms); !s) return s;
-  f->m_streamer = std::make_unique<Streamer>(f->m_source, config.streamer);
+  if (config.terrain) {
+    if (Status s = f->makeTerrain(); !s) return s;
+    // Two layers through one cache: the colour texels are the world; the
+    // elevation's texel under world (x, z) is (x - sample0) / spacing + 0.5
+    // (sample i's centre lies at texel i + 0.5).
+    const LayerAlignment& a = config.terrain->alignment;
+    StreamLayer colour{f->m_source, LayerRole::kColour, {1.0, 1.0}, {0.0, 0.0}};
+    StreamLayer heights{config.terrain->source, LayerRole::kElevation,
+                        1.0 / a.world_per_sample, 0.5 - a.sample0_world / a.world_per_sample};
+    std::vector<StreamLayer> layers{colour, heights};
+    if (Status s = checkStreamLayers(layers); !s) return s;
+    f->m_streamer = std::make_unique<Streamer>(std::move(layers), config.streamer);
+  } else {
+    f->m_streamer = std::make_unique<Streamer>(f->m_source, config.streamer);
+  }
   f->m_before = f->m_streamer->stats();
   f->m_previous = first;
   *out = std::move(f);
@@ -89,6 +103,34 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
   m_target = std::move(target);
   m_first_plan = std::move(plan);
   return Status::ok();
+}
+
+Status Flight::makeTerrain() {
+  const TerrainLayerConfig& t = *m_config.terrain;
+  if (!t.source || t.source->content() != TileContent::kHeightF32) {
+    return Status::error(ErrorCode::kInvalidArgument, "flight: the terrain layer is not a height source");
+  }
+  TerrainConfig tc;
+  tc.ring_cells = t.ring_cells;
+  tc.mapping.world_per_sample = t.alignment.world_per_sample;
+  tc.mapping.sample0_world = t.alignment.sample0_world;
+  tc.mapping.world_per_height = t.alignment.world_per_height;
+  std::unique_ptr<TerrainRenderer> terrain;
+  if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
+  TileSource& source = *t.source;
+  m_preload_failures += terrain->preloadCoarseLevels(
+      [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        if (!source.fetch(key, px.get()).isOk()) return nullptr;
+        return px;
+      });
+  m_terrain = std::move(terrain);
+  return Status::ok();
+}
+
+bool Flight::groundHeight(const glm::dvec2& world_xz, double* height) const {
+  *height = 0.0;
+  return m_terrain && m_terrain->groundHeight(world_xz, height);
 }
 
 Status Flight::resize(const Viewport& viewport, const Camera& camera, const Viewport& framebuffer) {
@@ -122,8 +164,26 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   ++m_steps;
 
   const auto t0 = Clock::now();
-  m_streamer->update(camera, m_config.viewport, clock_s);
-  const FrameHandoff handoff = m_streamer->takeReady(m_config.upload_tiles);
+  // Over terrain the planner sees the ground under the camera as its plane
+  // (the flat planner's assumption, moved to the local ground height).
+  Camera planning = camera;
+  if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, &f.ground_height)) {
+    planning.position.y = std::max(camera.position.y - f.ground_height, camera.near_dist);
+  }
+  m_streamer->update(planning, m_config.viewport, clock_s);
+  FrameHandoff handoff;
+  if (m_terrain) {
+    std::vector<FrameHandoff> all = m_streamer->takeReadyAll(m_config.upload_tiles);
+    handoff = std::move(all[0]);
+    const size_t floats = size_t(m_terrain->geometry().tile_px) * m_terrain->geometry().tile_px;
+    for (const ReadyTile& t : all[1].tiles) {
+      if (!t.rgba || t.rgba->size() != floats * sizeof(float)) continue;
+      m_terrain->uploadTile(t.key, reinterpret_cast<const float*>(t.rgba->data()));
+      ++f.height_tiles_uploaded;
+    }
+  } else {
+    handoff = m_streamer->takeReady(m_config.upload_tiles);
+  }
   const auto t_streamer = Clock::now();
   m_renderer->applyHandoff(handoff);
   const auto t_upload = Clock::now();
@@ -134,7 +194,15 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
     bindWindowFramebuffer(fb);
   }
   ClipmapRenderer::clearSky();
-  m_renderer->draw(camera, m_config.viewport);
+  if (m_terrain) {
+    m_terrain->draw(camera, m_config.viewport, *m_renderer);
+    const TerrainFrame& tf = m_terrain->lastFrame();
+    f.terrain_rings = tf.rings;
+    f.terrain_finest_level = tf.finest_level;
+    f.terrain_triangles = tf.triangles;
+  } else {
+    m_renderer->draw(camera, m_config.viewport);
+  }
   glFinish();  // frame time includes the GPU's (llvmpipe's) work
   const auto t1 = Clock::now();
   f.frame_ms = msBetween(t0, t1);
@@ -155,9 +223,13 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   f.tiles_loaded = now.total.loads - m_before.total.loads;
   const uint32_t levels = m_source->geometry().levelCount();
   f.levels.resize(levels);
+  // The colour layer's counters (with terrain, `levels` sums both layers).
+  const std::vector<LevelCounters>& now_levels = now.layers.empty() ? now.levels : now.layers[0].levels;
+  const std::vector<LevelCounters>& before_levels =
+      m_before.layers.empty() ? m_before.levels : m_before.layers[0].levels;
   for (uint32_t l = 0; l < levels; ++l) {
-    const LevelCounters c = l < now.levels.size() ? now.levels[l] : LevelCounters{};
-    const LevelCounters b = l < m_before.levels.size() ? m_before.levels[l] : LevelCounters{};
+    const LevelCounters c = l < now_levels.size() ? now_levels[l] : LevelCounters{};
+    const LevelCounters b = l < before_levels.size() ? before_levels[l] : LevelCounters{};
     LevelFrame& lf = f.levels[l];
     lf.ram_hits = c.ram_hits - b.ram_hits;
     lf.ram_misses = c.ram_misses - b.ram_misses;

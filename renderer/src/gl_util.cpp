@@ -33,15 +33,26 @@ Status compile(GLenum kind, const std::string& source, GLuint* out) {
 
 }  // namespace
 
+std::string shaderHeader(const std::string& extra_defines) {
+  return "#version 450 core\n#define MAX_LEVELS " + std::to_string(renderer_config::kMaxLevels) +
+         "\n#define AMBIENT " + std::to_string(renderer_config::kTerrainAmbient) + "\n" +
+         extra_defines;
+}
+
 Status buildGroundProgram(const char* fragment_body, uint32_t* program,
                           const std::string& extra_defines) {
-  const std::string header = "#version 450 core\n#define MAX_LEVELS " +
-                             std::to_string(renderer_config::kMaxLevels) + "\n" + extra_defines;
+  return buildProgram(shaders::k_fullscreen_vert,
+                      std::string(shaders::k_ground_ray_glsl) + "\n" + fragment_body, program,
+                      extra_defines);
+}
+
+Status buildProgram(const std::string& vertex, const std::string& fragment, uint32_t* program,
+                    const std::string& extra_defines, const std::vector<const char*>& feedback) {
+  const std::string header = shaderHeader(extra_defines);
   GLuint vs = 0, fs = 0;
-  Status s = compile(GL_VERTEX_SHADER, header + shaders::k_fullscreen_vert, &vs);
+  Status s = compile(GL_VERTEX_SHADER, header + vertex, &vs);
   if (!s) return s;
-  s = compile(GL_FRAGMENT_SHADER,
-              header + shaders::k_ground_ray_glsl + "\n" + fragment_body, &fs);
+  s = compile(GL_FRAGMENT_SHADER, header + fragment, &fs);
   if (!s) {
     glDeleteShader(vs);
     return s;
@@ -49,6 +60,9 @@ Status buildGroundProgram(const char* fragment_body, uint32_t* program,
   GLuint p = glCreateProgram();
   glAttachShader(p, vs);
   glAttachShader(p, fs);
+  if (!feedback.empty()) {
+    glTransformFeedbackVaryings(p, GLsizei(feedback.size()), feedback.data(), GL_INTERLEAVED_ATTRIBS);
+  }
   glLinkProgram(p);
   glDeleteShader(vs);
   glDeleteShader(fs);

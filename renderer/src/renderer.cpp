@@ -410,6 +410,16 @@ void ClipmapRenderer::clearSky() {
 
 void ClipmapRenderer::draw(const Camera& camera, const Viewport& viewport) {
   const GLuint p = m_program[m_overlay == Overlay::kOff ? 0 : 1];
+  bindColour(p, camera, viewport);
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glDisable(GL_DEPTH_TEST);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewport& viewport) const {
   const uint32_t pyramid = m_config.pyramid_level;
   const double tp = m_geometry.tile_px;
   const double clip = m_slots;
@@ -442,12 +452,6 @@ void ClipmapRenderer::draw(const Camera& camera, const Viewport& viewport) {
   glProgramUniform1i(p, loc(p, "uUsable"), 1);
   glBindTextureUnit(0, m_stack[setCount() == 1 ? 0 : m_front]);
   glBindTextureUnit(1, m_usable_tex[setCount() == 1 ? 0 : m_front]);
-  glUseProgram(p);
-  glBindVertexArray(m_vao);
-  glDisable(GL_DEPTH_TEST);
-  glDrawArrays(GL_TRIANGLES, 0, 3);
-  glBindVertexArray(0);
-  glUseProgram(0);
 }
 
 // ---------------------------------------------------------------------------

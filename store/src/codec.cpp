@@ -13,12 +13,42 @@
 namespace clipstream {
 namespace {
 
+// Single-channel 32-bit samples (F32) as little-endian u32 words.
+void applyLeftDelta32(const uint8_t* in, uint8_t* out, uint32_t tile_px) {
+  for (uint32_t y = 0; y < tile_px; ++y) {
+    uint32_t previous = 0;
+    for (uint32_t x = 0; x < tile_px; ++x) {
+      uint32_t value;
+      std::memcpy(&value, in + (size_t(y) * tile_px + x) * 4, 4);
+      const uint32_t delta = value - previous;
+      std::memcpy(out + (size_t(y) * tile_px + x) * 4, &delta, 4);
+      previous = value;
+    }
+  }
+}
+
+void undoLeftDelta32(uint8_t* pixels, uint32_t tile_px) {
+  for (uint32_t y = 0; y < tile_px; ++y) {
+    uint32_t run = 0;
+    for (uint32_t x = 0; x < tile_px; ++x) {
+      uint32_t delta;
+      std::memcpy(&delta, pixels + (size_t(y) * tile_px + x) * 4, 4);
+      run += delta;
+      std::memcpy(pixels + (size_t(y) * tile_px + x) * 4, &run, 4);
+    }
+  }
+}
+
 // Per row, per channel: out[x] = in[x] - in[x - 1] modulo the sample width.
-// The first pixel of each row is kept as is. 16-bit samples are treated as
-// little-endian u16.
+// The first pixel of each row is kept as is. 16-bit samples (R16, I16) are
+// treated as little-endian u16, F32 samples as u32 words.
 void applyLeftDelta(const uint8_t* in, uint8_t* out, uint32_t tile_px, PixelFormat format) {
   const size_t row_bytes = size_t(tile_px) * bytesPerPixel(format);
-  if (format == PixelFormat::kR16) {
+  if (format == PixelFormat::kF32) {
+    applyLeftDelta32(in, out, tile_px);
+    return;
+  }
+  if (format == PixelFormat::kR16 || format == PixelFormat::kI16) {
     for (uint32_t y = 0; y < tile_px; ++y) {
       const uint8_t* src = in + y * row_bytes;
       uint8_t* dst = out + y * row_bytes;
@@ -50,7 +80,11 @@ bool undoLeftDeltaFast(uint8_t* pixels, uint32_t tile_px, PixelFormat format);
 void undoLeftDelta(uint8_t* pixels, uint32_t tile_px, PixelFormat format) {
   if (undoLeftDeltaFast(pixels, tile_px, format)) return;
   const size_t row_bytes = size_t(tile_px) * bytesPerPixel(format);
-  if (format == PixelFormat::kR16) {
+  if (format == PixelFormat::kF32) {
+    undoLeftDelta32(pixels, tile_px);
+    return;
+  }
+  if (format == PixelFormat::kR16 || format == PixelFormat::kI16) {
     for (uint32_t y = 0; y < tile_px; ++y) {
       uint8_t* row = pixels + y * row_bytes;
       uint16_t previous = 0;
@@ -412,6 +446,8 @@ void tileToRgba8(const uint8_t* src, uint8_t* dst, uint32_t tile_px, PixelFormat
       case PixelFormat::kR16: rowR16<kDelta>(src, dst, tile_px); break;
       case PixelFormat::kRGB8: rowRgb<kDelta, 3>(src, dst, tile_px); break;
       case PixelFormat::kRGBA8: rowRgb<kDelta, 4>(src, dst, tile_px); break;
+      case PixelFormat::kI16:
+      case PixelFormat::kF32: break;  // heights: refused by decodeTileRgba8
     }
   }
 }
@@ -503,7 +539,9 @@ __attribute__((target("ssse3"))) void undoRowsRgb8Ssse3(uint8_t* pixels, uint32_
 bool undoLeftDeltaFast(uint8_t* pixels, uint32_t tile_px, PixelFormat format) {
   switch (format) {
     case PixelFormat::kR8: undoRowsSse2<1>(pixels, tile_px); return true;
-    case PixelFormat::kR16: undoRowsSse2<2>(pixels, tile_px); return true;
+    case PixelFormat::kR16:
+    case PixelFormat::kI16: undoRowsSse2<2>(pixels, tile_px); return true;
+    case PixelFormat::kF32: return false;
     case PixelFormat::kRGBA8: undoRowsSse2<4>(pixels, tile_px); return true;
     case PixelFormat::kRGB8:
 #if defined(CLIPSTREAM_HAVE_SSSE3_PATH)
@@ -525,8 +563,10 @@ bool undoLeftDeltaFast(uint8_t*, uint32_t, PixelFormat) { return false; }
 Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& encoding,
                        const RawTile& raw, std::span<uint8_t> rgba) {
   const size_t pixel_count = size_t(geometry.tile_px) * geometry.tile_px;
-  if (!isValidPixelFormat(uint32_t(geometry.format))) {
-    return Status::error(ErrorCode::kUnsupported, "decode: unknown pixel format");
+  if (!isValidPixelFormat(uint32_t(geometry.format)) || !isColourFormat(geometry.format)) {
+    return Status::error(ErrorCode::kUnsupported,
+                         std::string("decode: pixel format ") + pixelFormatName(geometry.format) +
+                             " is not a colour format");
   }
   if (rgba.size() != pixel_count * 4) {
     return Status::error(ErrorCode::kInvalidArgument,

@@ -186,51 +186,101 @@ Decoded decodePageDirectory(std::span<const uint8_t> directory, std::vector<Page
 
 // ---- Index page ----
 
-uint64_t encodeIndexPage(std::span<const TileEntry> entries, std::vector<uint8_t>* out) {
-  out->assign(entries.size() * kTileEntryBytes, 0);
+uint64_t encodeIndexPage(std::span<const TileEntry> entries, uint32_t entry_bytes,
+                         std::vector<uint8_t>* out) {
+  out->assign(entries.size() * entry_bytes, 0);
   for (size_t i = 0; i < entries.size(); ++i) {
-    uint8_t* p = out->data() + i * kTileEntryBytes;
+    uint8_t* p = out->data() + i * entry_bytes;
     put64(p + kTileOffOffsetOrValue, entries[i].offset_or_value);
     put32(p + kTileOffStoredBytes, entries[i].stored_bytes);
     put32(p + kTileOffChecksum, entries[i].checksum);
+    if (entry_bytes == kElevationTileEntryBytes) {
+      putF32(p + kTileOffMinHeight, entries[i].min_height);
+      putF32(p + kTileOffMaxHeight, entries[i].max_height);
+      putF32(p + kTileOffError, entries[i].error);
+    }
   }
   return checksum64(out->data(), out->size());
 }
 
-Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum,
+Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum, uint32_t entry_bytes,
                         std::vector<TileEntry>* out) {
-  if (page.size() % kTileEntryBytes != 0) return Decoded::kBadSize;
+  if (entry_bytes != kTileEntryBytes && entry_bytes != kElevationTileEntryBytes) {
+    return Decoded::kBadSize;
+  }
+  if (page.size() % entry_bytes != 0) return Decoded::kBadSize;
   if (checksum64(page.data(), page.size()) != checksum) return Decoded::kBadChecksum;
-  const size_t count = page.size() / kTileEntryBytes;
+  const size_t count = page.size() / entry_bytes;
   out->resize(count);
   for (size_t i = 0; i < count; ++i) {
-    const uint8_t* p = page.data() + i * kTileEntryBytes;
+    const uint8_t* p = page.data() + i * entry_bytes;
     TileEntry& e = (*out)[i];
     e.offset_or_value = get64(p + kTileOffOffsetOrValue);
     e.stored_bytes = get32(p + kTileOffStoredBytes);
     e.checksum = get32(p + kTileOffChecksum);
+    if (entry_bytes == kElevationTileEntryBytes) {
+      if (get32(p + kTileOffReserved) != 0) return Decoded::kBadSize;
+      e.min_height = getF32(p + kTileOffMinHeight);
+      e.max_height = getF32(p + kTileOffMaxHeight);
+      e.error = getF32(p + kTileOffError);
+    }
   }
   return Decoded::kOk;
 }
 
 // ---- Metadata block ----
 
-std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs) {
-  std::vector<uint8_t> block(metadataBytes(crs.size()));
+std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs,
+                                    const ElevationInfo* elevation) {
+  std::vector<uint8_t> block(metadataBytes(crs.size(), elevation != nullptr));
   for (size_t i = 0; i < 6; ++i) putF64(block.data() + kMetaOffTransform + 8 * i, transform[i]);
   put32(block.data() + kMetaOffCrsBytes, static_cast<uint32_t>(crs.size()));
   std::memcpy(block.data() + kMetaOffCrs, crs.data(), crs.size());
+  if (elevation != nullptr) {
+    uint8_t* p = block.data() + kMetaOffCrs + crs.size();
+    putF64(p + kElevOffScale, elevation->scale);
+    putF64(p + kElevOffOffset, elevation->offset);
+    putF64(p + kElevOffNodata, elevation->has_nodata ? elevation->nodata : 0.0);
+    put32(p + kElevOffFlags, (elevation->has_nodata ? kElevFlagHasNodata : 0u) |
+                                 (elevation->units_assumed ? kElevFlagUnitsAssumed : 0u) |
+                                 (elevation->quantised ? kElevFlagQuantised : 0u));
+    put32(p + kElevOffUnits, static_cast<uint32_t>(elevation->units));
+    put64(p + kElevOffFilled, elevation->filled_samples);
+    putF64(p + kElevOffMaxError, elevation->max_error);
+    putF64(p + kElevOffMinHeight, elevation->min_height);
+    putF64(p + kElevOffMaxHeight, elevation->max_height);
+  }
   sealBlock(&block);
   return block;
 }
 
-Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out) {
+Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out,
+                       ElevationInfo* elevation) {
   if (block.size() < kMetadataFixedBytes) return Decoded::kBadSize;
   if (!blockChecksumOk(block)) return Decoded::kBadChecksum;
   const uint32_t crs_bytes = get32(block.data() + kMetaOffCrsBytes);
-  if (metadataBytes(crs_bytes) != block.size()) return Decoded::kBadSize;
+  if (metadataBytes(crs_bytes, elevation != nullptr) != block.size()) return Decoded::kBadSize;
   for (size_t i = 0; i < 6; ++i) out->transform[i] = getF64(block.data() + kMetaOffTransform + 8 * i);
   out->crs.assign(reinterpret_cast<const char*>(block.data() + kMetaOffCrs), crs_bytes);
+  if (elevation != nullptr) {
+    const uint8_t* p = block.data() + kMetaOffCrs + crs_bytes;
+    const uint32_t flags = get32(p + kElevOffFlags);
+    const uint32_t units = get32(p + kElevOffUnits);
+    if ((flags & ~kElevKnownFlags) != 0 || !isValidHeightUnits(units)) return Decoded::kBadSize;
+    *elevation = ElevationInfo{};
+    elevation->present = true;
+    elevation->scale = getF64(p + kElevOffScale);
+    elevation->offset = getF64(p + kElevOffOffset);
+    elevation->has_nodata = (flags & kElevFlagHasNodata) != 0;
+    elevation->nodata = getF64(p + kElevOffNodata);
+    elevation->units = static_cast<HeightUnits>(units);
+    elevation->units_assumed = (flags & kElevFlagUnitsAssumed) != 0;
+    elevation->quantised = (flags & kElevFlagQuantised) != 0;
+    elevation->filled_samples = get64(p + kElevOffFilled);
+    elevation->max_error = getF64(p + kElevOffMaxError);
+    elevation->min_height = getF64(p + kElevOffMinHeight);
+    elevation->max_height = getF64(p + kElevOffMaxHeight);
+  }
   return Decoded::kOk;
 }
 

@@ -23,7 +23,12 @@ static_assert(std::endian::native == std::endian::little,
               "the store codec assumes a little-endian host");
 
 constexpr char kMagic[8] = {'C', 'L', 'I', 'P', 'T', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 1;
+// Version 2 added elevation stores (the elevation flag, 32-byte tile
+// entries with height bounds, the elevation record in the metadata block,
+// pixel formats I16 and F32, the decimate filter). Version 1 stores (colour
+// only) are still read; writers write version 2.
+constexpr uint32_t kVersion = 2;
+constexpr uint32_t kOldestVersion = 1;
 
 // Header: fixed size, followed immediately by level 0's payloads.
 constexpr uint32_t kHeaderBytes = 136;
@@ -61,7 +66,9 @@ constexpr size_t kVersionEndBytes = kOffVersion + 4;
 
 constexpr uint32_t kFlagLinearLight = 1u << 0;
 constexpr uint32_t kFlagGeoPresent = 1u << 1;
-constexpr uint32_t kKnownFlags = kFlagLinearLight | kFlagGeoPresent;
+constexpr uint32_t kFlagElevation = 1u << 2;  // version 2
+constexpr uint32_t kKnownFlagsV1 = kFlagLinearLight | kFlagGeoPresent;
+constexpr uint32_t kKnownFlags = kKnownFlagsV1 | kFlagElevation;
 
 // Tiles per index page side: a page holds up to 64 x 64 entries (64 KiB),
 // small enough to read on demand, large enough that the page directory of a
@@ -102,12 +109,23 @@ static_assert(kPageOffChecksum + 8 == kPageEntryBytes);
 constexpr uint32_t kPageFlagConstant = 1u << 0;
 
 // Tile entry inside an index page (section 8); the page has no checksum of
-// its own, its directory entry carries it.
+// its own, its directory entry carries it. Elevation stores append the
+// tile's height bounds and geometric error (f32, in height units) and a
+// reserved zero word.
 constexpr uint32_t kTileEntryBytes = 16;
 constexpr size_t kTileOffOffsetOrValue = 0;
 constexpr size_t kTileOffStoredBytes = 8;
 constexpr size_t kTileOffChecksum = 12;
 static_assert(kTileOffChecksum + 4 == kTileEntryBytes);
+constexpr uint32_t kElevationTileEntryBytes = 32;
+constexpr size_t kTileOffMinHeight = 16;
+constexpr size_t kTileOffMaxHeight = 20;
+constexpr size_t kTileOffError = 24;
+constexpr size_t kTileOffReserved = 28;
+static_assert(kTileOffReserved + 4 == kElevationTileEntryBytes);
+inline uint32_t tileEntryBytes(bool elevation) {
+  return elevation ? kElevationTileEntryBytes : kTileEntryBytes;
+}
 
 // Metadata block (section 10): 6 f64 transform, u32 CRS length, CRS bytes,
 // then the checksum.
@@ -115,6 +133,23 @@ constexpr size_t kMetaOffTransform = 0;
 constexpr size_t kMetaOffCrsBytes = 48;
 constexpr size_t kMetaOffCrs = 52;
 constexpr uint32_t kMetadataFixedBytes = kMetaOffCrs + kChecksumBytes;
+// Elevation record (version 2, elevation stores only): follows the CRS
+// bytes, before the checksum. Offsets are relative to the record.
+constexpr uint32_t kElevationRecordBytes = 64;
+constexpr size_t kElevOffScale = 0;         // f64: height = offset + scale * sample
+constexpr size_t kElevOffOffset = 8;        // f64
+constexpr size_t kElevOffNodata = 16;       // f64: the input's no-data value
+constexpr size_t kElevOffFlags = 24;        // u32: kElevFlag*
+constexpr size_t kElevOffUnits = 28;        // u32: HeightUnits
+constexpr size_t kElevOffFilled = 32;       // u64: level-0 samples filled
+constexpr size_t kElevOffMaxError = 40;     // f64: largest |stored - input| at level 0
+constexpr size_t kElevOffMinHeight = 48;    // f64: lowest stored height
+constexpr size_t kElevOffMaxHeight = 56;    // f64: highest stored height
+static_assert(kElevOffMaxHeight + 8 == kElevationRecordBytes);
+constexpr uint32_t kElevFlagHasNodata = 1u << 0;
+constexpr uint32_t kElevFlagUnitsAssumed = 1u << 1;
+constexpr uint32_t kElevFlagQuantised = 1u << 2;
+constexpr uint32_t kElevKnownFlags = kElevFlagHasNodata | kElevFlagUnitsAssumed | kElevFlagQuantised;
 
 inline void put32(uint8_t* p, uint32_t v) { std::memcpy(p, &v, 4); }
 inline void put64(uint8_t* p, uint64_t v) { std::memcpy(p, &v, 8); }
@@ -132,6 +167,12 @@ inline uint64_t get64(const uint8_t* p) {
 inline double getF64(const uint8_t* p) {
   double v;
   std::memcpy(&v, p, 8);
+  return v;
+}
+inline void putF32(uint8_t* p, float v) { std::memcpy(p, &v, 4); }
+inline float getF32(const uint8_t* p) {
+  float v;
+  std::memcpy(&v, p, 4);
   return v;
 }
 
@@ -236,31 +277,45 @@ Decoded decodePageDirectory(std::span<const uint8_t> directory, std::vector<Page
 
 // A tile's index entry: stored_bytes 0 is a constant tile whose value (the
 // first bpp bytes, rest 0) is in offset_or_value; otherwise offset_or_value
-// is relative to the level's payload region.
+// is relative to the level's payload region. The height fields exist in
+// elevation stores only (0 elsewhere).
 struct TileEntry {
   uint64_t offset_or_value = 0;
   uint32_t stored_bytes = 0;
   uint32_t checksum = 0;  // checksum32 of the stored payload; 0 when constant
+  float min_height = 0.0f;
+  float max_height = 0.0f;
+  float error = 0.0f;
 
   friend bool operator==(const TileEntry&, const TileEntry&) = default;
 };
 
-// One index page: entries row-major inside the page. Returns the page's
-// checksum, which goes in its directory entry.
-uint64_t encodeIndexPage(std::span<const TileEntry> entries, std::vector<uint8_t>* out);
+// One index page: entries row-major inside the page, each `entry_bytes`
+// (tileEntryBytes()). Returns the page's checksum, which goes in its
+// directory entry.
+uint64_t encodeIndexPage(std::span<const TileEntry> entries, uint32_t entry_bytes,
+                         std::vector<uint8_t>* out);
 // kBadChecksum when the bytes do not match `checksum` (from the directory),
-// kBadSize unless they are whole entries.
-Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum,
+// kBadSize unless they are whole entries (a non-zero reserved word of an
+// elevation entry is kBadSize too).
+Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum, uint32_t entry_bytes,
                         std::vector<TileEntry>* out);
 
-inline uint64_t metadataBytes(uint64_t crs_bytes) { return kMetadataFixedBytes + crs_bytes; }
+inline uint64_t metadataBytes(uint64_t crs_bytes, bool elevation = false) {
+  return kMetadataFixedBytes + crs_bytes + (elevation ? kElevationRecordBytes : 0);
+}
 // The metadata block of `transform` and `crs` (at most kMaxCrsBytes; the
-// caller checks), checksum included.
-std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs);
-// Fills transform and crs (not `present`: that is a header flag). kBadSize
-// when the block is shorter than kMetadataFixedBytes or its CRS length does
-// not match its size.
-Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out);
+// caller checks), then the elevation record when `elevation` is given,
+// checksum included.
+std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs,
+                                    const ElevationInfo* elevation = nullptr);
+// Fills transform and crs (not `present`: that is a header flag), and
+// *elevation when it is not null (the elevation flag says the record is
+// there). kBadSize when the block is shorter than kMetadataFixedBytes or its
+// CRS length (plus the record) does not match its size, or the record has
+// unknown flags or units.
+Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out,
+                       ElevationInfo* elevation = nullptr);
 
 // ---- Geometry helpers ----
 

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <mutex>
 #include <system_error>
@@ -51,6 +52,7 @@ struct TileStoreReader::Impl {
   uint64_t pages_begin = 0;  // index pages region [pages_begin, pages_end)
   uint64_t pages_end = 0;
   size_t max_stored_bytes = 0;
+  uint32_t entry_bytes = format::kTileEntryBytes;  // per the elevation flag
   std::vector<LevelRead> levels;
   mutable std::atomic<uint64_t> bytes_read{0};
   mutable std::atomic<uint64_t> pages_loaded{0};
@@ -111,9 +113,10 @@ Status TileStoreReader::Impl::openImpl() {
     return bad(ErrorCode::kTruncated, "file ends inside the header");
   }
   const uint32_t version = format::decodeVersion(header_bytes);
-  if (version != format::kVersion) {
+  if (version < format::kOldestVersion || version > format::kVersion) {
     return bad(ErrorCode::kBadVersion, "format version " + std::to_string(version) +
-                                           " (this reader knows version " +
+                                           " (this reader knows versions " +
+                                           std::to_string(format::kOldestVersion) + " to " +
                                            std::to_string(format::kVersion) + ")");
   }
   if (header_read < sizeof(header_bytes)) {
@@ -145,7 +148,9 @@ Status TileStoreReader::Impl::openImpl() {
   if (tile_px < format::kMinTilePx || tile_px > format::kMaxTilePx) {
     return bad(ErrorCode::kBadHeader, "tile size " + std::to_string(tile_px) + " outside 16..4096");
   }
-  if (!isValidPixelFormat(header.pixel_format)) {
+  const bool v1 = version == 1;
+  if (!isValidPixelFormat(header.pixel_format) ||
+      (v1 && !isColourFormat(PixelFormat(header.pixel_format)))) {
     return bad(ErrorCode::kUnsupported,
                "unknown pixel format " + std::to_string(header.pixel_format));
   }
@@ -155,15 +160,23 @@ Status TileStoreReader::Impl::openImpl() {
   if (header.predictor > 1) {
     return bad(ErrorCode::kUnsupported, "unknown predictor " + std::to_string(header.predictor));
   }
-  if (header.filter > 1) {
+  if (header.filter > (v1 ? 1u : 2u)) {
     return bad(ErrorCode::kBadHeader, "unknown filter " + std::to_string(header.filter));
   }
-  if ((header.flags & ~format::kKnownFlags) != 0) {
+  if ((header.flags & ~(v1 ? format::kKnownFlagsV1 : format::kKnownFlags)) != 0) {
     return bad(ErrorCode::kBadHeader, "unknown header flags");
   }
-  if (header.page_tiles != format::kPageTiles ||
-      header.tile_entry_bytes != format::kTileEntryBytes) {
-    return bad(ErrorCode::kBadHeader, "index page shape is not 64 tiles of 16 bytes");
+  const bool elevation = (header.flags & format::kFlagElevation) != 0;
+  const PixelFormat pixel_format = static_cast<PixelFormat>(header.pixel_format);
+  if (elevation ? !isHeightFormat(pixel_format) : !isColourFormat(pixel_format)) {
+    return bad(ErrorCode::kBadHeader, std::string("pixel format ") + pixelFormatName(pixel_format) +
+                                          (elevation ? " cannot hold heights"
+                                                     : " is for elevation stores only"));
+  }
+  entry_bytes = format::tileEntryBytes(elevation);
+  if (header.page_tiles != format::kPageTiles || header.tile_entry_bytes != entry_bytes) {
+    return bad(ErrorCode::kBadHeader, "index page shape is not 64 tiles of " +
+                                          std::to_string(entry_bytes) + " bytes");
   }
   PyramidGeometry geometry;
   if (!makePyramidGeometry(header.width_px, header.height_px, tile_px,
@@ -204,8 +217,8 @@ Status TileStoreReader::Impl::openImpl() {
       metadata_offset + metadata_bytes != file_bytes || index_offset < format::kHeaderBytes) {
     return bad(ErrorCode::kBadHeader, "region offsets in the header are inconsistent");
   }
-  if (metadata_bytes < format::metadataBytes(0) ||
-      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes)) {
+  if (metadata_bytes < format::metadataBytes(0, elevation) ||
+      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes, elevation)) {
     return bad(ErrorCode::kBadHeader, "metadata block size out of range");
   }
   // Level table and metadata lie back to back at the end: one read remotely.
@@ -298,7 +311,7 @@ Status TileStoreReader::Impl::openImpl() {
       }
       const uint64_t tiles = uint64_t(format::pageSpan(geometry.levels[l].tiles_x, px)) *
                              format::pageSpan(geometry.levels[l].tiles_y, py);
-      if (entry.bytes != tiles * format::kTileEntryBytes || entry.constant_value != 0 ||
+      if (entry.bytes != tiles * entry_bytes || entry.constant_value != 0 ||
           entry.offset < pages_begin || !fits(entry.offset, entry.bytes, pages_end)) {
         return bad(ErrorCode::kCorruptIndex, where + "page location out of bounds");
       }
@@ -312,14 +325,25 @@ Status TileStoreReader::Impl::openImpl() {
   std::vector<uint8_t> metadata(static_cast<size_t>(metadata_bytes));
   status = read(metadata.data(), metadata.size(), metadata_offset);
   if (!status) return status;
-  switch (format::decodeMetadata(metadata, &info.geo)) {
+  switch (format::decodeMetadata(metadata, &info.geo, elevation ? &info.elevation : nullptr)) {
     case format::Decoded::kOk: break;
     case format::Decoded::kBadChecksum:
       return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
     case format::Decoded::kBadSize:
-      return bad(ErrorCode::kBadHeader, "metadata CRS length does not match the block size");
+      return bad(ErrorCode::kBadHeader,
+                 elevation ? "metadata block: CRS length does not match the block size, or the "
+                             "elevation record has unknown flags or units"
+                           : "metadata CRS length does not match the block size");
   }
   info.geo.present = (header.flags & format::kFlagGeoPresent) != 0;
+  if (elevation) {
+    const ElevationInfo& e = info.elevation;
+    if (!std::isfinite(e.scale) || e.scale <= 0.0 || !std::isfinite(e.offset) ||
+        !std::isfinite(e.max_error) || e.max_error < 0.0 || !std::isfinite(e.min_height) ||
+        !std::isfinite(e.max_height) || e.min_height > e.max_height) {
+      return bad(ErrorCode::kBadHeader, "elevation record: scale, offset or bounds out of range");
+    }
+  }
   return Status::ok();
 }
 
@@ -334,18 +358,27 @@ Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32
   if (!status) return status;
   auto page = std::make_unique<Page>();
   // Its size was checked against the page's tile count at open.
-  if (format::decodeIndexPage(bytes, dir.checksum, &page->entries) != format::Decoded::kOk) {
-    return bad(ErrorCode::kCorruptIndex, where + ": checksum mismatch");
+  switch (format::decodeIndexPage(bytes, dir.checksum, entry_bytes, &page->entries)) {
+    case format::Decoded::kOk: break;
+    case format::Decoded::kBadChecksum:
+      return bad(ErrorCode::kCorruptIndex, where + ": checksum mismatch");
+    case format::Decoded::kBadSize:
+      return bad(ErrorCode::kCorruptIndex, where + ": malformed entries");
   }
   const LevelInfo& level_info = info.geometry.levels[level_index];
   const uint32_t w = format::pageSpan(level_info.tiles_x, px);
   const size_t bpp = bytesPerPixel(info.geometry.format);
   for (size_t i = 0; i < page->entries.size(); ++i) {
     const format::TileEntry& entry = page->entries[i];
-    const bool ok = entry.stored_bytes == 0
-                        ? entry.checksum == 0 && valueFits(entry.offset_or_value, bpp)
-                        : entry.stored_bytes <= max_stored_bytes &&
-                              fits(entry.offset_or_value, entry.stored_bytes, level.payload_bytes);
+    const bool bounds_ok = !info.elevation.present ||
+                           (std::isfinite(entry.min_height) && std::isfinite(entry.max_height) &&
+                            std::isfinite(entry.error) && entry.min_height <= entry.max_height &&
+                            entry.error >= 0.0f);
+    const bool ok = bounds_ok &&
+                    (entry.stored_bytes == 0
+                         ? entry.checksum == 0 && valueFits(entry.offset_or_value, bpp)
+                         : entry.stored_bytes <= max_stored_bytes &&
+                               fits(entry.offset_or_value, entry.stored_bytes, level.payload_bytes));
     if (!ok) {
       const TileKey key{level_index, px * format::kPageTiles + uint32_t(i % w),
                         py * format::kPageTiles + uint32_t(i / w)};
@@ -399,6 +432,9 @@ Status TileStoreReader::Impl::peekPage(uint32_t level_index, uint32_t px, uint32
 void TileStoreReader::Impl::entryLocation(uint32_t level_index, const TileEntry& entry,
                                           TileLocation* out) const {
   *out = TileLocation{};
+  out->min_height = entry.min_height;
+  out->max_height = entry.max_height;
+  out->error = entry.error;
   if (entry.stored_bytes == 0) {
     out->constant = true;
     std::memcpy(out->constant_pixel, &entry.offset_or_value, 8);
@@ -421,6 +457,11 @@ Status TileStoreReader::Impl::locate(const TileKey& key, TileLocation* out) cons
   if (dir.flags & format::kPageFlagConstant) {
     out->constant = true;
     std::memcpy(out->constant_pixel, &dir.constant_value, 8);
+    if (info.elevation.present) {
+      // A constant page of an elevation store is flat ground (the writer's rule).
+      out->min_height = out->max_height =
+          float(heightOfSample(info.geometry.format, info.elevation, out->constant_pixel));
+    }
     return Status::ok();
   }
   const Page* page = nullptr;

@@ -15,6 +15,8 @@ uint32_t channelCount(PixelFormat format) {
     case PixelFormat::kR16: return 1;
     case PixelFormat::kRGB8: return 3;
     case PixelFormat::kRGBA8: return 4;
+    case PixelFormat::kI16: return 1;
+    case PixelFormat::kF32: return 1;
   }
   return 0;
 }
@@ -25,6 +27,8 @@ uint32_t bytesPerPixel(PixelFormat format) {
     case PixelFormat::kR16: return 2;
     case PixelFormat::kRGB8: return 3;
     case PixelFormat::kRGBA8: return 4;
+    case PixelFormat::kI16: return 2;
+    case PixelFormat::kF32: return 4;
   }
   return 0;
 }
@@ -35,16 +39,28 @@ const char* pixelFormatName(PixelFormat format) {
     case PixelFormat::kR16: return "R16";
     case PixelFormat::kRGB8: return "RGB8";
     case PixelFormat::kRGBA8: return "RGBA8";
+    case PixelFormat::kI16: return "I16";
+    case PixelFormat::kF32: return "F32";
   }
   return "unknown";
 }
 
-bool isValidPixelFormat(uint32_t raw) { return raw >= 1 && raw <= 4; }
+bool isValidPixelFormat(uint32_t raw) { return raw >= 1 && raw <= 6; }
+
+bool isColourFormat(PixelFormat format) {
+  return format == PixelFormat::kR8 || format == PixelFormat::kR16 ||
+         format == PixelFormat::kRGB8 || format == PixelFormat::kRGBA8;
+}
+
+bool isHeightFormat(PixelFormat format) {
+  return format == PixelFormat::kR16 || format == PixelFormat::kI16 || format == PixelFormat::kF32;
+}
 
 const char* downsampleFilterName(DownsampleFilter filter) {
   switch (filter) {
     case DownsampleFilter::kBox: return "box";
     case DownsampleFilter::kLanczos3: return "lanczos3";
+    case DownsampleFilter::kDecimate: return "decimate";
   }
   return "unknown";
 }

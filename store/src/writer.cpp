@@ -16,6 +16,7 @@
 #include <zstd.h>
 
 #include <cerrno>
+#include <cmath>
 #include <filesystem>
 #include <mutex>
 #include <random>
@@ -163,15 +164,16 @@ struct TileStoreWriter::Impl {
     bool all_constant = true;
     for (uint32_t i = 0; i < count && all_constant; ++i) {
       all_constant = page->entries[i].stored_bytes == 0 &&
-                     page->entries[i].offset_or_value == page->entries[0].offset_or_value;
+                     page->entries[i].offset_or_value == page->entries[0].offset_or_value &&
+                     flatEntry(page->entries[i]);
     }
     if (all_constant) {
       page->state = PageState::kConstant;
       page->constant_value = page->entries[0].offset_or_value;
     } else {
       std::vector<uint8_t> bytes;
-      const uint64_t checksum =
-          format::encodeIndexPage(std::span<const PendingEntry>(page->entries.get(), count), &bytes);
+      const uint64_t checksum = format::encodeIndexPage(
+          std::span<const PendingEntry>(page->entries.get(), count), entryBytes(), &bytes);
       Status status = fileio::pwriteAll(index_fd, bytes.data(), bytes.size(), index_bytes,
                                         index_temp);
       if (!status) return status;
@@ -184,6 +186,26 @@ struct TileStoreWriter::Impl {
     page->entries.reset();
     page->claimed_bits.reset();
     return Status::ok();
+  }
+
+  bool elevation() const { return options.elevation.present; }
+  uint32_t entryBytes() const { return format::tileEntryBytes(elevation()); }
+
+  // The height a constant entry's value stands for (elevation stores).
+  float constantHeight(uint64_t value) const {
+    uint8_t pixel[8];
+    std::memcpy(pixel, &value, 8);
+    return float(heightOfSample(geometry.format, options.elevation, pixel));
+  }
+
+  // A constant entry a constant page may stand for: in an elevation store
+  // its bounds must be its own value and its error 0 (a coarse tile may be
+  // constant while the ground under it is not), since a constant page
+  // records the value alone.
+  bool flatEntry(const PendingEntry& entry) const {
+    if (!elevation()) return true;
+    const float h = constantHeight(entry.offset_or_value);
+    return entry.min_height == h && entry.max_height == h && entry.error == 0.0f;
   }
 
   Status fail(Status status) {
@@ -239,8 +261,23 @@ Status TileStoreWriter::create(const std::string& path, const PyramidGeometry& g
   if (encoding.predictor != Predictor::kNone && encoding.predictor != Predictor::kLeftDelta) {
     return Status::error(ErrorCode::kInvalidArgument, "unknown predictor");
   }
-  if (encoding.filter != DownsampleFilter::kBox && encoding.filter != DownsampleFilter::kLanczos3) {
+  if (encoding.filter != DownsampleFilter::kBox && encoding.filter != DownsampleFilter::kLanczos3 &&
+      encoding.filter != DownsampleFilter::kDecimate) {
     return Status::error(ErrorCode::kInvalidArgument, "unknown downsample filter");
+  }
+  if (options.elevation.present ? !isHeightFormat(geometry.format)
+                                 : !isColourFormat(geometry.format)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         std::string("pixel format ") + pixelFormatName(geometry.format) +
+                             (options.elevation.present ? " cannot hold heights"
+                                                        : " is for elevation stores only"));
+  }
+  if (options.elevation.present &&
+      (!isValidHeightUnits(uint32_t(options.elevation.units)) ||
+       !std::isfinite(options.elevation.scale) || options.elevation.scale <= 0.0 ||
+       !std::isfinite(options.elevation.offset))) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "elevation scale, offset or units out of range");
   }
   if (options.geo.crs.size() > format::kMaxCrsBytes) {
     return Status::error(ErrorCode::kInvalidArgument, "CRS text longer than 1 MiB");
@@ -280,6 +317,17 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
   }
   PendingEntry entry;
   const size_t bpp = bytesPerPixel(impl.geometry.format);
+  if (impl.elevation()) {
+    const TileLocation& l = tile.location;
+    if (!std::isfinite(l.min_height) || !std::isfinite(l.max_height) || !std::isfinite(l.error) ||
+        l.min_height > l.max_height || l.error < 0.0f) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           format::keyText(key) + ": height bounds are not finite and ordered");
+    }
+    entry.min_height = l.min_height;
+    entry.max_height = l.max_height;
+    entry.error = l.error;
+  }
   if (tile.location.constant) {
     if (!tile.payload.empty()) {
       return Status::error(ErrorCode::kInvalidArgument,
@@ -364,6 +412,8 @@ Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, ui
   }
   PendingEntry entry;
   entry.offset_or_value = packValue(pixel.data(), bpp);
+  // Constant rectangles are flat ground in an elevation store.
+  if (impl.elevation()) entry.min_height = entry.max_height = impl.constantHeight(entry.offset_or_value);
 
   std::lock_guard<std::mutex> lock(impl.mutex);
   if (!impl.failure.isOk()) return impl.failure;
@@ -401,6 +451,26 @@ Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, ui
       }
     }
   }
+  return Status::ok();
+}
+
+Status TileStoreWriter::setElevationFigures(uint64_t filled_samples, double max_error,
+                                            double min_height, double max_height) {
+  Impl& impl = *m_impl;
+  if (!impl.elevation()) {
+    return Status::error(ErrorCode::kInvalidArgument, "not an elevation store");
+  }
+  if (!std::isfinite(max_error) || max_error < 0.0 || !std::isfinite(min_height) ||
+      !std::isfinite(max_height) || min_height > max_height) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "elevation figures are not finite and ordered");
+  }
+  std::lock_guard<std::mutex> lock(impl.mutex);
+  ElevationInfo& e = impl.options.elevation;
+  e.filled_samples = filled_samples;
+  e.max_error = max_error;
+  e.min_height = min_height;
+  e.max_height = max_height;
   return Status::ok();
 }
 
@@ -528,7 +598,8 @@ Status TileStoreWriter::Impl::finishLocked() {
   // Without a georeference the block holds the identity transform and no
   // CRS, so stale caller values never reach the file.
   const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
-  const std::vector<uint8_t> metadata = format::encodeMetadata(geo.transform, geo.crs);
+  const std::vector<uint8_t> metadata = format::encodeMetadata(
+      geo.transform, geo.crs, elevation() ? &options.elevation : nullptr);
   status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
   if (!status) return status;
   position += metadata.size();
@@ -547,6 +618,8 @@ Status TileStoreWriter::Impl::finishLocked() {
   header.filter = static_cast<uint32_t>(encoding.filter);
   if (encoding.linear_light) header.flags |= format::kFlagLinearLight;
   if (geo.present) header.flags |= format::kFlagGeoPresent;
+  if (elevation()) header.flags |= format::kFlagElevation;
+  header.tile_entry_bytes = entryBytes();
   header.level_table_offset = level_table_offset;
   header.level_table_bytes = table_bytes.size();
   header.index_offset = index_offset;

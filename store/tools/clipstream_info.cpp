@@ -91,6 +91,29 @@ void printText(const std::string& path, const StoreInfo& info,
   } else {
     std::printf("georeference none\n");
   }
+  if (info.elevation.present) {
+    const ElevationInfo& e = info.elevation;
+    std::printf("layer        elevation\n");
+    std::printf("heights      %.10g to %.10g %s%s\n", e.min_height, e.max_height,
+                heightUnitsName(e.units), e.units_assumed ? " (assumed: the input did not say)" : "");
+    if (g.format != PixelFormat::kF32) {
+      std::printf("height rule  offset %.10g + scale %.10g x sample\n", e.offset, e.scale);
+    }
+    if (e.quantised) {
+      std::printf("precision    quantised in steps of %.6g: error <= %.6g %s (largest measured %.6g)\n",
+                  e.scale, e.scale / 2, heightUnitsName(e.units), e.max_error);
+    } else {
+      std::printf("precision    exact (lossless)\n");
+    }
+    if (e.has_nodata) {
+      std::printf("no-data      %.10g in the input; %" PRIu64 " samples filled from their neighbours\n",
+                  e.nodata, e.filled_samples);
+    } else {
+      std::printf("no-data      none declared; %" PRIu64 " NaN samples filled\n", e.filled_samples);
+    }
+  } else {
+    std::printf("layer        colour\n");
+  }
   if (stats == nullptr) return;
   std::printf("\nlevel\twidth_px\theight_px\ttiles\tconstant_tiles\tstored_bytes\traw_bytes\tratio\n");
   LevelStats total;
@@ -135,6 +158,21 @@ nlohmann::json toJson(const std::string& path, const StoreInfo& info,
         {"crs", info.geo.crs}};
   } else {
     out["georeference"] = nullptr;
+  }
+  out["layer"] = info.elevation.present ? "elevation" : "colour";
+  if (info.elevation.present) {
+    const ElevationInfo& e = info.elevation;
+    out["elevation"] = {{"min_height", e.min_height},
+                        {"max_height", e.max_height},
+                        {"units", heightUnitsName(e.units)},
+                        {"units_assumed", e.units_assumed},
+                        {"scale", e.scale},
+                        {"offset", e.offset},
+                        {"quantised", e.quantised},
+                        {"error_bound", e.quantised ? e.scale / 2 : 0.0},
+                        {"max_error", e.max_error},
+                        {"nodata", e.has_nodata ? nlohmann::json(e.nodata) : nlohmann::json()},
+                        {"filled_samples", e.filled_samples}};
   }
   if (stats != nullptr) {
     nlohmann::json levels = nlohmann::json::array();

@@ -14,6 +14,8 @@ class FaultySource final : public TileSource {
       : m_inner(std::move(inner)), m_spec(spec) {}
 
   const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  TileContent content() const override { return m_inner->content(); }
+  ElevationInfo elevationInfo() const override { return m_inner->elevationInfo(); }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
     FetchInfo info;

@@ -40,6 +40,17 @@ std::string StreamerStats::toJson() const {
   j["path_hint_frames"] = path_hint_frames;
   j["path_hint_ignored_frames"] = path_hint_ignored_frames;
   j["loader_threads"] = loader_threads;
+  j["layers"] = nlohmann::json::array();
+  for (const LayerStats& layer : layers) {
+    nlohmann::json l;
+    l["total"] = countersJson(layer.total);
+    l["levels"] = nlohmann::json::array();
+    for (const LevelCounters& c : layer.levels) l["levels"].push_back(countersJson(c));
+    l["ram_bytes"] = layer.ram_bytes;
+    l["ram_entries"] = layer.ram_entries;
+    l["max_texture_lod"] = layer.max_texture_lod;
+    j["layers"].push_back(std::move(l));
+  }
   return j.dump();
 }
 

@@ -1,6 +1,7 @@
-// TileSource over a tile store file: positional reads through
+// TileSources over tile store files: positional reads through
 // TileStoreReader (no lock around I/O), then decodeTileRgba8 (decode,
-// predictor inverse and conversion to RGBA8 in one pass).
+// predictor inverse and conversion to RGBA8 in one pass) for colour
+// stores, decodeTileHeights (heights as float32) for elevation stores.
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -74,6 +75,54 @@ class StoreSource final : public TileSource {
   std::string m_path;
 };
 
+// An elevation store's tiles as float32 heights (offset + scale * sample,
+// or the F32 sample), 4 bytes a texel like RGBA8.
+class ElevationStoreSource final : public TileSource {
+ public:
+  ElevationStoreSource(std::unique_ptr<TileStoreReader> reader, std::string path)
+      : m_reader(std::move(reader)), m_path(std::move(path)) {}
+
+  const PyramidGeometry& geometry() const override { return m_reader->geometry(); }
+  TileContent content() const override { return TileContent::kHeightF32; }
+  ElevationInfo elevationInfo() const override { return m_reader->info().elevation; }
+
+  Status fetch(const TileKey& key, std::vector<uint8_t>* heights) override {
+    FetchInfo info;
+    return fetchWithInfo(key, heights, &info);
+  }
+
+  Status fetchWithInfo(const TileKey& key, std::vector<uint8_t>* heights, FetchInfo* info) override {
+    *info = {};
+    const StoreInfo& store = m_reader->info();
+    const PyramidGeometry& geo = store.geometry;
+    thread_local RawTile raw;
+    Status status = m_reader->readRaw(key, &raw);
+    if (!status) return status;
+    info->bytes_read = raw.payload.size();
+    const auto start = std::chrono::steady_clock::now();
+    const size_t count = size_t(geo.tile_px) * geo.tile_px;
+    // Decoded as floats, then copied: the cache holds bytes, and a float
+    // view of a byte vector's storage would not be a float object.
+    thread_local std::vector<float> samples;
+    samples.resize(count);
+    status = decodeTileHeights(geo, store.encoding, store.elevation, raw, samples);
+    if (status) {
+      heights->resize(count * sizeof(float));
+      std::memcpy(heights->data(), samples.data(), count * sizeof(float));
+    }
+    info->decode_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return status;
+  }
+
+  std::string describe() const override { return "elevation:" + m_path; }
+  unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+
+ private:
+  std::unique_ptr<TileStoreReader> m_reader;
+  std::string m_path;
+};
+
 }  // namespace
 
 Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t* dst,
@@ -122,6 +171,11 @@ Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t*
     case PixelFormat::kRGBA8:
       std::copy(s, s + pixel_count * 4, dst);
       break;
+    case PixelFormat::kI16:
+    case PixelFormat::kF32:
+      return Status::error(ErrorCode::kUnsupported,
+                           std::string("pixel format ") + pixelFormatName(format) +
+                               " holds heights, not colour");
   }
   return Status::ok();
 }
@@ -135,7 +189,34 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, const Remot
   std::unique_ptr<TileStoreReader> reader;
   *status = TileStoreReader::open(path, remote, &reader);
   if (!*status) return nullptr;
+  if (reader->info().elevation.present) {
+    *status = Status::error(ErrorCode::kUnsupported,
+                            displayStorePath(path) +
+                                " is an elevation store (heights), not a colour image: give it "
+                                "as the scene's elevation layer (--elevation)");
+    return nullptr;
+  }
   return std::make_shared<StoreSource>(std::move(reader), displayStorePath(path));
+}
+
+std::shared_ptr<TileSource> openElevationSource(const std::string& path, Status* status) {
+  return openElevationSource(path, RemoteOptions{}, status);
+}
+
+std::shared_ptr<TileSource> openElevationSource(const std::string& path,
+                                                const RemoteOptions& remote, Status* status) {
+  std::unique_ptr<TileStoreReader> reader;
+  *status = TileStoreReader::open(path, remote, &reader);
+  if (!*status) return nullptr;
+  if (!reader->info().elevation.present || !isHeightFormat(reader->geometry().format)) {
+    *status = Status::error(ErrorCode::kUnsupported,
+                            displayStorePath(path) + " is a colour store (" +
+                                pixelFormatName(reader->geometry().format) +
+                                "), not an elevation store: tile a DEM (clipstream-tile DEM.tif "
+                                "dem.cstore) for the scene's elevation layer");
+    return nullptr;
+  }
+  return std::make_shared<ElevationStoreSource>(std::move(reader), displayStorePath(path));
 }
 
 }  // namespace clipstream

@@ -1,5 +1,6 @@
 // The streamer: planning on the render thread, loading on a worker pool, a
-// RAM cache with a hard byte budget, and the per-frame GPU hand-off.
+// RAM cache with a hard byte budget, and the per-frame GPU hand-off, for a
+// scene of one or more layers.
 //
 // Locking: one mutex (m_mutex) guards the queue, the cache map, the rank
 // map, the failure map and the counters. Workers take it to pop a request
@@ -7,6 +8,10 @@
 // conversion), and take it again to publish the tile. The render thread
 // takes it briefly in update(), takeReady() and stats(); it never waits on
 // I/O because no one holds the lock across I/O.
+//
+// Layers: every key in the shared maps is a LayerTile (layer, level, x, y).
+// Each layer keeps its own plan, windows, counters and MaxTextureLOD; the
+// cache, the budget, the queue and the rank order are one for all layers.
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
 
@@ -16,13 +21,16 @@
 #include "lookahead.h"
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
 #include <system_error>
 #include <mutex>
 #include <thread>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -50,14 +58,17 @@ constexpr double kMinHistoryS = 0.05;
 // Predicted moves longer than this many finest-level windows are teleports.
 constexpr double kTeleportWindows = 2.0;
 
+static_assert(sizeof(LayerTile) == 16, "LayerTile is hashed as four words: no padding allowed");
+
 // Hash for the streamer's own maps, which are probed thousands of times per
-// plan change: a multiply-xorshift of the three fields is several times
-// cheaper than hashing 12 bytes with XXH3 (TileKeyHash) and mixes as well
-// for grid coordinates.
+// plan change: a multiply-xorshift of the four fields is several times
+// cheaper than hashing 16 bytes with XXH3 and mixes as well for grid
+// coordinates. The layer shares the level's word (levels stay below 64).
 struct FastKeyHash {
-  size_t operator()(const TileKey& k) const noexcept {
+  size_t operator()(const LayerTile& t) const noexcept {
+    const TileKey& k = t.key;
     uint64_t h = (uint64_t(k.x) << 32 | k.y) * 0x9E3779B97F4A7C15ull;
-    h ^= uint64_t(k.level) * 0xC2B2AE3D27D4EB4Full;
+    h ^= (uint64_t(k.level) | uint64_t(t.layer) << 32) * 0xC2B2AE3D27D4EB4Full;
     h ^= h >> 29;
     h *= 0xBF58476D1CE4E5B9ull;
     return size_t(h ^ (h >> 32));
@@ -80,7 +91,7 @@ struct FailedTile {
 };
 
 struct Request {
-  TileKey key;
+  LayerTile key;
   uint32_t rank = 0;
   Clock::time_point queued_at;
 };
@@ -111,37 +122,118 @@ bool sameWindows(const ClipmapPlan& a, const ClipmapPlan& b) {
   return true;
 }
 
+bool finitePositive(double v) { return std::isfinite(v) && v > 0.0; }
+
+// The order of roles among equally coarse tiles: elevation first.
+int roleOrder(LayerRole role) { return role == LayerRole::kElevation ? 0 : 1; }
+
+const PyramidGeometry kNoGeometry{};
+const ClipmapPlan kNoPlan{};
+
 }  // namespace
 
+namespace {
+
+// checkStreamLayers() for one layer, named by its index in the scene.
+Status checkLayer(const StreamLayer& l, size_t index) {
+  const std::string name = "scene layer " + std::to_string(index);
+  if (!l.source) return Status::error(ErrorCode::kInvalidArgument, name + " has no source");
+  const std::string what = name + " (" + l.source->describe() + ")";
+  if (!finitePositive(l.texels_per_unit.x) || !finitePositive(l.texels_per_unit.y))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + ": texels per world unit (" + std::to_string(l.texels_per_unit.x) +
+                             ", " + std::to_string(l.texels_per_unit.y) +
+                             ") must be finite and positive");
+  if (!std::isfinite(l.origin_texel.x) || !std::isfinite(l.origin_texel.y))
+    return Status::error(ErrorCode::kInvalidArgument, what + ": the origin texel is not finite");
+  const TileContent content = l.source->content();
+  if (l.role == LayerRole::kColour && content != TileContent::kRgba8)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " is a colour layer but its source hands out heights");
+  if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " is an elevation layer but its source hands out colour");
+  return Status::ok();
+}
+
+}  // namespace
+
+Status checkStreamLayers(const std::vector<StreamLayer>& layers) {
+  for (size_t i = 0; i < layers.size(); ++i)
+    if (Status s = checkLayer(layers[i], i); !s) return s;
+  return Status::ok();
+}
+
+Camera layerCamera(const StreamLayer& layer, const Camera& world) {
+  const glm::dvec2 k = layer.texels_per_unit;
+  if (k == glm::dvec2(1.0, 1.0) && layer.origin_texel == glm::dvec2(0.0, 0.0)) return world;
+  const double s = std::sqrt(k.x * k.y);
+  Camera c = world;
+  c.position.x = layer.origin_texel.x + k.x * world.position.x;
+  c.position.z = layer.origin_texel.y + k.y * world.position.z;
+  c.position.y = world.position.y * s;
+  c.near_dist = world.near_dist * s;
+  return c;
+}
+
 struct Streamer::Impl {
-  // Immutable after construction.
-  std::shared_ptr<TileSource> source;
-  PyramidGeometry geometry;
+  struct Layer {
+    // Immutable after construction.
+    StreamLayer spec;           // source null: an empty layer (plans and loads nothing)
+    PyramidGeometry geometry;
+    uint64_t tile_bytes = 0;    // payload handed out: tile_px^2 * 4
+    uint64_t entry_bytes = 0;   // payload + overhead charged per cache entry
+    double log2_units_per_texel = 0.0;  // world units a level-0 texel spans, log2
+    int role_order = 1;         // roleOrder(spec.role)
+
+    // Render thread only.
+    ClipmapPlan plan;
+    ClipmapPlan predicted_plan;
+    PathHint hint;              // the streamer's hint seen through layerCamera()
+    PathLookahead lookahead;    // windows along that hint
+    uint32_t lod = 0;
+    uint32_t lod_ready_frames = 0;
+
+    // Guarded by the streamer's mutex.
+    std::vector<LevelCounters> counters;
+    uint64_t ram_bytes = 0;
+    uint64_t ram_entries = 0;
+    PlanWindows windows;            // current plan, for eviction scores
+    PlanWindows predicted_windows;  // predicted plan (empty without prefetch)
+    std::shared_ptr<const LookaheadSnapshot> ahead;  // hinted path's windows, or null
+    uint32_t published_lod = 0;
+
+    bool active() const { return spec.source && geometry.levelCount() != 0; }
+    // Coarseness of one of this layer's levels in world space: log2 of the
+    // world units its texel spans, rounded, so levels of two layers within
+    // a factor of sqrt(2) are equally coarse.
+    int64_t coarseness(uint32_t level) const {
+      return std::lround(double(level) + log2_units_per_texel);
+    }
+  };
+
+  // Immutable after construction (the vector; see Layer for its fields).
+  std::vector<Layer> layers;
   StreamerConfig config;
-  uint64_t entry_bytes = 0;  // payload + overhead charged per cache entry
+  bool any_active = false;
 
   // Render thread only.
-  ClipmapPlan plan;
   bool have_plan = false;
-  ClipmapPlan predicted_plan;
   uint64_t frame = 0;
   double now_s = 0.0;
   bool force_rebuild = false;
   std::deque<std::pair<double, glm::dvec3>> history;
   PathHint hint;               // camera_at empty: none
-  PathLookahead lookahead;     // windows along the hint
-  bool hint_used = false;      // this frame's plan came with a trusted hint
+  bool hint_used = false;      // this frame's plans came with a trusted hint
   bool hint_used_by_plan = false;  // the last rebuild's
-  std::vector<TileKey> wanted;                         // plan tiles, rank order
-  std::unordered_set<TileKey, FastKeyHash> wanted_set; // same, for lookups
-  std::vector<TileKey> prefetch;                       // predicted tiles, after wanted
-  std::unordered_set<TileKey, FastKeyHash> gpu;        // handed off and still wanted
-  std::vector<TileKey> pending;                        // wanted, not yet handed off (rank order)
-  uint32_t lod = 0;
-  uint32_t lod_ready_frames = 0;
-  // The trace: text buffered here, appended to trace_file in blocks and
-  // published at shutdown(). `tracing` is false without a trace or after a
-  // failure (trace_status says which).
+  std::vector<LayerTile> wanted;                         // plan tiles, rank order
+  std::unordered_set<LayerTile, FastKeyHash> wanted_set; // same, for lookups
+  std::vector<LayerTile> prefetch;                       // predicted tiles, after wanted
+  std::unordered_set<LayerTile, FastKeyHash> gpu;        // handed off and still wanted
+  std::vector<LayerTile> pending;                        // wanted, not yet handed off (rank order)
+  // The trace (layer 0's requests): text buffered here, appended to
+  // trace_file in blocks and published at shutdown(). `tracing` is false
+  // without a trace or after a failure (trace_status says which).
   uint32_t loader_threads = 0;  // set once by the constructor
   bool tracing = false;
   std::string trace;
@@ -153,11 +245,10 @@ struct Streamer::Impl {
   mutable std::mutex mutex;
   std::condition_variable work_cv;
   std::deque<Request> queue;  // rank order, front first
-  std::unordered_map<TileKey, CacheEntry, FastKeyHash> cache;
-  std::unordered_map<TileKey, uint32_t, FastKeyHash> rank;  // wanted + prefetch ranks
-  std::unordered_map<TileKey, FailedTile, FastKeyHash> failed;
-  std::unordered_set<TileKey, FastKeyHash> ever_read;
-  std::vector<LevelCounters> counters;
+  std::unordered_map<LayerTile, CacheEntry, FastKeyHash> cache;
+  std::unordered_map<LayerTile, uint32_t, FastKeyHash> rank;  // wanted + prefetch ranks
+  std::unordered_map<LayerTile, FailedTile, FastKeyHash> failed;
+  std::unordered_set<LayerTile, FastKeyHash> ever_read;
   uint64_t ram_bytes = 0;
   uint64_t ram_peak = 0;
   uint64_t in_flight = 0;
@@ -165,57 +256,62 @@ struct Streamer::Impl {
   std::vector<double> latency_ms;  // ring of the last kLatencySamples
   size_t latency_next = 0;
   uint32_t logged_failures = 0;
-  PlanWindows windows;            // current plan, for eviction scores
-  PlanWindows predicted_windows;  // predicted plan (empty without prefetch)
-  std::shared_ptr<const LookaheadSnapshot> ahead;  // hinted path's windows, or null
   uint64_t hint_frames = 0;
   uint64_t hint_ignored_frames = 0;
   // Eviction candidates sorted best victim first, rebuilt lazily after a
   // plan change or when exhausted; entries are re-checked when popped.
-  std::vector<TileKey> victims;
+  std::vector<LayerTile> victims;
   size_t victims_next = 0;
   // Wanted tiles that only a better-ranked newcomer may evict: worst first.
-  std::vector<std::pair<uint32_t, TileKey>> pinned;
+  std::vector<std::pair<uint32_t, LayerTile>> pinned;
   size_t pinned_next = 0;
   bool victims_dirty = true;
   double shared_now_s = 0.0;  // copy of now_s for workers (retry times)
   uint64_t shared_frame = 0;  // copy of frame for workers
-  uint32_t published_lod = 0;
   bool stopping = false;
 
   std::vector<std::thread> workers;
 
+  LevelCounters& counters(const LayerTile& t) { return layers[t.layer].counters[t.key.level]; }
+  bool scoredWhenOnGpu(const LayerTile& t) const {
+    return scoredOnGpu(t.key, layers[t.layer].windows, config.eviction);
+  }
   void workerLoop();
   bool admit(const Request& request, bool neighbour, bool* reread, bool* no_room);
-  bool reserveRoom(uint32_t incoming_rank);
+  bool reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes);
   void buildVictimLists();
+  std::vector<LayerTile> rankScene() const;
   void rebuild(const Viewport& viewport);
-  uint32_t computeLod() const;
+  uint32_t computeLod(const Layer& layer, uint32_t index) const;
+  std::vector<FrameHandoff> handOff(size_t layer_count, size_t max_tiles, size_t max_bytes);
 };
 
 // ---------------------------------------------------------------------------
 // Workers
 
 // Sorts the eviction candidates once per change (plan rebuild, hand-off),
-// so each eviction is amortised O(1) instead of a scan of the cache.
-// Caller holds the mutex.
+// so each eviction is amortised O(1) instead of a scan of the cache. Tiles
+// of every layer compete in one list, each scored against its own layer's
+// windows. Caller holds the mutex.
 void Streamer::Impl::buildVictimLists() {
   struct Candidate {
     double score;
     uint64_t stamp;
-    TileKey key;
+    LayerTile key;
   };
   std::vector<Candidate> scored_list;
   pinned.clear();
   for (const auto& [key, e] : cache) {
     if (e.state != EntryState::kReady) continue;  // placeholders are never evicted
     const auto r = rank.find(key);
-    if (r == rank.end() || (e.gpu && scoredOnGpu(key, windows, config.eviction)))
-      scored_list.push_back(
-          {evictionScoreAhead(key, windows, predicted_windows, config.eviction, ahead.get()),
-           e.last_wanted_frame, key});
-    else
+    if (r == rank.end() || (e.gpu && scoredWhenOnGpu(key))) {
+      const Layer& layer = layers[key.layer];
+      scored_list.push_back({evictionScoreAhead(key.key, layer.windows, layer.predicted_windows,
+                                                config.eviction, layer.ahead.get()),
+                             e.last_wanted_frame, key});
+    } else {
       pinned.emplace_back(r->second, key);
+    }
   }
   std::sort(scored_list.begin(), scored_list.end(), [](const Candidate& x, const Candidate& y) {
     return evictsBefore(x.score, x.stamp, y.score, y.stamp);
@@ -228,7 +324,7 @@ void Streamer::Impl::buildVictimLists() {
   victims_dirty = false;
 }
 
-// Makes room for one entry. Candidates, in order:
+// Makes room for one entry of incoming_bytes. Candidates, in order:
 //  1. tiles that are not wanted, or wanted and already on the GPU (pyramid
 //     tiles only with kGpuFirst), by plan-distance score (eviction.h);
 //  2. wanted tiles still waiting for the GPU (and, with kProtectGpu,
@@ -238,21 +334,24 @@ void Streamer::Impl::buildVictimLists() {
 // Placeholders are never evicted. Lists are re-checked as they are consumed
 // (an entry may have been handed off, evicted or re-ranked since). Caller
 // holds the mutex.
-bool Streamer::Impl::reserveRoom(uint32_t incoming_rank) {
-  auto evict = [&](std::unordered_map<TileKey, CacheEntry, FastKeyHash>::iterator it) {
-    counters[it->first.level].evictions++;
-    ram_bytes -= entry_bytes;
+bool Streamer::Impl::reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes) {
+  auto evict = [&](std::unordered_map<LayerTile, CacheEntry, FastKeyHash>::iterator it) {
+    Layer& layer = layers[it->first.layer];
+    layer.counters[it->first.key.level].evictions++;
+    ram_bytes -= layer.entry_bytes;
+    layer.ram_bytes -= layer.entry_bytes;
+    layer.ram_entries--;
     cache.erase(it);
   };
-  while (ram_bytes + entry_bytes > config.ram_budget_bytes) {
+  while (ram_bytes + incoming_bytes > config.ram_budget_bytes) {
     if (victims_dirty) buildVictimLists();
     bool evicted = false;
     while (!evicted && victims_next < victims.size()) {
-      const TileKey key = victims[victims_next++];
+      const LayerTile key = victims[victims_next++];
       auto it = cache.find(key);
       if (it == cache.end() || it->second.state != EntryState::kReady) continue;
       const auto r = rank.find(key);
-      if (r != rank.end() && (!it->second.gpu || !scoredOnGpu(key, windows, config.eviction)))
+      if (r != rank.end() && (!it->second.gpu || !scoredWhenOnGpu(key)))
         continue;  // pinned now
       evict(it);
       evicted = true;
@@ -281,9 +380,10 @@ bool Streamer::Impl::reserveRoom(uint32_t incoming_rank) {
 // instead: *no_room tells the caller to stop taking neighbours. Caller
 // holds the mutex.
 bool Streamer::Impl::admit(const Request& request, bool neighbour, bool* reread, bool* no_room) {
-  const TileKey key = request.key;
-  LevelCounters& level_counters = counters[key.level];
-  if (neighbour && cache.count(key) == 0 && ram_bytes + entry_bytes > config.ram_budget_bytes) {
+  const LayerTile key = request.key;
+  Layer& layer = layers[key.layer];
+  LevelCounters& level_counters = layer.counters[key.key.level];
+  if (neighbour && cache.count(key) == 0 && ram_bytes + layer.entry_bytes > config.ram_budget_bytes) {
     *no_room = true;  // eviction is the popped request's business, not a neighbour's
     return false;
   }
@@ -300,13 +400,15 @@ bool Streamer::Impl::admit(const Request& request, bool neighbour, bool* reread,
     level_counters.cancellations++;
     return false;
   }
-  if (!reserveRoom(request.rank)) {
+  if (!reserveRoom(request.rank, layer.entry_bytes)) {
     level_counters.budget_skips++;
     return false;
   }
   // Placeholder first so nobody reads this tile twice, then read unlocked.
   cache.emplace(key, CacheEntry{});
-  ram_bytes += entry_bytes;
+  ram_bytes += layer.entry_bytes;
+  layer.ram_bytes += layer.entry_bytes;
+  layer.ram_entries++;
   ram_peak = std::max(ram_peak, ram_bytes);
   if (config.on_ram_insert) config.on_ram_insert(ram_bytes, config.ram_budget_bytes);
   in_flight++;
@@ -315,9 +417,7 @@ bool Streamer::Impl::admit(const Request& request, bool neighbour, bool* reread,
 }
 
 void Streamer::Impl::workerLoop() {
-  // A source that reads neighbours in one request (a store over HTTP) gets
-  // up to max_batch queued tiles of the popped tile's level and row.
-  const size_t max_batch = std::clamp<size_t>(source->maxBatch(), 1, kMaxBatchTiles);
+  std::vector<LayerTile> tiles;
   std::vector<TileKey> keys;
   std::vector<bool> rereads;
   std::vector<std::shared_ptr<std::vector<uint8_t>>> pixels;
@@ -331,26 +431,30 @@ void Streamer::Impl::workerLoop() {
     if (stopping) return;
     const Request request = queue.front();
     queue.pop_front();
-    keys.clear();
+    tiles.clear();
     rereads.clear();
     bool reread = false, no_room = false;
     if (!admit(request, false, &reread, &no_room)) continue;
-    keys.push_back(request.key);
+    tiles.push_back(request.key);
     rereads.push_back(reread);
+    Layer& layer = layers[request.key.layer];
+    // A source that reads neighbours in one request (a store over HTTP)
+    // gets up to max_batch queued tiles of the popped tile's layer, level
+    // and row: the tiles most likely to lie next to it in the file (the
+    // tiler writes rows in order). Only the front of the queue is searched,
+    // so the batch stays among the best-ranked tiles and the scan is bounded.
+    const size_t max_batch = std::clamp<size_t>(layer.spec.source->maxBatch(), 1, kMaxBatchTiles);
     if (max_batch > 1) {
-      // Same level and row, within a batch of columns: the tiles most
-      // likely to lie next to it in the file (the tiler writes rows in
-      // order). Only the front of the queue is searched, so the batch stays
-      // among the best-ranked tiles and the scan is bounded.
       taken.clear();
+      const TileKey& first = request.key.key;
       const size_t scan = std::min(queue.size(), kBatchScanRequests);
-      for (size_t i = 0; i < scan && keys.size() < max_batch && !no_room; ++i) {
-        const TileKey& k = queue[i].key;
-        if (k.level != request.key.level || k.y != request.key.y ||
-            std::abs(int64_t(k.x) - int64_t(request.key.x)) >= int64_t(max_batch))
+      for (size_t i = 0; i < scan && tiles.size() < max_batch && !no_room; ++i) {
+        const LayerTile& t = queue[i].key;
+        if (t.layer != request.key.layer || t.key.level != first.level || t.key.y != first.y ||
+            std::abs(int64_t(t.key.x) - int64_t(first.x)) >= int64_t(max_batch))
           continue;
         if (admit(queue[i], true, &reread, &no_room)) {
-          keys.push_back(k);
+          tiles.push_back(t);
           rereads.push_back(reread);
         }
         if (!no_room) taken.push_back(i);
@@ -359,29 +463,30 @@ void Streamer::Impl::workerLoop() {
     }
     lock.unlock();
 
-    const size_t n = keys.size();
+    const size_t n = tiles.size();
+    keys.resize(n);
     pixels.resize(n);
     outs.resize(n);
     statuses.assign(n, Status::ok());
     infos.assign(n, FetchInfo{});
     for (size_t i = 0; i < n; ++i) {
+      keys[i] = tiles[i].key;
       pixels[i] = std::make_shared<std::vector<uint8_t>>();
       outs[i] = pixels[i].get();
     }
     if (n == 1) {
-      statuses[0] = source->fetchWithInfo(keys[0], outs[0], &infos[0]);
+      statuses[0] = layer.spec.source->fetchWithInfo(keys[0], outs[0], &infos[0]);
     } else {
-      source->fetchBatch(keys, outs, statuses, infos);
+      layer.spec.source->fetchBatch(keys, outs, statuses, infos);
     }
-    const size_t expected = size_t(geometry.tile_px) * geometry.tile_px * 4;
 
     lock.lock();
     for (size_t i = 0; i < n; ++i) {
-      const TileKey key = keys[i];
+      const LayerTile key = tiles[i];
       const Status& status = statuses[i];
       const FetchInfo& info = infos[i];
-      const bool good = status.isOk() && pixels[i]->size() == expected;
-      LevelCounters& level_counters = counters[key.level];
+      const bool good = status.isOk() && pixels[i]->size() == layer.tile_bytes;
+      LevelCounters& level_counters = layer.counters[key.key.level];
       in_flight--;
       level_counters.bytes_read += info.bytes_read;
       decode_ms_total += info.decode_ms;
@@ -393,7 +498,9 @@ void Streamer::Impl::workerLoop() {
         it->second.rgba = std::move(pixels[i]);
         it->second.last_wanted_frame = shared_frame;
       } else {
-        ram_bytes -= entry_bytes;
+        ram_bytes -= layer.entry_bytes;
+        layer.ram_bytes -= layer.entry_bytes;
+        layer.ram_entries--;
         cache.erase(it);
         level_counters.failures++;
         FailedTile& f = failed[key];
@@ -404,7 +511,8 @@ void Streamer::Impl::workerLoop() {
           logged_failures++;
           const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
           std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
-                       source->describe().c_str(), key.level, key.x, key.y, why.c_str(),
+                       layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y,
+                       why.c_str(),
                        logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
         }
       }
@@ -415,25 +523,72 @@ void Streamer::Impl::workerLoop() {
 // ---------------------------------------------------------------------------
 // Render thread
 
-// Recomputes the wanted list, ranks, pending hand-offs and the queue after
-// the plan (or the prediction) changed. Cancels queued requests that are no
-// longer wanted; counts RAM hits/misses for tiles that became wanted.
-void Streamer::Impl::rebuild(const Viewport& viewport) {
-  std::vector<TileKey> new_wanted = rankPlanTiles(geometry, plan, config.frustum_priority);
-  std::unordered_set<TileKey, FastKeyHash> new_set(new_wanted.begin(), new_wanted.end());
-  std::vector<TileKey> new_prefetch;
-  if (config.prefetch && have_plan) {
-    for (const TileKey& k : diffPlans(plan, predicted_plan).entered)
-      if (new_set.count(k) == 0) new_prefetch.push_back(k);
-    // Coarse levels first: their tiles cover the most ground.
-    std::stable_sort(new_prefetch.begin(), new_prefetch.end(),
-                     [](const TileKey& a, const TileKey& b) { return a.level > b.level; });
+// Every layer's wanted tiles in the one load order (docs/architecture.md,
+// "Layers"): every layer's pyramid before any stack level; then, in each
+// group, coarse to fine by world-space coarseness; among equally coarse
+// levels elevation before colour, then layer order; inside a layer's level
+// rankPlanTiles()'s order (visible first, near the focus first). With one
+// layer this is rankPlanTiles() itself.
+std::vector<LayerTile> Streamer::Impl::rankScene() const {
+  struct Ranked {
+    int stack;               // 0: pyramid, 1: stack
+    int64_t neg_coarseness;  // coarse first
+    int role;
+    uint32_t layer;
+    LayerTile tile;
+  };
+  std::vector<Ranked> ranked;
+  for (uint32_t i = 0; i < layers.size(); ++i) {
+    const Layer& layer = layers[i];
+    if (!layer.active()) continue;
+    for (const TileKey& k : rankPlanTiles(layer.geometry, layer.plan, config.frustum_priority))
+      ranked.push_back({k.level < layer.plan.pyramid_level ? 1 : 0, -layer.coarseness(k.level),
+                        layer.role_order, i, {i, k}});
   }
-  std::unordered_map<TileKey, uint32_t, FastKeyHash> new_rank;
+  // Stable: inside one layer's level rankPlanTiles()'s order stays.
+  std::stable_sort(ranked.begin(), ranked.end(), [](const Ranked& a, const Ranked& b) {
+    return std::tie(a.stack, a.neg_coarseness, a.role, a.layer) <
+           std::tie(b.stack, b.neg_coarseness, b.role, b.layer);
+  });
+  std::vector<LayerTile> out;
+  out.reserve(ranked.size());
+  for (const Ranked& r : ranked) out.push_back(r.tile);
+  return out;
+}
+
+// Recomputes the wanted list, ranks, pending hand-offs and the queue after
+// the plans (or the predictions) changed. Cancels queued requests that are
+// no longer wanted; counts RAM hits/misses for tiles that became wanted.
+void Streamer::Impl::rebuild(const Viewport& viewport) {
+  std::vector<LayerTile> new_wanted = rankScene();
+  std::unordered_set<LayerTile, FastKeyHash> new_set(new_wanted.begin(), new_wanted.end());
+  std::vector<LayerTile> new_prefetch;
+  if (config.prefetch && have_plan) {
+    struct Predicted {
+      int64_t neg_coarseness;
+      int role;
+      uint32_t layer;
+      LayerTile tile;
+    };
+    std::vector<Predicted> predicted;
+    for (uint32_t i = 0; i < layers.size(); ++i) {
+      const Layer& layer = layers[i];
+      if (!layer.active()) continue;
+      for (const TileKey& k : diffPlans(layer.plan, layer.predicted_plan).entered)
+        if (new_set.count({i, k}) == 0)
+          predicted.push_back({-layer.coarseness(k.level), layer.role_order, i, {i, k}});
+    }
+    // Coarse levels first: their tiles cover the most ground.
+    std::stable_sort(predicted.begin(), predicted.end(), [](const Predicted& a, const Predicted& b) {
+      return std::tie(a.neg_coarseness, a.role, a.layer) < std::tie(b.neg_coarseness, b.role, b.layer);
+    });
+    for (const Predicted& p : predicted) new_prefetch.push_back(p.tile);
+  }
+  std::unordered_map<LayerTile, uint32_t, FastKeyHash> new_rank;
   new_rank.reserve(new_wanted.size() + new_prefetch.size());
   uint32_t next_rank = 0;
-  for (const TileKey& k : new_wanted) new_rank.emplace(k, next_rank++);
-  for (const TileKey& k : new_prefetch) new_rank.emplace(k, next_rank++);
+  for (const LayerTile& k : new_wanted) new_rank.emplace(k, next_rank++);
+  for (const LayerTile& k : new_prefetch) new_rank.emplace(k, next_rank++);
 
   // GPU residency survives only while the tile stays wanted: the renderer
   // reuses a slot as soon as its tile leaves the window.
@@ -441,16 +596,20 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
     if (new_set.count(*it) == 0) it = gpu.erase(it); else ++it;
   }
   pending.clear();
-  for (const TileKey& k : new_wanted)
+  for (const LayerTile& k : new_wanted)
     if (gpu.count(k) == 0) pending.push_back(k);
 
-  PlanWindows new_windows = planWindows(plan);
-  PlanWindows new_predicted;
-  if (config.prefetch && have_plan) new_predicted = planWindows(predicted_plan);
-  std::shared_ptr<const LookaheadSnapshot> new_ahead =
-      hint_used && config.eviction == EvictionMode::kGpuFirst ? lookahead.snapshot() : nullptr;
+  std::vector<PlanWindows> new_windows(layers.size()), new_predicted(layers.size());
+  std::vector<std::shared_ptr<const LookaheadSnapshot>> new_ahead(layers.size());
+  for (size_t i = 0; i < layers.size(); ++i) {
+    Layer& layer = layers[i];
+    new_windows[i] = planWindows(layer.plan);
+    if (config.prefetch && have_plan) new_predicted[i] = planWindows(layer.predicted_plan);
+    if (hint_used && config.eviction == EvictionMode::kGpuFirst) new_ahead[i] = layer.lookahead.snapshot();
+  }
   hint_used_by_plan = hint_used;
-  if (tracing) {
+  if (tracing && !layers.empty()) {
+    // The trace records layer 0 (its format has no layer field).
     // Time and viewport first: the replay re-plans the hint with them.
     TraceEvent time_line;
     time_line.window = kTraceTimeTag;
@@ -470,19 +629,19 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
         appendTraceLine(line, &trace);
       }
     };
-    windowLines(kTraceWindowTag, new_windows);
-    windowLines(kTracePredictedTag, new_predicted);
+    windowLines(kTraceWindowTag, new_windows[0]);
+    windowLines(kTracePredictedTag, new_predicted[0]);
     TraceEvent tile_line;
     tile_line.frame = frame;
-    for (const TileKey& k : new_wanted) {
-      if (wanted_set.count(k) != 0) continue;
-      tile_line.key = k;
+    for (const LayerTile& k : new_wanted) {
+      if (k.layer != 0 || wanted_set.count(k) != 0) continue;
+      tile_line.key = k.key;
       appendTraceLine(tile_line, &trace);
     }
     tile_line.leave = true;
-    for (const TileKey& k : wanted) {
-      if (new_set.count(k) != 0) continue;
-      tile_line.key = k;
+    for (const LayerTile& k : wanted) {
+      if (k.layer != 0 || new_set.count(k) != 0) continue;
+      tile_line.key = k.key;
       appendTraceLine(tile_line, &trace);
     }
     constexpr size_t kTraceBlockBytes = size_t(1) << 20;
@@ -498,19 +657,19 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
     for (auto it = cache.begin(); it != cache.end(); ++it) {
       it->second.gpu = gpu.count(it->first) != 0;
     }
-    for (const TileKey& k : new_wanted) {
+    for (const LayerTile& k : new_wanted) {
       auto c = cache.find(k);
       if (c != cache.end()) c->second.last_wanted_frame = frame;
       if (wanted_set.count(k) == 0) {
-        if (c != cache.end() && c->second.state == EntryState::kReady) counters[k.level].ram_hits++;
-        else counters[k.level].ram_misses++;
+        if (c != cache.end() && c->second.state == EntryState::kReady) counters(k).ram_hits++;
+        else counters(k).ram_misses++;
       }
     }
-    std::unordered_map<TileKey, Clock::time_point, FastKeyHash> queued_at;
+    std::unordered_map<LayerTile, Clock::time_point, FastKeyHash> queued_at;
     for (const Request& r : queue) queued_at.emplace(r.key, r.queued_at);
     std::deque<Request> new_queue;
-    std::unordered_set<TileKey, FastKeyHash> kept;
-    auto consider = [&](const TileKey& k) {
+    std::unordered_set<LayerTile, FastKeyHash> kept;
+    auto consider = [&](const LayerTile& k) {
       if (gpu.count(k) != 0 || cache.count(k) != 0) return;
       auto f = failed.find(k);
       if (f != failed.end()) {
@@ -521,19 +680,21 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
         kept.insert(k);
         new_queue.push_back({k, new_rank[k], q->second});
       } else {
-        counters[k.level].requests++;
+        counters(k).requests++;
         new_queue.push_back({k, new_rank[k], now});
       }
     };
-    for (const TileKey& k : new_wanted) consider(k);
-    for (const TileKey& k : new_prefetch) consider(k);
+    for (const LayerTile& k : new_wanted) consider(k);
+    for (const LayerTile& k : new_prefetch) consider(k);
     for (const Request& r : queue)
-      if (kept.count(r.key) == 0) counters[r.key.level].cancellations++;
+      if (kept.count(r.key) == 0) counters(r.key).cancellations++;
     queue.swap(new_queue);
     rank.swap(new_rank);
-    windows = std::move(new_windows);
-    predicted_windows = std::move(new_predicted);
-    ahead = std::move(new_ahead);
+    for (size_t i = 0; i < layers.size(); ++i) {
+      layers[i].windows = std::move(new_windows[i]);
+      layers[i].predicted_windows = std::move(new_predicted[i]);
+      layers[i].ahead = std::move(new_ahead[i]);
+    }
     victims_dirty = true;
   }
   work_cv.notify_all();
@@ -542,28 +703,30 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
   prefetch.swap(new_prefetch);
 }
 
-// Finest level l such that every level from the coarsest down to l is
-// ready: a pyramid level with all its tiles on the GPU, a stack level with
-// at least lod_min_coverage of its visible tiles. The missing tiles of a
-// ready level are drawn from their finest usable ancestor (the renderer's
+// Finest level l of `layer` such that every level from the coarsest down to
+// l is ready: a pyramid level with all its tiles on the GPU, a stack level
+// with at least lod_min_coverage of its visible tiles. The missing tiles of
+// a ready level are drawn from their finest usable ancestor (the renderer's
 // usable map), so no tile that is not loaded is ever sampled; demanding
 // every visible tile (coverage 1) kept the whole view several levels too
 // coarse at speed (docs/accuracy.md, "Throttling"). Tiles that failed for
 // good count as done: the renderer shows their ancestor, and one bad tile
 // must not pin the whole view to the coarsest level.
-uint32_t Streamer::Impl::computeLod() const {
-  const uint32_t levels = geometry.levelCount();
+uint32_t Streamer::Impl::computeLod(const Layer& layer, uint32_t index) const {
+  const uint32_t levels = layer.geometry.levelCount();
   if (levels == 0) return 0;
+  const ClipmapPlan& plan = layer.plan;
   std::lock_guard<std::mutex> lock(mutex);  // for `failed`
   auto done = [&](const TileKey& k) {
-    if (gpu.count(k) != 0) return true;
-    const auto f = failed.find(k);
+    if (gpu.count({index, k}) != 0) return true;
+    const auto f = failed.find({index, k});
     return f != failed.end() && f->second.code != ErrorCode::kUnavailable;
   };
   uint32_t finest = levels;
   for (uint32_t l = levels; l-- > 0;) {
     TileRect rect;
     if (l >= plan.pyramid_level) {
+      if (l - plan.pyramid_level >= plan.pyramid.size()) break;  // no plan yet
       rect = plan.pyramid[l - plan.pyramid_level];
     } else {
       const ClipLevelPlan& lp = plan.stack[l];
@@ -584,16 +747,45 @@ uint32_t Streamer::Impl::computeLod() const {
   return std::min(finest, levels - 1);
 }
 
+// One colour layer with the identity map (elevation if the source hands out
+// heights: a single source is streamed as what it is).
 Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& config)
+    : Streamer(
+          [&] {
+            StreamLayer layer;
+            layer.role = source && source->content() == TileContent::kHeightF32 ? LayerRole::kElevation
+                                                                                : LayerRole::kColour;
+            layer.source = std::move(source);
+            return std::vector<StreamLayer>{std::move(layer)};
+          }(),
+          config) {}
+
+Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config)
     : m_impl(std::make_unique<Impl>()) {
   Impl& s = *m_impl;
-  s.source = std::move(source);
   s.config = config;
-  if (s.source) s.geometry = s.source->geometry();
-  s.entry_bytes = uint64_t(s.geometry.tile_px) * s.geometry.tile_px * 4 + kCacheEntryOverheadBytes;
-  s.counters.resize(s.geometry.levelCount());
-  s.lod = s.geometry.levelCount() ? s.geometry.levelCount() - 1 : 0;
-  s.published_lod = s.lod;
+  s.layers.resize(layers.size());
+  for (size_t i = 0; i < layers.size(); ++i) {
+    Impl::Layer& layer = s.layers[i];
+    layer.spec = std::move(layers[i]);
+    if (layer.spec.source) {
+      const Status check = checkLayer(layer.spec, i);
+      if (!check) {
+        std::fprintf(stderr, "clipstream: %s; the layer stays empty\n", check.toString().c_str());
+        layer.spec.source = nullptr;
+      }
+    }
+    if (layer.spec.source) layer.geometry = layer.spec.source->geometry();
+    layer.tile_bytes = uint64_t(layer.geometry.tile_px) * layer.geometry.tile_px * 4;
+    layer.entry_bytes = layer.tile_bytes + kCacheEntryOverheadBytes;
+    const glm::dvec2 k = layer.spec.texels_per_unit;
+    layer.log2_units_per_texel = layer.spec.source ? -0.5 * std::log2(k.x * k.y) : 0.0;
+    layer.role_order = roleOrder(layer.spec.role);
+    layer.counters.resize(layer.geometry.levelCount());
+    layer.lod = layer.geometry.levelCount() ? layer.geometry.levelCount() - 1 : 0;
+    layer.published_lod = layer.lod;
+    s.any_active = s.any_active || layer.spec.source != nullptr;
+  }
   if (!config.trace_path.empty()) {
     OutputOptions trace_options;
     trace_options.existing = ExistingOutput::kReplaceRegular;
@@ -604,10 +796,15 @@ Streamer::Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& con
       s.trace += '\n';
     }
   }
-  if (!s.source) return;  // nothing to load; update() plans nothing
-  unsigned threads = config.io_threads               ? config.io_threads
-                     : s.source->suggestedLoaderThreads() ? s.source->suggestedLoaderThreads()
-                                                          : std::thread::hardware_concurrency();
+  if (!s.any_active) return;  // nothing to load; update() plans nothing
+  // Unless told, one loader per core, or what the sources ask for (a store
+  // over HTTP: one per connection, each waiting out its round trips).
+  unsigned suggested = 0;
+  for (const Impl::Layer& layer : s.layers)
+    if (layer.spec.source) suggested = std::max(suggested, layer.spec.source->suggestedLoaderThreads());
+  unsigned threads = config.io_threads ? config.io_threads
+                     : suggested        ? suggested
+                                        : std::thread::hardware_concurrency();
   threads = std::clamp(threads, 1u, kMaxIoThreads);
   for (unsigned i = 0; i < threads; ++i) {
     try {
@@ -645,24 +842,55 @@ void Streamer::discardTrace() {
 
 Streamer::~Streamer() { shutdown(); }
 
-const PyramidGeometry& Streamer::geometry() const { return m_impl->geometry; }
+size_t Streamer::layerCount() const { return m_impl->layers.size(); }
+
+const StreamLayer& Streamer::layer(size_t layer) const {
+  assert(layer < m_impl->layers.size());
+  return m_impl->layers[layer].spec;
+}
+
+const PyramidGeometry& Streamer::geometry(size_t layer) const {
+  const Impl& s = *m_impl;
+  assert(layer < s.layers.size() || (layer == 0 && s.layers.empty()));
+  return layer < s.layers.size() ? s.layers[layer].geometry : kNoGeometry;
+}
 
 void Streamer::update(const Camera& camera, const Viewport& viewport, double time_s) {
   Impl& s = *m_impl;
-  if (!s.source || s.geometry.levelCount() == 0) return;
+  bool any_levels = false;
+  for (const Impl::Layer& layer : s.layers) any_levels = any_levels || layer.active();
+  if (!any_levels) return;
   s.frame++;
   s.now_s = time_s;
-  ClipmapPlan next = planClipmap(s.geometry, viewport, camera, s.config.planner);
+  const size_t n = s.layers.size();
+  // Plans every active layer for `cam` (a world camera) into *plans.
+  auto planAll = [&](const Camera& cam, std::vector<ClipmapPlan>* plans) {
+    plans->resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      const Impl::Layer& layer = s.layers[i];
+      if (layer.active())
+        (*plans)[i] = planClipmap(layer.geometry, viewport, layerCamera(layer.spec, cam), s.config.planner);
+    }
+  };
+  std::vector<ClipmapPlan> next;
+  planAll(camera, &next);
 
-  // The path hint counts only while it agrees with the real camera.
+  // The path hint counts only while it agrees with the real camera, on
+  // every layer.
   s.hint_used = false;
   if (s.hint.camera_at && std::isfinite(time_s)) {
     const Camera hinted = s.hint.camera_at(time_s);
-    s.hint_used =
-        finiteCamera(hinted) && hintAgrees(planClipmap(s.geometry, viewport, hinted, s.config.planner), next);
+    s.hint_used = finiteCamera(hinted);
+    for (size_t i = 0; i < n && s.hint_used; ++i) {
+      const Impl::Layer& layer = s.layers[i];
+      if (layer.active())
+        s.hint_used = hintAgrees(
+            planClipmap(layer.geometry, viewport, layerCamera(layer.spec, hinted), s.config.planner), next[i]);
+    }
     // The lookahead serves eviction by return time, which only kGpuFirst does.
     if (s.hint_used && s.config.eviction == EvictionMode::kGpuFirst)
-      s.lookahead.advance(s.geometry, viewport, s.config.planner, s.hint, time_s);
+      for (Impl::Layer& layer : s.layers)
+        if (layer.active()) layer.lookahead.advance(layer.geometry, viewport, s.config.planner, layer.hint, time_s);
   }
 
   // Velocity from the camera history; the predicted camera keeps today's
@@ -670,29 +898,37 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   // trusted hint the predicted camera is the hinted one instead.
   s.history.emplace_back(time_s, camera.position);
   while (s.history.size() > 2 && time_s - s.history.front().first > kHistoryS) s.history.pop_front();
-  ClipmapPlan predicted = next;
+  std::vector<ClipmapPlan> predicted = next;
   const Camera hinted_ahead =
       s.config.prefetch && s.hint_used ? s.hint.camera_at(time_s + s.config.prefetch_ahead_s) : camera;
   if (s.config.prefetch && s.hint_used && finiteCamera(hinted_ahead)) {
-    predicted = planClipmap(s.geometry, viewport, hinted_ahead, s.config.planner);
+    planAll(hinted_ahead, &predicted);
   } else if (s.config.prefetch && s.history.size() >= 2) {
     const double dt = s.history.back().first - s.history.front().first;
     if (dt >= kMinHistoryS) {
       const glm::dvec3 velocity = (s.history.back().second - s.history.front().second) / dt;
       const glm::dvec3 step = velocity * s.config.prefetch_ahead_s;
-      // A jump farther than two windows of the finest needed level is a
-      // teleport, not motion: forget the history instead of prefetching a
-      // path nobody flies.
-      const double window_texels = double(next.clip_tiles) * double(s.geometry.tile_px) *
-                                   std::ldexp(1.0, int(next.finest_level));
-      if (glm::length(glm::dvec2(step.x, step.z)) > kTeleportWindows * window_texels) {
+      // A jump farther than two windows of the finest needed level (of any
+      // layer, in its texels) is a teleport, not motion: forget the history
+      // instead of prefetching a path nobody flies.
+      bool teleport = false;
+      for (size_t i = 0; i < n; ++i) {
+        const Impl::Layer& layer = s.layers[i];
+        if (!layer.active()) continue;
+        const glm::dvec2 k = layer.spec.texels_per_unit;
+        const double window_texels = double(next[i].clip_tiles) * double(layer.geometry.tile_px) *
+                                     std::ldexp(1.0, int(next[i].finest_level));
+        if (glm::length(glm::dvec2(step.x * k.x, step.z * k.y)) > kTeleportWindows * window_texels)
+          teleport = true;
+      }
+      if (teleport) {
         s.history.clear();
         s.history.emplace_back(time_s, camera.position);
       } else {
         Camera ahead = camera;
         ahead.position += step;
         ahead.position.y = std::max(ahead.position.y, camera.near_dist);
-        predicted = planClipmap(s.geometry, viewport, ahead, s.config.planner);
+        planAll(ahead, &predicted);
       }
     }
   }
@@ -709,10 +945,14 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
       }
     }
   }
-  const bool changed = !s.have_plan || s.force_rebuild || retry_due || !sameWindows(s.plan, next) ||
-                       !sameWindows(s.predicted_plan, predicted) || s.hint_used != s.hint_used_by_plan;
-  s.plan = std::move(next);
-  s.predicted_plan = std::move(predicted);
+  bool changed = !s.have_plan || s.force_rebuild || retry_due || s.hint_used != s.hint_used_by_plan;
+  for (size_t i = 0; i < n; ++i) {
+    Impl::Layer& layer = s.layers[i];
+    changed = changed || !sameWindows(layer.plan, next[i]) ||
+              !sameWindows(layer.predicted_plan, predicted[i]);
+    layer.plan = std::move(next[i]);
+    layer.predicted_plan = std::move(predicted[i]);
+  }
   if (changed) {
     s.have_plan = true;
     s.force_rebuild = false;
@@ -720,71 +960,105 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   }
 }
 
-FrameHandoff Streamer::takeReady(size_t max_tiles, size_t max_bytes) {
-  Impl& s = *m_impl;
-  FrameHandoff out;
-  const size_t tile_bytes = size_t(s.geometry.tile_px) * s.geometry.tile_px * 4;
+// Hands off ready tiles of layers [0, layer_count) in rank order within one
+// shared per-frame budget, then each layer's MaxTextureLOD and residency.
+std::vector<FrameHandoff> Streamer::Impl::handOff(size_t layer_count, size_t max_tiles,
+                                                  size_t max_bytes) {
+  std::vector<FrameHandoff> out(layer_count);
+  for (size_t i = 0; i < layer_count; ++i) out[i].layer = uint32_t(i);
   {
-    std::lock_guard<std::mutex> lock(s.mutex);
-    size_t bytes = 0;
-    std::vector<TileKey> still_pending;
-    still_pending.reserve(s.pending.size());
-    for (const TileKey& k : s.pending) {
-      const bool room = out.tiles.size() < max_tiles && (max_bytes == 0 || bytes + tile_bytes <= max_bytes);
-      auto c = room ? s.cache.find(k) : s.cache.end();
-      if (c == s.cache.end() || c->second.state != EntryState::kReady) {
+    std::lock_guard<std::mutex> lock(mutex);
+    size_t bytes = 0, tiles = 0;
+    std::vector<LayerTile> still_pending;
+    still_pending.reserve(pending.size());
+    for (const LayerTile& k : pending) {
+      if (k.layer >= layer_count) {
+        still_pending.push_back(k);
+        continue;
+      }
+      const size_t tile_bytes = layers[k.layer].tile_bytes;
+      const bool room = tiles < max_tiles && (max_bytes == 0 || bytes + tile_bytes <= max_bytes);
+      auto c = room ? cache.find(k) : cache.end();
+      if (c == cache.end() || c->second.state != EntryState::kReady) {
         still_pending.push_back(k);
         continue;
       }
       c->second.gpu = true;
-      s.victims_dirty = true;  // it may be scored for eviction now
-      s.gpu.insert(k);
-      s.counters[k.level].gpu_handoffs++;
-      out.tiles.push_back({k, c->second.rgba});
+      victims_dirty = true;  // it may be scored for eviction now
+      gpu.insert(k);
+      counters(k).gpu_handoffs++;
+      out[k.layer].tiles.push_back({k.key, c->second.rgba});
+      ++tiles;
       bytes += tile_bytes;
     }
-    s.pending.swap(still_pending);
+    pending.swap(still_pending);
   }
 
-  const uint32_t target = s.config.throttle ? s.computeLod() : s.plan.finest_level;
-  if (target >= s.lod) {
-    s.lod = target;  // coarser (or equal): at once
-    s.lod_ready_frames = 0;
-  } else if (++s.lod_ready_frames >= s.config.lod_hysteresis_frames) {
-    s.lod = target;
-    s.lod_ready_frames = 0;
-  }
-  out.max_texture_lod = s.lod;
-  {
-    std::lock_guard<std::mutex> lock(s.mutex);
-    s.published_lod = s.lod;
-  }
-
-  out.residency.reserve(s.plan.stack.size());
-  for (const ClipLevelPlan& lp : s.plan.stack) {
-    LevelResidency r;
-    r.level = lp.level;
-    r.window = lp.window;
-    r.resident.assign(size_t(lp.window.width() * lp.window.height()), 0);
-    if (lp.needed) {
-      size_t i = 0;
-      for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
-        for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++i)
-          r.resident[i] = s.gpu.count({lp.level, uint32_t(x), uint32_t(y)}) ? 1 : 0;
+  for (uint32_t i = 0; i < layer_count; ++i) {
+    Layer& layer = layers[i];
+    FrameHandoff& h = out[i];
+    const uint32_t target = config.throttle ? computeLod(layer, i) : layer.plan.finest_level;
+    if (target >= layer.lod) {
+      layer.lod = target;  // coarser (or equal): at once
+      layer.lod_ready_frames = 0;
+    } else if (++layer.lod_ready_frames >= config.lod_hysteresis_frames) {
+      layer.lod = target;
+      layer.lod_ready_frames = 0;
     }
-    out.residency.push_back(std::move(r));
+    h.max_texture_lod = layer.lod;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      layer.published_lod = layer.lod;
+    }
+
+    h.residency.reserve(layer.plan.stack.size());
+    for (const ClipLevelPlan& lp : layer.plan.stack) {
+      LevelResidency r;
+      r.level = lp.level;
+      r.window = lp.window;
+      r.resident.assign(size_t(lp.window.width() * lp.window.height()), 0);
+      if (lp.needed) {
+        size_t j = 0;
+        for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+          for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j)
+            r.resident[j] = gpu.count({i, {lp.level, uint32_t(x), uint32_t(y)}}) ? 1 : 0;
+      }
+      h.residency.push_back(std::move(r));
+    }
   }
   return out;
+}
+
+FrameHandoff Streamer::takeReady(size_t max_tiles, size_t max_bytes) {
+  Impl& s = *m_impl;
+  if (s.layers.empty()) return {};
+  return std::move(s.handOff(1, max_tiles, max_bytes).front());
+}
+
+std::vector<FrameHandoff> Streamer::takeReadyAll(size_t max_tiles, size_t max_bytes) {
+  Impl& s = *m_impl;
+  return s.handOff(s.layers.size(), max_tiles, max_bytes);
 }
 
 void Streamer::setPathHint(PathHint hint) {
   Impl& s = *m_impl;
   s.hint = std::move(hint);
-  s.lookahead.reset();
+  for (Impl::Layer& layer : s.layers) {
+    layer.lookahead.reset();
+    layer.hint = s.hint;
+    if (s.hint.camera_at) {
+      // The layer's lookahead plans in its texels: the hinted camera mapped.
+      StreamLayer map = layer.spec;
+      map.source = nullptr;
+      layer.hint.camera_at = [camera_at = s.hint.camera_at, map](double t_s) {
+        return layerCamera(map, camera_at(t_s));
+      };
+    }
+  }
   s.hint_used = false;
   s.force_rebuild = true;  // the next update() plans with (or without) the new hint
   std::lock_guard<std::mutex> lock(s.mutex);
-  s.ahead = nullptr;  // no eviction by the old path meanwhile
+  for (Impl::Layer& layer : s.layers) layer.ahead = nullptr;  // no eviction by the old path meanwhile
   s.victims_dirty = true;
 }
 
@@ -797,22 +1071,46 @@ void Streamer::resetGpuResidency() {
   }
   s.force_rebuild = true;  // re-queue wanted tiles no longer in RAM
   s.pending = s.wanted;
-  s.lod = s.geometry.levelCount() ? s.geometry.levelCount() - 1 : 0;
-  s.lod_ready_frames = 0;
+  for (Impl::Layer& layer : s.layers) {
+    layer.lod = layer.geometry.levelCount() ? layer.geometry.levelCount() - 1 : 0;
+    layer.lod_ready_frames = 0;
+  }
 }
 
-const ClipmapPlan& Streamer::plan() const { return m_impl->plan; }
+const ClipmapPlan& Streamer::plan(size_t layer) const {
+  const Impl& s = *m_impl;
+  assert(layer < s.layers.size() || (layer == 0 && s.layers.empty()));
+  return layer < s.layers.size() ? s.layers[layer].plan : kNoPlan;
+}
 
 bool Streamer::settled() const {
   const Impl& s = *m_impl;
   if (!s.have_plan) return false;
   std::lock_guard<std::mutex> lock(s.mutex);
-  for (const TileKey& k : s.pending) {
+  for (const LayerTile& k : s.pending) {
     const auto f = s.failed.find(k);
     if (f == s.failed.end() || f->second.code == ErrorCode::kUnavailable) return false;
   }
   return true;
 }
+
+namespace {
+
+void addCounters(const LevelCounters& c, LevelCounters* sum) {
+  sum->requests += c.requests;
+  sum->ram_hits += c.ram_hits;
+  sum->ram_misses += c.ram_misses;
+  sum->gpu_handoffs += c.gpu_handoffs;
+  sum->cancellations += c.cancellations;
+  sum->evictions += c.evictions;
+  sum->redundant_reads += c.redundant_reads;
+  sum->bytes_read += c.bytes_read;
+  sum->failures += c.failures;
+  sum->loads += c.loads;
+  sum->budget_skips += c.budget_skips;
+}
+
+}  // namespace
 
 StreamerStats Streamer::stats() const {
   const Impl& s = *m_impl;
@@ -820,13 +1118,21 @@ StreamerStats Streamer::stats() const {
   std::vector<double> lat;
   {
     std::lock_guard<std::mutex> lock(s.mutex);
-    out.levels = s.counters;
+    out.layers.resize(s.layers.size());
+    for (size_t i = 0; i < s.layers.size(); ++i) {
+      const Impl::Layer& layer = s.layers[i];
+      LayerStats& ls = out.layers[i];
+      ls.levels = layer.counters;
+      ls.ram_bytes = layer.ram_bytes;
+      ls.ram_entries = layer.ram_entries;
+      ls.max_texture_lod = layer.published_lod;
+    }
     out.ram_bytes = s.ram_bytes;
     out.ram_peak_bytes = s.ram_peak;
     out.queue_depth = s.queue.size();
     out.in_flight = s.in_flight;
     out.decode_ms_total = s.decode_ms_total;
-    out.max_texture_lod = s.published_lod;
+    out.max_texture_lod = s.layers.empty() ? 0 : s.layers[0].published_lod;
     out.ram_entries = s.cache.size();
     out.path_hint_frames = s.hint_frames;
     out.path_hint_ignored_frames = s.hint_ignored_frames;
@@ -835,19 +1141,14 @@ StreamerStats Streamer::stats() const {
   }
   out.ram_budget_bytes = s.config.ram_budget_bytes;
   out.entry_overhead_bytes = kCacheEntryOverheadBytes;
-  for (const LevelCounters& c : out.levels) {
-    out.total.requests += c.requests;
-    out.total.ram_hits += c.ram_hits;
-    out.total.ram_misses += c.ram_misses;
-    out.total.gpu_handoffs += c.gpu_handoffs;
-    out.total.cancellations += c.cancellations;
-    out.total.evictions += c.evictions;
-    out.total.redundant_reads += c.redundant_reads;
-    out.total.bytes_read += c.bytes_read;
-    out.total.failures += c.failures;
-    out.total.loads += c.loads;
-    out.total.budget_skips += c.budget_skips;
+  for (LayerStats& ls : out.layers) {
+    if (out.levels.size() < ls.levels.size()) out.levels.resize(ls.levels.size());
+    for (size_t l = 0; l < ls.levels.size(); ++l) {
+      addCounters(ls.levels[l], &ls.total);
+      addCounters(ls.levels[l], &out.levels[l]);
+    }
   }
+  for (const LevelCounters& c : out.levels) addCounters(c, &out.total);
   if (!lat.empty()) {
     std::sort(lat.begin(), lat.end());
     out.queue_latency_p50_ms = lat[(lat.size() - 1) / 2];
@@ -861,6 +1162,15 @@ std::vector<TileKey> Streamer::queuedTiles() const {
   std::lock_guard<std::mutex> lock(s.mutex);
   std::vector<TileKey> out;
   out.reserve(s.queue.size());
+  for (const Request& r : s.queue) out.push_back(r.key.key);
+  return out;
+}
+
+std::vector<LayerTile> Streamer::queuedLayerTiles() const {
+  const Impl& s = *m_impl;
+  std::lock_guard<std::mutex> lock(s.mutex);
+  std::vector<LayerTile> out;
+  out.reserve(s.queue.size());
   for (const Request& r : s.queue) out.push_back(r.key);
   return out;
 }
@@ -871,7 +1181,7 @@ void Streamer::shutdown() {
     std::lock_guard<std::mutex> lock(s.mutex);
     if (!s.stopping) {
       s.stopping = true;
-      for (const Request& r : s.queue) s.counters[r.key.level].cancellations++;
+      for (const Request& r : s.queue) s.counters(r.key).cancellations++;
       s.queue.clear();
     }
   }

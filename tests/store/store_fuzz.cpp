@@ -38,6 +38,11 @@ void reseal(std::vector<uint8_t>& b) {
   const uint64_t table_offset = format::get64(h + format::kOffLevelTableOffset);
   const uint64_t table_bytes = format::get64(h + format::kOffLevelTableBytes);
   const uint32_t levels = format::get32(h + format::kOffLevelCount);
+  // Elevation stores have 32-byte entries; anything else is walked as 16.
+  const uint32_t entry_bytes = format::get32(h + format::kOffEntryBytes) ==
+                                       format::kElevationTileEntryBytes
+                                   ? format::kElevationTileEntryBytes
+                                   : format::kTileEntryBytes;
   if (levels <= format::kMaxLevels && table_bytes >= format::kChecksumBytes &&
       inFile(table_offset, table_bytes, b.size())) {
     const uint64_t body = table_bytes - format::kChecksumBytes;
@@ -53,8 +58,7 @@ void reseal(std::vector<uint8_t>& b) {
         const uint64_t page_offset = format::get64(d);
         const uint32_t page_bytes = format::get32(d + 8);
         if (!inFile(page_offset, page_bytes, b.size())) continue;
-        for (uint32_t t = 0; t + format::kTileEntryBytes <= page_bytes;
-             t += format::kTileEntryBytes) {
+        for (uint32_t t = 0; t + entry_bytes <= page_bytes; t += entry_bytes) {
           uint8_t* te = h + page_offset + t;
           const uint64_t rel = format::get64(te);
           const uint32_t stored = format::get32(te + 8);
@@ -94,7 +98,8 @@ void writeBytes(const std::string& path, const uint8_t* data, size_t size) {
 }
 
 // Small stores covering every structure: edge pages, constant tiles and
-// pages, every pixel format, both compressions, a georeference.
+// pages, every pixel format, both compressions, a georeference, and
+// elevation stores (their record and 32-byte entries).
 void writeSeeds(const std::string& dir) {
   struct Seed {
     uint64_t w, h;
@@ -108,6 +113,8 @@ void writeSeeds(const std::string& dir) {
       {40, 33, 16, PixelFormat::kR16, Compression::kNone, Predictor::kLeftDelta},
       {70, 20, 16, PixelFormat::kRGBA8, Compression::kZstd, Predictor::kNone},
       {16, 16, 16, PixelFormat::kR8, Compression::kNone, Predictor::kNone},
+      {100, 60, 16, PixelFormat::kI16, Compression::kZstd, Predictor::kLeftDelta},
+      {50, 40, 16, PixelFormat::kF32, Compression::kNone, Predictor::kLeftDelta},
   };
   int n = 0;
   for (const Seed& s : seeds) {
@@ -120,6 +127,12 @@ void writeSeeds(const std::string& dir) {
     options.encoding.predictor = s.predictor;
     options.geo.present = (n % 2) == 0;
     options.geo.crs = "EPSG:2992";
+    if (!isColourFormat(s.format)) {
+      options.encoding.filter = DownsampleFilter::kDecimate;
+      options.elevation.present = true;
+      options.elevation.has_nodata = true;
+      options.elevation.nodata = -32768;
+    }
     const std::string path = dir + "/seed" + std::to_string(n) + ".store";
     std::unique_ptr<TileStoreWriter> writer;
     if (!TileStoreWriter::create(path, g, options, &writer)) std::abort();
@@ -133,8 +146,17 @@ void writeSeeds(const std::string& dir) {
             pixels[i] = uint8_t(constant ? (i % bpp) * 50 + l : i * 7 + x * 13 + y * 29 + l);
           }
           EncodedTile encoded;
-          if (!encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded) ||
-              !writer->write(std::move(encoded))) {
+          if (!encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded)) std::abort();
+          if (options.elevation.present && !(constant && l == 0)) {
+            encoded.location.min_height = -float(l);
+            encoded.location.max_height = float(x + y);
+            encoded.location.error = float(l);
+          } else if (options.elevation.present) {
+            // Flat constant tiles: bounds are the value's height (a constant page).
+            encoded.location.min_height = encoded.location.max_height =
+                float(heightOfSample(g.format, options.elevation, encoded.location.constant_pixel));
+          }
+          if (!writer->write(std::move(encoded))) {
             std::abort();
           }
         }

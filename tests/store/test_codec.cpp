@@ -29,6 +29,8 @@ std::vector<uint8_t> expandReference(const std::vector<uint8_t>& pixels, PixelFo
       case PixelFormat::kR16: o[0] = o[1] = o[2] = p[1]; o[3] = 255; break;
       case PixelFormat::kRGB8: o[0] = p[0]; o[1] = p[1]; o[2] = p[2]; o[3] = 255; break;
       case PixelFormat::kRGBA8: std::memcpy(o, p, 4); break;
+      case PixelFormat::kI16:
+      case PixelFormat::kF32: break;  // heights: no colour
     }
   }
   return out;

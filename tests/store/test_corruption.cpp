@@ -199,7 +199,7 @@ TEST_F(StoreCorruption, WrongMagicVersionAndTrailingBytesAreNamed) {
   std::unique_ptr<TileStoreReader> reader;
   EXPECT_EQ(TileStoreReader::open(m_damaged, &reader).code, ErrorCode::kBadMagic);
   bytes = m_bytes;
-  bytes[8] = 2;  // version field
+  bytes[8] = 3;  // version field: one this reader does not know
   writeBytes(m_damaged, bytes);
   EXPECT_EQ(TileStoreReader::open(m_damaged, &reader).code, ErrorCode::kBadVersion);
   bytes = m_bytes;
@@ -214,9 +214,9 @@ TEST_F(StoreCorruption, WrongMagicVersionAndTrailingBytesAreNamed) {
 
 TEST_F(StoreCorruption, VersionIsReportedFromTheFirstTwelveBytes) {
   // Magic and version are all a reader needs to say "a newer format": a
-  // 12-byte prefix of a version-2 file is kBadVersion, not kTruncated.
+  // 12-byte prefix of a version-3 file is kBadVersion, not kTruncated.
   std::vector<uint8_t> bytes(m_bytes.begin(), m_bytes.begin() + 12);
-  bytes[8] = 2;
+  bytes[8] = 3;
   writeBytes(m_damaged, bytes);
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(m_damaged, &reader);

@@ -127,16 +127,16 @@ TEST(StoreFormat, IndexPageRoundTripsAgainstItsDirectoryChecksum) {
       {0x3132333435363738ull, 0x41424344, 0x51525354},
   };
   std::vector<uint8_t> page;
-  const uint64_t checksum = format::encodeIndexPage(entries, &page);
+  const uint64_t checksum = format::encodeIndexPage(entries, format::kTileEntryBytes, &page);
   ASSERT_EQ(page.size(), 3u * 16);
   EXPECT_EQ(checksum, format::checksum64(page.data(), page.size()));
   std::vector<format::TileEntry> decoded;
-  ASSERT_EQ(format::decodeIndexPage(page, checksum, &decoded), format::Decoded::kOk);
+  ASSERT_EQ(format::decodeIndexPage(page, checksum, format::kTileEntryBytes, &decoded), format::Decoded::kOk);
   EXPECT_EQ(decoded, entries);
   page[17] ^= 4;
-  EXPECT_EQ(format::decodeIndexPage(page, checksum, &decoded), format::Decoded::kBadChecksum);
+  EXPECT_EQ(format::decodeIndexPage(page, checksum, format::kTileEntryBytes, &decoded), format::Decoded::kBadChecksum);
   page.pop_back();
-  EXPECT_EQ(format::decodeIndexPage(page, checksum, &decoded), format::Decoded::kBadSize);
+  EXPECT_EQ(format::decodeIndexPage(page, checksum, format::kTileEntryBytes, &decoded), format::Decoded::kBadSize);
 }
 
 TEST(StoreFormat, MetadataRoundTripsAndRejectsAWrongCrsLength) {
@@ -218,7 +218,7 @@ TEST(StoreFormat, KnownStoreHeaderMatchesTheDocumentedLayout) {
 
   // docs/tile-store.md section 5, offset by offset.
   EXPECT_EQ(std::string(b.begin(), b.begin() + 8), "CLIPTILE");
-  EXPECT_EQ(le32(b, 8), 1u);     // format_version
+  EXPECT_EQ(le32(b, 8), 2u);     // format_version
   EXPECT_EQ(le32(b, 12), 136u);  // header_bytes
   EXPECT_EQ(le64(b, 16), 300u);  // width_px
   EXPECT_EQ(le64(b, 24), 200u);  // height_px
@@ -288,10 +288,10 @@ TEST(StoreFormat, KnownStoreHeaderMatchesTheDocumentedLayout) {
     EXPECT_EQ(le32(b, levels[l].directory_offset + 8), pages[0].bytes);
     const std::vector<uint8_t> page_block = slice(b, pages[0].offset, pages[0].bytes);
     std::vector<format::TileEntry> entries;
-    ASSERT_EQ(format::decodeIndexPage(page_block, pages[0].checksum, &entries),
+    ASSERT_EQ(format::decodeIndexPage(page_block, pages[0].checksum, format::kTileEntryBytes, &entries),
               format::Decoded::kOk);
     std::vector<uint8_t> page_again;
-    EXPECT_EQ(format::encodeIndexPage(entries, &page_again), pages[0].checksum);
+    EXPECT_EQ(format::encodeIndexPage(entries, format::kTileEntryBytes, &page_again), pages[0].checksum);
     EXPECT_EQ(page_again, page_block);
     ASSERT_EQ(entries.size(), size_t(g.levels[l].tiles_x) * g.levels[l].tiles_y);
     if (l == 0) {

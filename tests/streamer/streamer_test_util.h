@@ -62,6 +62,8 @@ class RecordingSource final : public TileSource {
   explicit RecordingSource(std::shared_ptr<TileSource> inner, double latency_ms = 0.0)
       : m_inner(std::move(inner)), m_latency_ms(latency_ms) {}
   const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  TileContent content() const override { return m_inner->content(); }
+  ElevationInfo elevationInfo() const override { return m_inner->elevationInfo(); }
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
     FetchInfo info;
     return fetchWithInfo(key, rgba, &info);

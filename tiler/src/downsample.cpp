@@ -60,6 +60,15 @@ float linearToSrgb(float l) {
 
 Downsampler::Downsampler(DownsampleFilter filter, bool linear_light, PixelFormat format)
     : m_filter(filter), m_linear_light(linear_light), m_format(format) {
+  if (filter == DownsampleFilter::kDecimate) {
+    // Output sample y is input sample 2y. The second tap (weight 0) makes
+    // the builder wait for row 2y + 1, so a finer tile row is always emitted
+    // before the coarser one built from it (the tiler's height bounds
+    // depend on that order).
+    m_first_tap = 0;
+    m_weights = {1.0f, 0.0f};
+    return;
+  }
   if (filter == DownsampleFilter::kBox) {
     m_first_tap = 0;
     m_weights = {0.5f, 0.5f};
@@ -82,7 +91,11 @@ Downsampler::Downsampler(DownsampleFilter filter, bool linear_light, PixelFormat
 
 void Downsampler::downsampleRow(const uint8_t* const* rows, uint64_t width_in, uint8_t* out,
                                 std::vector<float>* scratch) const {
-  if (m_filter == DownsampleFilter::kBox) {
+  if (m_filter == DownsampleFilter::kDecimate) {
+    const size_t bpp = bytesPerPixel(m_format);
+    const uint64_t width_out = (width_in + 1) / 2;
+    for (uint64_t x = 0; x < width_out; ++x) std::memcpy(out + x * bpp, rows[0] + 2 * x * bpp, bpp);
+  } else if (m_filter == DownsampleFilter::kBox) {
     boxRow(rows[0], rows[1], width_in, out);
   } else {
     filteredRow(rows, width_in, out, scratch);

@@ -5,6 +5,7 @@
 #include <clipstream/tiler/georef.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +21,10 @@ constexpr uint16_t kTagModelPixelScale = 33550;
 constexpr uint16_t kTagModelTiepoint = 33922;
 constexpr uint16_t kTagModelTransformation = 34264;
 constexpr uint16_t kTagGeoKeyDirectory = 34735;
+constexpr uint16_t kTagGdalMetadata = 42112;  // GDAL's XML metadata (ASCII)
+constexpr uint16_t kTagGdalNodata = 42113;    // GDAL's no-data value (ASCII)
+constexpr uint16_t kKeyVerticalUnits = 4099;
+constexpr uint64_t kMaxAsciiTagBytes = 1u << 20;
 constexpr uint16_t kKeyModelType = 1024;
 constexpr uint16_t kKeyRasterType = 1025;
 constexpr uint16_t kKeyGeographicType = 2048;
@@ -95,8 +100,38 @@ Status readWorldFile(const std::string& path, GeoReference* out) {
   return Status::ok();
 }
 
-Status readGeoTiffTags(const std::string& path, GeoReference* out) {
+namespace {
+
+// Heights' unit from an EPSG linear unit code or GDAL's UNITTYPE text.
+std::optional<HeightUnits> unitsFromEpsg(uint32_t code) {
+  if (code == 9001) return HeightUnits::kMetre;
+  if (code == 9002) return HeightUnits::kFoot;
+  if (code == 9003) return HeightUnits::kUsSurveyFoot;
+  return std::nullopt;
+}
+std::optional<HeightUnits> unitsFromText(const std::string& text) {
+  if (text == "m" || text == "metre" || text == "meter" || text == "metres" || text == "meters") {
+    return HeightUnits::kMetre;
+  }
+  if (text == "ft" || text == "foot" || text == "feet") return HeightUnits::kFoot;
+  if (text == "US survey foot" || text == "ftUS" || text == "us-ft") return HeightUnits::kUsSurveyFoot;
+  return std::nullopt;
+}
+
+// The UNITTYPE item of GDAL's metadata XML (band 0), if any.
+std::string gdalUnitType(const std::string& xml) {
+  const std::string role = "role=\"unittype\"";
+  const size_t at = xml.find(role);
+  if (at == std::string::npos) return {};
+  const size_t open = xml.find('>', at);
+  const size_t close = xml.find('<', open == std::string::npos ? at : open);
+  if (open == std::string::npos || close == std::string::npos) return {};
+  return xml.substr(open + 1, close - open - 1);
+}
+
+Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* elevation) {
   *out = GeoReference{};
+  *elevation = ElevationTags{};
   std::error_code ec;
   const uint64_t size = fs::file_size(path, ec);
   if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
@@ -133,11 +168,34 @@ Status readGeoTiffTags(const std::string& path, GeoReference* out) {
     const uint8_t* e = table.data() + i * entry_size;
     const uint16_t tag = uint16_t(tb.decode(e, 2));
     if (tag != kTagModelPixelScale && tag != kTagModelTiepoint && tag != kTagModelTransformation &&
-        tag != kTagGeoKeyDirectory) {
+        tag != kTagGeoKeyDirectory && tag != kTagGdalMetadata && tag != kTagGdalNodata) {
       continue;
     }
     const uint16_t type = uint16_t(tb.decode(e + 2, 2));
     const uint64_t count = big ? tb.decode(e + 4, 8) : tb.decode(e + 4, 4);
+    if (tag == kTagGdalMetadata || tag == kTagGdalNodata) {
+      // ASCII text; a malformed one is ignored (it only adds information).
+      if (type != 2 || count == 0 || count > kMaxAsciiTagBytes) continue;
+      std::string text(count, '\0');
+      const size_t inline_bytes = big ? 8 : 4;
+      if (count <= inline_bytes) {
+        std::memcpy(text.data(), e + (big ? 12 : 8), count);
+      } else if (!tb.read(big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4), text.data(), count)) {
+        continue;
+      }
+      text.resize(std::strlen(text.c_str()));
+      if (tag == kTagGdalNodata) {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end != text.c_str()) {
+          elevation->has_nodata = true;
+          elevation->nodata = v;  // may be nan, as GDAL writes it
+        }
+      } else if (auto units = unitsFromText(gdalUnitType(text))) {
+        elevation->units = units;
+      }
+      continue;
+    }
     const int elem = type == 12 ? 8 : type == 3 ? 2 : 0;  // DOUBLE or SHORT
     if (elem == 0 || count == 0 || count > kMaxTagValues) {
       return bad(path, "tag " + std::to_string(tag) + " has type " + std::to_string(type) +
@@ -177,6 +235,9 @@ Status readGeoTiffTags(const std::string& path, GeoReference* out) {
       if (key[0] == kKeyRasterType) raster_type = key[3];
       if (key[0] == kKeyProjectedCsType) projected = key[3];
       if (key[0] == kKeyGeographicType) geographic = key[3];
+      if (key[0] == kKeyVerticalUnits) {
+        if (auto units = unitsFromEpsg(key[3])) elevation->units = units;
+      }
     }
   }
 
@@ -206,6 +267,18 @@ Status readGeoTiffTags(const std::string& path, GeoReference* out) {
     out->crs = "EPSG:" + std::to_string(geographic);
   }
   return Status::ok();
+}
+
+}  // namespace
+
+Status readGeoTiffTags(const std::string& path, GeoReference* out) {
+  ElevationTags ignored;
+  return parseTiffTags(path, out, &ignored);
+}
+
+Status readElevationTags(const std::string& path, ElevationTags* out) {
+  GeoReference ignored;
+  return parseTiffTags(path, &ignored, out);
 }
 
 Status findGeoReference(const std::string& path, GeoReference* out) {

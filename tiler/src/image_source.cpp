@@ -135,6 +135,16 @@ void syntheticPixel(uint64_t x, uint64_t y, PixelFormat format, uint8_t* out) {
       out[2] = uint8_t(b);
       out[3] = uint8_t(255u - ((h >> 12) & 3u));
       break;
+    case PixelFormat::kI16: {
+      const int16_t v = int16_t(((x + y) & 0x3fffu) + (h & 7u));
+      std::memcpy(out, &v, 2);
+      break;
+    }
+    case PixelFormat::kF32: {
+      const float v = float((x + y) & 0xffffu) + float(h & 7u) * 0.125f;
+      std::memcpy(out, &v, 4);
+      break;
+    }
   }
 }
 

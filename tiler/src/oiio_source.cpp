@@ -41,8 +41,26 @@ uint32_t formatChannels(PixelFormat f) {
     case PixelFormat::kR16: return 1;
     case PixelFormat::kRGB8: return 3;
     case PixelFormat::kRGBA8: return 4;
+    case PixelFormat::kI16:
+    case PixelFormat::kF32: return 1;
   }
   return 0;
+}
+
+// Heights: channel 0 as its value, not as a colour (no normalisation).
+// I16 is asked for int16 input only; F32 takes any sample type.
+template <typename T>
+void convertHeightRow(const T* src, uint32_t nch, uint64_t width, PixelFormat format,
+                      uint8_t* dst) {
+  for (uint64_t x = 0; x < width; ++x, src += nch) {
+    if (format == PixelFormat::kI16) {
+      const int16_t v = int16_t(std::clamp<double>(double(src[0]), -32768.0, 32767.0));
+      std::memcpy(dst + 2 * x, &v, 2);
+    } else {
+      const float v = float(src[0]);
+      std::memcpy(dst + 4 * x, &v, 4);
+    }
+  }
 }
 
 // Scratch reads are split so one OIIO call never needs more than this many
@@ -136,6 +154,8 @@ void convertRow(const T* src, uint32_t nch, uint64_t width, PixelFormat format, 
         }
         dst += 4;
         break;
+      case PixelFormat::kI16:
+      case PixelFormat::kF32: break;  // convertHeightRow's
     }
   }
 }
@@ -202,6 +222,21 @@ class OiioSource final : public ImageSource {
     }
     const uint32_t nch = m_info.input_channels;
     uint64_t* clamped = &m_info.clamped_samples;
+    if (m_info.format == PixelFormat::kI16 || m_info.format == PixelFormat::kF32) {
+      switch (m_kind) {
+        case SampleKind::kU8: convertHeightRow(src, nch, width, m_info.format, out); break;
+        case SampleKind::kU16:
+          convertHeightRow(reinterpret_cast<const uint16_t*>(src), nch, width, m_info.format, out);
+          break;
+        case SampleKind::kI16:
+          convertHeightRow(reinterpret_cast<const int16_t*>(src), nch, width, m_info.format, out);
+          break;
+        case SampleKind::kF32:
+          convertHeightRow(reinterpret_cast<const float*>(src), nch, width, m_info.format, out);
+          break;
+      }
+      return;
+    }
     switch (m_kind) {
       case SampleKind::kU8:
         convertRow(src, nch, width, m_info.format, out, clamped);

@@ -10,14 +10,18 @@
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
 
+#include "height_bounds.h"
+#include "height_source.h"
 #include "pyramid_builder.h"
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <optional>
 #include <filesystem>
 #include <mutex>
 #include <system_error>
@@ -135,6 +139,7 @@ struct StripItem {
 struct TileJob {
   TileKey key;
   std::vector<uint8_t> pixels;
+  TileHeights heights;  // elevation stores
 };
 
 // How the image is cut: panels of panel_px columns (and rows), whose first
@@ -237,7 +242,41 @@ Status validateOptions(const TilerOptions& o) {
   if (o.linear_light && o.filter != DownsampleFilter::kLanczos3) {
     return Status::error(ErrorCode::kInvalidArgument, "--linear-light needs --filter lanczos3");
   }
+  if (o.filter == DownsampleFilter::kDecimate) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "the decimate filter is chosen by the tiler for elevation stores only");
+  }
+  if (!std::isfinite(o.height_step) || o.height_step < 0.0 || o.height_step > kMaxHeightStep) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--height-step " + std::to_string(o.height_step) + " must be in (0, " +
+                             std::to_string(int(kMaxHeightStep)) + "]");
+  }
+  if (o.height_step > 0.0 && o.layer == LayerKind::kColour) {
+    return Status::error(ErrorCode::kInvalidArgument, "--height-step applies to elevation stores");
+  }
+  if (o.nodata && std::isinf(*o.nodata)) {
+    return Status::error(ErrorCode::kInvalidArgument, "--nodata must be a finite number or nan");
+  }
+  if (o.input_path.empty() &&
+      (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format)))) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--synthetic makes colour images; elevation needs an input DEM");
+  }
+  if (o.format && o.layer == LayerKind::kColour && !isColourFormat(*o.format)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         std::string("--format ") + pixelFormatName(*o.format) +
+                             " holds heights, not colour");
+  }
   return Status::ok();
+}
+
+const char* layerKindName(LayerKind kind) {
+  switch (kind) {
+    case LayerKind::kAuto: return "auto";
+    case LayerKind::kColour: return "colour";
+    case LayerKind::kElevation: return "elevation";
+  }
+  return "unknown";
 }
 
 namespace {
@@ -265,6 +304,135 @@ Status checkOutput(const TilerOptions& o) {
 
 namespace {
 
+// Decides whether an opened input becomes an elevation store (LayerKind)
+// and, if so, reopens it delivering native height samples behind a
+// HeightSource (no-data fill, quantisation). *heights points into *source.
+Status openElevation(const TilerOptions& o, const GeoReference& geo,
+                     std::unique_ptr<ImageSource>* source, HeightSource** heights,
+                     ElevationInfo* elevation, TilerSummary* summary) {
+  const SourceInfo& first = (*source)->info();
+  const std::string& type = first.input_type;
+  const bool int16 = type == "int16", uint16 = type == "uint16";
+  const bool floating = type == "float" || type == "half" || type == "double";
+  const bool forced_height = o.format && !isColourFormat(*o.format);
+  bool wanted = false;
+  switch (o.layer) {
+    case LayerKind::kColour: wanted = false; break;
+    case LayerKind::kElevation: wanted = true; break;
+    case LayerKind::kAuto:
+      wanted = forced_height ||
+               (!o.format && first.input_channels == 1 &&
+                (int16 || ((uint16 || floating) && geo.present)));
+      break;
+  }
+  if (!wanted) {
+    if (o.height_step > 0.0) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           o.input_path + ": --height-step applies to elevation stores, and this "
+                                          "input is tiled as colour (use --layer elevation)");
+    }
+    return Status::ok();
+  }
+  if (first.input_channels != 1) {
+    return Status::error(ErrorCode::kUnsupported,
+                         o.input_path + ": " + std::to_string(first.input_channels) +
+                             " channels; an elevation store needs a single-band DEM");
+  }
+  if (o.format && !forced_height) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         std::string("--format ") + pixelFormatName(*o.format) +
+                             " is a colour format; elevation stores hold I16, R16 or F32");
+  }
+  if (o.filter != DownsampleFilter::kBox || o.linear_light) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--filter and --linear-light are for colour: heights are decimated "
+                         "(every other sample), never filtered like colour");
+  }
+  const PixelFormat native = int16 ? PixelFormat::kI16 : uint16 ? PixelFormat::kR16 : PixelFormat::kF32;
+  const bool integer = int16 || uint16 || type == "uint8";
+  if (integer && o.height_step > 0.0) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         o.input_path + ": integer heights (" + type +
+                             ") are stored exactly; --height-step is for floating-point DEMs");
+  }
+  PixelFormat stored = o.height_step > 0.0 ? PixelFormat::kR16 : native;
+  if (forced_height) {
+    const bool widen = *o.format == PixelFormat::kF32;
+    if (*o.format != stored && !widen) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           std::string("--format ") + pixelFormatName(*o.format) + " cannot hold " +
+                               type + " heights " +
+                               (o.height_step > 0.0 ? "quantised (R16 does)"
+                                                    : "exactly (use " + std::string(pixelFormatName(stored)) +
+                                                          " or F32)"));
+    }
+    stored = *o.format;
+  }
+  ElevationTags tags;
+  Status s = readElevationTags(o.input_path, &tags);
+  if (!s) return s;
+  HeightConversion conversion;
+  conversion.stored = stored;
+  conversion.has_nodata = o.nodata.has_value() || tags.has_nodata;
+  conversion.nodata = o.nodata.value_or(tags.nodata);
+
+  // The reader for native samples (the file is opened again: cheap, and
+  // it starts from the top).
+  const std::optional<PixelFormat> native_format = stored == PixelFormat::kF32 || o.height_step > 0.0
+                                                       ? PixelFormat::kF32
+                                                       : native;
+  auto reopen = [&]() {
+    source->reset();
+    return openImageFile(o.input_path, native_format, source);
+  };
+  s = reopen();
+  if (!s) return s;
+  if (o.height_step > 0.0) {
+    double lo = 0.0, hi = 0.0;
+    s = scanHeightRange(source->get(), conversion, &lo, &hi);
+    if (!s) return Status::error(s.code, o.input_path + ": " + s.message);
+    conversion.scale = o.height_step;
+    conversion.offset = std::floor(lo / o.height_step) * o.height_step;
+    if ((hi - conversion.offset) / o.height_step > 65535.0) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           o.input_path + ": heights " + std::to_string(lo) + " to " +
+                               std::to_string(hi) + " need more than 65536 steps of " +
+                               std::to_string(o.height_step) + "; use --height-step " +
+                               std::to_string((hi - conversion.offset) / 65535.0) +
+                               " or more, or store them exactly");
+    }
+    s = reopen();
+    if (!s) return s;
+  }
+  auto wrapped = std::make_unique<HeightSource>(std::move(*source), conversion);
+  *heights = wrapped.get();
+  *source = std::move(wrapped);
+
+  *elevation = ElevationInfo{};
+  elevation->present = true;
+  elevation->scale = conversion.scale;
+  elevation->quantised = o.height_step > 0.0;
+  elevation->offset = conversion.offset;
+  elevation->has_nodata = conversion.has_nodata;
+  elevation->nodata = conversion.nodata;
+  if (o.vertical_units) {
+    elevation->units = *o.vertical_units;
+    elevation->units_assumed = false;
+  } else if (tags.units) {
+    elevation->units = *tags.units;
+    elevation->units_assumed = false;
+  } else {
+    elevation->units = HeightUnits::kMetre;
+    elevation->units_assumed = true;
+  }
+  if (!geo.present) {
+    summary->warnings.push_back(o.input_path +
+                                ": the DEM has no georeference; a scene will stretch it over the "
+                                "colour layer's extent");
+  }
+  return Status::ok();
+}
+
 Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   const auto start = Clock::now();
   *summary = TilerSummary{};
@@ -274,28 +442,37 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   if (!s) return s;
 
   std::unique_ptr<ImageSource> source;
+  GeoReference geo;
   if (o.input_path.empty()) {
     s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
                             o.format.value_or(PixelFormat::kRGB8), &source);
   } else {
-    s = openImageFile(o.input_path, o.format, &source);
+    // A height format asked for by --format is the elevation path's to
+    // choose; the first open only looks at the input.
+    const bool height_format = o.format && !isColourFormat(*o.format);
+    s = openImageFile(o.input_path, height_format ? std::nullopt : o.format, &source);
+    if (s) s = findGeoReference(o.input_path, &geo);
   }
   if (!s) return s;
+  HeightSource* heights = nullptr;
+  ElevationInfo elevation;
+  if (!o.input_path.empty()) {
+    s = openElevation(o, geo, &source, &heights, &elevation, summary);
+    if (!s) return s;
+  }
   const SourceInfo& src = source->info();
   for (const std::string& w : src.warnings) summary->warnings.push_back(w);
 
   WriterOptions wopt;
+  wopt.elevation = elevation;
   wopt.encoding.compression = Compression::kZstd;
   wopt.encoding.zstd_level = o.zstd_level;
   wopt.encoding.predictor = o.predictor ? Predictor::kLeftDelta : Predictor::kNone;
-  wopt.encoding.filter = o.filter;
+  wopt.encoding.filter = elevation.present ? DownsampleFilter::kDecimate : o.filter;
   wopt.encoding.linear_light = o.linear_light;
   wopt.fsync = o.fsync;
   wopt.replace = o.overwrite;
-  if (!o.input_path.empty()) {
-    s = findGeoReference(o.input_path, &wopt.geo);
-    if (!s) return s;
-  }
+  wopt.geo = geo;
 
   PyramidGeometry geometry;
   if (!makePyramidGeometry(src.width_px, src.height_px, o.tile_px, src.format, &geometry)) {
@@ -304,22 +481,25 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
                              std::to_string(src.height_px) + " with tile size " +
                              std::to_string(o.tile_px));
   }
-  const Downsampler downsampler(o.filter, o.linear_light, src.format);
+  const Downsampler downsampler(wopt.encoding.filter, o.linear_light, src.format);
   const unsigned threads =
       o.threads != 0 ? o.threads : std::max(1u, std::thread::hardware_concurrency());
 
   Layout layout;
   const uint64_t base_bytes = currentRssBytes();
-  s = planLayout(geometry, downsampler, threads, o.memory_budget_bytes, base_bytes,
-                 o.filter != DownsampleFilter::kBox, &layout);
+  // Box and decimate read only the 2x2 samples under each output sample, so
+  // levels can be built per panel; Lanczos reaches across panel borders.
+  const bool need_single = wopt.encoding.filter == DownsampleFilter::kLanczos3;
+  s = planLayout(geometry, downsampler, threads, o.memory_budget_bytes, base_bytes, need_single,
+                 &layout);
   if (!s && base_bytes > o.memory_budget_bytes / 2) {
     // Most of the budget is gone before the first row: the libraries and the
     // decoder's own state (a progressive JPEG keeps every DCT coefficient, 2
     // bytes per sample). Nothing the tiler does can undo that, so plan our
     // part within half the budget on top of it, and say so.
     Status retry = planLayout(geometry, downsampler, threads,
-                              base_bytes + o.memory_budget_bytes / 2, base_bytes,
-                              o.filter != DownsampleFilter::kBox, &layout);
+                              base_bytes + o.memory_budget_bytes / 2, base_bytes, need_single,
+                              &layout);
     if (retry) {
       s = retry;
       summary->warnings.push_back(
@@ -437,6 +617,9 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
         Status es;
         try {
           es = encodeTile(geometry, wopt.encoding, job.key, job.pixels, &encoded);
+          encoded.location.min_height = job.heights.min_height;
+          encoded.location.max_height = job.heights.max_height;
+          encoded.location.error = job.heights.error;
           if (es) es = writer->write(std::move(encoded));
         } catch (const std::bad_alloc&) {
           es = Status::error(ErrorCode::kOutOfMemory, "an allocation failed while encoding tiles");
@@ -469,8 +652,18 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   const double build_cpu0 = threadCpuSeconds();
   try {
     if (o.progress) o.progress(0, total_px);
+    std::optional<HeightBoundsTracker> bounds;
+    if (elevation.present) bounds.emplace(geometry, elevation);
     auto tile_sink = [&](const TileKey& key, std::vector<uint8_t>&& pixels) {
-      if (!jobs.push(TileJob{key, std::move(pixels)}) && !error.failed()) {
+      TileHeights tile_heights;
+      if (bounds) {
+        tile_heights = bounds->add(key, pixels);
+        if (key.level + 1 == levels) {
+          elevation.min_height = tile_heights.min_height;
+          elevation.max_height = tile_heights.max_height;
+        }
+      }
+      if (!jobs.push(TileJob{key, std::move(pixels), tile_heights}) && !error.failed()) {
         error.set(Status::error(ErrorCode::kCancelled, "encoder queue closed"));
       }
     };
@@ -545,7 +738,18 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     return error.get();
   }
   summary->constant_tiles = writer->constantTiles();
-  s = writer->finish();
+  if (heights != nullptr) {
+    elevation.filled_samples = heights->filledSamples();
+    elevation.max_error = heights->maxError();
+    s = writer->setElevationFigures(elevation.filled_samples, elevation.max_error,
+                                    elevation.min_height, elevation.max_height);
+    if (s) s = writer->finish();
+    if (s && elevation.filled_samples == src.width_px * src.height_px) {
+      summary->warnings.push_back("every sample of the input is no-data: the store is flat at 0");
+    }
+  } else {
+    s = writer->finish();
+  }
   if (!s) {
     writer.reset();
     return s;
@@ -568,6 +772,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->panels = uint32_t(layout.blocks_x);
   summary->memory_budget_bytes = o.memory_budget_bytes;
   summary->geo = wopt.geo;
+  summary->elevation = elevation;
   summary->read_s = read_s;
   summary->build_s = build_s;
   summary->encode_s = encode_s;

@@ -7,7 +7,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -80,6 +82,23 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   geo["transform"] = std::vector<double>(s.geo.transform, s.geo.transform + 6);
   geo["crs"] = s.geo.crs;
   j["geo"] = geo;
+  j["layer"] = s.elevation.present ? "elevation" : "colour";
+  if (s.elevation.present) {
+    const clipstream::ElevationInfo& e = s.elevation;
+    nlohmann::json el;
+    el["units"] = clipstream::heightUnitsName(e.units);
+    el["units_assumed"] = e.units_assumed;
+    el["scale"] = e.scale;
+    el["offset"] = e.offset;
+    el["nodata"] = e.has_nodata ? nlohmann::json(e.nodata) : nlohmann::json();
+    el["filled_samples"] = e.filled_samples;
+    el["quantised"] = e.quantised;
+    el["error_bound"] = e.quantised ? e.scale / 2 : 0.0;
+    el["max_error"] = e.max_error;
+    el["min_height"] = e.min_height;
+    el["max_height"] = e.max_height;
+    j["elevation"] = el;
+  }
   j["warnings"] = s.warnings;
   return j;
 }
@@ -91,7 +110,8 @@ int main(int argc, char** argv) {
   CLI::App app{"Builds a clipstream tile store (full mip pyramid) from an image, out of core.",
                "clipstream-tile"};
   std::vector<std::string> positional;
-  std::string synthetic, format_text, filter_text = "box", json_path;
+  std::string synthetic, format_text, filter_text, json_path, layer_text = "auto", nodata_text, units_text;
+  double height_step = 0.0;
   uint32_t tile_px = 128;
   int zstd_level = 1;
   unsigned threads = 0;
@@ -102,7 +122,17 @@ int main(int argc, char** argv) {
       ->required()
       ->expected(1, 2);
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
-  app.add_option("--format", format_text, "force the store format: R8, R16, RGB8, RGBA8");
+  app.add_option("--format", format_text,
+                 "force the store format: R8, R16, RGB8, RGBA8 (colour), I16, R16, F32 (heights)");
+  app.add_option("--layer", layer_text,
+                 "colour, elevation, or auto (default: elevation for a single-band int16 input, or "
+                 "uint16/float with a georeference)");
+  app.add_option("--height-step", height_step,
+                 "elevation: store float heights as R16 steps of this size (error <= step/2); "
+                 "default: exactly (F32)")
+      ->transform(cli::inRange(0.0, kMaxHeightStep));
+  app.add_option("--nodata", nodata_text, "elevation: the no-data value (overrides the file's; 'nan' allowed)");
+  app.add_option("--vertical-units", units_text, "elevation: metre, foot or us-foot (overrides the file's)");
   app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
       ->transform(cli::wholeInRange(kMinTilePx, kMaxTilePx));
   app.add_option("--zstd-level", zstd_level, "zstd compression level (1..22)")
@@ -147,10 +177,43 @@ int main(int argc, char** argv) {
   if (!format_text.empty()) {
     options.format = cli::parsePixelFormat(format_text);
     if (!options.format) {
-      return cli::usageError(app, "--format '" + format_text + "' is not R8, R16, RGB8 or RGBA8");
+      return cli::usageError(app, "--format '" + format_text +
+                                      "' is not R8, R16, RGB8, RGBA8, I16 or F32");
     }
   }
-  if (filter_text == "box") {
+  if (layer_text == "auto") {
+    options.layer = LayerKind::kAuto;
+  } else if (layer_text == "colour" || layer_text == "color") {
+    options.layer = LayerKind::kColour;
+  } else if (layer_text == "elevation") {
+    options.layer = LayerKind::kElevation;
+  } else {
+    return cli::usageError(app, "--layer '" + layer_text + "' is not auto, colour or elevation");
+  }
+  if (!filter_text.empty() && options.layer == LayerKind::kElevation) {
+    return cli::usageError(app, "--filter is for colour: heights are decimated, never filtered");
+  }
+  options.height_step = height_step;
+  if (!nodata_text.empty()) {
+    char* end = nullptr;
+    const double v = std::strtod(nodata_text.c_str(), &end);
+    if (end == nodata_text.c_str() || *end != '\0' || std::isinf(v)) {
+      return cli::usageError(app, "--nodata '" + nodata_text + "' is not a finite number or nan");
+    }
+    options.nodata = v;
+  }
+  if (!units_text.empty()) {
+    if (units_text == "metre" || units_text == "meter" || units_text == "m") {
+      options.vertical_units = HeightUnits::kMetre;
+    } else if (units_text == "foot" || units_text == "ft") {
+      options.vertical_units = HeightUnits::kFoot;
+    } else if (units_text == "us-foot" || units_text == "ftUS") {
+      options.vertical_units = HeightUnits::kUsSurveyFoot;
+    } else {
+      return cli::usageError(app, "--vertical-units '" + units_text + "' is not metre, foot or us-foot");
+    }
+  }
+  if (filter_text.empty() || filter_text == "box") {
     options.filter = DownsampleFilter::kBox;
   } else if (filter_text == "lanczos3") {
     options.filter = DownsampleFilter::kLanczos3;
@@ -229,6 +292,16 @@ int main(int argc, char** argv) {
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
                   summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
+    }
+    if (summary.elevation.present) {
+      const ElevationInfo& e = summary.elevation;
+      std::printf("elevation: heights %.2f to %.2f %s%s, %s, %llu no-data samples filled",
+                  e.min_height, e.max_height, heightUnitsName(e.units),
+                  e.units_assumed ? " (assumed: the file does not say)" : "",
+                  e.quantised ? "quantised" : "stored exactly",
+                  (unsigned long long)e.filled_samples);
+      if (e.quantised) std::printf(" (step %.4g: error <= %.4g, largest %.4g)", e.scale, e.scale / 2, e.max_error);
+      std::printf("\n");
     }
     if (summary.clamped_samples > 0) {
       std::printf("note: %llu input samples were outside the output range and clamped\n",

@@ -61,6 +61,8 @@ void syntheticRgba(PixelFormat format, const TileKey& key, uint32_t px, uint32_t
     case PixelFormat::kR16: rgba[0] = rgba[1] = rgba[2] = raw[1]; rgba[3] = 255; break;
     case PixelFormat::kRGB8: rgba[0] = raw[0]; rgba[1] = raw[1]; rgba[2] = raw[2]; rgba[3] = 255; break;
     case PixelFormat::kRGBA8: for (int c = 0; c < 4; ++c) rgba[c] = raw[c]; break;
+    case PixelFormat::kI16:
+    case PixelFormat::kF32: break;  // heights: no colour
   }
 }
 

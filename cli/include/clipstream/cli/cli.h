@@ -51,8 +51,8 @@ int usageError(const CLI::App& app, const std::string& message);
 CLI::Validator inRange(double lo, double hi);
 CLI::Validator wholeInRange(int64_t lo, int64_t hi);
 
-// Parses a pixel format option value: "R8", "R16", "RGB8", "RGBA8", in any
-// case. nullopt for anything else (the caller names the option).
+// Parses a pixel format option value: "R8", "R16", "RGB8", "RGBA8", "I16",
+// "F32", in any case. nullopt for anything else (the caller names the option).
 std::optional<PixelFormat> parsePixelFormat(const std::string& text);
 
 // SIGINT, SIGTERM and SIGHUP (unless ignored at start, as under nohup).

@@ -29,6 +29,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,10 @@ struct FlightRunOptions {
   Buffering buffering = Buffering::kDoubleUploadTwice;
   Overlay overlay = Overlay::kOff;
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
+  // Terrain under the colour layer (FlightConfig::terrain). Path heights
+  // then mean heights above the ground under the camera, never less than
+  // kTerrainClearance; the accuracy reference (flat) is not run.
+  std::optional<TerrainLayerConfig> terrain;
 
   // Measurement.
   uint32_t reference_every = 1;     // compare every Nth frame (and every rest frame); 0 = never
@@ -116,7 +121,20 @@ struct FlightRun {
   uint32_t frames_with_holes = 0;        // judged frames with hole pixels
   uint32_t ground_truth_frames = 0;
   double ground_truth_psnr_mean_db = 0.0, ground_truth_psnr_min_db = 0.0;  // 0 when none
+  // Terrain (0 without): the height stack's video memory and the mean
+  // triangles drawn per recorded frame.
+  uint64_t height_texture_bytes = 0;
+  double terrain_triangles_mean = 0.0;
 };
+
+// Least height above the ground a terrain flight keeps the camera (world
+// units): a path that asks for less (or for a camera under the ground) is
+// lifted to this, so the near plane never cuts into the slope in front.
+inline constexpr double kTerrainClearance = 2.0;
+
+// The camera of a terrain flight: `path_camera` with its height taken as
+// height above `ground` (world units), at least kTerrainClearance.
+Camera cameraAboveGround(Camera path_camera, double ground);
 
 // Flies the run. kInvalidArgument for a missing source or zero frames;
 // GL failures as from Flight::create; the first error of `on_frame` or of

@@ -58,7 +58,15 @@ struct FlyOptions {
   bool loop = false;                 // wrap path time instead of clamping at the end
   uint32_t teleport_frames = 30;     // the built-in teleport path jumps this often
   std::string trace_path;            // record the streamer's request trace here
+  // Terrain (docs/terrain.md): an elevation store under the colour layer.
+  std::string elevation_path;        // empty: the flat plane
+  double vertical_scale = 1.0;       // height exaggeration
+  bool stretch_elevation = false;    // place by extent, not by georeference
+  uint32_t terrain_ring = renderer_config::kTerrainRingCells;  // cells per ring side
 };
+
+// Largest --vertical-scale: beyond it every slope is a wall.
+inline constexpr double kMaxVerticalScale = 1000.0;
 
 // Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
 // the real render time (simulated pacing: results are deterministic).

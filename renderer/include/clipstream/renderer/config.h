@@ -22,6 +22,17 @@ inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
 // real render time, so runs are deterministic.
 inline constexpr double kSimulatedFrameSeconds = 1.0 / 60.0;
 
+// Geometry clipmap (terrain.h): cells per ring side. 128 cells of 2^L
+// samples put the ring's outer edge about 64 cells away, where a cell
+// spans about 10 px at 1280x720 and 60 degrees: fine enough for the
+// 1-px geometric error target on real DEMs, while 10 rings stay under
+// 250,000 triangles (docs/terrain.md has the measurements).
+inline constexpr uint32_t kTerrainRingCells = 128;
+// A ring's transition band is its cells / this (Losasso & Hoppe's w = n / 10).
+inline constexpr uint32_t kTerrainTransitionDivisor = 10;
+// Share of the light that does not depend on the sun (Lambert + ambient).
+inline constexpr float kTerrainAmbient = 0.35f;
+
 // Colour written where the view ray misses the textured ground (sky, or
 // outside the texture). Tests compare against the same constant.
 inline constexpr uint8_t kSkyRgba[4] = {46, 51, 64, 255};

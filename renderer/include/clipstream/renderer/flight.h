@@ -25,7 +25,9 @@
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/renderer.h>
+#include <clipstream/renderer/terrain.h>
 #include <clipstream/store/types.h>
+#include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/stats.h>
@@ -34,6 +36,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 namespace clipstream {
@@ -56,6 +59,14 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
                              ClipmapPlan* plan = nullptr);
 
+// Terrain under the colour layer: an elevation source (TileContent
+// kHeightF32, e.g. openElevationSource()) and where it lies (alignElevation()).
+struct TerrainLayerConfig {
+  std::shared_ptr<TileSource> source;
+  LayerAlignment alignment;
+  uint32_t ring_cells = renderer_config::kTerrainRingCells;
+};
+
 struct FlightConfig {
   Viewport viewport{1280, 720};
   StreamerConfig streamer;
@@ -68,6 +79,9 @@ struct FlightConfig {
   // viewport), which the host presents.
   bool offscreen = true;
   Viewport framebuffer{0, 0};
+  // With terrain the streamer serves two layers (colour, elevation) through
+  // one cache, and the frame is drawn as a geometry clipmap (terrain.h).
+  std::optional<TerrainLayerConfig> terrain;
 };
 
 // Counters of one level, or all levels, for one frame.
@@ -90,8 +104,14 @@ struct FrameSample {
   uint32_t max_texture_lod = 0, finest_needed = 0;
   uint64_t queue_depth = 0, in_flight = 0, ram_bytes = 0;
   uint64_t tiles_loaded = 0;  // tiles the loader read into RAM this frame
-  std::vector<LevelFrame> levels;  // index = level
+  std::vector<LevelFrame> levels;  // index = level (the colour layer's)
   LevelFrame total;
+  // Terrain (zero without): what the geometry clipmap drew and uploaded.
+  uint32_t terrain_rings = 0;
+  uint32_t terrain_finest_level = 0;
+  uint64_t terrain_triangles = 0;
+  uint32_t height_tiles_uploaded = 0;
+  double ground_height = 0.0;  // world units under the camera (0 without terrain)
 };
 
 class Flight {
@@ -127,6 +147,13 @@ class Flight {
   const Streamer& streamer() const { return *m_streamer; }
   // Replaced by resize(): do not keep the reference across one.
   ClipmapRenderer& renderer() { return *m_renderer; }
+  // Null without terrain.
+  const TerrainRenderer* terrain() const { return m_terrain.get(); }
+  // The ground height (world units) at world (x, z) from the heights the
+  // GPU holds (TerrainRenderer::groundHeight()); 0 and false without
+  // terrain. The coarse height levels are loaded at create(), so over the
+  // terrain's extent there is always an answer.
+  bool groundHeight(const glm::dvec2& world_xz, double* height) const;
   const OffscreenTarget* target() const { return m_target.get(); }  // null unless offscreen
   const Viewport& viewport() const { return m_config.viewport; }
   const ClipmapPlan& firstPlan() const { return m_first_plan; }  // of create() or the last resize()
@@ -140,10 +167,12 @@ class Flight {
   // A renderer (and target) for `viewport`, into the members only when both
   // were made. Sets *preload_ms to the pyramid load's time.
   Status makeRenderer(const Viewport& viewport, const Camera& camera, double* preload_ms);
+  Status makeTerrain();
 
   std::shared_ptr<TileSource> m_source;
   FlightConfig m_config;
   std::unique_ptr<ClipmapRenderer> m_renderer;
+  std::unique_ptr<TerrainRenderer> m_terrain;
   std::unique_ptr<OffscreenTarget> m_target;
   std::unique_ptr<Streamer> m_streamer;
   ClipmapPlan m_first_plan;

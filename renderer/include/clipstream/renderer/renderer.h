@@ -90,6 +90,12 @@ class ClipmapRenderer {
   void draw(const Camera& camera, const Viewport& viewport);
   static void clearSky();
 
+  // Binds the colour stack and usable map (texture units 0 and 1) and sets
+  // the sampling uniforms of ground_clipmap.frag on `program` for this
+  // camera: what draw() does before its triangle, for programs that draw
+  // other geometry with the same fragment shader (TerrainRenderer).
+  void bindColour(uint32_t program, const Camera& camera, const Viewport& viewport) const;
+
   void setOverlay(Overlay overlay) { m_overlay = overlay; }
   Overlay overlay() const { return m_overlay; }
 

@@ -33,11 +33,38 @@ struct StoreEncoding {
   bool linear_light = false;  // filter ran in linear light (informational)
 };
 
+// Unit of an elevation store's heights. Values are part of the on-disk format.
+enum class HeightUnits : uint32_t { kMetre = 1, kFoot = 2, kUsSurveyFoot = 3 };
+bool isValidHeightUnits(uint32_t raw);
+const char* heightUnitsName(HeightUnits units);  // "metre", "foot", "US survey foot"
+double metresPerUnit(HeightUnits units);
+
+// What an elevation store says about its heights (format version 2). A
+// height is offset + scale * sample for integer formats, the sample itself
+// for F32 (scale 1, offset 0). No-data samples of the input were filled
+// from valid neighbours before tiling (docs/tile-store.md, "Elevation"), so
+// every stored sample is a height.
+struct ElevationInfo {
+  bool present = false;        // false: a colour store
+  double scale = 1.0;
+  double offset = 0.0;
+  HeightUnits units = HeightUnits::kMetre;
+  bool units_assumed = true;   // the input did not say; metres taken
+  bool has_nodata = false;     // the input declared a no-data value
+  double nodata = 0.0;
+  uint64_t filled_samples = 0; // level-0 samples that were no-data (or NaN) and were filled
+  bool quantised = false;      // float heights stored in steps of `scale`: error <= scale / 2
+  double max_error = 0.0;      // largest |stored - input| height measured at level 0
+  double min_height = 0.0;     // lowest and highest stored height
+  double max_height = 0.0;
+};
+
 // What a store says about itself.
 struct StoreInfo {
   PyramidGeometry geometry;
   StoreEncoding encoding;
   GeoReference geo;
+  ElevationInfo elevation;
   uint64_t file_bytes = 0;
   uint32_t format_version = 0;
 };
@@ -49,6 +76,13 @@ struct TileLocation {
   uint64_t offset = 0;       // payload byte offset in the file (non-constant)
   uint32_t stored_bytes = 0; // payload size on disk
   uint32_t checksum = 0;     // checksum of the stored payload bytes
+  // Elevation stores: the lowest and highest level-0 height under the
+  // tile's footprint (so a coarse tile bounds every finer tile below it),
+  // and its geometric error: an upper bound of |finest surface - this
+  // level's surface| over the footprint, in height units (0 at level 0).
+  float min_height = 0.0f;
+  float max_height = 0.0f;
+  float error = 0.0f;
 };
 
 // A payload as read from disk, verified against its checksum, not yet decoded.
@@ -153,6 +187,7 @@ class TileStoreReader {
 struct WriterOptions {
   StoreEncoding encoding;
   GeoReference geo;
+  ElevationInfo elevation;  // present: write an elevation store (a height format)
   bool fsync = true;     // flush to disk before the final rename
   bool replace = false;  // a regular file at the path may be replaced (OutputFile's rule)
 };
@@ -183,6 +218,17 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
 // once warm). Pure and thread-safe.
 Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& encoding,
                        const RawTile& raw, std::span<uint8_t> rgba);
+
+// The height of one stored sample (`pixel`, bytesPerPixel(format) bytes) of
+// an elevation store: offset + scale * value (R16, I16) or the value (F32).
+double heightOfSample(PixelFormat format, const ElevationInfo& elevation, const uint8_t* pixel);
+
+// decodeTile() straight to heights: `heights` must hold tile_px^2 floats.
+// kUnsupported for a format that is not a height format. Pure and
+// thread-safe.
+Status decodeTileHeights(const PyramidGeometry& geometry, const StoreEncoding& encoding,
+                         const ElevationInfo& elevation, const RawTile& raw,
+                         std::span<float> heights);
 
 // Writes a store atomically through an OutputFile (output_file.h): everything
 // goes to a temporary file next to the final path, which appears (fsync +
@@ -221,6 +267,13 @@ class TileStoreWriter {
   // written. kInvalidArgument / kOutOfRange on bad arguments.
   Status writeConstantTiles(uint32_t level, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
                             std::span<const uint8_t> pixel);
+
+  // Elevation stores: the figures of the elevation record known only once
+  // the input was read (samples filled, largest error, lowest and highest
+  // height), written by finish(). kInvalidArgument for a colour store or
+  // figures that are not finite and ordered.
+  Status setElevationFigures(uint64_t filled_samples, double max_error, double min_height,
+                             double max_height);
 
   // Writes the index and header, flushes and renames into place. Fails
   // (kInvalidArgument) if any tile is missing.

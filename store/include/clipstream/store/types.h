@@ -11,25 +11,34 @@
 
 namespace clipstream {
 
-// Pixel layout of a store's tiles. Channels are interleaved, 16-bit samples
-// are little-endian. The numeric values are part of the on-disk format.
+// Pixel layout of a store's tiles. Channels are interleaved, multi-byte
+// samples are little-endian. The numeric values are part of the on-disk
+// format. I16 and F32 hold heights (elevation stores, format version 2);
+// R16 is a 16-bit grey image or unsigned heights.
 enum class PixelFormat : uint32_t {
   kR8 = 1,
   kR16 = 2,
   kRGB8 = 3,
   kRGBA8 = 4,
+  kI16 = 5,  // signed 16-bit (two's complement)
+  kF32 = 6,  // IEEE-754 binary32
 };
 
-uint32_t channelCount(PixelFormat format);   // 1, 1, 3, 4
-uint32_t bytesPerPixel(PixelFormat format);  // 1, 2, 3, 4
-const char* pixelFormatName(PixelFormat format);  // "R8", "R16", "RGB8", "RGBA8"
+uint32_t channelCount(PixelFormat format);   // 1, 1, 3, 4, 1, 1
+uint32_t bytesPerPixel(PixelFormat format);  // 1, 2, 3, 4, 2, 4
+const char* pixelFormatName(PixelFormat format);  // "R8", "R16", "RGB8", "RGBA8", "I16", "F32"
 bool isValidPixelFormat(uint32_t raw);
+// True for the formats a colour store may use (R8, R16, RGB8, RGBA8).
+bool isColourFormat(PixelFormat format);
+// True for the formats an elevation store may use (R16, I16, F32).
+bool isHeightFormat(PixelFormat format);
 
 // Filter used to build each coarser level from the one below it. Values are
 // part of the on-disk format (recorded in the header, informational only).
 enum class DownsampleFilter : uint32_t {
   kBox = 0,      // exact 2x2 average, odd edges handled (see docs/tile-store.md)
   kLanczos3 = 1, // separable Lanczos-3, optionally in linear light
+  kDecimate = 2, // every other sample of the finer level (elevation stores)
 };
 const char* downsampleFilterName(DownsampleFilter filter);
 

@@ -25,9 +25,21 @@ struct LevelCounters {
   // budget_skips, or is still queued / in flight (see StreamerStats).
 };
 
-struct StreamerStats {
-  std::vector<LevelCounters> levels;  // index = level
+// One layer of a scene (Streamer with several layers).
+struct LayerStats {
+  std::vector<LevelCounters> levels;  // index = the layer's level
   LevelCounters total;
+  uint64_t ram_bytes = 0;    // this layer's entries, including accounted overhead
+  uint64_t ram_entries = 0;
+  uint32_t max_texture_lod = 0;  // last handed off
+};
+
+struct StreamerStats {
+  // index = level; with several layers, the sum over layers of that level
+  // (each layer's own figures are in `layers`).
+  std::vector<LevelCounters> levels;
+  LevelCounters total;                // every layer
+  std::vector<LayerStats> layers;     // index = layer
   uint64_t ram_bytes = 0;             // current, including accounted overhead
   uint64_t ram_budget_bytes = 0;
   uint64_t ram_peak_bytes = 0;
@@ -36,14 +48,15 @@ struct StreamerStats {
   double decode_ms_total = 0.0;
   double queue_latency_p50_ms = 0.0;
   double queue_latency_p99_ms = 0.0;
-  uint32_t max_texture_lod = 0;
+  uint32_t max_texture_lod = 0;      // layer 0's
   uint64_t ram_entries = 0;           // decoded tiles (and placeholders) in RAM
   uint64_t entry_overhead_bytes = 0;  // per-entry overhead counted with each payload
   uint64_t path_hint_frames = 0;          // update() calls that used the path hint
   uint64_t path_hint_ignored_frames = 0;  // update() calls whose hint disagreed with the camera
   uint32_t loader_threads = 0;  // loader threads started (at most kMaxIoThreads)
 
-  // One JSON object: {"total": {...}, "levels": [{...}, ...], "ram_bytes": ...}
+  // One JSON object: {"total": {...}, "levels": [{...}, ...], "ram_bytes": ...,
+  // "layers": [{"total": {...}, "levels": [...], "ram_bytes": ...}, ...]}
   // with the field names above. Always valid JSON (non-finite numbers as 0).
   std::string toJson() const;
 };

@@ -2,10 +2,18 @@
 // into a RAM cache with a hard byte budget, and hands ready tiles to the
 // renderer under a per-frame budget. No GL here.
 //
-// Thread rule: update(), takeReady(), setPathHint(), resetGpuResidency(),
-// plan() and settled() are for the render thread only and never block on
-// I/O (no source call ever runs on it; nor does PathHint::camera_at run
-// anywhere else). stats() and queuedTiles() are thread-safe.
+// A streamer serves a scene of layers (colour, elevation; StreamLayer):
+// each layer has its own clip stack, planned from the camera mapped into
+// its texels, with its own residency and MaxTextureLOD; all layers share
+// one RAM cache, one hard byte budget, one load queue and one priority
+// order (docs/architecture.md, "Layers"). The one-source constructor is a
+// scene of one colour layer.
+//
+// Thread rule: update(), takeReady(), takeReadyAll(), setPathHint(),
+// resetGpuResidency(), plan() and settled() are for the render thread only
+// and never block on I/O (no source call ever runs on it; nor does
+// PathHint::camera_at run anywhere else). stats(), queuedTiles() and
+// queuedLayerTiles() are thread-safe.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
@@ -94,7 +102,8 @@ struct PathHint {
 // node, key, shared_ptr control block and vector header, rounded up.
 constexpr uint64_t kCacheEntryOverheadBytes = 256;
 
-// A decoded tile ready for upload: RGBA8, tile_px * tile_px * 4 bytes.
+// A decoded tile ready for upload, tile_px * tile_px * 4 bytes: RGBA8 for a
+// colour layer, float32 heights for an elevation layer (TileContent).
 struct ReadyTile {
   TileKey key;
   std::shared_ptr<const std::vector<uint8_t>> rgba;
@@ -107,40 +116,112 @@ struct LevelResidency {
   std::vector<uint8_t> resident;  // window.width() * window.height(), row-major, 1 = handed off
 };
 
+// One layer's hand-off for a frame. Levels, tiles and windows are the
+// layer's own (its store's pyramid).
 struct FrameHandoff {
   std::vector<ReadyTile> tiles;           // upload all of these this frame, in order
   uint32_t max_texture_lod = 0;           // finest level the shader may sample
   std::vector<LevelResidency> residency;  // stack levels, after these tiles
+  uint32_t layer = 0;                     // which layer of the streamer
+};
+
+// What a layer is to the scene. Colour layers are textures; elevation
+// layers hold the heights the geometry is made of. Among tiles equally
+// coarse in world space, elevation loads first: a missing height is a hole
+// or a wrong silhouette, a missing colour texel only a blurrier one.
+enum class LayerRole : uint8_t { kColour, kElevation };
+
+// One layer of a scene: a source, its role and where it lies in the world.
+// World space is that of camera.h: x and z in the colour layer's level-0
+// texels, y up. The layer's level-0 texel under world point (x, z) is
+//   origin_texel + texels_per_unit * (x, z)      (component-wise),
+// so a DEM of 30 m samples under a 1 m orthophoto has texels_per_unit 1/30
+// and origin_texel = the orthophoto's top-left corner in DEM samples.
+// texels_per_unit must be finite and > 0 (checkStreamLayers()).
+struct StreamLayer {
+  std::shared_ptr<TileSource> source;
+  LayerRole role = LayerRole::kColour;
+  glm::dvec2 texels_per_unit{1.0, 1.0};
+  glm::dvec2 origin_texel{0.0, 0.0};
+};
+
+// Ok when every layer can be streamed: a source; a finite, positive map;
+// a colour layer's source hands out RGBA8 and an elevation layer's heights
+// (TileContent). Otherwise kInvalidArgument naming the layer and the
+// problem. The Streamer constructor runs it and leaves a failing layer
+// empty (it plans and loads nothing, and the reason goes to stderr), so an
+// application checks first to report the problem itself.
+Status checkStreamLayers(const std::vector<StreamLayer>& layers);
+
+// The world camera as `layer` sees it: position (x, z) mapped into the
+// layer's level-0 texels; height and near distance multiplied by the
+// layer's mean scale s = sqrt(texels_per_unit.x * texels_per_unit.y);
+// heading, pitch and field of view unchanged. For a map of equal scales on
+// both axes (square texels on both layers, the georeferenced case) this is
+// the same view in the layer's units, so the planner's pixel footprints and
+// windows are exact; for unequal scales the height uses their geometric
+// mean. The identity map returns the camera unchanged. Pure.
+Camera layerCamera(const StreamLayer& layer, const Camera& world);
+
+// A tile of one layer of the streamer.
+struct LayerTile {
+  uint32_t layer = 0;
+  TileKey key;
+  friend bool operator==(const LayerTile&, const LayerTile&) = default;
 };
 
 class Streamer {
  public:
+  // One colour layer with the identity map: the texture streamer.
   Streamer(std::shared_ptr<TileSource> source, const StreamerConfig& config);
+  // A scene of layers, in this order (layer 0 is what takeReady(), plan()
+  // and geometry() without an index mean). Layers failing
+  // checkStreamLayers() stay empty. An empty list streams nothing.
+  Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config);
   ~Streamer();
   Streamer(const Streamer&) = delete;
   Streamer& operator=(const Streamer&) = delete;
 
-  const PyramidGeometry& geometry() const;
+  size_t layerCount() const;
+  // Layer `layer` as given to the constructor (source null if it failed
+  // checkStreamLayers()). layer < layerCount().
+  const StreamLayer& layer(size_t layer) const;
+  // The layer's pyramid (empty for an empty layer). layer < layerCount(),
+  // or 0 on a streamer without layers (an empty geometry).
+  const PyramidGeometry& geometry(size_t layer = 0) const;
 
-  // Render thread. Plans for this camera, queues what is missing, cancels
-  // what the plan no longer needs, and queues predicted tiles at low priority.
+  // Render thread. Plans every layer for this (world) camera, queues what
+  // is missing, cancels what the plans no longer need, and queues predicted
+  // tiles at low priority.
   void update(const Camera& camera, const Viewport& viewport, double time_s);
 
   // Render thread. Sets (or, with an empty camera_at, clears) the path hint.
   void setPathHint(PathHint hint);
 
-  // Render thread. Up to max_tiles tiles and max_bytes bytes (0 = no byte
-  // limit) that are decoded and needed, in priority order; marks them as
-  // resident on the GPU. Also the MaxTextureLOD and residency after them.
+  // Render thread. Layer 0's hand-off: up to max_tiles tiles and max_bytes
+  // bytes (0 = no byte limit) of layer 0 that are decoded and needed, in
+  // priority order; marks them as resident on the GPU. Also layer 0's
+  // MaxTextureLOD and residency after them. Other layers' tiles stay
+  // pending (takeReadyAll() serves every layer).
   FrameHandoff takeReady(size_t max_tiles, size_t max_bytes = 0);
 
-  // Render thread. Forgets GPU residency (e.g. after the renderer recreates
-  // its textures on a viewport resize); tiles are handed off again.
+  // Render thread. Every layer's hand-off, one FrameHandoff per layer
+  // (index = layer): the ready tiles of all layers share max_tiles and
+  // max_bytes (0 = no byte limit) and are taken in the one priority order,
+  // so a tight per-frame budget goes to the coarsest tiles of every layer
+  // first. Each layer's MaxTextureLOD and residency come after its tiles.
+  std::vector<FrameHandoff> takeReadyAll(size_t max_tiles, size_t max_bytes = 0);
+
+  // Render thread. Forgets GPU residency of every layer (e.g. after the
+  // renderer recreates its textures on a viewport resize); tiles are handed
+  // off again.
   void resetGpuResidency();
 
-  const ClipmapPlan& plan() const;
+  // Render thread. The layer's plan of the last update(), in its texels.
+  // layer < layerCount() (or 0 on a streamer without layers).
+  const ClipmapPlan& plan(size_t layer = 0) const;
 
-  // True when every tile the current plan needs is handed off (tiles that
+  // True when every tile the current plans need is handed off (tiles that
   // failed and are not being retried count as done).
   bool settled() const;
 
@@ -148,7 +229,9 @@ class Streamer {
 
   // Thread-safe. Snapshot of the load queue, front (next to load) first:
   // for diagnostics overlays and tests of priority and prefetch.
+  // queuedTiles() lists the keys of every layer without saying which.
   std::vector<TileKey> queuedTiles() const;
+  std::vector<LayerTile> queuedLayerTiles() const;
   // Render thread. Stops and joins the loader threads, then publishes the
   // trace (if any). Idempotent; the destructor calls it.
   void shutdown();

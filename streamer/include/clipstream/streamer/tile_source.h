@@ -1,9 +1,11 @@
 // Where tiles come from: a store file, a procedural generator, or a test
 // wrapper that injects latency and failures. Sources hand out tiles already
-// converted to the GPU layout (RGBA8, tile_px * tile_px * 4 bytes).
+// converted to the GPU layout: colour as RGBA8, heights as float32, both
+// tile_px * tile_px * 4 bytes (TileContent).
 #pragma once
 
 #include <clipstream/store/remote.h>
+#include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
 
 #include <cstdint>
@@ -20,6 +22,14 @@ struct FetchInfo {
   double decode_ms = 0.0;   // decompression + conversion time
 };
 
+// What the bytes of a fetched tile are. Both are 4 bytes per texel, so a
+// tile costs the same in the streamer's RAM cache whatever it holds.
+enum class TileContent : uint8_t {
+  kRgba8,      // colour: R, G, B, A bytes per texel
+  kHeightF32,  // heights: one native float per texel, in the store's height
+               // unit (offset and scale applied; elevationInfo())
+};
+
 // Thread-safe: fetch() may be called from any number of threads at once and
 // must not hold a lock across I/O or decompression.
 class TileSource {
@@ -27,12 +37,22 @@ class TileSource {
   virtual ~TileSource() = default;
 
   // Geometry of the pyramid this source serves (format is the stored one;
-  // fetch() always returns RGBA8).
+  // fetch() always returns content()'s layout).
   virtual const PyramidGeometry& geometry() const = 0;
 
-  // Reads, verifies, decodes and converts one tile to RGBA8 into *rgba
-  // (resized to tile_px * tile_px * 4). A failure leaves *rgba unspecified
-  // and returns kCorruptTile, kIo, kUnavailable, kOutOfRange, ...
+  // What fetch() hands out. The default, RGBA8, is every colour source's.
+  virtual TileContent content() const { return TileContent::kRgba8; }
+
+  // For kHeightF32 sources: what the elevation store says about its
+  // heights (unit, no-data fill, quantisation, range). present = false for
+  // colour sources (the default).
+  virtual ElevationInfo elevationInfo() const { return {}; }
+
+  // Reads, verifies, decodes and converts one tile into *rgba (resized to
+  // tile_px * tile_px * 4): RGBA8 texels, or float32 heights for a
+  // kHeightF32 source (the buffer keeps its name; it is 4 bytes a texel
+  // either way). A failure leaves *rgba unspecified and returns
+  // kCorruptTile, kIo, kUnavailable, kOutOfRange, ...
   virtual Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) = 0;
 
   // fetch() that also reports its cost. The default calls fetch() and
@@ -67,7 +87,10 @@ class TileSource {
   virtual unsigned suggestedLoaderThreads() const { return 0; }
 };
 
-// Opens a tile store file, or a URL of one (isStoreUrl()), as a source. On failure returns null and sets *status.
+// Opens a colour tile store file, or a URL of one (isStoreUrl()), as a
+// source. On failure returns null and sets *status; an elevation store is
+// refused (kUnsupported, naming the path): heights are not colour, and
+// openElevationSource() opens them.
 // Conversion to RGBA8: R8 -> (v, v, v, 255); R16 -> grey of the high byte
 // (v >> 8: a linear rescale, exact for data that uses the full 16-bit range;
 // data sets needing a window belong in the tiler); RGB8 -> A = 255.
@@ -76,6 +99,16 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* sta
 // `remote`'s settings (the first form uses RemoteOptions{}).
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, const RemoteOptions& remote,
                                             Status* status);
+
+// Opens an elevation store (format version 2, ElevationInfo::present) as a
+// kHeightF32 source: each tile is tile_px^2 floats, the store's heights
+// after scale and offset (decodeTileHeights()), in its height unit. On
+// failure returns null and sets *status; a colour store is refused
+// (kUnsupported, naming the path).
+std::shared_ptr<TileSource> openElevationSource(const std::string& path, Status* status);
+// The same for a path that may be an http:// or https:// URL.
+std::shared_ptr<TileSource> openElevationSource(const std::string& path,
+                                                const RemoteOptions& remote, Status* status);
 
 // Deterministic procedural texture of any size up to 2^31 texels a side,
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)

@@ -30,7 +30,25 @@ constexpr unsigned kMaxThreads = 1024;
 // Largest --synthetic side: 2^32 px keeps every level's tile count in 32 bits.
 constexpr uint64_t kMaxSyntheticSidePx = uint64_t(1) << 32;
 
+// Whether the input is a picture or a height field (docs/terrain.md).
+// kAuto: an elevation store for a single-band int16 input, and for a
+// single-band uint16 or floating-point input that is georeferenced (a DEM);
+// a colour store otherwise.
+enum class LayerKind { kAuto, kColour, kElevation };
+const char* layerKindName(LayerKind kind);  // "auto", "colour", "elevation"
+
+// Largest quantisation step for heights (--height-step), in height units.
+constexpr double kMaxHeightStep = 1000.0;
+
 struct TilerOptions {
+  LayerKind layer = LayerKind::kAuto;
+  // Elevation stores only. height_step > 0 stores floating-point heights as
+  // R16 steps of this size from the lowest height (error bound step / 2,
+  // recorded in the store); 0 keeps them exactly (F32). Integer DEMs are
+  // always stored exactly.
+  double height_step = 0.0;
+  std::optional<double> nodata;              // overrides the input's no-data tag
+  std::optional<HeightUnits> vertical_units; // overrides the input's (else metres)
   std::string input_path;            // image file; empty when synthetic
   uint64_t synthetic_width_px = 0;   // used when input_path is empty
   uint64_t synthetic_height_px = 0;
@@ -77,6 +95,7 @@ struct TilerSummary {
   double build_s = 0.0;          // building thread CPU time (filter + tile copies)
   double encode_s = 0.0;         // encoder threads' CPU time, summed (encode + write)
   GeoReference geo;
+  ElevationInfo elevation;       // present for an elevation store
   std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
 };
 

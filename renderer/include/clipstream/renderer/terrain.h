@@ -1,0 +1,138 @@
+// Terrain geometry: a GPU geometry clipmap (Losasso & Hoppe 2004; GPU Gems 2
+// ch. 2) over a height clip stack, textured by the colour clipmap. Rings of
+// n x n cells, each level twice the spacing of the one inside it, centred
+// on the viewer; every vertex's height is fetched in the vertex shader from
+// the height stack (R32F, one array layer per height level, tiles placed
+// toroidally as in the colour stack); the outer band of each ring blends
+// towards the coarser ring's surface so rings meet without cracks,
+// T-junctions or popping. docs/terrain.md explains the method.
+//
+// Owned by the GL thread: every method must be called on the thread whose
+// context was current at create().
+#pragma once
+
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/camera.h>
+
+#include <glm/glm.hpp>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+namespace clipstream {
+
+// How heights map to the world (the colour layer's level-0 texels, y up).
+struct TerrainMapping {
+  // World units per level-0 height sample, along x and z.
+  glm::dvec2 world_per_sample{1.0, 1.0};
+  // World position of the centre of height sample (0, 0).
+  glm::dvec2 sample0_world{0.5, 0.5};
+  // World units per height unit (the vertical exaggeration included).
+  double world_per_height = 1.0;
+};
+
+struct TerrainConfig {
+  uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
+  TerrainMapping mapping;
+};
+
+// What the last draw() drew.
+struct TerrainFrame {
+  uint32_t rings = 0;          // 0: the height stack could not draw even its coarsest ring
+  uint32_t finest_level = 0;   // height level of the innermost ring drawn
+  uint32_t coarsest_level = 0; // height level of the outermost ring
+  uint64_t triangles = 0;
+  uint32_t culled_rings = 0;   // rings outside the frustum (not drawn)
+};
+
+class TerrainRenderer {
+ public:
+  // Allocates the height stack for `heights` (an elevation store's
+  // geometry) and builds the ring meshes. kInvalidArgument for a ring size
+  // that is not a power of two in 16..1024 or a non-positive mapping;
+  // kUnavailable when GL fails (with the shader log).
+  static Status create(const PyramidGeometry& heights, const TerrainConfig& config,
+                       std::unique_ptr<TerrainRenderer>* out);
+  ~TerrainRenderer();
+  TerrainRenderer(const TerrainRenderer&) = delete;
+  TerrainRenderer& operator=(const TerrainRenderer&) = delete;
+
+  // Uploads one height tile (tile_px^2 floats, heights in the store's units;
+  // other sizes and keys outside the pyramid are ignored) into its level's
+  // toroidal slot, replacing whatever tile had the slot.
+  void uploadTile(const TileKey& key, const float* heights);
+
+  // Uploads every tile of every level small enough to stay whole in the
+  // stack (its tile grid fits the slots), asking `tile` for each (null: the
+  // tile cannot be had). These levels are the outer rings' and the
+  // fallback of every finer one; loading them before the first frame means
+  // the terrain is drawn from the first frame on. Returns the tiles `tile`
+  // could not give (their rings are not drawn until they arrive).
+  using HeightTileFn = std::function<std::shared_ptr<const std::vector<uint8_t>>(const TileKey&)>;
+  uint32_t preloadCoarseLevels(const HeightTileFn& tile);
+
+  // Draws the terrain seen by `camera`, textured and lit, into the bound
+  // framebuffer (depth test on; the caller clears colour and depth, e.g.
+  // ClipmapRenderer::clearSky()). Rings whose height tiles are not all in
+  // the stack are not drawn: the innermost ring drawn is the finest level
+  // whose tiles, and those of every coarser ring, are resident, so a
+  // missing height tile coarsens the geometry, never opens a hole.
+  void draw(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour);
+
+  // The ground height (world units) at world point (x, z), from the finest
+  // level whose tile there is in the stack, on the surface the rings draw
+  // (cells cut along the same diagonal); false when no level holds it.
+  // `level` (optional) receives the level used.
+  bool groundHeight(const glm::dvec2& world_xz, double* height, uint32_t* level = nullptr) const;
+
+  const TerrainFrame& lastFrame() const { return m_frame; }
+  // Bytes of the height stack texture (video memory).
+  uint64_t textureBytes() const { return m_texture_bytes; }
+  const PyramidGeometry& geometry() const { return m_geometry; }
+  const TerrainConfig& config() const { return m_config; }
+
+  // Ring origin of `level` for this camera: the level's sample index of the
+  // ring's vertex (0, 0), even, so every other vertex is a vertex of the
+  // next coarser ring. Pure; exposed for tests.
+  static glm::i64vec2 ringOrigin(const TerrainConfig& config, const Camera& camera, uint32_t level);
+
+  // Test hook: runs ring `level`'s vertex shader for this camera (transform
+  // feedback, nothing drawn) and returns, for each vertex of its
+  // (n + 1)^2 grid in row order, the normal (xyz) and height (w) it outputs.
+  // A complete framebuffer must be bound (e.g. an OffscreenTarget).
+  std::vector<glm::vec4> ringVertices(const Camera& camera, const Viewport& viewport,
+                                      uint32_t level);
+
+ private:
+  TerrainRenderer() = default;
+  void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
+  void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
+                       const glm::i64vec2& origin) const;
+  bool levelResident(uint32_t level, const glm::i64vec2& origin) const;
+  uint32_t slotOf(int64_t tile) const;
+
+  PyramidGeometry m_geometry;
+  TerrainConfig m_config;
+  uint32_t m_slots = 0;        // tiles per stack layer side (toroidal period)
+  uint32_t m_coarsest = 0;     // outermost ring level: covers the whole height field
+  uint32_t m_program[2] = {0, 0};  // without / with the overlay
+  uint32_t m_feedback_program = 0; // ringVertices()
+  uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
+  uint32_t m_heights = 0;      // R32F array texture
+  // Index buffer ranges: [0] no hole, [1 + hx + 2 hy] hole at (n/4 + hx, n/4 + hy).
+  uint32_t m_first_index[5] = {};
+  uint32_t m_index_count[5] = {};
+  // Which tile each slot holds, per level (x | y << 32, or kNoTile).
+  static constexpr uint64_t kNoTile = ~uint64_t(0);
+  std::vector<std::vector<uint64_t>> m_slot_tile;
+  // CPU copies of the same tiles, for groundHeight() (per level, per slot).
+  std::vector<std::vector<std::vector<float>>> m_slot_heights;
+  uint64_t m_texture_bytes = 0;
+  TerrainFrame m_frame;
+};
+
+}  // namespace clipstream

@@ -1,0 +1,21 @@
+// The terrain's ground point for the clipmap fragment shader: the
+// camera-relative position interpolated from the ring vertices (instead of
+// ground_ray.glsl's ray-plane intersection), and Lambert + ambient light.
+in vec2 vRel;
+in vec3 vNormal;
+in float vMorph;
+
+uniform vec4 uImageRel;  // texture rectangle relative to the camera: x0, z0, x1, z1
+uniform vec3 uSunDir;    // unit vector towards the sun (world space)
+
+vec2 groundRel(out bool onGround) {
+  onGround = vRel.x >= uImageRel.x && vRel.y >= uImageRel.y && vRel.x < uImageRel.z &&
+             vRel.y < uImageRel.w;
+  return vRel;
+}
+
+vec3 shadeTerrain(vec3 albedo) {
+  vec3 n = normalize(vNormal);
+  float lambert = max(dot(n, uSunDir), 0.0);
+  return albedo * (AMBIENT + (1.0 - AMBIENT) * lambert);
+}

@@ -1,0 +1,374 @@
+#include <clipstream/renderer/terrain.h>
+
+#include "gl.h"
+#include "gl_util.h"
+#include "shaders.h"
+#include "terrain_mesh.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+namespace clipstream {
+namespace {
+
+GLint loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
+
+bool isPowerOfTwo(uint32_t v) { return v != 0 && (v & (v - 1)) == 0; }
+
+// The camera in level-0 sample coordinates (sample i at i).
+glm::dvec2 cameraSamples(const TerrainMapping& m, const Camera& camera) {
+  return {(camera.position.x - m.sample0_world.x) / m.world_per_sample.x,
+          (camera.position.z - m.sample0_world.y) / m.world_per_sample.y};
+}
+
+// Index buffer configuration of a ring: 0 without hole, else the finer
+// ring's offset (n/4 + hx, n/4 + hy), hx, hy in {0, 1}.
+int holeConfig(const glm::i64vec2& fine_origin, const glm::i64vec2& origin, uint32_t n) {
+  // The finer ring's origin in this level's samples (both are even at their own level).
+  const int64_t kx = fine_origin.x / 2 - origin.x, ky = fine_origin.y / 2 - origin.y;
+  const int64_t base = int64_t(n / 4);
+  return 1 + int(kx - base) + 2 * int(ky - base);
+}
+
+}  // namespace
+
+glm::i64vec2 TerrainRenderer::ringOrigin(const TerrainConfig& config, const Camera& camera,
+                                         uint32_t level) {
+  const glm::dvec2 cam = cameraSamples(config.mapping, camera) / std::ldexp(1.0, int(level));
+  const double half = double(config.ring_cells) / 2.0;
+  return {2 * int64_t(std::floor((cam.x - half) / 2.0)), 2 * int64_t(std::floor((cam.y - half) / 2.0))};
+}
+
+Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConfig& config,
+                               std::unique_ptr<TerrainRenderer>* out) {
+  out->reset();
+  const uint32_t n = config.ring_cells;
+  if (!isPowerOfTwo(n) || n < 16 || n > 1024) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "terrain ring of " + std::to_string(n) +
+                             " cells: must be a power of two from 16 to 1024");
+  }
+  const TerrainMapping& m = config.mapping;
+  if (!(m.world_per_sample.x > 0.0) || !(m.world_per_sample.y > 0.0) ||
+      !std::isfinite(m.world_per_sample.x) || !std::isfinite(m.world_per_sample.y) ||
+      !std::isfinite(m.world_per_height) || !(m.world_per_height > 0.0) ||
+      !std::isfinite(m.sample0_world.x) || !std::isfinite(m.sample0_world.y)) {
+    return Status::error(ErrorCode::kInvalidArgument, "terrain mapping must be finite and positive");
+  }
+  if (heights.levelCount() == 0 || heights.levelCount() > renderer_config::kMaxLevels) {
+    return Status::error(ErrorCode::kInvalidArgument, "terrain: height pyramid has no level or too many");
+  }
+  std::unique_ptr<TerrainRenderer> r(new TerrainRenderer());
+  r->m_geometry = heights;
+  r->m_config = config;
+  // Slots: a ring spans n + 1 samples plus one on each side for normals,
+  // which touches at most ceil((n + 3) / tile) + 1 tiles a side; one more
+  // slot keeps a tile that just left from sharing a slot with one needed.
+  const uint32_t tile = heights.tile_px;
+  r->m_slots = (n + 3 + tile - 1) / tile + 2;
+  // The outermost ring: the first level whose ring covers every sample.
+  // Rings may be coarser than the pyramid's last level (its one tile,
+  // decimated further in the shader), so the outermost ring always covers
+  // the whole field.
+  const uint64_t side = std::max(heights.width_px, heights.height_px);
+  r->m_coarsest = renderer_config::kMaxLevels - 2;
+  for (uint32_t l = 0; l + 1 < renderer_config::kMaxLevels; ++l) {
+    if ((uint64_t(n) << l) >= side + (uint64_t(4) << l)) {
+      r->m_coarsest = l;
+      break;
+    }
+  }
+
+  const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" +
+                               shaders::k_ground_clipmap_frag;
+  for (int overlay = 0; overlay < 2; ++overlay) {
+    Status s = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &r->m_program[overlay],
+                                     std::string("#define TERRAIN 1\n") +
+                                         (overlay ? "#define OVERLAY 1\n" : ""));
+    if (!s) return s;
+  }
+  Status fs = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &r->m_feedback_program,
+                                    "#define TERRAIN 1\n", {"vNormal", "vHeight"});
+  if (!fs) return fs;
+
+  // One vertex grid; five index patterns (no hole, four hole offsets).
+  std::vector<int32_t> grid;
+  grid.reserve(size_t(n + 1) * (n + 1) * 2);
+  for (uint32_t j = 0; j <= n; ++j)
+    for (uint32_t i = 0; i <= n; ++i) {
+      grid.push_back(int32_t(i));
+      grid.push_back(int32_t(j));
+    }
+  std::vector<uint32_t> indices;
+  for (int c = 0; c < 5; ++c) {
+    const int hx = c == 0 ? -1 : int(n / 4) + (c - 1) % 2;
+    const int hy = c == 0 ? -1 : int(n / 4) + (c - 1) / 2;
+    const std::vector<uint32_t> ring = terrain_mesh::ringTriangles(n, hx, hy);
+    r->m_first_index[c] = uint32_t(indices.size());
+    r->m_index_count[c] = uint32_t(ring.size());
+    indices.insert(indices.end(), ring.begin(), ring.end());
+  }
+  glCreateBuffers(1, &r->m_vertices);
+  glNamedBufferStorage(r->m_vertices, GLsizeiptr(grid.size() * sizeof(int32_t)), grid.data(), 0);
+  glCreateBuffers(1, &r->m_indices);
+  glNamedBufferStorage(r->m_indices, GLsizeiptr(indices.size() * sizeof(uint32_t)), indices.data(), 0);
+  glCreateVertexArrays(1, &r->m_vao);
+  glVertexArrayVertexBuffer(r->m_vao, 0, r->m_vertices, 0, 2 * sizeof(int32_t));
+  glVertexArrayElementBuffer(r->m_vao, r->m_indices);
+  glEnableVertexArrayAttrib(r->m_vao, 0);
+  glVertexArrayAttribIFormat(r->m_vao, 0, 2, GL_INT, 0);
+  glVertexArrayAttribBinding(r->m_vao, 0, 0);
+
+  const uint32_t period = r->m_slots * tile;
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  if (period > uint32_t(max_size)) {
+    return Status::error(ErrorCode::kUnavailable, "terrain: height stack of " +
+                                                      std::to_string(period) +
+                                                      " texels exceeds GL_MAX_TEXTURE_SIZE");
+  }
+  const GLsizei layers = GLsizei(heights.levelCount());
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_heights);
+  glTextureStorage3D(r->m_heights, 1, GL_R32F, GLsizei(period), GLsizei(period), layers);
+  glTextureParameteri(r->m_heights, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(r->m_heights, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  const float zero = 0.0f;
+  glClearTexImage(r->m_heights, 0, GL_RED, GL_FLOAT, &zero);
+  r->m_texture_bytes = uint64_t(period) * period * 4 * uint64_t(layers);
+  r->m_slot_tile.assign(heights.levelCount(),
+                        std::vector<uint64_t>(size_t(r->m_slots) * r->m_slots, kNoTile));
+  r->m_slot_heights.assign(heights.levelCount(),
+                           std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
+  if (glGetError() != GL_NO_ERROR) {
+    return Status::error(ErrorCode::kUnavailable, "terrain: GL error while creating the height stack");
+  }
+  *out = std::move(r);
+  return Status::ok();
+}
+
+TerrainRenderer::~TerrainRenderer() {
+  for (uint32_t p : m_program) glDeleteProgram(p);
+  glDeleteProgram(m_feedback_program);
+  glDeleteVertexArrays(1, &m_vao);
+  glDeleteBuffers(1, &m_vertices);
+  glDeleteBuffers(1, &m_indices);
+  glDeleteTextures(1, &m_heights);
+}
+
+uint32_t TerrainRenderer::slotOf(int64_t tile) const {
+  const int64_t s = tile % int64_t(m_slots);
+  return uint32_t(s < 0 ? s + m_slots : s);
+}
+
+void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
+  if (heights == nullptr || !m_geometry.contains(key)) return;
+  const uint32_t tile = m_geometry.tile_px;
+  const uint32_t sx = slotOf(key.x), sy = slotOf(key.y);
+  glTextureSubImage3D(m_heights, 0, GLint(sx * tile), GLint(sy * tile), GLint(key.level),
+                      GLsizei(tile), GLsizei(tile), 1, GL_RED, GL_FLOAT, heights);
+  const size_t slot = size_t(sy) * m_slots + sx;
+  m_slot_tile[key.level][slot] = uint64_t(key.x) | (uint64_t(key.y) << 32);
+  m_slot_heights[key.level][slot].assign(heights, heights + size_t(tile) * tile);
+}
+
+uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
+  uint32_t missing = 0;
+  const size_t floats = size_t(m_geometry.tile_px) * m_geometry.tile_px;
+  for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
+    const LevelInfo& info = m_geometry.levels[l];
+    if (info.tiles_x > m_slots || info.tiles_y > m_slots) continue;
+    for (uint32_t y = 0; y < info.tiles_y; ++y)
+      for (uint32_t x = 0; x < info.tiles_x; ++x) {
+        const std::shared_ptr<const std::vector<uint8_t>> bytes = tile(TileKey{l, x, y});
+        if (!bytes || bytes->size() != floats * sizeof(float)) {
+          ++missing;
+          continue;
+        }
+        uploadTile(TileKey{l, x, y}, reinterpret_cast<const float*>(bytes->data()));
+      }
+  }
+  return missing;
+}
+
+bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
+                                   uint32_t* level_used) const {
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
+  const int64_t tile = m_geometry.tile_px;
+  for (uint32_t level = 0; level < m_geometry.levelCount(); ++level) {
+    const LevelInfo& info = m_geometry.levels[level];
+    const glm::dvec2 s = s0 / std::ldexp(1.0, int(level));
+    const double fx = std::clamp(s.x, 0.0, double(info.width_px - 1));
+    const double fz = std::clamp(s.y, 0.0, double(info.height_px - 1));
+    const int64_t i0 = int64_t(std::floor(fx)), j0 = int64_t(std::floor(fz));
+    const int64_t i1 = std::min<int64_t>(i0 + 1, int64_t(info.width_px) - 1);
+    const int64_t j1 = std::min<int64_t>(j0 + 1, int64_t(info.height_px) - 1);
+    bool have = true;
+    auto at = [&](int64_t i, int64_t j) -> double {
+      const int64_t tx = i / tile, ty = j / tile;
+      const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+      if (m_slot_tile[level][slot] != (uint64_t(tx) | (uint64_t(ty) << 32))) {
+        have = false;
+        return 0.0;
+      }
+      return m_slot_heights[level][slot][size_t(j - ty * tile) * tile + size_t(i - tx * tile)];
+    };
+    const double h00 = at(i0, j0), h10 = at(i1, j0), h01 = at(i0, j1), h11 = at(i1, j1);
+    if (!have) continue;
+    // The triangle of the cell (diagonal (i0, j0)-(i1, j1)) the point is in.
+    const double u = fx - double(i0), v = fz - double(j0);
+    const double h = u >= v ? h00 + u * (h10 - h00) + v * (h11 - h10)
+                            : h00 + v * (h01 - h00) + u * (h11 - h01);
+    *height = h * m.world_per_height;
+    if (level_used != nullptr) *level_used = level;
+    return true;
+  }
+  return false;
+}
+
+bool TerrainRenderer::levelResident(uint32_t ring_level, const glm::i64vec2& ring_origin) const {
+  // Samples the ring reads: its (n + 1)^2 vertices and one more on each
+  // side (normals), clamped to the level; a ring past the last stored
+  // level reads that level's samples 2^k apart.
+  const uint32_t last_level = m_geometry.levelCount() - 1;
+  const uint32_t level = std::min(ring_level, last_level);
+  const int shift = int(ring_level - level);
+  const glm::i64vec2 origin = ring_origin * (int64_t(1) << shift);
+  const LevelInfo& info = m_geometry.levels[level];
+  const int64_t tile = m_geometry.tile_px;
+  const int64_t n = int64_t(m_config.ring_cells) << shift;
+  auto tiles = [&](int64_t first, int64_t last, uint64_t size, int64_t* t0, int64_t* t1) {
+    first = std::clamp<int64_t>(first, 0, int64_t(size) - 1);
+    last = std::clamp<int64_t>(last, 0, int64_t(size) - 1);
+    *t0 = first / tile;
+    *t1 = last / tile;
+  };
+  int64_t tx0, tx1, ty0, ty1;
+  tiles(origin.x - 1, origin.x + n + 1, info.width_px, &tx0, &tx1);
+  tiles(origin.y - 1, origin.y + n + 1, info.height_px, &ty0, &ty1);
+  for (int64_t ty = ty0; ty <= ty1; ++ty)
+    for (int64_t tx = tx0; tx <= tx1; ++tx) {
+      const uint64_t want = uint64_t(tx) | (uint64_t(ty) << 32);
+      if (m_slot_tile[level][size_t(slotOf(ty)) * m_slots + slotOf(tx)] != want) return false;
+    }
+  return true;
+}
+
+void TerrainRenderer::setFrameUniforms(uint32_t p, const Camera& camera,
+                                       const Viewport& viewport) const {
+  const uint32_t n = m_config.ring_cells;
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 cam = cameraSamples(m, camera);
+  const glm::dvec2 cam_int = glm::floor(cam);
+  // Far plane: beyond the outermost ring's corner and the highest ground.
+  const double extent = double(uint64_t(n) << m_coarsest) *
+                        std::max(m.world_per_sample.x, m.world_per_sample.y);
+  const double far_dist = 2.0 * extent + std::abs(camera.position.y) * 2.0 + 1.0;
+  const glm::mat4 view_proj =
+      glm::mat4(cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera));
+  glProgramUniformMatrix4fv(p, loc(p, "uViewProj"), 1, GL_FALSE, &view_proj[0][0]);
+  glProgramUniform1i(p, loc(p, "uN"), GLint(n));
+  glProgramUniform1i(p, loc(p, "uCoarsest"), GLint(m_coarsest));
+  glProgramUniform1i(p, loc(p, "uTransition"),
+                     GLint(std::max(1u, n / renderer_config::kTerrainTransitionDivisor)));
+  glProgramUniform1i(p, loc(p, "uHeightPeriod"), GLint(m_slots * m_geometry.tile_px));
+  glProgramUniform2f(p, loc(p, "uCamFrac"), float(cam.x - cam_int.x), float(cam.y - cam_int.y));
+  glProgramUniform2f(p, loc(p, "uWorldPerSample"), float(m.world_per_sample.x),
+                     float(m.world_per_sample.y));
+  glProgramUniform1f(p, loc(p, "uWorldPerHeight"), float(m.world_per_height));
+  glProgramUniform1f(p, loc(p, "uCamY"), float(camera.position.y));
+  std::array<GLint, 2 * renderer_config::kMaxLevels> sizes{};
+  for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
+    sizes[2 * l] = GLint(m_geometry.levels[l].width_px);
+    sizes[2 * l + 1] = GLint(m_geometry.levels[l].height_px);
+  }
+  glProgramUniform2iv(p, loc(p, "uLevelSize"), GLsizei(m_geometry.levelCount()), sizes.data());
+  glProgramUniform1i(p, loc(p, "uStoredLevels"), GLint(m_geometry.levelCount()));
+  // Sun from the north-west, 45 degrees up (the cartographic convention for
+  // hillshading: slopes facing the viewer's upper left are lit).
+  const glm::vec3 sun = glm::normalize(glm::vec3(-1.0f, 1.41421356f, -1.0f));
+  glProgramUniform3f(p, loc(p, "uSunDir"), sun.x, sun.y, sun.z);
+  glProgramUniform1i(p, loc(p, "uHeights"), 2);
+  glBindTextureUnit(2, m_heights);
+}
+
+void TerrainRenderer::setRingUniforms(uint32_t p, const Camera& camera, uint32_t level,
+                                      const glm::i64vec2& o) const {
+  const glm::dvec2 cam_int = glm::floor(cameraSamples(m_config.mapping, camera));
+  glProgramUniform1i(p, loc(p, "uLevel"), GLint(level));
+  glProgramUniform2i(p, loc(p, "uOriginLevel"), GLint(o.x), GLint(o.y));
+  const int64_t scale = int64_t(1) << level;
+  glProgramUniform2i(p, loc(p, "uOriginRel"), GLint(o.x * scale - int64_t(cam_int.x)),
+                     GLint(o.y * scale - int64_t(cam_int.y)));
+}
+
+std::vector<glm::vec4> TerrainRenderer::ringVertices(const Camera& camera, const Viewport& viewport,
+                                                     uint32_t level) {
+  const uint32_t n = m_config.ring_cells;
+  const size_t count = size_t(n + 1) * (n + 1);
+  std::vector<glm::vec4> out(count);
+  if (level >= m_geometry.levelCount()) return {};
+  const GLuint p = m_feedback_program;
+  setFrameUniforms(p, camera, viewport);
+  setRingUniforms(p, camera, level, ringOrigin(m_config, camera, level));
+  GLuint buffer = 0;
+  glCreateBuffers(1, &buffer);
+  glNamedBufferStorage(buffer, GLsizeiptr(count * sizeof(glm::vec4)), nullptr, GL_MAP_READ_BIT);
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glEnable(GL_RASTERIZER_DISCARD);
+  glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, buffer);
+  glBeginTransformFeedback(GL_POINTS);
+  glDrawArrays(GL_POINTS, 0, GLsizei(count));
+  glEndTransformFeedback();
+  glDisable(GL_RASTERIZER_DISCARD);
+  glBindVertexArray(0);
+  glUseProgram(0);
+  glGetNamedBufferSubData(buffer, 0, GLsizeiptr(count * sizeof(glm::vec4)), out.data());
+  glDeleteBuffers(1, &buffer);
+  return out;
+}
+
+void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
+                           const ClipmapRenderer& colour) {
+  m_frame = TerrainFrame{};
+  const uint32_t n = m_config.ring_cells;
+  const uint32_t coarsest = m_coarsest;
+  std::vector<glm::i64vec2> origins(coarsest + 1);
+  for (uint32_t l = 0; l <= coarsest; ++l) origins[l] = ringOrigin(m_config, camera, l);
+  // The innermost ring: the finest level that, with every coarser ring, is
+  // resident. A gap below it only coarsens the geometry.
+  int64_t finest = -1;
+  for (int64_t l = coarsest; l >= 0; --l) {
+    if (!levelResident(uint32_t(l), origins[size_t(l)])) break;
+    finest = l;
+  }
+  if (finest < 0) return;
+
+  const GLuint p = m_program[colour.overlay() == Overlay::kOff ? 0 : 1];
+  colour.bindColour(p, camera, viewport);
+  setFrameUniforms(p, camera, viewport);
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  for (uint32_t l = uint32_t(finest); l <= coarsest; ++l) {
+    const glm::i64vec2 o = origins[l];
+    const int config = l == uint32_t(finest) ? 0 : holeConfig(origins[l - 1], o, n);
+    if (config < 0 || config > 4) continue;  // cannot happen: origins nest (see ringOrigin)
+    setRingUniforms(p, camera, l, o);
+    glDrawElements(GL_TRIANGLES, GLsizei(m_index_count[config]), GL_UNSIGNED_INT,
+                   reinterpret_cast<const void*>(uintptr_t(m_first_index[config]) * sizeof(uint32_t)));
+    ++m_frame.rings;
+    m_frame.triangles += m_index_count[config] / 3;
+  }
+  m_frame.finest_level = uint32_t(finest);
+  m_frame.coarsest_level = coarsest;
+  glDisable(GL_DEPTH_TEST);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+}  // namespace clipstream

@@ -1,0 +1,332 @@
+// The geometry clipmap (terrain.h): the ring mesh's topology on the CPU,
+// and on the GPU no crack (no background pixel where the ground must be) at
+// rest and while the rings move across level borders, vertex heights and
+// normals against the CPU, and missing fine tiles coarsening the geometry
+// rather than opening holes. Headless llvmpipe; GL tests skip without EGL.
+#include "test_helpers.h"
+
+#include <clipstream/renderer/config.h>
+#include <clipstream/renderer/terrain.h>
+
+#include "../../renderer/src/terrain_mesh.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <utility>
+
+namespace clipstream {
+namespace {
+
+const Viewport kViewport{320, 200};
+
+// A height field of w x h level-0 samples (heights in world units).
+struct HeightField {
+  uint32_t w = 0, h = 0;
+  std::vector<float> samples;
+  PyramidGeometry geometry;
+
+  float at(uint32_t level, int64_t i, int64_t j) const {
+    const int64_t step = int64_t(1) << level;
+    const int64_t x = std::clamp<int64_t>(i * step, 0, w - 1);
+    const int64_t y = std::clamp<int64_t>(j * step, 0, h - 1);
+    return samples[size_t(y) * w + size_t(x)];
+  }
+  // Tile (level, tx, ty) as the tiler cuts it: decimated, edges repeated.
+  std::vector<float> tile(const TileKey& k) const {
+    const uint32_t t = geometry.tile_px;
+    const LevelInfo& info = geometry.levels[k.level];
+    std::vector<float> out(size_t(t) * t);
+    for (uint32_t y = 0; y < t; ++y)
+      for (uint32_t x = 0; x < t; ++x) {
+        const int64_t i = std::min<int64_t>(int64_t(k.x) * t + x, int64_t(info.width_px) - 1);
+        const int64_t j = std::min<int64_t>(int64_t(k.y) * t + y, int64_t(info.height_px) - 1);
+        out[size_t(y) * t + x] = at(k.level, i, j);
+      }
+    return out;
+  }
+  float lowest() const { return *std::min_element(samples.begin(), samples.end()); }
+};
+
+// Rolling hills, a sharp ridge and a 40-unit cliff: what rings must stitch.
+HeightField roughField(uint32_t side) {
+  HeightField f;
+  f.w = f.h = side;
+  f.samples.resize(size_t(side) * side);
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x) {
+      double v = 40.0 + 25.0 * std::sin(x * 0.05) * std::cos(y * 0.037) +
+                 15.0 * std::abs(std::sin(x * 0.013 + y * 0.021)) + ((x * 7 + y * 3) % 11) * 0.7;
+      if (x > side / 2 + 37) v += 40.0;
+      f.samples[size_t(y) * side + x] = float(v);
+    }
+  EXPECT_TRUE(makePyramidGeometry(side, side, 128, PixelFormat::kF32, &f.geometry));
+  return f;
+}
+
+// Uploads, for this camera, the tiles every ring reads at levels >= finest.
+void uploadRings(TerrainRenderer& terrain, const HeightField& f, const Camera& camera,
+                 uint32_t finest = 0) {
+  const uint32_t n = terrain.config().ring_cells;
+  const int64_t t = f.geometry.tile_px;
+  for (uint32_t l = finest; l < f.geometry.levelCount(); ++l) {
+    const glm::i64vec2 o = TerrainRenderer::ringOrigin(terrain.config(), camera, l);
+    const LevelInfo& info = f.geometry.levels[l];
+    auto clampTile = [&](int64_t s, uint64_t size) {
+      return std::clamp<int64_t>(s, 0, int64_t(size) - 1) / t;
+    };
+    for (int64_t ty = clampTile(o.y - 1, info.height_px); ty <= clampTile(o.y + n + 1, info.height_px); ++ty)
+      for (int64_t tx = clampTile(o.x - 1, info.width_px); tx <= clampTile(o.x + n + 1, info.width_px); ++tx) {
+        const TileKey key{l, uint32_t(tx), uint32_t(ty)};
+        const std::vector<float> heights = f.tile(key);
+        terrain.uploadTile(key, heights.data());
+      }
+  }
+}
+
+struct TerrainScene {
+  HeightField field;
+  std::shared_ptr<TileSource> colour_source;
+  ClipmapPlan plan;
+  std::unique_ptr<ClipmapRenderer> colour;
+  std::unique_ptr<TerrainRenderer> terrain;
+  std::unique_ptr<OffscreenTarget> target;
+};
+
+// A 1024^2-sample field under a 2048^2-texel white image (2 texels per
+// sample): lit terrain is grey (r = g = b), which the background colour is
+// not, so every background pixel is told apart from ground.
+TerrainScene makeScene(const Camera& camera, uint32_t ring_cells = 64) {
+  TerrainScene s;
+  s.field = roughField(1024);
+  s.colour_source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
+  s.plan = planClipmap(s.colour_source->geometry(), kViewport, camera, {});
+  RendererConfig rc{s.plan.clip_tiles, s.plan.pyramid_level, Buffering::kSingle};
+  EXPECT_TRUE(ClipmapRenderer::create(s.colour_source->geometry(), rc, &s.colour).isOk());
+  test::loadPlan(*s.colour, *s.colour_source, s.plan);
+  TerrainConfig tc;
+  tc.ring_cells = ring_cells;
+  tc.mapping.world_per_sample = {2.0, 2.0};
+  tc.mapping.sample0_world = {1.0, 1.0};
+  tc.mapping.world_per_height = 1.0;
+  const Status st = TerrainRenderer::create(s.field.geometry, tc, &s.terrain);
+  EXPECT_TRUE(st.isOk()) << st.toString();
+  EXPECT_TRUE(OffscreenTarget::create(kViewport, &s.target).isOk());
+  return s;
+}
+
+std::vector<uint8_t> drawTerrain(TerrainScene& s, const Camera& camera) {
+  s.target->bind();
+  ClipmapRenderer::clearSky();
+  s.terrain->draw(camera, kViewport, *s.colour);
+  std::vector<uint8_t> rgba;
+  s.target->readRgba(&rgba);
+  return rgba;
+}
+
+// Pixels whose ray meets the plane y = lowest inside the field but show the
+// background: the terrain is above that plane everywhere, so such a ray
+// must have met it first. Any such pixel is a crack or a hole.
+size_t crackPixels(const std::vector<uint8_t>& rgba, const Camera& camera, float lowest,
+                   std::vector<uint8_t>* marked = nullptr) {
+  if (marked) *marked = rgba;
+  Camera lowered = camera;
+  lowered.position.y -= lowest;
+  size_t cracks = 0;
+  for (uint32_t py = 0; py < kViewport.height_px; ++py)
+    for (uint32_t px = 0; px < kViewport.width_px; ++px) {
+      glm::dvec2 hit;
+      if (!groundHit(lowered, kViewport, px + 0.5, py + 0.5, &hit)) continue;
+      if (hit.x < 4.0 || hit.y < 4.0 || hit.x > 2044.0 || hit.y > 2044.0) continue;
+      const uint8_t* p = rgba.data() + (size_t(py) * kViewport.width_px + px) * 4;
+      if (std::equal(p, p + 3, renderer_config::kSkyRgba)) {
+        ++cracks;
+        if (marked) {
+          uint8_t* m = marked->data() + (size_t(py) * kViewport.width_px + px) * 4;
+          m[0] = 255, m[1] = 0, m[2] = 0;
+        }
+      }
+    }
+  return cracks;
+}
+
+// Pixels that show ground at all (to make sure a test looks at terrain).
+size_t groundPixels(const std::vector<uint8_t>& rgba) {
+  size_t n = 0;
+  for (size_t i = 0; i < rgba.size(); i += 4)
+    if (!std::equal(rgba.begin() + long(i), rgba.begin() + long(i) + 3, renderer_config::kSkyRgba)) ++n;
+  return n;
+}
+
+Camera overField(double x, double z, double height, double heading, double pitch) {
+  Camera c;
+  c.position = {x, height, z};
+  c.heading_rad = heading;
+  c.pitch_rad = pitch;
+  return c;
+}
+
+TEST(TerrainMesh, RingsCoverTheirCellsOnceAndMeetWithoutTJunctions) {
+  for (uint32_t n : {16u, 64u, 128u}) {
+    for (int config = 0; config < 5; ++config) {
+      const int hx = config == 0 ? -1 : int(n / 4) + (config - 1) % 2;
+      const int hy = config == 0 ? -1 : int(n / 4) + (config - 1) / 2;
+      const std::vector<uint32_t> tris = terrain_mesh::ringTriangles(n, hx, hy);
+      ASSERT_EQ(tris.size() % 3, 0u);
+      double area = 0.0;
+      std::map<std::pair<uint32_t, uint32_t>, int> edges;
+      auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
+      for (size_t t = 0; t < tris.size(); t += 3) {
+        const auto [ax, ay] = xy(tris[t]);
+        const auto [bx, by] = xy(tris[t + 1]);
+        const auto [cx, cy] = xy(tris[t + 2]);
+        const double a = 0.5 * ((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
+        EXPECT_GT(std::abs(a), 0.0) << "degenerate triangle";
+        area += std::abs(a);
+        for (int e = 0; e < 3; ++e) {
+          uint32_t u = tris[t + e], v = tris[t + (e + 1) % 3];
+          if (u > v) std::swap(u, v);
+          ++edges[{u, v}];
+        }
+      }
+      const double hole = config == 0 ? 0.0 : double(n / 2) * (n / 2);
+      EXPECT_DOUBLE_EQ(area, double(n) * n - hole) << "n " << n << " config " << config;
+      for (const auto& [edge, uses] : edges) {
+        ASSERT_LE(uses, 2) << "an edge shared by three triangles";
+        if (uses == 2) continue;
+        // A border edge: on the outer edge it joins two even vertices two
+        // cells apart (the coarser ring's vertices); on the hole's edge it
+        // is one cell long (the finer ring's outer edge has the same).
+        const auto [ux, uy] = xy(edge.first);
+        const auto [vx, vy] = xy(edge.second);
+        const bool outer = (ux == vx && (ux == 0 || ux == int(n))) || (uy == vy && (uy == 0 || uy == int(n)));
+        if (outer) {
+          EXPECT_EQ(std::abs(ux - vx) + std::abs(uy - vy), 2) << "T-junction on the outer edge";
+          EXPECT_EQ(ux % 2 + uy % 2 + vx % 2 + vy % 2, 0);
+        } else {
+          ASSERT_NE(config, 0) << "a border edge inside a ring without hole";
+          EXPECT_EQ(std::abs(ux - vx) + std::abs(uy - vy), 1);
+          const bool on_hole = (ux == hx || ux == hx + int(n / 2) || uy == hy || uy == hy + int(n / 2));
+          EXPECT_TRUE(on_hole) << "a crack inside the ring at (" << ux << ", " << uy << ")";
+        }
+      }
+    }
+  }
+}
+
+TEST(Terrain, NoCrackAtRestOrWhileRingsMoveAcrossLevelBorders) {
+  CLIPSTREAM_REQUIRE_GL();
+  Camera camera = overField(1000.0, 1000.0, 160.0, 0.6, -0.45);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain && s.colour && s.target);
+  const float lowest = s.field.lowest();
+  size_t frames = 0;
+  // Sub-sample steps across several ring snaps of every level, looking in
+  // four directions, low and high.
+  for (int step = 0; step < 24; ++step) {
+    camera.position.x = 1000.0 + step * 3.7;
+    camera.position.z = 1000.0 - step * 2.3;
+    camera.heading_rad = 0.6 + step * (6.2831853 / 24.0);
+    camera.position.y = (step % 3 == 0) ? 110.0 : 160.0 + step;
+    uploadRings(*s.terrain, s.field, camera);
+    const std::vector<uint8_t> rgba = drawTerrain(s, camera);
+    ASSERT_GT(s.terrain->lastFrame().rings, 1u);
+    EXPECT_EQ(s.terrain->lastFrame().finest_level, 0u);
+    EXPECT_GT(groundPixels(rgba), rgba.size() / 8) << "step " << step;
+    std::vector<uint8_t> marked;
+    const size_t cracks = crackPixels(rgba, camera, lowest, &marked);
+    if (cracks > 0) test::dumpPpm("terrain_crack_" + std::to_string(step), marked, kViewport);
+    EXPECT_EQ(cracks, 0u) << "step " << step;
+    ++frames;
+  }
+  EXPECT_EQ(frames, 24u);
+}
+
+TEST(Terrain, MissingFineHeightTilesCoarsenTheGeometryWithoutHoles) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera camera = overField(900.0, 1100.0, 140.0, 2.0, -0.5);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  // Nothing resident: nothing drawn (no garbage heights).
+  std::vector<uint8_t> rgba = drawTerrain(s, camera);
+  EXPECT_EQ(s.terrain->lastFrame().rings, 0u);
+  EXPECT_EQ(groundPixels(rgba), 0u);
+  uploadRings(*s.terrain, s.field, camera, 2);
+  rgba = drawTerrain(s, camera);
+  EXPECT_EQ(s.terrain->lastFrame().finest_level, 2u);
+  EXPECT_EQ(crackPixels(rgba, camera, s.field.lowest()), 0u);
+  uploadRings(*s.terrain, s.field, camera, 0);
+  rgba = drawTerrain(s, camera);
+  EXPECT_EQ(s.terrain->lastFrame().finest_level, 0u);
+  EXPECT_EQ(crackPixels(rgba, camera, s.field.lowest()), 0u);
+}
+
+TEST(Terrain, VertexHeightsAndNormalsMatchTheCpu) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera camera = overField(1234.5, 987.25, 150.0, 0.3, -0.5);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  uploadRings(*s.terrain, s.field, camera);
+  s.target->bind();  // draws need a complete framebuffer, even with nothing rasterised
+  const uint32_t n = s.terrain->config().ring_cells;
+  const uint32_t w = std::max(1u, n / renderer_config::kTerrainTransitionDivisor);
+  for (uint32_t level : {0u, 1u, 2u}) {
+    const std::vector<glm::vec4> v = s.terrain->ringVertices(camera, kViewport, level);
+    ASSERT_EQ(v.size(), size_t(n + 1) * (n + 1));
+    const glm::i64vec2 o = TerrainRenderer::ringOrigin(s.terrain->config(), camera, level);
+    const double spacing = 2.0 * double(1 << level);  // world units between samples
+    size_t inner = 0, edge = 0;
+    for (uint32_t j = 0; j <= n; ++j)
+      for (uint32_t i = 0; i <= n; ++i) {
+        const glm::vec4 got = v[size_t(j) * (n + 1) + i];
+        const int64_t si = o.x + i, sj = o.y + j;
+        const uint32_t d = std::max(uint32_t(std::abs(int(2 * i) - int(n))), uint32_t(std::abs(int(2 * j) - int(n)))) / 2;
+        if (d + w + 1 <= n / 2) {
+          // Inside the transition band: the level's own sample, and the
+          // normal by central differences of the level (seed 000).
+          ASSERT_EQ(got.w, s.field.at(level, si, sj)) << level << ": " << i << "," << j;
+          const double dx = s.field.at(level, si + 1, sj) - s.field.at(level, si - 1, sj);
+          const double dz = s.field.at(level, si, sj + 1) - s.field.at(level, si, sj - 1);
+          const glm::dvec3 want = glm::normalize(glm::dvec3(-dx / (2 * spacing), 1.0, -dz / (2 * spacing)));
+          EXPECT_NEAR(got.x, want.x, 1e-4);
+          EXPECT_NEAR(got.y, want.y, 1e-4);
+          EXPECT_NEAR(got.z, want.z, 1e-4);
+          ++inner;
+        } else if (d == n / 2 && level + 1 < s.field.geometry.levelCount()) {
+          // On the outer edge: exactly the coarser ring's surface.
+          const int64_t ci0 = si >> 1, cj0 = sj >> 1, ci1 = (si + 1) >> 1, cj1 = (sj + 1) >> 1;
+          const float coarse = 0.5f * (s.field.at(level + 1, ci0, cj0) + s.field.at(level + 1, ci1, cj1));
+          EXPECT_FLOAT_EQ(got.w, coarse) << level << ": " << i << "," << j;
+          ++edge;
+        }
+      }
+    EXPECT_GT(inner, size_t(n) * n / 2);
+    EXPECT_EQ(edge, size_t(4) * n);
+  }
+}
+
+TEST(Terrain, GroundHeightFollowsTheFinestResidentLevel) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera camera = overField(1001.0, 777.0, 150.0, 0.0, -0.5);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  double h = 0.0;
+  uint32_t level = 99;
+  EXPECT_FALSE(s.terrain->groundHeight({1001.0, 777.0}, &h));
+  uploadRings(*s.terrain, s.field, camera, 1);
+  ASSERT_TRUE(s.terrain->groundHeight({1001.0, 777.0}, &h, &level));
+  EXPECT_EQ(level, 1u);
+  uploadRings(*s.terrain, s.field, camera, 0);
+  // World (1001, 777) is sample (500, 388) exactly: the level-0 sample.
+  ASSERT_TRUE(s.terrain->groundHeight({1001.0, 777.0}, &h, &level));
+  EXPECT_EQ(level, 0u);
+  EXPECT_FLOAT_EQ(float(h), s.field.at(0, 500, 388));
+  // Half-way along x between two samples: their mean (on the cell's edge).
+  ASSERT_TRUE(s.terrain->groundHeight({1002.0, 777.0}, &h));
+  EXPECT_NEAR(h, 0.5 * (s.field.at(0, 500, 388) + s.field.at(0, 501, 388)), 1e-4);
+}
+
+}  // namespace
+}  // namespace clipstream
