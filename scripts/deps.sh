@@ -10,6 +10,7 @@ packages=(
   libopenimageio-dev libzstd-dev libxxhash-dev
   libcurl4-openssl-dev  # stores read over HTTP(S)
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
+  openssl               # ... and make a certificate for its https:// test
   libcli11-dev nlohmann-json3-dev libglm-dev
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -317,6 +317,7 @@ CURL* HttpSource::acquire() const {
   curl_easy_setopt(curl, CURLOPT_LOW_SPEED_TIME,
                    long(std::max<uint32_t>(1, (m_options.stall_timeout_ms + 999) / 1000)));
   curl_easy_setopt(curl, CURLOPT_TCP_KEEPALIVE, 1L);
+  if (!m_options.ca_file.empty()) curl_easy_setopt(curl, CURLOPT_CAINFO, m_options.ca_file.c_str());
   curl_easy_setopt(curl, CURLOPT_USERAGENT, "clipstream");
   curl_easy_setopt(curl, CURLOPT_HEADERFUNCTION, onHeader);
   curl_easy_setopt(curl, CURLOPT_WRITEFUNCTION, onBody);

@@ -442,6 +442,45 @@ TEST_F(HttpStore, MessagesHideCredentialsAndQueryStrings) {
   EXPECT_EQ(displayStorePath("/data/a.cstore"), "/data/a.cstore");
 }
 
+// https: an untrusted certificate fails at once, naming the URL and not
+// retried; trusted through RemoteOptions::ca_file, the tiles equal the file's.
+TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
+  test::TempDir dir("https-store");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string local_path = dir.file("www/store.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  std::unique_ptr<NginxServer> server;
+  const Status started = NginxServer::start(dir.path().string(), dir.file("www"), &server, true);
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  const std::string url = server->url("store.cstore");
+  ASSERT_EQ(url.rfind("https://", 0), 0u);
+
+  std::unique_ptr<TileStoreReader> remote;
+  const Status untrusted = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(untrusted.code, ErrorCode::kIo) << untrusted.toString();
+  EXPECT_NE(untrusted.message.find(url), std::string::npos) << untrusted.message;
+  EXPECT_NE(untrusted.message.find("certificate"), std::string::npos) << untrusted.message;
+  std::printf("  %s\n", untrusted.message.c_str());
+  ::usleep(50000);
+  EXPECT_TRUE(server->requests().empty()) << "no HTTP request after a failed handshake";
+
+  RemoteOptions trusted;
+  trusted.ca_file = server->certificateFile();
+  const Status opened = TileStoreReader::open(url, trusted, &remote);
+  ASSERT_TRUE(opened.isOk()) << opened.toString();
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    const TileKey key{l, g.levels[l].tiles_x - 1, g.levels[l].tiles_y - 1};
+    std::vector<uint8_t> a, b;
+    ASSERT_TRUE(local->readTile(key, &a).isOk());
+    const Status rs = remote->readTile(key, &b);
+    ASSERT_TRUE(rs.isOk()) << rs.toString();
+    EXPECT_EQ(a, b);
+  }
+}
+
 TEST(StoreUrl, SchemesAreRecognised) {
   EXPECT_TRUE(isStoreUrl("http://host/a.cstore"));
   EXPECT_TRUE(isStoreUrl("HTTPS://host/a.cstore"));

@@ -85,10 +85,20 @@ std::string readFile(const std::string& path) {
 // NginxServer
 
 Status NginxServer::start(const std::string& work_dir, const std::string& root_dir,
-                          std::unique_ptr<NginxServer>* out) {
+                          std::unique_ptr<NginxServer>* out, bool tls) {
   std::unique_ptr<NginxServer> server(new NginxServer());
   server->m_work_dir = work_dir;
   server->m_root_dir = root_dir;
+  server->m_tls = tls;
+  if (tls) {
+    const std::string command = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj "
+                                "/CN=127.0.0.1 -addext subjectAltName=IP:127.0.0.1 -keyout '" +
+                                work_dir + "/key.pem' -out '" + work_dir + "/cert.pem' 2>/dev/null";
+    if (std::system(command.c_str()) != 0) {
+      return Status::error(ErrorCode::kIo, "openssl could not make a test certificate (the Debian "
+                                           "package openssl; scripts/deps.sh installs it)");
+    }
+  }
   const char* env = std::getenv("CLIPSTREAM_NGINX");
   server->m_binary = env != nullptr && *env != '\0' ? env : "/usr/sbin/nginx";
   if (::access(server->m_binary.c_str(), X_OK) != 0) {
@@ -135,8 +145,11 @@ Status NginxServer::launch() {
        << "  scgi_temp_path " << w << "/tmp;\n"
        << "  keepalive_requests 100000;\n"
        << "  server {\n"
-       << "    listen 127.0.0.1:" << m_port << ";\n"
+       << "    listen 127.0.0.1:" << m_port << (m_tls ? " ssl" : "") << ";\n"
        << "    root " << m_root_dir << ";\n"
+       << (m_tls ? "    ssl_certificate " + w + "/cert.pem;\n    ssl_certificate_key " + w +
+                       "/key.pem;\n"
+                 : std::string())
        << "    location = /forbidden.cstore { return 403; }\n"
        << "    location = /failing.cstore { return 503; }\n"
        << "  }\n"
@@ -193,7 +206,7 @@ Status NginxServer::restart() {
 }
 
 std::string NginxServer::url(const std::string& name) const {
-  return "http://127.0.0.1:" + std::to_string(m_port) + "/" + name;
+  return std::string(m_tls ? "https" : "http") + "://127.0.0.1:" + std::to_string(m_port) + "/" + name;
 }
 
 std::vector<LoggedRequest> NginxServer::requests(size_t at_least) const {

@@ -37,6 +37,9 @@ struct RemoteOptions {
   // that, ... before the read fails with kUnavailable.
   uint32_t retries = 2;
   uint32_t retry_base_ms = 100;
+  // https:// servers are verified against the system's certificate
+  // authorities, or only against this PEM file when it is set (a private CA).
+  std::string ca_file;
   // Coalescing (TileStoreReader::readRawBatch): tiles the streamer wants
   // together are read with one range request when their payloads lie at
   // most coalesce_gap_bytes apart, up to coalesce_max_bytes per request and

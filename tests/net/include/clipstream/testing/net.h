@@ -33,7 +33,8 @@ struct LoggedRequest {
 };
 
 // nginx serving `root_dir` at http://127.0.0.1:PORT/. Extra locations:
-// /forbidden.cstore answers 403, /failing.cstore answers 503.
+// /forbidden.cstore answers 403, /failing.cstore answers 503. Optionally
+// over TLS.
 class NginxServer {
  public:
   // Writes nginx.conf into `work_dir` (logs, pid and temporaries go there
@@ -41,8 +42,10 @@ class NginxServer {
   // as a child of this process; returns once it accepts connections.
   // kNotFound naming the package when no nginx binary is installed
   // ($CLIPSTREAM_NGINX, else /usr/sbin/nginx).
+  // With `tls`, serves https:// with a self-signed certificate for
+  // 127.0.0.1 made by the openssl program (certificateFile() names it).
   static Status start(const std::string& work_dir, const std::string& root_dir,
-                      std::unique_ptr<NginxServer>* out);
+                      std::unique_ptr<NginxServer>* out, bool tls = false);
   ~NginxServer();  // stop()
   NginxServer(const NginxServer&) = delete;
   NginxServer& operator=(const NginxServer&) = delete;
@@ -54,7 +57,8 @@ class NginxServer {
   bool running() const { return m_pid > 0; }
 
   uint16_t port() const { return m_port; }
-  std::string url(const std::string& name) const;  // http://127.0.0.1:PORT/name
+  std::string url(const std::string& name) const;  // http(s)://127.0.0.1:PORT/name
+  std::string certificateFile() const { return m_work_dir + "/cert.pem"; }
   // The access log so far. nginx writes a line after the answer is sent,
   // so a client may see its answer before the line exists: with
   // `at_least`, waits (up to 5 s) until that many lines are there.
@@ -68,6 +72,7 @@ class NginxServer {
   std::vector<LoggedRequest> parseLog() const;
 
   std::string m_work_dir, m_root_dir, m_binary;
+  bool m_tls = false;
   uint16_t m_port = 0;
   pid_t m_pid = -1;
 };
