@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
   const auto frames = cli::wholeInRange(1, kMaxFlyFrames);
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
   app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
-  app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom) or JSON file");
+  app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom, valley) or JSON file");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
       ->transform(frames);
   app.add_option("--size", size, "Viewport WIDTHxHEIGHT");

@@ -66,7 +66,9 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
     const LayerAlignment& a = config.terrain->alignment;
     StreamLayer colour{f->m_source, LayerRole::kColour, {1.0, 1.0}, {0.0, 0.0}};
     StreamLayer heights{config.terrain->source, LayerRole::kElevation,
-                        1.0 / a.world_per_sample, 0.5 - a.sample0_world / a.world_per_sample};
+                        1.0 / a.world_per_sample, 0.5 - a.sample0_world / a.world_per_sample,
+                        TerrainRenderer::windowTiles(config.terrain->ring_cells,
+                                                     config.terrain->source->geometry().tile_px)};
     std::vector<StreamLayer> layers{colour, heights};
     if (Status s = checkStreamLayers(layers); !s) return s;
     f->m_streamer = std::make_unique<Streamer>(std::move(layers), config.streamer);
@@ -112,6 +114,7 @@ Status Flight::makeTerrain() {
   }
   TerrainConfig tc;
   tc.ring_cells = t.ring_cells;
+  tc.clip_tiles = TerrainRenderer::windowTiles(t.ring_cells, t.source->geometry().tile_px);
   tc.mapping.world_per_sample = t.alignment.world_per_sample;
   tc.mapping.sample0_world = t.alignment.sample0_world;
   tc.mapping.world_per_height = t.alignment.world_per_height;
@@ -142,6 +145,9 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
   }
   m_config.viewport = viewport;
   m_config.framebuffer = framebuffer;
+  // The height stack follows the clip size too (TerrainConfig::clip_tiles).
+  if (m_terrain)
+    if (Status s = makeTerrain(); !s) return s;
   m_streamer->resetGpuResidency();
   ++m_resizes;
   return Status::ok();

@@ -67,7 +67,9 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   // which touches at most ceil((n + 3) / tile) + 1 tiles a side; one more
   // slot keeps a tile that just left from sharing a slot with one needed.
   const uint32_t tile = heights.tile_px;
-  r->m_slots = (n + 3 + tile - 1) / tile + 2;
+  // ... and at least the streamer's window plus two (as the colour stack),
+  // so no two tiles it hands over share a slot.
+  r->m_slots = std::max((n + 3 + tile - 1) / tile + 2, (config.clip_tiles / 2) * 2 + 2);
   // The outermost ring: the first level whose ring covers every sample.
   // Rings may be coarser than the pyramid's last level (its one tile,
   // decimated further in the shader), so the outermost ring always covers
@@ -102,13 +104,28 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
       grid.push_back(int32_t(j));
     }
   std::vector<uint32_t> indices;
+  const uint32_t block_cells = n / kBlocks;
   for (int c = 0; c < 5; ++c) {
     const int hx = c == 0 ? -1 : int(n / 4) + (c - 1) % 2;
     const int hy = c == 0 ? -1 : int(n / 4) + (c - 1) / 2;
     const std::vector<uint32_t> ring = terrain_mesh::ringTriangles(n, hx, hy);
-    r->m_first_index[c] = uint32_t(indices.size());
-    r->m_index_count[c] = uint32_t(ring.size());
-    indices.insert(indices.end(), ring.begin(), ring.end());
+    std::vector<std::vector<uint32_t>> blocks(kBlocks * kBlocks);
+    for (size_t t = 0; t < ring.size(); t += 3) {
+      uint32_t sx = 0, sy = 0;
+      for (int k = 0; k < 3; ++k) {
+        sx += ring[t + k] % (n + 1);
+        sy += ring[t + k] / (n + 1);
+      }
+      const uint32_t bx = std::min(sx / 3 / block_cells, kBlocks - 1);
+      const uint32_t by = std::min(sy / 3 / block_cells, kBlocks - 1);
+      blocks[by * kBlocks + bx].insert(blocks[by * kBlocks + bx].end(), ring.begin() + long(t),
+                                       ring.begin() + long(t) + 3);
+    }
+    for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
+      r->m_first_index[c][b] = uint32_t(indices.size());
+      r->m_index_count[c][b] = uint32_t(blocks[b].size());
+      indices.insert(indices.end(), blocks[b].begin(), blocks[b].end());
+    }
   }
   glCreateBuffers(1, &r->m_vertices);
   glNamedBufferStorage(r->m_vertices, GLsizeiptr(grid.size() * sizeof(int32_t)), grid.data(), 0);
@@ -141,6 +158,8 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                         std::vector<uint64_t>(size_t(r->m_slots) * r->m_slots, kNoTile));
   r->m_slot_heights.assign(heights.levelCount(),
                            std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
+  r->m_slot_bounds.assign(heights.levelCount(),
+                          std::vector<glm::vec2>(size_t(r->m_slots) * r->m_slots, glm::vec2(0.0f)));
   if (glGetError() != GL_NO_ERROR) {
     return Status::error(ErrorCode::kUnavailable, "terrain: GL error while creating the height stack");
   }
@@ -171,6 +190,33 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   const size_t slot = size_t(sy) * m_slots + sx;
   m_slot_tile[key.level][slot] = uint64_t(key.x) | (uint64_t(key.y) << 32);
   m_slot_heights[key.level][slot].assign(heights, heights + size_t(tile) * tile);
+  const auto [lo, hi] = std::minmax_element(heights, heights + size_t(tile) * tile);
+  m_slot_bounds[key.level][slot] = {*lo, *hi};
+}
+
+glm::vec2 TerrainRenderer::heightBounds(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const {
+  const uint32_t level = std::min(ring_level, m_geometry.levelCount() - 1);
+  const int shift = int(ring_level - level);
+  s0 *= int64_t(1) << shift;
+  s1 *= int64_t(1) << shift;
+  const LevelInfo& info = m_geometry.levels[level];
+  const int64_t tile = m_geometry.tile_px;
+  const int64_t tx0 = std::clamp<int64_t>(s0.x, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t tx1 = std::clamp<int64_t>(s1.x, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t ty0 = std::clamp<int64_t>(s0.y, 0, int64_t(info.height_px) - 1) / tile;
+  const int64_t ty1 = std::clamp<int64_t>(s1.y, 0, int64_t(info.height_px) - 1) / tile;
+  glm::vec2 b(INFINITY, -INFINITY);
+  for (int64_t ty = ty0; ty <= ty1; ++ty)
+    for (int64_t tx = tx0; tx <= tx1; ++tx) {
+      const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+      if (m_slot_tile[level][slot] != (uint64_t(tx) | (uint64_t(ty) << 32))) {
+        // Not resident (the ring does not read it): no bound, never culled.
+        return {-INFINITY, INFINITY};
+      }
+      const glm::vec2 t = m_slot_bounds[level][slot];
+      b = {std::min(b.x, t.x), std::max(b.y, t.y)};
+    }
+  return b;
 }
 
 uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
@@ -256,16 +302,21 @@ bool TerrainRenderer::levelResident(uint32_t ring_level, const glm::i64vec2& rin
   return true;
 }
 
+double TerrainRenderer::farDistance(const Camera& camera) const {
+  // Beyond the outermost ring's corner and the highest ground.
+  const TerrainMapping& m = m_config.mapping;
+  const double extent = double(uint64_t(m_config.ring_cells) << m_coarsest) *
+                        std::max(m.world_per_sample.x, m.world_per_sample.y);
+  return 2.0 * extent + std::abs(camera.position.y) * 2.0 + 1.0;
+}
+
 void TerrainRenderer::setFrameUniforms(uint32_t p, const Camera& camera,
                                        const Viewport& viewport) const {
   const uint32_t n = m_config.ring_cells;
   const TerrainMapping& m = m_config.mapping;
   const glm::dvec2 cam = cameraSamples(m, camera);
   const glm::dvec2 cam_int = glm::floor(cam);
-  // Far plane: beyond the outermost ring's corner and the highest ground.
-  const double extent = double(uint64_t(n) << m_coarsest) *
-                        std::max(m.world_per_sample.x, m.world_per_sample.y);
-  const double far_dist = 2.0 * extent + std::abs(camera.position.y) * 2.0 + 1.0;
+  const double far_dist = farDistance(camera);
   const glm::mat4 view_proj =
       glm::mat4(cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera));
   glProgramUniformMatrix4fv(p, loc(p, "uViewProj"), 1, GL_FALSE, &view_proj[0][0]);
@@ -354,15 +405,66 @@ void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
   glBindVertexArray(m_vao);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
+  // Frustum planes of the camera-relative view-projection (Gribb &
+  // Hartmann), for the block test below.
+  const TerrainMapping& m = m_config.mapping;
+  const double far_dist = farDistance(camera);
+  const glm::dmat4 vp = cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera);
+  std::array<glm::dvec4, 6> planes;
+  for (int i = 0; i < 3; ++i) {
+    const glm::dvec4 row_w(vp[0][3], vp[1][3], vp[2][3], vp[3][3]);
+    const glm::dvec4 row_i(vp[0][i], vp[1][i], vp[2][i], vp[3][i]);
+    planes[size_t(2 * i)] = row_w + row_i;
+    planes[size_t(2 * i + 1)] = row_w - row_i;
+  }
+  const glm::dvec2 cam = cameraSamples(m, camera);
+  const uint32_t block_cells = n / kBlocks;
+  std::vector<GLsizei> counts;
+  std::vector<const void*> offsets;
   for (uint32_t l = uint32_t(finest); l <= coarsest; ++l) {
     const glm::i64vec2 o = origins[l];
     const int config = l == uint32_t(finest) ? 0 : holeConfig(origins[l - 1], o, n);
     if (config < 0 || config > 4) continue;  // cannot happen: origins nest (see ringOrigin)
     setRingUniforms(p, camera, l, o);
-    glDrawElements(GL_TRIANGLES, GLsizei(m_index_count[config]), GL_UNSIGNED_INT,
-                   reinterpret_cast<const void*>(uintptr_t(m_first_index[config]) * sizeof(uint32_t)));
+    counts.clear();
+    offsets.clear();
+    const double spacing = std::ldexp(1.0, int(l));
+    for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
+      if (m_index_count[config][b] == 0) continue;
+      // The block's box, camera-relative: its cells (plus the two samples
+      // the transition and normals reach beyond them) and the heights of
+      // the tiles under it.
+      const glm::i64vec2 c0 = o + glm::i64vec2((b % kBlocks) * block_cells, (b / kBlocks) * block_cells);
+      const glm::i64vec2 c1 = c0 + glm::i64vec2(block_cells, block_cells);
+      const glm::vec2 h = heightBounds(l, glm::max(c0 - int64_t(2), o - int64_t(1)),
+                                       glm::min(c1 + int64_t(2), o + int64_t(n + 1)));
+      const glm::dvec2 x0 = (glm::dvec2(c0) * spacing - cam) * m.world_per_sample;
+      const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
+      const double y0 = double(h.x) * m.world_per_height - camera.position.y;
+      const double y1 = double(h.y) * m.world_per_height - camera.position.y;
+      bool outside = false;
+      for (const glm::dvec4& pl : planes) {
+        // The box corner farthest along the plane's normal.
+        const glm::dvec3 far_corner(pl.x >= 0 ? x1.x : x0.x, pl.y >= 0 ? y1 : y0, pl.z >= 0 ? x1.y : x0.y);
+        if (glm::dot(glm::dvec3(pl), far_corner) + pl.w < 0.0) {
+          outside = true;
+          break;
+        }
+      }
+      if (outside) {
+        ++m_frame.culled_blocks;
+        continue;
+      }
+      counts.push_back(GLsizei(m_index_count[config][b]));
+      offsets.push_back(reinterpret_cast<const void*>(uintptr_t(m_first_index[config][b]) * sizeof(uint32_t)));
+      m_frame.triangles += m_index_count[config][b] / 3;
+      ++m_frame.blocks;
+    }
+    if (!counts.empty()) {
+      glMultiDrawElements(GL_TRIANGLES, counts.data(), GL_UNSIGNED_INT, offsets.data(),
+                          GLsizei(counts.size()));
+    }
     ++m_frame.rings;
-    m_frame.triangles += m_index_count[config] / 3;
   }
   m_frame.finest_level = uint32_t(finest);
   m_frame.coarsest_level = coarsest;

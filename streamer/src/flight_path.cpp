@@ -184,7 +184,7 @@ Camera FlightPath::sample(double t_s) const {
 }
 
 std::vector<std::string> FlightPath::builtinNames() {
-  return {"pass", "dive", "orbit", "teleport", "zoom"};
+  return {"pass", "dive", "orbit", "teleport", "zoom", "valley"};
 }
 
 Status FlightPath::builtin(const std::string& name, const PyramidGeometry& geometry,
@@ -239,6 +239,20 @@ Status FlightPath::builtin(const std::string& name, const PyramidGeometry& geome
                                 360.0 * next(),
                                 -25.0 - 40.0 * next()});
     }
+  } else if (name == "valley") {
+    // Low and slow across the whole texture, winding, looking a little
+    // down ahead: over terrain, a flight at a few texels above the ground
+    // (heights are above the ground there) through whatever it crosses.
+    const double height = std::clamp(side * 0.001, 3.0, 500.0);
+    const double length = 0.8 * w;
+    constexpr int kKeys = 8;
+    for (int i = 0; i <= kKeys; ++i) {
+      const double x = centre.x - length * 0.5 + length * i / kKeys;
+      const double z = centre.y + 0.15 * h * std::sin(i * 0.9);
+      const double dz = 0.15 * h * 0.9 * std::cos(i * 0.9) * kKeys / length;  // dz/dx of the line
+      const double heading = std::atan2(1.0, -dz) / kDegToRad;  // along +x, turning with the line
+      path.keyframes.push_back({3.0 * i, {x, height, z}, heading, -8.0});
+    }
   } else if (name == "zoom") {
     const double top = std::max(w, h), low = 5.0;
     for (int i = 0; i <= 10; ++i) {
@@ -249,7 +263,7 @@ Status FlightPath::builtin(const std::string& name, const PyramidGeometry& geome
                                 -89.0});
     }
   } else {
-    return fail("unknown built-in path \"" + name + "\" (pass, dive, orbit, teleport, zoom)");
+    return fail("unknown built-in path \"" + name + "\" (pass, dive, orbit, teleport, zoom, valley)");
   }
   *out = std::move(path);
   return Status::ok();

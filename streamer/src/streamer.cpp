@@ -204,6 +204,11 @@ struct Streamer::Impl {
     uint32_t published_lod = 0;
 
     bool active() const { return spec.source && geometry.levelCount() != 0; }
+    PlannerConfig planner(const PlannerConfig& base) const {
+      PlannerConfig c = base;
+      if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
+      return c;
+    }
     // Coarseness of one of this layer's levels in world space: log2 of the
     // world units its texel spans, rounded, so levels of two layers within
     // a factor of sqrt(2) are equally coarse.
@@ -537,6 +542,20 @@ std::vector<LayerTile> Streamer::Impl::rankScene() const {
     uint32_t layer;
     LayerTile tile;
   };
+  size_t active = 0;
+  for (const Layer& layer : layers) active += layer.active() ? 1 : 0;
+  if (active == 1) {
+    // rankPlanTiles() already lists one layer in this order: skip the sort.
+    std::vector<LayerTile> out;
+    for (uint32_t i = 0; i < layers.size(); ++i) {
+      if (!layers[i].active()) continue;
+      const std::vector<TileKey> keys =
+          rankPlanTiles(layers[i].geometry, layers[i].plan, config.frustum_priority);
+      out.reserve(keys.size());
+      for (const TileKey& k : keys) out.push_back({i, k});
+    }
+    return out;
+  }
   std::vector<Ranked> ranked;
   for (uint32_t i = 0; i < layers.size(); ++i) {
     const Layer& layer = layers[i];
@@ -869,7 +888,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
     for (size_t i = 0; i < n; ++i) {
       const Impl::Layer& layer = s.layers[i];
       if (layer.active())
-        (*plans)[i] = planClipmap(layer.geometry, viewport, layerCamera(layer.spec, cam), s.config.planner);
+        (*plans)[i] = planClipmap(layer.geometry, viewport, layerCamera(layer.spec, cam), layer.planner(s.config.planner));
     }
   };
   std::vector<ClipmapPlan> next;
@@ -885,12 +904,12 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
       const Impl::Layer& layer = s.layers[i];
       if (layer.active())
         s.hint_used = hintAgrees(
-            planClipmap(layer.geometry, viewport, layerCamera(layer.spec, hinted), s.config.planner), next[i]);
+            planClipmap(layer.geometry, viewport, layerCamera(layer.spec, hinted), layer.planner(s.config.planner)), next[i]);
     }
     // The lookahead serves eviction by return time, which only kGpuFirst does.
     if (s.hint_used && s.config.eviction == EvictionMode::kGpuFirst)
       for (Impl::Layer& layer : s.layers)
-        if (layer.active()) layer.lookahead.advance(layer.geometry, viewport, s.config.planner, layer.hint, time_s);
+        if (layer.active()) layer.lookahead.advance(layer.geometry, viewport, layer.planner(s.config.planner), layer.hint, time_s);
   }
 
   // Velocity from the camera history; the predicted camera keeps today's

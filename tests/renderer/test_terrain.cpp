@@ -222,7 +222,7 @@ TEST(Terrain, NoCrackAtRestOrWhileRingsMoveAcrossLevelBorders) {
   TerrainScene s = makeScene(camera);
   ASSERT_TRUE(s.terrain && s.colour && s.target);
   const float lowest = s.field.lowest();
-  size_t frames = 0;
+  size_t frames = 0, culled = 0, drawn = 0;
   // Sub-sample steps across several ring snaps of every level, looking in
   // four directions, low and high.
   for (int step = 0; step < 24; ++step) {
@@ -239,9 +239,14 @@ TEST(Terrain, NoCrackAtRestOrWhileRingsMoveAcrossLevelBorders) {
     const size_t cracks = crackPixels(rgba, camera, lowest, &marked);
     if (cracks > 0) test::dumpPpm("terrain_crack_" + std::to_string(step), marked, kViewport);
     EXPECT_EQ(cracks, 0u) << "step " << step;
+    culled += s.terrain->lastFrame().culled_blocks;
+    drawn += s.terrain->lastFrame().blocks;
     ++frames;
   }
   EXPECT_EQ(frames, 24u);
+  // Blocks behind the camera were culled (with no crack above, none that
+  // could be seen was).
+  EXPECT_GT(culled, drawn / 4) << "drawn " << drawn;
 }
 
 TEST(Terrain, MissingFineHeightTilesCoarsenTheGeometryWithoutHoles) {

@@ -11,6 +11,7 @@
 #include <clipstream/testing/temp_dir.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <atomic>
 #include <cmath>
@@ -337,6 +338,11 @@ TEST(SceneStreamer, PlansEachLayerInItsTexelsAndHandsOffBothLayersTiles) {
   EXPECT_EQ(st.layers[1].ram_bytes, st.layers[1].ram_entries * (32 * 32 * 4 + kCacheEntryOverheadBytes));
   EXPECT_EQ(st.layers[0].ram_bytes, st.layers[0].ram_entries * (128 * 128 * 4 + kCacheEntryOverheadBytes));
   expectCountersAddUp(st);
+  const nlohmann::json j = nlohmann::json::parse(st.toJson());
+  ASSERT_EQ(j["layers"].size(), 2u);
+  EXPECT_EQ(j["layers"][1]["total"]["loads"], st.layers[1].total.loads);
+  EXPECT_EQ(j["layers"][1]["levels"].size(), s.geometry(1).levelCount());
+  EXPECT_EQ(j["layers"][0]["ram_bytes"], st.layers[0].ram_bytes);
 }
 
 TEST(SceneStreamer, OneHardBudgetHoldsForBothLayersTogether) {
@@ -358,7 +364,9 @@ TEST(SceneStreamer, OneHardBudgetHoldsForBothLayersTogether) {
   for (int frame = 0; frame < 60; ++frame) {
     cam.position.x = 1000.0 + 90.0 * frame;
     s.update(cam, vp, frame / 60.0);
-    if (frame % 4 == 0) ASSERT_TRUE(waitIdle(s));
+    if (frame % 4 == 0) {
+      ASSERT_TRUE(waitIdle(s));
+    }
     (void)s.takeReadyAll(16);
   }
   ASSERT_TRUE(waitIdle(s));

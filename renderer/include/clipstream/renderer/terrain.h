@@ -38,6 +38,10 @@ struct TerrainMapping {
 struct TerrainConfig {
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
   TerrainMapping mapping;
+  // The streamer's clip size for the height layer (tiles a side), so that
+  // every tile of a window it hands over has a slot of its own; 0: only
+  // what the rings read.
+  uint32_t clip_tiles = 0;
 };
 
 // What the last draw() drew.
@@ -46,7 +50,8 @@ struct TerrainFrame {
   uint32_t finest_level = 0;   // height level of the innermost ring drawn
   uint32_t coarsest_level = 0; // height level of the outermost ring
   uint64_t triangles = 0;
-  uint32_t culled_rings = 0;   // rings outside the frustum (not drawn)
+  uint32_t blocks = 0;         // ring blocks drawn
+  uint32_t culled_blocks = 0;  // ring blocks outside the frustum (not drawn)
 };
 
 class TerrainRenderer {
@@ -95,6 +100,14 @@ class TerrainRenderer {
   const PyramidGeometry& geometry() const { return m_geometry; }
   const TerrainConfig& config() const { return m_config; }
 
+  // The clip size (tiles a side) a streamer's height layer needs for rings
+  // of `ring_cells`: the n + 3 samples a ring reads (one more each side for
+  // normals) in whole tiles, plus room for the planner's window, which
+  // lies a quarter of its width ahead of the camera and snaps to tiles.
+  static uint32_t windowTiles(uint32_t ring_cells, uint32_t tile_px) {
+    return (ring_cells + 3 + tile_px - 1) / tile_px + 3;
+  }
+
   // Ring origin of `level` for this camera: the level's sample index of the
   // ring's vertex (0, 0), even, so every other vertex is a vertex of the
   // next coarser ring. Pure; exposed for tests.
@@ -110,9 +123,13 @@ class TerrainRenderer {
  private:
   TerrainRenderer() = default;
   void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
+  double farDistance(const Camera& camera) const;
   void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
                        const glm::i64vec2& origin) const;
   bool levelResident(uint32_t level, const glm::i64vec2& origin) const;
+  // Bounds of the heights a ring of `ring_level` reads in level samples
+  // [s0, s1] (inclusive, clamped), from the resident tiles' bounds.
+  glm::vec2 heightBounds(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const;
   uint32_t slotOf(int64_t tile) const;
 
   PyramidGeometry m_geometry;
@@ -124,8 +141,13 @@ class TerrainRenderer {
   uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
   uint32_t m_heights = 0;      // R32F array texture
   // Index buffer ranges: [0] no hole, [1 + hx + 2 hy] hole at (n/4 + hx, n/4 + hy).
-  uint32_t m_first_index[5] = {};
-  uint32_t m_index_count[5] = {};
+  // Each pattern's triangles in kBlocks x kBlocks blocks (by the cell of
+  // their centroid), culled one by one against the frustum.
+  static constexpr uint32_t kBlocks = 4;
+  uint32_t m_first_index[5][kBlocks * kBlocks] = {};
+  uint32_t m_index_count[5][kBlocks * kBlocks] = {};
+  // Height bounds of the tile in each slot (min, max), per level.
+  std::vector<std::vector<glm::vec2>> m_slot_bounds;
   // Which tile each slot holds, per level (x | y << 32, or kNoTile).
   static constexpr uint64_t kNoTile = ~uint64_t(0);
   std::vector<std::vector<uint64_t>> m_slot_tile;

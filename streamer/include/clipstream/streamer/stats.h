@@ -39,7 +39,7 @@ struct StreamerStats {
   // (each layer's own figures are in `layers`).
   std::vector<LevelCounters> levels;
   LevelCounters total;                // every layer
-  std::vector<LayerStats> layers;     // index = layer
+  std::vector<LayerStats> layers;     // index = layer; one for a one-source streamer
   uint64_t ram_bytes = 0;             // current, including accounted overhead
   uint64_t ram_budget_bytes = 0;
   uint64_t ram_peak_bytes = 0;
@@ -48,7 +48,7 @@ struct StreamerStats {
   double decode_ms_total = 0.0;
   double queue_latency_p50_ms = 0.0;
   double queue_latency_p99_ms = 0.0;
-  uint32_t max_texture_lod = 0;      // layer 0's
+  uint32_t max_texture_lod = 0;       // layer 0's
   uint64_t ram_entries = 0;           // decoded tiles (and placeholders) in RAM
   uint64_t entry_overhead_bytes = 0;  // per-entry overhead counted with each payload
   uint64_t path_hint_frames = 0;          // update() calls that used the path hint

@@ -13,7 +13,8 @@
 // resetGpuResidency(), plan() and settled() are for the render thread only
 // and never block on I/O (no source call ever runs on it; nor does
 // PathHint::camera_at run anywhere else). stats(), queuedTiles() and
-// queuedLayerTiles() are thread-safe.
+// queuedLayerTiles() are thread-safe; layerCount(), layer() and geometry()
+// return what the constructor fixed, on any thread.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
@@ -143,6 +144,11 @@ struct StreamLayer {
   LayerRole role = LayerRole::kColour;
   glm::dvec2 texels_per_unit{1.0, 1.0};
   glm::dvec2 origin_texel{0.0, 0.0};
+  // Clip size of this layer's windows (tiles a side); 0: the streamer's
+  // PlannerConfig::clip_tiles. A renderer that reads less than a
+  // viewport's worth of a layer (the terrain's rings read about n samples
+  // per level) asks for less, and the layer costs that much less memory.
+  uint32_t clip_tiles = 0;
 };
 
 // Ok when every layer can be streamed: a source; a finite, positive map;
