@@ -384,6 +384,36 @@ TEST_F(HttpStore, ConnectionsAreKeptAlive) {
   EXPECT_EQ(proxy->connections(), 1u) << "every request on one kept-alive connection";
 }
 
+TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
+  std::unique_ptr<test::DelayProxy> proxy;
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).isOk());
+  // The first connection dies 600 bytes into its answer (the headers and
+  // part of the first 64 KiB): a retry on a new connection completes it.
+  proxy->cutConnections(1, 600);
+  RemoteOptions options;
+  options.connections = 1;
+  options.retry_base_ms = 10;
+  std::unique_ptr<TileStoreReader> local, remote;
+  const Status s = TileStoreReader::open(proxy->url("store.cstore"), options, &remote);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  EXPECT_EQ(remote->remoteStats().retries, 1u);
+  EXPECT_EQ(proxy->connections(), 2u);
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  const TileKey key{0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1};
+  RawTile a, b;
+  ASSERT_TRUE(local->readRaw(key, &a).isOk());
+  ASSERT_TRUE(remote->readRaw(key, &b).isOk());
+  EXPECT_EQ(a.payload, b.payload);
+  // With no retries left, the same cut is a transient failure.
+  proxy->cutConnections(1, 600);
+  options.retries = 0;
+  std::unique_ptr<TileStoreReader> once;
+  const Status cut = TileStoreReader::open(proxy->url("store.cstore"), options, &once);
+  EXPECT_EQ(cut.code, ErrorCode::kUnavailable) << cut.toString();
+  EXPECT_NE(cut.message.find(proxy->url("store.cstore")), std::string::npos) << cut.message;
+}
+
 TEST_F(HttpStore, AbsurdConnectionCountIsRefused) {
   RemoteOptions options;
   options.connections = 0;

@@ -11,6 +11,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
@@ -309,6 +310,14 @@ void DelayProxy::serve(int client_fd) {
     return;
   }
   std::vector<char> buffer(size_t(256) << 10);
+  // A connection chosen to be cut passes this many answer bytes, then closes.
+  uint64_t answer_budget = UINT64_MAX;
+  for (uint64_t left = m_cuts_left.load(); left > 0;) {
+    if (m_cuts_left.compare_exchange_weak(left, left - 1)) {
+      answer_budget = m_cut_after_bytes.load();
+      break;
+    }
+  }
   pollfd fds[2] = {{client_fd, POLLIN, 0}, {upstream_fd, POLLIN, 0}};
   while (!m_stopping.load()) {
     if (::poll(fds, 2, 50) <= 0) continue;
@@ -322,7 +331,10 @@ void DelayProxy::serve(int client_fd) {
     if (fds[1].revents & (POLLIN | POLLHUP | POLLERR)) {
       const ssize_t got = ::recv(upstream_fd, buffer.data(), buffer.size(), 0);
       if (got <= 0) break;
-      if (!writeAll(client_fd, buffer.data(), size_t(got))) break;
+      const size_t pass = size_t(std::min<uint64_t>(uint64_t(got), answer_budget));
+      if (!writeAll(client_fd, buffer.data(), pass)) break;
+      if (answer_budget != UINT64_MAX) answer_budget -= pass;
+      if (answer_budget == 0) break;
     }
   }
   ::close(upstream_fd);

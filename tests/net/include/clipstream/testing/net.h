@@ -91,6 +91,12 @@ class DelayProxy {
   uint16_t port() const { return m_port; }
   std::string url(const std::string& name) const;
   void setDelayMs(double delay_ms) { m_delay_us.store(uint64_t(delay_ms * 1000.0)); }
+  // The next `connections` connections are closed after passing this many
+  // bytes of the server's answers: a server that dies mid-answer.
+  void cutConnections(uint64_t connections, uint64_t after_bytes) {
+    m_cut_after_bytes.store(after_bytes);
+    m_cuts_left.store(connections);
+  }
   uint64_t connections() const { return m_connections.load(); }
 
  private:
@@ -103,6 +109,7 @@ class DelayProxy {
   int m_listen_fd = -1;
   std::atomic<uint64_t> m_delay_us{0};
   std::atomic<uint64_t> m_connections{0};
+  std::atomic<uint64_t> m_cuts_left{0}, m_cut_after_bytes{0};
   std::atomic<bool> m_stopping{false};
   std::thread m_acceptor;
   std::mutex m_mutex;  // guards m_threads
