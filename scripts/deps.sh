@@ -8,6 +8,9 @@ packages=(
   build-essential cmake ninja-build pkg-config
   dpkg-dev file  # the Debian package: dpkg-shlibdeps, and CPack finds ELF files with file
   libopenimageio-dev libzstd-dev libxxhash-dev
+  libcurl4-openssl-dev  # stores read over HTTP(S)
+  nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
+  openssl               # ... and make a certificate for its https:// test
   libcli11-dev nlohmann-json3-dev libglm-dev
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev
@@ -15,7 +18,7 @@ packages=(
   clang libclang-rt-dev
 )
 if [[ "${1:-}" == "--bench" ]]; then
-  packages+=(gdal-bin libvips-tools time)
+  packages+=(gdal-bin python3-gdal libvips-tools time)
 fi
 
 missing=()

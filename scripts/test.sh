@@ -45,12 +45,12 @@ dpkg-deb --contents build/clipstream_*.deb
 rm -rf "$prefix"
 trap - EXIT
 
-echo "== ThreadSanitizer build of the store and streamer tests =="
+echo "== ThreadSanitizer build of the store, streamer and HTTP tests =="
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=thread -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-tsan -j "$jobs" --target test_store test_streamer
+cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
-  ctest --test-dir build-tsan -L 'store|streamer' --output-on-failure -j "$jobs" --timeout 900
+  ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
 
 # Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
 # Mesa's driver mapped until the check, tests/lsan.supp names the

@@ -43,6 +43,13 @@ class ThreadWatchSource final : public TileSource {
     return m_inner->fetchWithInfo(key, rgba, info);
   }
   std::string describe() const override { return m_inner->describe(); }
+  unsigned suggestedLoaderThreads() const override { return m_inner->suggestedLoaderThreads(); }
+  size_t maxBatch() const override { return m_inner->maxBatch(); }
+  void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                  std::span<Status> statuses, std::span<FetchInfo> infos) override {
+    note();
+    m_inner->fetchBatch(keys, rgba, statuses, infos);
+  }
   void arm(bool on) { m_armed.store(on); }
   uint64_t renderThreadFetches() const { return m_count.load(); }
 

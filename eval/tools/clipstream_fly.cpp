@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
   std::string size = "1280x720", buffering = bufferingName(o.buffering);
   const auto frames = cli::wholeInRange(1, kMaxFlyFrames);
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
-  app.add_option("store", o.store_path, "Tile store file (omit with --procedural)");
+  app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom, valley) or JSON file");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
       ->transform(frames);
@@ -30,8 +30,12 @@ int main(int argc, char** argv) {
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", o.upload_tiles, "GPU tile uploads per frame")
       ->transform(cli::wholeInRange(1, 1000000));
-  app.add_option("--io-threads", o.io_threads, "Loader threads (0 = cores)")
+  app.add_option("--io-threads", o.io_threads,
+                 "Loader threads (0 = cores; for a URL store, one per HTTP connection)")
       ->transform(cli::wholeInRange(0, kMaxIoThreads));
+  app.add_option("--http-connections", o.http_connections,
+                 "Requests in flight to a store given as a URL (kept-alive connections)")
+      ->transform(cli::wholeInRange(1, kMaxRemoteConnections));
   app.add_option("--out", o.out_dir,
                  "Output directory (holds one run: an earlier run's frames and statistics there are "
                  "removed first)");

@@ -53,23 +53,23 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
 Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
                         const std::string& elevation_path, double vertical_scale, bool stretch,
                         uint32_t ring_cells, TerrainLayerConfig* out,
-                        std::vector<std::string>* warnings) {
+                        std::vector<std::string>* warnings, const RemoteOptions& remote) {
   *out = TerrainLayerConfig{};
   Status s;
-  out->source = openElevationSource(elevation_path, &s);
+  out->source = openElevationSource(elevation_path, remote, &s);
   if (!out->source) return s;
   out->ring_cells = ring_cells;
   StoreInfo colour;
   colour.geometry = colour_geometry;
   if (!colour_path.empty()) {
     std::unique_ptr<TileStoreReader> reader;
-    if (s = TileStoreReader::open(colour_path, &reader); !s) return s;
+    if (s = TileStoreReader::open(colour_path, remote, &reader); !s) return s;
     colour = reader->info();
   }
   StoreInfo heights;
   {
     std::unique_ptr<TileStoreReader> reader;
-    if (s = TileStoreReader::open(elevation_path, &reader); !s) return s;
+    if (s = TileStoreReader::open(elevation_path, remote, &reader); !s) return s;
     heights = reader->info();
   }
   if (s = alignElevation(colour, heights, vertical_scale, stretch, &out->alignment); !s) {

@@ -47,7 +47,11 @@ int main(int argc, char** argv) {
   bool stretch_elevation = false;
   uint64_t procedural_px = 0, cache_mb = 512;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
-  app.add_option("store", store_path, "Tile store file (omit with --procedural)");
+  app.add_option("store", store_path, "Tile store file or http(s):// URL (omit with --procedural)");
+  unsigned http_connections = RemoteOptions{}.connections;
+  app.add_option("--http-connections", http_connections,
+                 "Requests in flight to a store given as a URL (kept-alive connections)")
+      ->transform(cli::wholeInRange(1, kMaxRemoteConnections));
   app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--size", size, "Window WIDTHxHEIGHT");
@@ -72,7 +76,7 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {
     std::error_code ec;
-    if (!store_path.empty() &&
+    if (!store_path.empty() && !isStoreUrl(store_path) &&
         (sameFile(store_path, record_path) || std::filesystem::weakly_canonical(store_path, ec) ==
                                                    std::filesystem::weakly_canonical(record_path, ec)))
       return cli::usageError(app, "--record-out " + record_path + " is the store being viewed");
@@ -91,7 +95,9 @@ int main(int argc, char** argv) {
     source = makeProceduralSource(spec);
   } else if (!store_path.empty()) {
     Status s;
-    source = openStoreSource(store_path, &s);
+    RemoteOptions remote;
+    remote.connections = http_connections;
+    source = openStoreSource(store_path, remote, &s);
     if (!source) {
       cli::printError(app, s.toString());
       return 1;
@@ -105,9 +111,11 @@ int main(int argc, char** argv) {
   if (!elevation_path.empty()) {
     TerrainLayerConfig layer;
     std::vector<std::string> notes;
+    RemoteOptions remote;
+    remote.connections = http_connections;
     if (Status s = openTerrainLayer(procedural_px > 0 ? std::string() : store_path, g, elevation_path,
                                     vertical_scale, stretch_elevation,
-                                    renderer_config::kTerrainRingCells, &layer, &notes);
+                                    renderer_config::kTerrainRingCells, &layer, &notes, remote);
         !s) {
       cli::printError(app, s.toString());
       return 1;

@@ -1,14 +1,10 @@
 // TileStoreReader: validates header, level table, page directories and
 // metadata at open; index pages are read on first use, outside any lock,
 // and published with a compare-and-swap (a racing loser frees its copy).
-#include "file_io.h"
+#include "byte_source.h"
 #include "format.h"
 
 #include <clipstream/store/tile_store.h>
-
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -50,7 +46,8 @@ bool valueFits(uint64_t value, size_t bpp) { return bpp >= 8 || (value >> (8 * b
 
 struct TileStoreReader::Impl {
   std::string path;
-  int fd = -1;
+  RemoteOptions remote;
+  std::unique_ptr<ByteSource> source;
   StoreInfo info;
   uint64_t pages_begin = 0;  // index pages region [pages_begin, pages_end)
   uint64_t pages_end = 0;
@@ -65,12 +62,11 @@ struct TileStoreReader::Impl {
       if (!level.pages) continue;
       for (size_t i = 0; i < level.directory.size(); ++i) delete level.pages[i].load();
     }
-    if (fd >= 0) ::close(fd);
   }
 
   Status read(void* data, size_t bytes, uint64_t offset) const {
     bytes_read.fetch_add(bytes, std::memory_order_relaxed);
-    return fileio::preadAll(fd, data, bytes, offset, path);
+    return source->read(data, bytes, offset);
   }
 
   Status bad(ErrorCode code, const std::string& what) const {
@@ -93,29 +89,12 @@ struct TileStoreReader::Impl {
 };
 
 Status TileStoreReader::Impl::openImpl() {
-  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a
-  // writer forever; the regular-file check below comes before any read.
-  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
-  if (fd < 0) {
-    const int err = errno;
-    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
-                         "cannot open " + path + ": " + fileio::errnoText(err));
-  }
-  struct stat file_stat {};
-  if (::fstat(fd, &file_stat) != 0) {
-    return bad(ErrorCode::kIo, std::string("fstat: ") + fileio::errnoText(errno));
-  }
-  if (S_ISDIR(file_stat.st_mode)) return bad(ErrorCode::kIo, "is a directory, not a tile store");
-  if (!S_ISREG(file_stat.st_mode)) {
-    return bad(ErrorCode::kIo, std::string(S_ISFIFO(file_stat.st_mode)   ? "is a FIFO"
-                                           : S_ISCHR(file_stat.st_mode) ? "is a character device"
-                                           : S_ISBLK(file_stat.st_mode) ? "is a block device"
-                                           : S_ISSOCK(file_stat.st_mode) ? "is a socket"
-                                                                          : "is not a regular file") +
-                                   ", not a tile store (only regular files are read)");
-  }
-  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-  const uint64_t actual_bytes = static_cast<uint64_t>(file_stat.st_size);
+  // A local regular file, or a URL read by HTTP range requests.
+  Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source)
+                                   : openFileSource(path, &source);
+  if (!opened) return opened;
+  path = displayStorePath(path);  // from here on `path` only names the store in messages
+  const uint64_t actual_bytes = source->size();
 
   // Header.
   uint8_t header_bytes[format::kHeaderBytes];
@@ -242,6 +221,8 @@ Status TileStoreReader::Impl::openImpl() {
       metadata_bytes > format::metadataBytes(format::kMaxCrsBytes, elevation)) {
     return bad(ErrorCode::kBadHeader, "metadata block size out of range");
   }
+  // Level table and metadata lie back to back at the end: one read remotely.
+  source->prefetch(table_offset, file_bytes - table_offset);
 
   // Level table (its size was checked against the level count above).
   std::vector<format::LevelEntry> table;
@@ -294,6 +275,7 @@ Status TileStoreReader::Impl::openImpl() {
   pages_begin = index_offset;
   pages_end = index_offset + index_bytes - directories_bytes;
   uint64_t directory_offset = pages_end;
+  source->prefetch(pages_end, table_offset - pages_end);  // every page directory
   for (uint32_t l = 0; l < level_count; ++l) {
     LevelRead& level = levels[l];
     const uint64_t bytes = table[l].directory_bytes;
@@ -509,14 +491,80 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
   return Status::ok();
 }
 
+void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawTile> out,
+                                   std::span<Status> statuses) const {
+  const Impl& impl = *m_impl;
+  const size_t n = std::min({keys.size(), out.size(), statuses.size()});
+  // Locate everything; payloads to read, in file order.
+  std::vector<size_t> order;
+  for (size_t i = 0; i < n; ++i) {
+    out[i].key = keys[i];
+    out[i].payload.clear();
+    statuses[i] = impl.locate(keys[i], &out[i].location);
+    if (statuses[i] && !out[i].location.constant) order.push_back(i);
+  }
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return out[a].location.offset < out[b].location.offset;
+  });
+  std::vector<uint8_t> buffer;
+  for (size_t first = 0; first < order.size();) {
+    // Grow the run while the next payload starts close to this one's end.
+    const uint64_t begin = out[order[first]].location.offset;
+    uint64_t end = begin + out[order[first]].location.stored_bytes;
+    size_t last = first + 1;
+    while (last < order.size()) {
+      const TileLocation& next = out[order[last]].location;
+      const uint64_t next_end = std::max(end, next.offset + next.stored_bytes);
+      if (next.offset > end + impl.remote.coalesce_gap_bytes ||
+          next_end - begin > impl.remote.coalesce_max_bytes)
+        break;
+      end = next_end;
+      ++last;
+    }
+    if (last == first + 1) {
+      const size_t i = order[first];
+      statuses[i] = impl.readPayload(keys[i], &out[i]);
+      first = last;
+      continue;
+    }
+    buffer.resize(static_cast<size_t>(end - begin));
+    const Status status = impl.read(buffer.data(), buffer.size(), begin);
+    for (size_t k = first; k < last; ++k) {
+      const size_t i = order[k];
+      if (!status) {
+        statuses[i] = Status::error(status.code, format::keyText(keys[i]) + ": " + status.message);
+        continue;
+      }
+      const TileLocation& location = out[i].location;
+      const uint8_t* payload = buffer.data() + (location.offset - begin);
+      out[i].payload.assign(payload, payload + location.stored_bytes);
+      if (format::tileChecksum(out[i].payload.data(), out[i].payload.size()) != location.checksum) {
+        statuses[i] = Status::error(ErrorCode::kCorruptTile,
+                                    format::keyText(keys[i]) + ": payload checksum mismatch");
+      }
+    }
+    first = last;
+  }
+}
+
+unsigned TileStoreReader::suggestedBatchTiles() const {
+  return isStoreUrl(m_impl->path) ? std::max(1u, m_impl->remote.batch_tiles) : 1u;
+}
+
 TileStoreReader::TileStoreReader() : m_impl(std::make_unique<Impl>()) {}
 TileStoreReader::~TileStoreReader() = default;
 
 Status TileStoreReader::open(const std::string& path, std::unique_ptr<TileStoreReader>* out) {
+  return open(path, RemoteOptions{}, out);
+}
+
+Status TileStoreReader::open(const std::string& path, const RemoteOptions& remote,
+                             std::unique_ptr<TileStoreReader>* out) {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
   out->reset();
   std::unique_ptr<TileStoreReader> reader(new TileStoreReader());
   reader->m_impl->path = path;
+  reader->m_impl->remote = remote;
   Status status = reader->m_impl->openImpl();
   if (!status) return status;
   *out = std::move(reader);
@@ -532,6 +580,12 @@ uint64_t TileStoreReader::bytesRead() const {
 uint64_t TileStoreReader::indexPagesLoaded() const {
   return m_impl->pages_loaded.load(std::memory_order_relaxed);
 }
+
+unsigned TileStoreReader::suggestedReadThreads() const {
+  return m_impl->source->suggestedReadThreads();
+}
+
+RemoteStats TileStoreReader::remoteStats() const { return m_impl->source->remoteStats(); }
 
 Status TileStoreReader::locate(const TileKey& key, TileLocation* out) const {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");

@@ -203,7 +203,7 @@ int main(int argc, char** argv) {
   bool verify = false;
   bool json = false;
   unsigned threads = 0;
-  app.add_option("STORE", path, "tile store file")->required();
+  app.add_option("STORE", path, "tile store file or http(s):// URL")->required();
   app.add_flag("--verify", verify, "read, check and decode every tile");
   app.add_flag("--json", json, "print JSON on stdout instead of text");
   app.add_option("--threads", threads, "verification threads (0 = all cores)")

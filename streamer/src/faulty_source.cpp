@@ -34,6 +34,7 @@ class FaultySource final : public TileSource {
   }
 
   std::string describe() const override { return "faulty:" + m_inner->describe(); }
+  unsigned suggestedLoaderThreads() const override { return m_inner->suggestedLoaderThreads(); }
 
  private:
   std::shared_ptr<TileSource> m_inner;

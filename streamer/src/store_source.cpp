@@ -44,7 +44,31 @@ class StoreSource final : public TileSource {
     return status;
   }
 
+  size_t maxBatch() const override { return m_reader->suggestedBatchTiles(); }
+
+  void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                  std::span<Status> statuses, std::span<FetchInfo> infos) override {
+    const PyramidGeometry& geo = m_reader->geometry();
+    thread_local std::vector<RawTile> raws;
+    raws.resize(keys.size());
+    // Neighbours in the file come in one read (one range request remotely).
+    m_reader->readRawBatch(keys, raws, statuses);
+    for (size_t i = 0; i < keys.size(); ++i) {
+      infos[i] = {};
+      if (!statuses[i]) continue;
+      infos[i].bytes_read = raws[i].payload.size();
+      const auto start = std::chrono::steady_clock::now();
+      rgba[i]->resize(size_t(geo.tile_px) * geo.tile_px * 4);
+      statuses[i] = decodeTileRgba8(geo, m_reader->info().encoding, raws[i],
+                                    std::span<uint8_t>(*rgba[i]));
+      infos[i].decode_ms = std::chrono::duration<double, std::milli>(
+                               std::chrono::steady_clock::now() - start)
+                               .count();
+    }
+  }
+
   std::string describe() const override { return "store:" + m_path; }
+  unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;
@@ -92,6 +116,7 @@ class ElevationStoreSource final : public TileSource {
   }
 
   std::string describe() const override { return "elevation:" + m_path; }
+  unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;
@@ -156,31 +181,42 @@ Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t*
 }
 
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status) {
+  return openStoreSource(path, RemoteOptions{}, status);
+}
+
+std::shared_ptr<TileSource> openStoreSource(const std::string& path, const RemoteOptions& remote,
+                                            Status* status) {
   std::unique_ptr<TileStoreReader> reader;
-  *status = TileStoreReader::open(path, &reader);
+  *status = TileStoreReader::open(path, remote, &reader);
   if (!*status) return nullptr;
   if (reader->info().elevation.present) {
     *status = Status::error(ErrorCode::kUnsupported,
-                            path + " is an elevation store (heights), not a colour image: give it "
-                                   "as the scene's elevation layer (--elevation)");
+                            displayStorePath(path) +
+                                " is an elevation store (heights), not a colour image: give it "
+                                "as the scene's elevation layer (--elevation)");
     return nullptr;
   }
-  return std::make_shared<StoreSource>(std::move(reader), path);
+  return std::make_shared<StoreSource>(std::move(reader), displayStorePath(path));
 }
 
 std::shared_ptr<TileSource> openElevationSource(const std::string& path, Status* status) {
+  return openElevationSource(path, RemoteOptions{}, status);
+}
+
+std::shared_ptr<TileSource> openElevationSource(const std::string& path,
+                                                const RemoteOptions& remote, Status* status) {
   std::unique_ptr<TileStoreReader> reader;
-  *status = TileStoreReader::open(path, &reader);
+  *status = TileStoreReader::open(path, remote, &reader);
   if (!*status) return nullptr;
   if (!reader->info().elevation.present || !isHeightFormat(reader->geometry().format)) {
     *status = Status::error(ErrorCode::kUnsupported,
-                            path + " is a colour store (" +
+                            displayStorePath(path) + " is a colour store (" +
                                 pixelFormatName(reader->geometry().format) +
                                 "), not an elevation store: tile a DEM (clipstream-tile DEM.tif "
                                 "dem.cstore) for the scene's elevation layer");
     return nullptr;
   }
-  return std::make_shared<ElevationStoreSource>(std::move(reader), path);
+  return std::make_shared<ElevationStoreSource>(std::move(reader), displayStorePath(path));
 }
 
 }  // namespace clipstream

@@ -46,6 +46,12 @@ constexpr uint32_t kMaxLoggedFailures = 16;
 // Back-off for transient (kUnavailable) failures: 0.5 s doubling to 30 s.
 constexpr double kRetryBaseS = 0.5;
 constexpr double kRetryMaxS = 30.0;
+// Batches for sources that read neighbours together (TileSource::maxBatch):
+// at most this many tiles, found among this many requests at the queue's
+// front (a bounded scan under the lock; deeper requests rank too low to be
+// worth pulling forward).
+constexpr size_t kMaxBatchTiles = 64;
+constexpr size_t kBatchScanRequests = 256;
 // Camera history used to estimate velocity for the prefetch.
 constexpr double kHistoryS = 0.5;
 constexpr double kMinHistoryS = 0.05;
@@ -280,6 +286,7 @@ struct Streamer::Impl {
     return scoredOnGpu(t.key, layers[t.layer].windows, config.eviction);
   }
   void workerLoop();
+  bool admit(const Request& request, bool neighbour, bool* reread, bool* no_room);
   bool reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes);
   void buildVictimLists();
   std::vector<LayerTile> rankScene() const;
@@ -375,77 +382,148 @@ bool Streamer::Impl::reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes
   return true;
 }
 
+// Takes a popped request for loading: counts its wait, cancels it if
+// another path loaded it, reserves room and inserts its placeholder.
+// Returns false when there is nothing to read. A neighbour (taken along
+// with another request) that does not fit the budget is left in the queue
+// instead: *no_room tells the caller to stop taking neighbours. Caller
+// holds the mutex.
+bool Streamer::Impl::admit(const Request& request, bool neighbour, bool* reread, bool* no_room) {
+  const LayerTile key = request.key;
+  Layer& layer = layers[key.layer];
+  LevelCounters& level_counters = layer.counters[key.key.level];
+  if (neighbour && cache.count(key) == 0 && ram_bytes + layer.entry_bytes > config.ram_budget_bytes) {
+    *no_room = true;  // eviction is the popped request's business, not a neighbour's
+    return false;
+  }
+  const double waited_ms =
+      std::chrono::duration<double, std::milli>(Clock::now() - request.queued_at).count();
+  if (latency_ms.size() < kLatencySamples) {
+    latency_ms.push_back(waited_ms);
+  } else {
+    latency_ms[latency_next] = waited_ms;
+    latency_next = (latency_next + 1) % kLatencySamples;
+  }
+  if (cache.count(key) != 0) {
+    // Queued before another path loaded it; nothing to read.
+    level_counters.cancellations++;
+    return false;
+  }
+  if (!reserveRoom(request.rank, layer.entry_bytes)) {
+    level_counters.budget_skips++;
+    return false;
+  }
+  // Placeholder first so nobody reads this tile twice, then read unlocked.
+  cache.emplace(key, CacheEntry{});
+  ram_bytes += layer.entry_bytes;
+  layer.ram_bytes += layer.entry_bytes;
+  layer.ram_entries++;
+  ram_peak = std::max(ram_peak, ram_bytes);
+  if (config.on_ram_insert) config.on_ram_insert(ram_bytes, config.ram_budget_bytes);
+  in_flight++;
+  *reread = !ever_read.insert(key).second;
+  return true;
+}
+
 void Streamer::Impl::workerLoop() {
+  std::vector<LayerTile> tiles;
+  std::vector<TileKey> keys;
+  std::vector<bool> rereads;
+  std::vector<std::shared_ptr<std::vector<uint8_t>>> pixels;
+  std::vector<std::vector<uint8_t>*> outs;
+  std::vector<Status> statuses;
+  std::vector<FetchInfo> infos;
+  std::vector<size_t> taken;
   std::unique_lock<std::mutex> lock(mutex);
   for (;;) {
     work_cv.wait(lock, [&] { return stopping || !queue.empty(); });
     if (stopping) return;
     const Request request = queue.front();
     queue.pop_front();
-    const LayerTile key = request.key;
-    Layer& layer = layers[key.layer];
-    LevelCounters& level_counters = layer.counters[key.key.level];
-    const double waited_ms =
-        std::chrono::duration<double, std::milli>(Clock::now() - request.queued_at).count();
-    if (latency_ms.size() < kLatencySamples) {
-      latency_ms.push_back(waited_ms);
-    } else {
-      latency_ms[latency_next] = waited_ms;
-      latency_next = (latency_next + 1) % kLatencySamples;
+    tiles.clear();
+    rereads.clear();
+    bool reread = false, no_room = false;
+    if (!admit(request, false, &reread, &no_room)) continue;
+    tiles.push_back(request.key);
+    rereads.push_back(reread);
+    Layer& layer = layers[request.key.layer];
+    // A source that reads neighbours in one request (a store over HTTP)
+    // gets up to max_batch queued tiles of the popped tile's layer, level
+    // and row: the tiles most likely to lie next to it in the file (the
+    // tiler writes rows in order). Only the front of the queue is searched,
+    // so the batch stays among the best-ranked tiles and the scan is bounded.
+    const size_t max_batch = std::clamp<size_t>(layer.spec.source->maxBatch(), 1, kMaxBatchTiles);
+    if (max_batch > 1) {
+      taken.clear();
+      const TileKey& first = request.key.key;
+      const size_t scan = std::min(queue.size(), kBatchScanRequests);
+      for (size_t i = 0; i < scan && tiles.size() < max_batch && !no_room; ++i) {
+        const LayerTile& t = queue[i].key;
+        if (t.layer != request.key.layer || t.key.level != first.level || t.key.y != first.y ||
+            std::abs(int64_t(t.key.x) - int64_t(first.x)) >= int64_t(max_batch))
+          continue;
+        if (admit(queue[i], true, &reread, &no_room)) {
+          tiles.push_back(t);
+          rereads.push_back(reread);
+        }
+        if (!no_room) taken.push_back(i);
+      }
+      for (size_t j = taken.size(); j-- > 0;) queue.erase(queue.begin() + std::ptrdiff_t(taken[j]));
     }
-    if (cache.count(key) != 0) {
-      // Queued before another path loaded it; nothing to read.
-      level_counters.cancellations++;
-      continue;
-    }
-    if (!reserveRoom(request.rank, layer.entry_bytes)) {
-      level_counters.budget_skips++;
-      continue;
-    }
-    // Placeholder first so nobody reads this tile twice, then read unlocked.
-    cache.emplace(key, CacheEntry{});
-    ram_bytes += layer.entry_bytes;
-    layer.ram_bytes += layer.entry_bytes;
-    layer.ram_entries++;
-    ram_peak = std::max(ram_peak, ram_bytes);
-    if (config.on_ram_insert) config.on_ram_insert(ram_bytes, config.ram_budget_bytes);
-    in_flight++;
-    const bool reread = !ever_read.insert(key).second;
     lock.unlock();
 
-    auto pixels = std::make_shared<std::vector<uint8_t>>();
-    FetchInfo info;
-    const Status status = layer.spec.source->fetchWithInfo(key.key, pixels.get(), &info);
-    const bool good = status.isOk() && pixels->size() == layer.tile_bytes;
+    const size_t n = tiles.size();
+    keys.resize(n);
+    pixels.resize(n);
+    outs.resize(n);
+    statuses.assign(n, Status::ok());
+    infos.assign(n, FetchInfo{});
+    for (size_t i = 0; i < n; ++i) {
+      keys[i] = tiles[i].key;
+      pixels[i] = std::make_shared<std::vector<uint8_t>>();
+      outs[i] = pixels[i].get();
+    }
+    if (n == 1) {
+      statuses[0] = layer.spec.source->fetchWithInfo(keys[0], outs[0], &infos[0]);
+    } else {
+      layer.spec.source->fetchBatch(keys, outs, statuses, infos);
+    }
 
     lock.lock();
-    in_flight--;
-    level_counters.bytes_read += info.bytes_read;
-    decode_ms_total += info.decode_ms;
-    if (reread) level_counters.redundant_reads++;
-    auto it = cache.find(key);
-    if (good) {
-      level_counters.loads++;
-      it->second.state = EntryState::kReady;
-      it->second.rgba = std::move(pixels);
-      it->second.last_wanted_frame = shared_frame;
-    } else {
-      ram_bytes -= layer.entry_bytes;
-      layer.ram_bytes -= layer.entry_bytes;
-      layer.ram_entries--;
-      cache.erase(it);
-      level_counters.failures++;
-      FailedTile& f = failed[key];
-      f.code = status.isOk() ? ErrorCode::kCorruptTile : status.code;
-      f.count++;
-      f.retry_at_s = shared_now_s + std::min(kRetryMaxS, kRetryBaseS * double(1u << std::min(f.count, 16u)));
-      if (f.count == 1 && logged_failures < kMaxLoggedFailures) {
-        logged_failures++;
-        const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
-        std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
-                     layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y,
-                     why.c_str(),
-                     logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
+    for (size_t i = 0; i < n; ++i) {
+      const LayerTile key = tiles[i];
+      const Status& status = statuses[i];
+      const FetchInfo& info = infos[i];
+      const bool good = status.isOk() && pixels[i]->size() == layer.tile_bytes;
+      LevelCounters& level_counters = layer.counters[key.key.level];
+      in_flight--;
+      level_counters.bytes_read += info.bytes_read;
+      decode_ms_total += info.decode_ms;
+      if (rereads[i]) level_counters.redundant_reads++;
+      auto it = cache.find(key);
+      if (good) {
+        level_counters.loads++;
+        it->second.state = EntryState::kReady;
+        it->second.rgba = std::move(pixels[i]);
+        it->second.last_wanted_frame = shared_frame;
+      } else {
+        ram_bytes -= layer.entry_bytes;
+        layer.ram_bytes -= layer.entry_bytes;
+        layer.ram_entries--;
+        cache.erase(it);
+        level_counters.failures++;
+        FailedTile& f = failed[key];
+        f.code = status.isOk() ? ErrorCode::kCorruptTile : status.code;
+        f.count++;
+        f.retry_at_s = shared_now_s + std::min(kRetryMaxS, kRetryBaseS * double(1u << std::min(f.count, 16u)));
+        if (f.count == 1 && logged_failures < kMaxLoggedFailures) {
+          logged_failures++;
+          const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
+          std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
+                       layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y,
+                       why.c_str(),
+                       logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
+        }
       }
     }
   }
@@ -742,7 +820,14 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     }
   }
   if (!s.any_active) return;  // nothing to load; update() plans nothing
-  unsigned threads = config.io_threads ? config.io_threads : std::thread::hardware_concurrency();
+  // Unless told, one loader per core, or what the sources ask for (a store
+  // over HTTP: one per connection, each waiting out its round trips).
+  unsigned suggested = 0;
+  for (const Impl::Layer& layer : s.layers)
+    if (layer.spec.source) suggested = std::max(suggested, layer.spec.source->suggestedLoaderThreads());
+  unsigned threads = config.io_threads ? config.io_threads
+                     : suggested        ? suggested
+                                        : std::thread::hardware_concurrency();
   threads = std::clamp(threads, 1u, kMaxIoThreads);
   for (unsigned i = 0; i < threads; ++i) {
     try {

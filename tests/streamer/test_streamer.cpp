@@ -483,3 +483,98 @@ TEST(Streamer, AnAbsurdLoaderCountIsCappedNotFatal) {
 
 }  // namespace
 }  // namespace clipstream
+
+namespace clipstream {
+namespace {
+
+// A source that asks for batches (as a store over HTTP does) and records
+// each batch it is given.
+class BatchingSource final : public TileSource {
+ public:
+  BatchingSource(std::shared_ptr<TileSource> inner, size_t max_batch)
+      : m_inner(std::move(inner)), m_max_batch(max_batch) {}
+  const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    record({key});
+    return m_inner->fetch(key, rgba);
+  }
+  size_t maxBatch() const override { return m_max_batch; }
+  void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                  std::span<Status> statuses, std::span<FetchInfo> infos) override {
+    record(std::vector<TileKey>(keys.begin(), keys.end()));
+    for (size_t i = 0; i < keys.size(); ++i) {
+      infos[i] = {};
+      statuses[i] = m_inner->fetch(keys[i], rgba[i]);
+    }
+  }
+  std::string describe() const override { return "batching"; }
+  std::vector<std::vector<TileKey>> batches() const {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    return m_batches;
+  }
+
+ private:
+  void record(std::vector<TileKey> batch) {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_batches.push_back(std::move(batch));
+  }
+  std::shared_ptr<TileSource> m_inner;
+  size_t m_max_batch;
+  mutable std::mutex m_mutex;  // guards m_batches
+  std::vector<std::vector<TileKey>> m_batches;
+};
+
+TEST(Streamer, BatchesHoldNeighboursOfOneLevelAndRowAndEveryTileIsReadOnce) {
+  constexpr size_t kMaxBatch = 6;
+  auto source = std::make_shared<BatchingSource>(procedural(8192), kMaxBatch);
+  Streamer s(source, baseConfig(3, 8));
+  const Viewport vp{800, 600};
+  Camera cam = lookingDown(4000.0, 4000.0, 60.0);
+  cam.pitch_rad = -1.0;
+  s.update(cam, vp, 0.0);
+  ASSERT_TRUE(waitIdle(s));
+  const std::vector<TileKey> ranked = rankPlanTiles(s.geometry(), s.plan());
+  KeySet read;
+  size_t multi = 0;
+  for (const std::vector<TileKey>& batch : source->batches()) {
+    ASSERT_FALSE(batch.empty());
+    ASSERT_LE(batch.size(), kMaxBatch);
+    if (batch.size() > 1) ++multi;
+    for (const TileKey& key : batch) {
+      EXPECT_EQ(key.level, batch[0].level);
+      EXPECT_EQ(key.y, batch[0].y);
+      EXPECT_LT(std::abs(int64_t(key.x) - int64_t(batch[0].x)), int64_t(kMaxBatch));
+      EXPECT_TRUE(read.insert(key).second) << "tile read twice";
+    }
+  }
+  EXPECT_EQ(read.size(), ranked.size());
+  for (const TileKey& key : ranked) EXPECT_EQ(read.count(key), 1u);
+  EXPECT_GT(multi, 0u) << "no batch of more than one tile";
+  const StreamerStats st = s.stats();
+  EXPECT_EQ(st.total.loads, ranked.size());
+  expectCountersAddUp(st);
+}
+
+TEST(Streamer, BatchNeighboursNeverPushTheRamBudget) {
+  auto source = std::make_shared<BatchingSource>(procedural(8192), 16);
+  StreamerConfig cfg = baseConfig(4, 8);
+  cfg.ram_budget_bytes = 40 * (128 * 128 * 4 + 4096);  // a few dozen tiles
+  uint64_t worst = 0;
+  cfg.on_ram_insert = [&](uint64_t bytes, uint64_t) { worst = std::max(worst, bytes); };
+  Streamer s(source, cfg);
+  const Viewport vp{800, 600};
+  Camera cam = lookingDown(4000.0, 4000.0, 60.0);
+  cam.pitch_rad = -1.0;
+  for (int i = 0; i < 40; ++i) {
+    cam.position.x += 300.0;
+    s.update(cam, vp, i * 0.1);
+    s.takeReady(1000);
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_TRUE(waitIdle(s));
+  EXPECT_LE(worst, cfg.ram_budget_bytes);
+  expectCountersAddUp(s.stats());
+}
+
+}  // namespace
+}  // namespace clipstream

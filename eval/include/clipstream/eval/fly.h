@@ -25,7 +25,7 @@ inline constexpr double kMaxFlyDelayMs = 10000.0;   // fault latency per read, r
 inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up frames
 
 struct FlyOptions {
-  std::string store_path;          // tile store; empty when procedural_px > 0
+  std::string store_path;          // tile store file or http(s) URL; empty when procedural_px > 0
   uint64_t procedural_px = 0;      // > 0: procedural texture of this side instead
   std::string path = "orbit";      // built-in name or JSON file
   uint32_t frames = 0;             // 0 = the whole path at `speed`
@@ -33,7 +33,8 @@ struct FlyOptions {
   double speed = 1.0;              // path seconds per simulated second
   uint64_t cache_mb = 256;         // streamer RAM budget
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // GPU uploads per frame
-  unsigned io_threads = 0;         // 0 = cores
+  unsigned io_threads = 0;         // 0 = cores (a URL store: one per HTTP connection)
+  unsigned http_connections = RemoteOptions{}.connections;  // requests in flight to a URL store
   std::string out_dir = "fly-out";
   uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
   Buffering buffering = Buffering::kDoubleUploadTwice;

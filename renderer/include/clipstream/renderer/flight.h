@@ -26,6 +26,7 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/renderer/terrain.h>
+#include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
@@ -73,11 +74,12 @@ struct TerrainLayerConfig {
 // colour layer (alignElevation(); `colour_path` empty: a colour layer of
 // `colour_geometry` without georeference, e.g. a procedural texture).
 // What the user should know (stretching, assumed units) goes to *warnings.
-// Errors name the elevation store.
+// Errors name the elevation store. Either path may be an http(s) URL, read
+// with `remote`'s settings.
 Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
                         const std::string& elevation_path, double vertical_scale, bool stretch,
                         uint32_t ring_cells, TerrainLayerConfig* out,
-                        std::vector<std::string>* warnings);
+                        std::vector<std::string>* warnings, const RemoteOptions& remote = {});
 
 struct FlightConfig {
   Viewport viewport{1280, 720};

@@ -4,6 +4,7 @@
 // docs/tile-store.md.
 #pragma once
 
+#include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 
 #include <atomic>
@@ -103,12 +104,19 @@ struct LevelStats {
 // small per-level page directories; index pages are read on first use.
 //
 // Thread-safe: all const methods may be called from any number of threads at
-// once. Tile reads are positional (pread) and take no lock around I/O.
+// once. Tile reads are positional (pread, or HTTP range requests for a URL)
+// and take no lock around I/O.
 class TileStoreReader {
  public:
   // Opens and validates header, level table and page directories. On
   // failure *out is left empty and the Status names the problem.
   static Status open(const std::string& path, std::unique_ptr<TileStoreReader>* out);
+  // The same for a path that may be an http:// or https:// URL
+  // (isStoreUrl()), read by range requests with `remote`'s settings; the
+  // first overload uses RemoteOptions{}. A store replaced on the server
+  // after open makes every later read fail (kIo, "changed on the server").
+  static Status open(const std::string& path, const RemoteOptions& remote,
+                     std::unique_ptr<TileStoreReader>* out);
   ~TileStoreReader();
   TileStoreReader(const TileStoreReader&) = delete;
   TileStoreReader& operator=(const TileStoreReader&) = delete;
@@ -128,6 +136,18 @@ class TileStoreReader {
   // any thread. kCorruptTile if the payload does not decode to that size.
   Status decode(const RawTile& raw, std::span<uint8_t> pixels) const;
 
+  // readRaw() for several tiles: out[i] and statuses[i] for keys[i] (the
+  // spans are of equal size). Payloads lying close together in the file are
+  // read with one read (RemoteOptions: coalesce_gap_bytes apart at most,
+  // coalesce_max_bytes per read); a failed read fails each of its tiles.
+  // Every payload is verified against its own checksum.
+  void readRawBatch(std::span<const TileKey> keys, std::span<RawTile> out,
+                    std::span<Status> statuses) const;
+  // Tiles worth asking readRawBatch() for at once: RemoteOptions::
+  // batch_tiles for a URL, 1 for a local file (a local read costs no round
+  // trip, so batching gains nothing).
+  unsigned suggestedBatchTiles() const;
+
   // readRaw + decode. `pixels` is resized to tileBytes().
   Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
 
@@ -140,6 +160,11 @@ class TileStoreReader {
   // Number of index pages loaded so far (a page read twice by racing
   // threads counts once: only the published copy counts).
   uint64_t indexPagesLoaded() const;
+  // Reader threads worth running: RemoteOptions::connections for a URL,
+  // 0 (no preference) for a local file.
+  unsigned suggestedReadThreads() const;
+  // Requests, retries and bytes of a URL store so far (zero for a file).
+  RemoteStats remoteStats() const;
 
   struct Problem {
     TileKey key;

@@ -49,7 +49,8 @@ inline constexpr unsigned kMaxIoThreads = 256;
 
 struct StreamerConfig {
   uint64_t ram_budget_bytes = uint64_t(256) << 20;  // hard: never exceeded
-  unsigned io_threads = 0;       // 0 = number of cores; at most kMaxIoThreads
+  unsigned io_threads = 0;       // 0 = the source's suggestion (a URL store: one per
+                                 // connection), else the number of cores; at most kMaxIoThreads
   bool prefetch = true;          // velocity-predictive prefetch
   bool frustum_priority = true;  // visible tiles before hidden ones
   bool throttle = true;          // compute MaxTextureLOD from residency

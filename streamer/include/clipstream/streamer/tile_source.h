@@ -4,11 +4,13 @@
 // tile_px * tile_px * 4 bytes (TileContent).
 #pragma once
 
+#include <clipstream/store/remote.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -62,15 +64,41 @@ class TileSource {
 
   // Short human name for logs: "store:path", "procedural:67108864x67108864".
   virtual std::string describe() const = 0;
+
+  // Tiles worth fetching together with fetchBatch(): more than 1 for a
+  // source where one read of neighbours costs about what one tile does (a
+  // store over HTTP: one range request instead of several round trips).
+  // The streamer then hands a loader up to this many queued tiles of one
+  // level and row at once. 1 = fetch tiles one by one.
+  virtual size_t maxBatch() const { return 1; }
+
+  // fetchWithInfo() for several tiles: *rgba[i], statuses[i] and infos[i]
+  // for keys[i] (spans of equal size). Same thread rule as fetch(). The
+  // default fetches them one by one.
+  virtual void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
+                          std::span<Status> statuses, std::span<FetchInfo> infos) {
+    for (size_t i = 0; i < keys.size(); ++i) statuses[i] = fetchWithInfo(keys[i], rgba[i], &infos[i]);
+  }
+
+  // Loader threads worth running against this source when the streamer is
+  // not told a number (StreamerConfig::io_threads = 0): a store read over
+  // HTTP wants one per connection, since each thread waits out a round trip.
+  // 0 = no preference (the streamer runs one per core).
+  virtual unsigned suggestedLoaderThreads() const { return 0; }
 };
 
-// Opens a colour tile store file as a source. On failure returns null and
-// sets *status; an elevation store is refused (kUnsupported, naming the
-// path): heights are not colour, and openElevationSource() opens them.
+// Opens a colour tile store file, or a URL of one (isStoreUrl()), as a
+// source. On failure returns null and sets *status; an elevation store is
+// refused (kUnsupported, naming the path): heights are not colour, and
+// openElevationSource() opens them.
 // Conversion to RGBA8: R8 -> (v, v, v, 255); R16 -> grey of the high byte
 // (v >> 8: a linear rescale, exact for data that uses the full 16-bit range;
 // data sets needing a window belong in the tiler); RGB8 -> A = 255.
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status);
+// The same for a path that may be an http:// or https:// URL, read with
+// `remote`'s settings (the first form uses RemoteOptions{}).
+std::shared_ptr<TileSource> openStoreSource(const std::string& path, const RemoteOptions& remote,
+                                            Status* status);
 
 // Opens an elevation store (format version 2, ElevationInfo::present) as a
 // kHeightF32 source: each tile is tile_px^2 floats, the store's heights
@@ -78,6 +106,9 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* sta
 // failure returns null and sets *status; a colour store is refused
 // (kUnsupported, naming the path).
 std::shared_ptr<TileSource> openElevationSource(const std::string& path, Status* status);
+// The same for a path that may be an http:// or https:// URL.
+std::shared_ptr<TileSource> openElevationSource(const std::string& path,
+                                                const RemoteOptions& remote, Status* status);
 
 // Deterministic procedural texture of any size up to 2^31 texels a side,
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)

@@ -1,0 +1,65 @@
+// Reading a tile store over HTTP(S): which paths are URLs, the options of
+// the URL byte source (connections, timeouts, retries) and its counters.
+// The source itself is private (store/src/http_source.cpp); stores are
+// opened through TileStoreReader::open(), which takes a path or a URL.
+//
+// Thread-safe: plain data and pure functions only.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace clipstream {
+
+// True for "http://..." and "https://..." (scheme in any case): such a store
+// path is read by HTTP range requests instead of from the local disk.
+bool isStoreUrl(const std::string& path);
+
+// A URL as messages and logs show it: without "user:password@" and with
+// its query string replaced by "?..." (a presigned object-store URL carries
+// its signature there); control bytes shown as '?'. Other paths unchanged.
+std::string displayStorePath(const std::string& path);
+
+// Tunables of the URL byte source. The defaults and their reasons are in
+// docs/decisions.md ("Stores over HTTP"); benchmarks in docs/benchmarks.md.
+struct RemoteOptions {
+  // Range requests in flight at once, each on its own kept-alive
+  // connection; a reader thread beyond this waits for a free connection.
+  // The streamer starts this many loader threads for a URL store unless
+  // told otherwise (StreamerConfig::io_threads).
+  unsigned connections = 32;
+  // Connecting (TCP + TLS) may take this long before the attempt fails.
+  uint32_t connect_timeout_ms = 5000;
+  // A transfer that moves no byte for this long is a stall and fails.
+  uint32_t stall_timeout_ms = 10000;
+  // Transient failures (connection refused or reset, timeouts, HTTP 5xx,
+  // 429) are retried this many times, waiting retry_base_ms, then twice
+  // that, ... before the read fails with kUnavailable.
+  uint32_t retries = 2;
+  uint32_t retry_base_ms = 100;
+  // https:// servers are verified against the system's certificate
+  // authorities, or only against this PEM file when it is set (a private CA).
+  std::string ca_file;
+  // Coalescing (TileStoreReader::readRawBatch): tiles the streamer wants
+  // together are read with one range request when their payloads lie at
+  // most coalesce_gap_bytes apart, up to coalesce_max_bytes per request and
+  // batch_tiles tiles per batch. A gap of 64 KiB costs about 5 ms at
+  // 100 Mbit/s, far less than the round trip a second request would.
+  uint32_t batch_tiles = 16;
+  uint32_t coalesce_gap_bytes = 64 << 10;
+  uint32_t coalesce_max_bytes = 2 << 20;
+};
+
+// Most connections a RemoteOptions may ask for (each holds a socket and,
+// in the streamer, a loader thread).
+inline constexpr unsigned kMaxRemoteConnections = 256;
+
+// What a URL store cost so far. All zero for a local store.
+struct RemoteStats {
+  uint64_t requests = 0;   // HTTP requests sent, retries included
+  uint64_t retries = 0;    // of those, repeats after a transient failure
+  uint64_t bytes = 0;      // body bytes received (payloads, index, header)
+  uint64_t failures = 0;   // reads that returned an error
+};
+
+}  // namespace clipstream

@@ -1,0 +1,523 @@
+// Stores read over HTTP from a real nginx (started per test on 127.0.0.1,
+// configuration and logs in a temporary folder): the bytes equal the local
+// file's, opening reads little, and every failure names the URL and the
+// HTTP status: 404, 403, 503 with retries, a refused connection, a stalled
+// server, a truncated file, a store replaced on the server.
+#include <clipstream/store/tile_store.h>
+#include <clipstream/testing/files.h>
+#include <clipstream/testing/net.h>
+#include <clipstream/testing/synthetic_store.h>
+#include <clipstream/testing/temp_dir.h>
+
+#include <arpa/inet.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <utime.h>
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+namespace clipstream {
+namespace {
+
+using test::LoggedRequest;
+using test::NginxServer;
+
+// A store of 57 tiles over 5 levels, about 600 KiB: larger than the first
+// request (64 KiB), so tiles and index pages need requests of their own.
+test::SyntheticStoreSpec storeSpec() {
+  test::SyntheticStoreSpec spec;
+  spec.width_px = 700;
+  spec.height_px = 500;
+  spec.tile_px = 64;
+  spec.format = PixelFormat::kRGBA8;
+  spec.constant = test::ConstantTiles::kSome;
+  return spec;
+}
+
+class HttpStore : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::filesystem::create_directories(m_dir.file("www"));
+    m_local = m_dir.file("www/store.cstore");
+    ASSERT_TRUE(test::writeSyntheticStore(m_local, storeSpec()).isOk());
+    const Status s = NginxServer::start(m_dir.path().string(), m_dir.file("www"), &m_server);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+  }
+
+  std::vector<TileKey> allKeys(const PyramidGeometry& g) const {
+    std::vector<TileKey> keys;
+    for (uint32_t l = 0; l < g.levelCount(); ++l)
+      for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+        for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
+    return keys;
+  }
+
+  // Puts a copy of `from` at www/<name> by rename (what a deployment does),
+  // with its modification time `seconds_later` than now, so nginx's ETag
+  // (mtime and size) changes even when the bytes do not.
+  void publish(const std::string& from, const std::string& name, int seconds_later) {
+    const std::string tmp = m_dir.file("www/." + name + ".new");
+    std::filesystem::copy_file(from, tmp, std::filesystem::copy_options::overwrite_existing);
+    utimbuf times{};
+    times.actime = times.modtime = ::time(nullptr) + seconds_later;
+    ASSERT_EQ(::utime(tmp.c_str(), &times), 0);
+    std::filesystem::rename(tmp, m_dir.file("www/" + name));
+  }
+
+  test::TempDir m_dir{"http-store"};
+  std::string m_local;
+  std::unique_ptr<NginxServer> m_server;
+};
+
+TEST_F(HttpStore, TilesReadOverHttpEqualTheLocalFile) {
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const Status s = TileStoreReader::open(m_server->url("store.cstore"), &remote);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  EXPECT_EQ(remote->info().file_bytes, local->info().file_bytes);
+  EXPECT_EQ(remote->geometry().levelCount(), local->geometry().levelCount());
+  EXPECT_EQ(remote->suggestedReadThreads(), RemoteOptions{}.connections);
+  EXPECT_EQ(local->suggestedReadThreads(), 0u);
+  size_t payloads = 0;
+  for (const TileKey& key : allKeys(local->geometry())) {
+    RawTile a, b;
+    ASSERT_TRUE(local->readRaw(key, &a).isOk());
+    const Status rs = remote->readRaw(key, &b);
+    ASSERT_TRUE(rs.isOk()) << rs.toString();
+    EXPECT_EQ(a.location.offset, b.location.offset);
+    EXPECT_EQ(a.location.constant, b.location.constant);
+    ASSERT_EQ(a.payload, b.payload) << "level " << key.level << " tile " << key.x << "," << key.y;
+    if (!a.payload.empty()) ++payloads;
+    std::vector<uint8_t> pixels_a, pixels_b;
+    ASSERT_TRUE(local->readTile(key, &pixels_a).isOk());
+    ASSERT_TRUE(remote->readTile(key, &pixels_b).isOk());
+    ASSERT_EQ(pixels_a, pixels_b);
+  }
+  EXPECT_GT(payloads, 10u);
+  // Every request asked for a range and got one; all after the first
+  // carried the version they expect.
+  const RemoteStats stats = remote->remoteStats();
+  const std::vector<LoggedRequest> log = m_server->requests(stats.requests);
+  ASSERT_FALSE(log.empty());
+  for (size_t i = 0; i < log.size(); ++i) {
+    EXPECT_EQ(log[i].status, 206) << "request " << i;
+    EXPECT_FALSE(log[i].range.empty()) << "request " << i;
+    if (i > 0) {
+      EXPECT_FALSE(log[i].if_range.empty()) << "request " << i;
+    }
+  }
+  EXPECT_EQ(stats.requests, log.size());
+  EXPECT_EQ(stats.failures, 0u);
+  EXPECT_EQ(local->remoteStats().requests, 0u);
+}
+
+TEST_F(HttpStore, BatchReadCoalescesNeighboursIntoOneRequestWithTheSameBytes) {
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  EXPECT_EQ(remote->suggestedBatchTiles(), RemoteOptions{}.batch_tiles);
+  EXPECT_EQ(local->suggestedBatchTiles(), 1u);
+  // The last row of level 0 (beyond the first 64 KiB the open read).
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) keys.push_back({0, x, g.levels[0].tiles_y - 1});
+  size_t payloads = 0;
+  for (const TileKey& key : keys) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(key, &location).isOk());
+    if (!location.constant) ++payloads;
+  }
+  ASSERT_GE(payloads, 3u);
+  {
+    RawTile warm;  // loads the row's index page
+    ASSERT_TRUE(remote->readRaw(keys[0], &warm).isOk());
+  }
+  const uint64_t before = remote->remoteStats().requests;
+  std::vector<RawTile> raws(keys.size());
+  std::vector<Status> statuses(keys.size());
+  remote->readRawBatch(keys, raws, statuses);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+    RawTile expected;
+    ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+    EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
+  }
+  // The row lies together in the file: one request for all its payloads.
+  EXPECT_EQ(remote->remoteStats().requests - before, 1u);
+  // With coalescing off (a gap of 0 and a cap of one tile), one each.
+  RemoteOptions apart;
+  apart.coalesce_gap_bytes = 0;
+  apart.coalesce_max_bytes = 1;
+  std::unique_ptr<TileStoreReader> separate;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), apart, &separate).isOk());
+  {
+    RawTile warm;
+    ASSERT_TRUE(separate->readRaw(keys[0], &warm).isOk());
+  }
+  const uint64_t separate_before = separate->remoteStats().requests;
+  separate->readRawBatch(keys, raws, statuses);
+  for (const Status& st : statuses) EXPECT_TRUE(st.isOk()) << st.toString();
+  EXPECT_EQ(separate->remoteStats().requests - separate_before, payloads);
+}
+
+TEST_F(HttpStore, BatchReadOfADamagedTileFailsThatTileOnly) {
+  // Flip a byte inside one payload of the last row: only that tile fails.
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) keys.push_back({0, x, g.levels[0].tiles_y - 1});
+  size_t damaged = keys.size();
+  TileLocation location;
+  for (size_t i = 0; i < keys.size() && damaged == keys.size(); ++i) {
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant) damaged = i;
+  }
+  ASSERT_LT(damaged, keys.size());
+  local.reset();
+  std::vector<uint8_t> bytes = test::readBytes(m_local);
+  bytes[location.offset + location.stored_bytes / 2] ^= 0x40;
+  test::writeBytes(m_local, bytes);
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  std::vector<RawTile> raws(keys.size());
+  std::vector<Status> statuses(keys.size());
+  remote->readRawBatch(keys, raws, statuses);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    if (i == damaged) {
+      EXPECT_EQ(statuses[i].code, ErrorCode::kCorruptTile) << statuses[i].toString();
+    } else {
+      EXPECT_TRUE(statuses[i].isOk()) << i << ": " << statuses[i].toString();
+    }
+  }
+}
+
+TEST_F(HttpStore, OpeningReadsTheHeaderTableAndDirectoriesOnly) {
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  const std::vector<LoggedRequest> log = m_server->requests(remote->remoteStats().requests);
+  EXPECT_EQ(log.size(), remote->remoteStats().requests);
+  // The first 64 KiB (the header), the level table with the metadata, and
+  // the page directories: one request each, none for payloads or pages.
+  EXPECT_LE(log.size(), 3u);
+  uint64_t bytes = 0;
+  for (const LoggedRequest& r : log) bytes += r.body_bytes;
+  EXPECT_LT(bytes, uint64_t(80) << 10);
+  EXPECT_EQ(remote->indexPagesLoaded(), 0u);
+  // One tile far into the file: its index page and its payload, no more.
+  const PyramidGeometry& g = remote->geometry();
+  const TileKey key{0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1};
+  RawTile raw;
+  ASSERT_TRUE(remote->readRaw(key, &raw).isOk());
+  ASSERT_FALSE(raw.location.constant);
+  EXPECT_GT(raw.location.offset, uint64_t(64) << 10);
+  EXPECT_EQ(remote->remoteStats().requests, log.size() + 2);
+  EXPECT_EQ(m_server->requests(log.size() + 2).size(), log.size() + 2);
+}
+
+TEST_F(HttpStore, MissingStoreNamesTheUrlAndHttp404) {
+  std::unique_ptr<TileStoreReader> remote;
+  const std::string url = m_server->url("missing.cstore");
+  const Status s = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kNotFound);
+  EXPECT_NE(s.message.find(url), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("HTTP 404"), std::string::npos) << s.message;
+  EXPECT_EQ(remote, nullptr);
+}
+
+TEST_F(HttpStore, ForbiddenIsAnErrorNamingHttp403) {
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(m_server->url("forbidden.cstore"), &remote);
+  EXPECT_EQ(s.code, ErrorCode::kIo);
+  EXPECT_NE(s.message.find("HTTP 403"), std::string::npos) << s.message;
+  ::usleep(100000);  // a retry, if any, would be logged by now
+  EXPECT_EQ(m_server->requests(1).size(), 1u) << "a 403 is not retried";
+}
+
+TEST_F(HttpStore, ServerErrorsAreRetriedThenReportedUnavailable) {
+  RemoteOptions options;
+  options.retries = 3;
+  options.retry_base_ms = 10;
+  std::unique_ptr<TileStoreReader> remote;
+  const std::string url = m_server->url("failing.cstore");
+  const Status s = TileStoreReader::open(url, options, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kUnavailable);
+  EXPECT_NE(s.message.find("HTTP 503"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find(url), std::string::npos) << s.message;
+  EXPECT_EQ(m_server->requests(4).size(), 4u) << "one request and three retries";
+}
+
+TEST_F(HttpStore, RefusedConnectionIsUnavailable) {
+  const std::string url = m_server->url("store.cstore");
+  m_server->stop();
+  RemoteOptions options;
+  options.retry_base_ms = 10;
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(url, options, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kUnavailable);
+  EXPECT_NE(s.message.find(url), std::string::npos) << s.message;
+}
+
+TEST_F(HttpStore, StalledServerTimesOut) {
+  // A socket that listens but never answers: the kernel completes the
+  // connection, no byte ever comes back.
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof(addr);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+  ASSERT_EQ(::listen(fd, 8), 0);
+  ASSERT_EQ(::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len), 0);
+  const std::string url = "http://127.0.0.1:" + std::to_string(ntohs(addr.sin_port)) + "/s.cstore";
+  RemoteOptions options;
+  options.stall_timeout_ms = 1000;
+  options.retries = 0;
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(url, options, &remote);
+  ::close(fd);
+  EXPECT_EQ(s.code, ErrorCode::kUnavailable);
+  EXPECT_NE(s.message.find(url), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("imed out"), std::string::npos) << s.message;
+}
+
+TEST_F(HttpStore, TruncatedFileOnTheServerIsReported) {
+  const std::vector<uint8_t> bytes = test::readBytes(m_local);
+  test::writeBytes(m_dir.file("www/half.cstore"),
+                   std::vector<uint8_t>(bytes.begin(), bytes.begin() + bytes.size() / 2));
+  std::unique_ptr<TileStoreReader> remote;
+  const std::string url = m_server->url("half.cstore");
+  const Status s = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kTruncated) << s.toString();
+  EXPECT_NE(s.message.find(url), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("the header says"), std::string::npos) << s.message;
+}
+
+TEST_F(HttpStore, EmptyFileOnTheServerIsReported) {
+  test::writeBytes(m_dir.file("www/empty.cstore"), {});
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(m_server->url("empty.cstore"), &remote);
+  EXPECT_EQ(s.code, ErrorCode::kTruncated) << s.toString();
+}
+
+// The same bytes under a new modification time: nginx's ETag changes, so
+// the server holds "another version" and every later read must refuse it.
+TEST_F(HttpStore, StoreReplacedOnTheServerIsDetectedAndNeverMixed) {
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  const size_t half = keys.size() / 2;
+  for (size_t i = 0; i < half; ++i) {
+    std::vector<uint8_t> a, b;
+    ASSERT_TRUE(local->readTile(keys[i], &a).isOk());
+    ASSERT_TRUE(remote->readTile(keys[i], &b).isOk());
+    ASSERT_EQ(a, b);
+  }
+  publish(m_local, "store.cstore", 100);
+  size_t failed = 0;
+  std::string message;
+  for (size_t i = half; i < keys.size(); ++i) {
+    RawTile raw;
+    const Status s = remote->readRaw(keys[i], &raw);
+    if (s) {
+      // Only tiles served from what was read before (constant entries of
+      // a loaded page, the first 64 KiB) may still succeed: from the old
+      // version, equal to the local file.
+      RawTile expected;
+      ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+      EXPECT_EQ(raw.payload, expected.payload);
+      continue;
+    }
+    ++failed;
+    EXPECT_EQ(s.code, ErrorCode::kIo);
+    message = s.message;
+  }
+  EXPECT_GT(failed, 0u);
+  EXPECT_NE(message.find("changed on the server"), std::string::npos) << message;
+  EXPECT_NE(message.find(m_server->url("store.cstore")), std::string::npos) << message;
+  // The server answered the If-Range with the whole file (200), which was cut.
+  bool saw_200 = false;
+  for (const LoggedRequest& r : m_server->requests(remote->remoteStats().requests))
+    saw_200 |= r.status == 200;
+  EXPECT_TRUE(saw_200);
+}
+
+TEST_F(HttpStore, StoreReplacedByAnotherStoreIsDetected) {
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  test::SyntheticStoreSpec other = storeSpec();
+  other.constant = test::ConstantTiles::kNone;
+  const std::string other_path = m_dir.file("other.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).isOk());
+  publish(other_path, "store.cstore", 100);
+  const PyramidGeometry& g = remote->geometry();
+  RawTile raw;
+  const Status s = remote->readRaw({0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1}, &raw);
+  EXPECT_EQ(s.code, ErrorCode::kIo);
+  EXPECT_NE(s.message.find("changed on the server"), std::string::npos) << s.message;
+  // Putting the old version back does not make the reader trust it again.
+  publish(m_local, "store.cstore", 200);
+  EXPECT_FALSE(remote->readRaw({0, 0, 0}, &raw).isOk());
+}
+
+TEST_F(HttpStore, ConnectionsAreKeptAlive) {
+  std::unique_ptr<test::DelayProxy> proxy;
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).isOk());
+  RemoteOptions options;
+  options.connections = 1;
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(proxy->url("store.cstore"), options, &remote).isOk());
+  for (const TileKey& key : allKeys(remote->geometry())) {
+    RawTile raw;
+    ASSERT_TRUE(remote->readRaw(key, &raw).isOk());
+  }
+  EXPECT_GT(remote->remoteStats().requests, 10u);
+  EXPECT_EQ(proxy->connections(), 1u) << "every request on one kept-alive connection";
+}
+
+TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
+  std::unique_ptr<test::DelayProxy> proxy;
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).isOk());
+  // The first connection dies 600 bytes into its answer (the headers and
+  // part of the first 64 KiB): a retry on a new connection completes it.
+  proxy->cutConnections(1, 600);
+  RemoteOptions options;
+  options.connections = 1;
+  options.retry_base_ms = 10;
+  std::unique_ptr<TileStoreReader> local, remote;
+  const Status s = TileStoreReader::open(proxy->url("store.cstore"), options, &remote);
+  ASSERT_TRUE(s.isOk()) << s.toString();
+  EXPECT_EQ(remote->remoteStats().retries, 1u);
+  EXPECT_EQ(proxy->connections(), 2u);
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  const TileKey key{0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1};
+  RawTile a, b;
+  ASSERT_TRUE(local->readRaw(key, &a).isOk());
+  ASSERT_TRUE(remote->readRaw(key, &b).isOk());
+  EXPECT_EQ(a.payload, b.payload);
+  // With no retries left, the same cut is a transient failure.
+  proxy->cutConnections(1, 600);
+  options.retries = 0;
+  std::unique_ptr<TileStoreReader> once;
+  const Status cut = TileStoreReader::open(proxy->url("store.cstore"), options, &once);
+  EXPECT_EQ(cut.code, ErrorCode::kUnavailable) << cut.toString();
+  EXPECT_NE(cut.message.find(proxy->url("store.cstore")), std::string::npos) << cut.message;
+}
+
+TEST_F(HttpStore, AbsurdConnectionCountIsRefused) {
+  RemoteOptions options;
+  options.connections = 0;
+  std::unique_ptr<TileStoreReader> remote;
+  EXPECT_EQ(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).code,
+            ErrorCode::kInvalidArgument);
+  options.connections = kMaxRemoteConnections + 1;
+  EXPECT_EQ(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).code,
+            ErrorCode::kInvalidArgument);
+  ::usleep(50000);
+  EXPECT_TRUE(m_server->requests().empty());
+}
+
+// The program, not only the library: clipstream-info takes a URL.
+std::pair<int, std::string> runProgram(const std::string& command_line) {
+  std::string output;
+  FILE* pipe = ::popen(("{ CLIPSTREAM_PROGRESS=0 " + command_line + "; } 2>&1").c_str(), "r");
+  if (pipe == nullptr) return {-1, ""};
+  char buffer[4096];
+  size_t got;
+  while ((got = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, got);
+  const int status = ::pclose(pipe);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
+}
+
+TEST_F(HttpStore, InfoToolVerifiesAStoreByUrlAndNamesA404) {
+  const std::string url = m_server->url("store.cstore");
+  const auto [code, output] =
+      runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' --verify '" + url + "'");
+  EXPECT_EQ(code, 0) << output;
+  EXPECT_NE(output.find(url), std::string::npos) << output;
+  EXPECT_NE(output.find("verify: OK"), std::string::npos) << output;
+  const std::string missing = m_server->url("missing.cstore");
+  const auto [missing_code, missing_output] =
+      runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' '" + missing + "'");
+  EXPECT_EQ(missing_code, 1) << missing_output;
+  EXPECT_NE(missing_output.find(missing + ": HTTP 404 Not Found"), std::string::npos)
+      << missing_output;
+}
+
+TEST_F(HttpStore, MessagesHideCredentialsAndQueryStrings) {
+  const std::string url = "http://reader:secret@127.0.0.1:" + std::to_string(m_server->port()) +
+                          "/half.cstore?X-Signature=abcdef";
+  const std::vector<uint8_t> bytes = test::readBytes(m_local);
+  test::writeBytes(m_dir.file("www/half.cstore"),
+                   std::vector<uint8_t>(bytes.begin(), bytes.begin() + bytes.size() / 2));
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kTruncated) << s.toString();
+  EXPECT_EQ(s.message.find("secret"), std::string::npos) << s.message;
+  EXPECT_EQ(s.message.find("abcdef"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("http://127.0.0.1:" + std::to_string(m_server->port()) +
+                           "/half.cstore?..."),
+            std::string::npos)
+      << s.message;
+  EXPECT_EQ(displayStorePath("/data/a.cstore"), "/data/a.cstore");
+}
+
+// https: an untrusted certificate fails at once, naming the URL and not
+// retried; trusted through RemoteOptions::ca_file, the tiles equal the file's.
+TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
+  test::TempDir dir("https-store");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string local_path = dir.file("www/store.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  std::unique_ptr<NginxServer> server;
+  const Status started = NginxServer::start(dir.path().string(), dir.file("www"), &server, true);
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  const std::string url = server->url("store.cstore");
+  ASSERT_EQ(url.rfind("https://", 0), 0u);
+
+  std::unique_ptr<TileStoreReader> remote;
+  const Status untrusted = TileStoreReader::open(url, &remote);
+  EXPECT_EQ(untrusted.code, ErrorCode::kIo) << untrusted.toString();
+  EXPECT_NE(untrusted.message.find(url), std::string::npos) << untrusted.message;
+  EXPECT_NE(untrusted.message.find("certificate"), std::string::npos) << untrusted.message;
+  std::printf("  %s\n", untrusted.message.c_str());
+  ::usleep(50000);
+  EXPECT_TRUE(server->requests().empty()) << "no HTTP request after a failed handshake";
+
+  RemoteOptions trusted;
+  trusted.ca_file = server->certificateFile();
+  const Status opened = TileStoreReader::open(url, trusted, &remote);
+  ASSERT_TRUE(opened.isOk()) << opened.toString();
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    const TileKey key{l, g.levels[l].tiles_x - 1, g.levels[l].tiles_y - 1};
+    std::vector<uint8_t> a, b;
+    ASSERT_TRUE(local->readTile(key, &a).isOk());
+    const Status rs = remote->readTile(key, &b);
+    ASSERT_TRUE(rs.isOk()) << rs.toString();
+    EXPECT_EQ(a, b);
+  }
+}
+
+TEST(StoreUrl, SchemesAreRecognised) {
+  EXPECT_TRUE(isStoreUrl("http://host/a.cstore"));
+  EXPECT_TRUE(isStoreUrl("HTTPS://host/a.cstore"));
+  EXPECT_FALSE(isStoreUrl("ftp://host/a.cstore"));
+  EXPECT_FALSE(isStoreUrl("http:/a.cstore"));
+  EXPECT_FALSE(isStoreUrl("./http://x"));
+}
+
+}  // namespace
+}  // namespace clipstream
