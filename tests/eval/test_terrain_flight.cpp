@@ -23,16 +23,17 @@ const Viewport kViewport{320, 180};
 
 // The DEM of the scenarios: hills and a 50-unit cliff across the flight;
 // with `spikes`, single samples 300 units high every 37 samples.
-float demHeight(uint64_t x, uint64_t y, bool spikes) {
+float demHeight(uint64_t x, uint64_t y, bool spikes, double cliff = 50.0) {
   double v = 60.0 + 40.0 * std::sin(x * 0.031) * std::cos(y * 0.027) + 20.0 * std::abs(std::sin(x * 0.011 + y * 0.017));
-  if (x > 300) v += 50.0;  // a cliff across the flight
+  if (x > 300) v += cliff;  // a cliff across the flight
   if (spikes && x % 37 == 5 && y % 37 == 11) v += 300.0;
   return float(v);
 }
 
-Status writeDem(const std::string& path, bool spikes) {
-  return test::writeElevationStore(path, kDemSide, kDemSide,
-                                   [spikes](uint64_t x, uint64_t y) { return demHeight(x, y, spikes); });
+Status writeDem(const std::string& path, bool spikes, double cliff = 50.0) {
+  return test::writeElevationStore(path, kDemSide, kDemSide, [spikes, cliff](uint64_t x, uint64_t y) {
+    return demHeight(x, y, spikes, cliff);
+  });
 }
 
 struct Scenario {
@@ -41,6 +42,8 @@ struct Scenario {
   uint32_t frames = 40;
   uint32_t rest_frames = 20;
   bool spikes = false;
+  double cliff = 50.0;            // height of the cliff across the flight
+  double height = 0.0;            // > 0: every keyframe this high above the ground
   double world_per_sample = 4.0;  // the DEM spans 2048 world units at 4 (the texture)
 };
 
@@ -54,7 +57,7 @@ struct Outcome {
 // the plane below the lowest ground inside the DEM and the texture.
 void flyScenario(const Scenario& sc, Outcome* out) {
   test::TempDir dir;
-  ASSERT_TRUE(writeDem(dir.file("dem.cst"), sc.spikes).isOk());
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), sc.spikes, sc.cliff).isOk());
   Status s;
   TerrainLayerConfig terrain;
   terrain.source = openElevationSource(dir.file("dem.cst"), &s);
@@ -69,6 +72,8 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   FlightRunOptions o;
   o.source = colour;
   ASSERT_TRUE(FlightPath::builtin(sc.path, colour->geometry(), &o.path, 10).isOk());
+  if (sc.height > 0.0)
+    for (auto& k : o.path.keyframes) k.position.y = sc.height;
   o.frames = sc.frames;
   o.rest_frames = sc.rest_frames;
   o.speed = sc.speed;
@@ -166,6 +171,23 @@ TEST(TerrainStability, LowValleyFlightAcrossTheCliff) {
   Outcome r;
   flyScenario(sc, &r);
   checkScenario(sc, r);
+}
+
+TEST(TerrainStability, AThousandUnitCliffAtGroundLevel) {
+  CLIPSTREAM_REQUIRE_GL();
+  // The pass crosses a 1000-unit wall two units above the ground: the
+  // camera climbs it (never inside it), the wall fills the view, no crack.
+  Scenario sc;
+  sc.cliff = 1000.0;
+  sc.height = 2.0;
+  sc.speed = 10.0;  // the whole pass, across the cliff
+  sc.frames = 60;
+  Outcome r;
+  flyScenario(sc, &r);
+  checkScenario(sc, r);
+  double highest = 0.0;
+  for (const FlightRunFrame& f : r.run.frames) highest = std::max(highest, f.sample.ground_height);
+  EXPECT_GT(highest, 1000.0) << "the flight never reached the top of the cliff";
 }
 
 TEST(TerrainStability, DemMuchCoarserOrFinerThanTheTexture) {
