@@ -89,18 +89,10 @@ void flyScenario(const Scenario& sc, Outcome* out) {
     const Camera camera = cameraAboveGround(o.path.sample(t), f.ground_height);
     std::vector<uint8_t> rgba;
     target.readRgba(&rgba);
-    Camera lowered = camera;
-    lowered.position.y -= 19.0;  // below the lowest ground (60 - 40 + 0)
-    for (uint32_t py = 0; py < kViewport.height_px; ++py)
-      for (uint32_t px = 0; px < kViewport.width_px; ++px) {
-        const uint8_t* p = rgba.data() + (size_t(py) * kViewport.width_px + px) * 4;
-        const bool sky = std::equal(p, p + 3, renderer_config::kSkyRgba);
-        if (!sky) ++out->ground;
-        glm::dvec2 hit;
-        if (!groundHit(lowered, kViewport, px + 0.5, py + 0.5, &hit)) continue;
-        if (hit.x < 8 || hit.y < 8 || hit.x > field - 8 || hit.y > field - 8) continue;
-        if (sky) ++out->cracks;
-      }
+    // Below the lowest ground (60 - 40 + 0), inside the DEM and the texture.
+    size_t ground = 0;
+    out->cracks += test::terrainCracks(rgba, camera, kViewport, 19.0, 8.0, field - 8.0, &ground);
+    out->ground += ground;
     ++out->checked;
     return Status::ok();
   };
@@ -126,6 +118,15 @@ void checkScenario(const Scenario& sc, const Outcome& r) {
   }
 }
 
+// Flies one scenario and makes the shared checks; returns its outcome for
+// checks of its own.
+Outcome flyAndCheck(const Scenario& sc) {
+  Outcome r;
+  flyScenario(sc, &r);
+  checkScenario(sc, r);
+  return r;
+}
+
 TEST(TerrainFlight, FliesAboveTheGroundThroughOneCacheWithoutHoles) {
   CLIPSTREAM_REQUIRE_GL();
   const Scenario sc;
@@ -147,9 +148,7 @@ TEST(TerrainStability, SpikesAtTheHundredfoldSpeed) {
   sc.spikes = true;
   sc.speed = 100.0;
   sc.frames = 60;
-  Outcome r;
-  flyScenario(sc, &r);
-  checkScenario(sc, r);
+  flyAndCheck(sc);
 }
 
 TEST(TerrainStability, TeleportsLandOnTheGround) {
@@ -157,9 +156,7 @@ TEST(TerrainStability, TeleportsLandOnTheGround) {
   Scenario sc;
   sc.path = "teleport";
   sc.frames = 60;
-  Outcome r;
-  flyScenario(sc, &r);
-  checkScenario(sc, r);
+  flyAndCheck(sc);
 }
 
 TEST(TerrainStability, LowValleyFlightAcrossTheCliff) {
@@ -168,9 +165,7 @@ TEST(TerrainStability, LowValleyFlightAcrossTheCliff) {
   sc.path = "valley";
   sc.speed = 3.0;
   sc.frames = 60;
-  Outcome r;
-  flyScenario(sc, &r);
-  checkScenario(sc, r);
+  flyAndCheck(sc);
 }
 
 TEST(TerrainStability, AThousandUnitCliffAtGroundLevel) {
@@ -182,9 +177,7 @@ TEST(TerrainStability, AThousandUnitCliffAtGroundLevel) {
   sc.height = 2.0;
   sc.speed = 10.0;  // the whole pass, across the cliff
   sc.frames = 60;
-  Outcome r;
-  flyScenario(sc, &r);
-  checkScenario(sc, r);
+  const Outcome r = flyAndCheck(sc);
   double highest = 0.0;
   for (const FlightRunFrame& f : r.run.frames) highest = std::max(highest, f.sample.ground_height);
   EXPECT_GT(highest, 1000.0) << "the flight never reached the top of the cliff";

@@ -1,5 +1,7 @@
 #include "test_helpers.h"
 
+#include <clipstream/renderer/config.h>
+
 #include <clipstream/store/tile_store.h>
 
 #include <cmath>
@@ -139,6 +141,30 @@ Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDam
   if (!out)
     return Status::error(ErrorCode::kIo, "damageTilePayload: cannot write the payload back");
   return Status::ok();
+}
+
+size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, const Viewport& viewport,
+                     double lowest, double lo, double hi, size_t* ground, std::vector<uint8_t>* marked) {
+  if (marked) *marked = rgba;
+  if (ground) *ground = 0;
+  Camera lowered = camera;
+  lowered.position.y -= lowest;
+  size_t cracks = 0;
+  for (uint32_t py = 0; py < viewport.height_px; ++py)
+    for (uint32_t px = 0; px < viewport.width_px; ++px) {
+      const uint8_t* p = rgba.data() + (size_t(py) * viewport.width_px + px) * 4;
+      const bool background = std::equal(p, p + 3, renderer_config::kSkyRgba);
+      if (ground && !background) ++*ground;
+      glm::dvec2 hit;
+      if (!background || !groundHit(lowered, viewport, px + 0.5, py + 0.5, &hit)) continue;
+      if (hit.x < lo || hit.y < lo || hit.x > hi || hit.y > hi) continue;
+      ++cracks;
+      if (marked) {
+        uint8_t* m = marked->data() + (size_t(py) * viewport.width_px + px) * 4;
+        m[0] = 255, m[1] = 0, m[2] = 0;
+      }
+    }
+  return cracks;
 }
 
 }  // namespace clipstream::test

@@ -49,6 +49,17 @@ std::vector<LevelResidency> fullResidency(const ClipmapPlan& plan, uint32_t fine
 std::vector<uint8_t> renderFrame(ClipmapRenderer& renderer, OffscreenTarget& target,
                                  const Camera& camera);
 
+// The crack test of a terrain frame: pixels whose ray meets the plane
+// y = `lowest` (world units, below every ground of the scene) with its
+// (x, z) inside [lo, hi]^2, yet show the background colour. Terrain is
+// above that plane everywhere, so such a ray met it first: each is a crack
+// or a hole. *ground (optional) receives the pixels that show anything
+// but the background; *marked (optional) a copy of the frame with the
+// cracks painted red, for dumpPpm().
+size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, const Viewport& viewport,
+                     double lowest, double lo, double hi, size_t* ground = nullptr,
+                     std::vector<uint8_t>* marked = nullptr);
+
 // Writes a PPM to $CLIPSTREAM_TEST_DUMP/<name>.ppm when that variable is set
 // (for looking at a failing comparison); does nothing otherwise.
 void dumpPpm(const std::string& name, const std::vector<uint8_t>& rgba, const Viewport& vp);

@@ -14,6 +14,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <map>
 #include <utility>
 
@@ -66,24 +68,29 @@ HeightField roughField(uint32_t side) {
   return f;
 }
 
-// Uploads, for this camera, the tiles every ring reads at levels >= finest.
-void uploadRings(TerrainRenderer& terrain, const HeightField& f, const Camera& camera,
-                 uint32_t finest = 0) {
+// Uploads, for this camera, the tiles every ring reads at levels >= finest
+// of `geometry`, each as `tile` gives it.
+void uploadRingTiles(TerrainRenderer& terrain, const PyramidGeometry& geometry, const Camera& camera,
+                     const std::function<std::vector<float>(const TileKey&)>& tile, uint32_t finest = 0) {
   const uint32_t n = terrain.config().ring_cells;
-  const int64_t t = f.geometry.tile_px;
-  for (uint32_t l = finest; l < f.geometry.levelCount(); ++l) {
+  const int64_t t = geometry.tile_px;
+  for (uint32_t l = finest; l < geometry.levelCount(); ++l) {
     const glm::i64vec2 o = TerrainRenderer::ringOrigin(terrain.config(), camera, l);
-    const LevelInfo& info = f.geometry.levels[l];
+    const LevelInfo& info = geometry.levels[l];
     auto clampTile = [&](int64_t s, uint64_t size) {
       return std::clamp<int64_t>(s, 0, int64_t(size) - 1) / t;
     };
     for (int64_t ty = clampTile(o.y - 1, info.height_px); ty <= clampTile(o.y + n + 1, info.height_px); ++ty)
       for (int64_t tx = clampTile(o.x - 1, info.width_px); tx <= clampTile(o.x + n + 1, info.width_px); ++tx) {
         const TileKey key{l, uint32_t(tx), uint32_t(ty)};
-        const std::vector<float> heights = f.tile(key);
-        terrain.uploadTile(key, heights.data());
+        terrain.uploadTile(key, tile(key).data());
       }
   }
+}
+
+void uploadRings(TerrainRenderer& terrain, const HeightField& f, const Camera& camera,
+                 uint32_t finest = 0) {
+  uploadRingTiles(terrain, f.geometry, camera, [&f](const TileKey& key) { return f.tile(key); }, finest);
 }
 
 struct TerrainScene {
@@ -126,30 +133,10 @@ std::vector<uint8_t> drawTerrain(TerrainScene& s, const Camera& camera) {
   return rgba;
 }
 
-// Pixels whose ray meets the plane y = lowest inside the field but show the
-// background: the terrain is above that plane everywhere, so such a ray
-// must have met it first. Any such pixel is a crack or a hole.
+// Cracks of a frame over the 1024^2-sample field (2048 world units).
 size_t crackPixels(const std::vector<uint8_t>& rgba, const Camera& camera, float lowest,
                    std::vector<uint8_t>* marked = nullptr) {
-  if (marked) *marked = rgba;
-  Camera lowered = camera;
-  lowered.position.y -= lowest;
-  size_t cracks = 0;
-  for (uint32_t py = 0; py < kViewport.height_px; ++py)
-    for (uint32_t px = 0; px < kViewport.width_px; ++px) {
-      glm::dvec2 hit;
-      if (!groundHit(lowered, kViewport, px + 0.5, py + 0.5, &hit)) continue;
-      if (hit.x < 4.0 || hit.y < 4.0 || hit.x > 2044.0 || hit.y > 2044.0) continue;
-      const uint8_t* p = rgba.data() + (size_t(py) * kViewport.width_px + px) * 4;
-      if (std::equal(p, p + 3, renderer_config::kSkyRgba)) {
-        ++cracks;
-        if (marked) {
-          uint8_t* m = marked->data() + (size_t(py) * kViewport.width_px + px) * 4;
-          m[0] = 255, m[1] = 0, m[2] = 0;
-        }
-      }
-    }
-  return cracks;
+  return test::terrainCracks(rgba, camera, kViewport, lowest, 4.0, 2044.0, nullptr, marked);
 }
 
 // Pixels that show ground at all (to make sure a test looks at terrain).
@@ -336,21 +323,13 @@ TEST(Terrain, GroundHeightFollowsTheFinestResidentLevel) {
 // Uploads, for this camera, the tiles every ring reads, fetched from a
 // height source.
 void uploadRingsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera& camera) {
-  const PyramidGeometry& g = heights.geometry();
-  const uint32_t n = terrain.config().ring_cells;
-  const int64_t t = g.tile_px;
-  std::vector<uint8_t> bytes;
-  for (uint32_t l = 0; l < g.levelCount(); ++l) {
-    const glm::i64vec2 o = TerrainRenderer::ringOrigin(terrain.config(), camera, l);
-    const LevelInfo& info = g.levels[l];
-    auto clampTile = [&](int64_t v, uint64_t size) { return std::clamp<int64_t>(v, 0, int64_t(size) - 1) / t; };
-    for (int64_t ty = clampTile(o.y - 1, info.height_px); ty <= clampTile(o.y + n + 1, info.height_px); ++ty)
-      for (int64_t tx = clampTile(o.x - 1, info.width_px); tx <= clampTile(o.x + n + 1, info.width_px); ++tx) {
-        const TileKey key{l, uint32_t(tx), uint32_t(ty)};
-        ASSERT_TRUE(heights.fetch(key, &bytes).isOk());
-        terrain.uploadTile(key, reinterpret_cast<const float*>(bytes.data()));
-      }
-  }
+  uploadRingTiles(terrain, heights.geometry(), camera, [&heights](const TileKey& key) {
+    std::vector<uint8_t> bytes;
+    EXPECT_TRUE(heights.fetch(key, &bytes).isOk());
+    std::vector<float> out(bytes.size() / sizeof(float));
+    std::memcpy(out.data(), bytes.data(), out.size() * sizeof(float));
+    return out;
+  });
 }
 
 TEST(Terrain, PlanetSizedTerrainNearItsFarCornerHasNoCrackOrJitter) {
@@ -406,19 +385,8 @@ TEST(Terrain, PlanetSizedTerrainNearItsFarCornerHasNoCrackOrJitter) {
       EXPECT_EQ(v[size_t(j) * 65 + i].w, float(proceduralHeight(spec, uint64_t(o.x + i), uint64_t(o.y + j))));
   // No crack: every pixel whose ray meets the plane of the lowest ground
   // (proceduralHeight >= 345) inside the planet shows terrain.
-  Camera lowered = world;
-  lowered.position.y -= 340.0;
-  size_t cracks = 0, ground = 0;
-  for (uint32_t py = 0; py < kViewport.height_px; ++py)
-    for (uint32_t px = 0; px < kViewport.width_px; ++px) {
-      const uint8_t* p = a.data() + (size_t(py) * kViewport.width_px + px) * 4;
-      const bool sky = std::equal(p, p + 3, renderer_config::kSkyRgba);
-      ground += sky ? 0 : 1;
-      glm::dvec2 hit;
-      if (!groundHit(lowered, kViewport, px + 0.5, py + 0.5, &hit)) continue;
-      if (hit.x > double(side) - 1.0 || hit.y > double(side) - 1.0) continue;
-      if (sky) ++cracks;
-    }
+  size_t ground = 0;
+  const size_t cracks = test::terrainCracks(a, world, kViewport, 340.0, 0.0, double(side) - 1.0, &ground);
   EXPECT_GT(ground, size_t(kViewport.width_px) * kViewport.height_px / 3);
   EXPECT_EQ(cracks, 0u);
   // No jitter: a hundredth of a sample sideways moves the picture by far
