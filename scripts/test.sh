@@ -56,7 +56,8 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 # tracer now and then crashes on the way out of a test whose body passed
 # ("Tracer caught signal 11 ... LeakSanitizer has encountered a fatal
 # error", a known sanitizer-runtime fault, seen once in about 80 runs
-# here). A real ASan, UBSan or leak report repeats and still fails.
+# here). A report that repeats still fails the step; one that comes and
+# goes with thread timing would pass on its second run (docs/decisions.md).
 # Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
 # Mesa's driver mapped until the check, tests/lsan.supp names the
 # third-party code that may leak (docs/accuracy.md, "Leak checking"). Any
