@@ -185,9 +185,10 @@ TEST(TerrainStability, AThousandUnitCliffAtGroundLevel) {
 
 TEST(TerrainStability, DemMuchCoarserOrFinerThanTheTexture) {
   CLIPSTREAM_REQUIRE_GL();
-  for (double world_per_sample : {16.0, 0.5}) {
-    // 16: 512 samples over 8192 world units (the texture covers a quarter
-    // of the DEM); 0.5: the DEM covers 256 world units, finer than texels.
+  for (double world_per_sample : {100.0, 0.5}) {
+    // 100: a sample every 100 texels (512 samples over 51,200 world units;
+    // the texture lies on 21 x 21 of them); 0.5: two samples a texel (the
+    // DEM covers 256 world units of the texture).
     Scenario sc;
     sc.world_per_sample = world_per_sample;
     sc.frames = 30;
