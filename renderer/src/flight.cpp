@@ -148,9 +148,7 @@ Status Flight::makeTerrain() {
   TerrainConfig tc;
   tc.ring_cells = t.ring_cells;
   tc.clip_tiles = TerrainRenderer::windowTiles(t.ring_cells, t.source->geometry().tile_px);
-  tc.mapping.world_per_sample = t.alignment.world_per_sample;
-  tc.mapping.sample0_world = t.alignment.sample0_world;
-  tc.mapping.world_per_height = t.alignment.world_per_height;
+  tc.mapping = t.alignment;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
   TileSource& source = *t.source;

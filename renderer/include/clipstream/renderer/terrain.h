@@ -14,6 +14,7 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
+#include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
 
 #include <glm/glm.hpp>
@@ -25,15 +26,10 @@
 
 namespace clipstream {
 
-// How heights map to the world (the colour layer's level-0 texels, y up).
-struct TerrainMapping {
-  // World units per level-0 height sample, along x and z.
-  glm::dvec2 world_per_sample{1.0, 1.0};
-  // World position of the centre of height sample (0, 0).
-  glm::dvec2 sample0_world{0.5, 0.5};
-  // World units per height unit (the vertical exaggeration included).
-  double world_per_height = 1.0;
-};
+// How heights map to the world (the colour layer's level-0 texels, y up):
+// the scene's alignment of the elevation layer (alignElevation()); the
+// renderer reads world_per_sample, sample0_world and world_per_height.
+using TerrainMapping = LayerAlignment;
 
 struct TerrainConfig {
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
