@@ -270,15 +270,6 @@ Status validateOptions(const TilerOptions& o) {
   return Status::ok();
 }
 
-const char* layerKindName(LayerKind kind) {
-  switch (kind) {
-    case LayerKind::kAuto: return "auto";
-    case LayerKind::kColour: return "colour";
-    case LayerKind::kElevation: return "elevation";
-  }
-  return "unknown";
-}
-
 namespace {
 
 // The output rule of OutputFile (only regular files replaced, and only with

@@ -35,7 +35,6 @@ constexpr uint64_t kMaxSyntheticSidePx = uint64_t(1) << 32;
 // single-band uint16 or floating-point input that is georeferenced (a DEM);
 // a colour store otherwise.
 enum class LayerKind { kAuto, kColour, kElevation };
-const char* layerKindName(LayerKind kind);  // "auto", "colour", "elevation"
 
 // Largest quantisation step for heights (--height-step), in height units.
 constexpr double kMaxHeightStep = 1000.0;
