@@ -70,17 +70,16 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   // ... and at least the streamer's window plus two (as the colour stack),
   // so no two tiles it hands over share a slot.
   r->m_slots = std::max((n + 3 + tile - 1) / tile + 2, (config.clip_tiles / 2) * 2 + 2);
-  // The outermost ring: the first level whose ring covers every sample.
+  // The outermost ring covers the whole height field (and the colour image)
+  // from wherever the camera is: chosen every frame (updateCoarsest()).
   // Rings may be coarser than the pyramid's last level (its one tile,
-  // decimated further in the shader), so the outermost ring always covers
-  // the whole field.
-  const uint64_t side = std::max(heights.width_px, heights.height_px);
-  r->m_coarsest = renderer_config::kMaxLevels - 2;
-  for (uint32_t l = 0; l + 1 < renderer_config::kMaxLevels; ++l) {
-    if ((uint64_t(n) << l) >= side + (uint64_t(4) << l)) {
-      r->m_coarsest = l;
-      break;
-    }
+  // decimated further in the shader). Until the first frame: the field
+  // seen from its centre.
+  r->m_coarsest = r->coarsestFor(glm::dvec2(heights.width_px, heights.height_px) * 0.5);
+  if (config.full_resolution) {
+    // Level 0 whole, one slot per tile (the toroidal period never wraps),
+    // and no transition band anywhere (uCoarsest 0).
+    r->m_slots = std::max(heights.levels[0].tiles_x, heights.levels[0].tiles_y);
   }
 
   const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" +
@@ -108,10 +107,13 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     }
   std::vector<uint32_t> indices;
   const uint32_t block_cells = n / kBlocks;
-  for (int c = 0; c < 5; ++c) {
+  // The full-resolution mesh has one pattern, a plain grid.
+  const int patterns = config.full_resolution ? 1 : 5;
+  for (int c = 0; c < patterns; ++c) {
     const int hx = c == 0 ? -1 : int(n / 4) + (c - 1) % 2;
     const int hy = c == 0 ? -1 : int(n / 4) + (c - 1) / 2;
-    const std::vector<uint32_t> ring = terrain_mesh::ringTriangles(n, hx, hy);
+    const std::vector<uint32_t> ring =
+        config.full_resolution ? terrain_mesh::gridTriangles(n) : terrain_mesh::ringTriangles(n, hx, hy);
     std::vector<std::vector<uint32_t>> blocks(kBlocks * kBlocks);
     for (size_t t = 0; t < ring.size(); t += 3) {
       uint32_t sx = 0, sy = 0;
@@ -149,7 +151,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                                                       std::to_string(period) +
                                                       " texels exceeds GL_MAX_TEXTURE_SIZE");
   }
-  const GLsizei layers = GLsizei(heights.levelCount());
+  const GLsizei layers = config.full_resolution ? 1 : GLsizei(heights.levelCount());
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_heights);
   glTextureStorage3D(r->m_heights, 1, GL_R32F, GLsizei(period), GLsizei(period), layers);
   glTextureParameteri(r->m_heights, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
@@ -183,6 +185,28 @@ TerrainRenderer::~TerrainRenderer() {
   glDeleteTextures(1, &m_heights);
 }
 
+uint32_t TerrainRenderer::coarsestFor(const glm::dvec2& cam) const {
+  // Samples to cover: the height field and the colour image (in samples)
+  // beyond it, as far as either reaches from the camera along each axis.
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 field(double(m_geometry.width_px), double(m_geometry.height_px));
+  const glm::dvec2 lo = glm::min(glm::dvec2(0.0), -m.sample0_world / m.world_per_sample);
+  const glm::dvec2 hi = glm::max(field, (m_image_px - m.sample0_world) / m.world_per_sample);
+  const glm::dvec2 reach = glm::max(glm::abs(cam - lo), glm::abs(hi - cam));
+  const double need = std::max(reach.x, reach.y) + 2.0;
+  // A ring of level l reaches at least (n / 2 - 2) << l samples from the
+  // camera on every side (its origin snaps to even samples).
+  const double half = double(m_config.ring_cells) / 2.0 - 2.0;
+  for (uint32_t l = 0; l + 2 < renderer_config::kMaxLevels; ++l)
+    if (std::ldexp(half, int(l)) >= need) return l;
+  return renderer_config::kMaxLevels - 2;
+}
+
+void TerrainRenderer::updateCoarsest(const Camera& camera, const ClipmapRenderer& colour) {
+  m_image_px = {double(colour.geometry().width_px), double(colour.geometry().height_px)};
+  m_coarsest = coarsestFor(cameraSamples(m_config.mapping, camera));
+}
+
 uint32_t TerrainRenderer::slotOf(int64_t tile) const {
   const int64_t s = tile % int64_t(m_slots);
   return uint32_t(s < 0 ? s + m_slots : s);
@@ -190,6 +214,7 @@ uint32_t TerrainRenderer::slotOf(int64_t tile) const {
 
 void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   if (heights == nullptr || !m_geometry.contains(key)) return;
+  if (m_config.full_resolution && key.level != 0) return;
   const uint32_t tile = m_geometry.tile_px;
   const uint32_t sx = slotOf(key.x), sy = slotOf(key.y);
   glTextureSubImage3D(m_heights, 0, GLint(sx * tile), GLint(sy * tile), GLint(key.level),
@@ -242,7 +267,8 @@ bool TerrainRenderer::groundRange(const Camera& camera, double* lowest, double* 
 uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
   uint32_t missing = 0;
   const size_t floats = size_t(m_geometry.tile_px) * m_geometry.tile_px;
-  for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
+  const uint32_t levels = m_config.full_resolution ? 1 : m_geometry.levelCount();
+  for (uint32_t l = 0; l < levels; ++l) {
     const LevelInfo& info = m_geometry.levels[l];
     if (info.tiles_x > m_slots || info.tiles_y > m_slots) continue;
     for (uint32_t y = 0; y < info.tiles_y; ++y)
@@ -263,7 +289,11 @@ bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
   const TerrainMapping& m = m_config.mapping;
   const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
   const int64_t tile = m_geometry.tile_px;
+  bool found = false;
+  uint32_t first = 0;
+  double highest = -INFINITY;
   for (uint32_t level = 0; level < m_geometry.levelCount(); ++level) {
+    if (found && level > std::max(first, m_frame.finest_level)) break;
     const LevelInfo& info = m_geometry.levels[level];
     const glm::dvec2 s = s0 / std::ldexp(1.0, int(level));
     const double fx = std::clamp(s.x, 0.0, double(info.width_px - 1));
@@ -287,11 +317,14 @@ bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
     const double u = fx - double(i0), v = fz - double(j0);
     const double h = u >= v ? h00 + u * (h10 - h00) + v * (h11 - h10)
                             : h00 + v * (h01 - h00) + u * (h11 - h01);
-    *height = h * m.world_per_height;
-    if (level_used != nullptr) *level_used = level;
-    return true;
+    if (!found) first = level;
+    found = true;
+    highest = std::max(highest, h);
   }
-  return false;
+  if (!found) return false;
+  *height = highest * m.world_per_height;
+  if (level_used != nullptr) *level_used = first;
+  return true;
 }
 
 bool TerrainRenderer::levelResident(uint32_t ring_level, const glm::i64vec2& ring_origin) const {
@@ -341,7 +374,7 @@ void TerrainRenderer::setFrameUniforms(uint32_t p, const Camera& camera,
       glm::mat4(cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera));
   glProgramUniformMatrix4fv(p, loc(p, "uViewProj"), 1, GL_FALSE, &view_proj[0][0]);
   glProgramUniform1i(p, loc(p, "uN"), GLint(n));
-  glProgramUniform1i(p, loc(p, "uCoarsest"), GLint(m_coarsest));
+  glProgramUniform1i(p, loc(p, "uCoarsest"), GLint(m_config.full_resolution ? 0 : m_coarsest));
   glProgramUniform1i(p, loc(p, "uTransition"),
                      GLint(std::max(1u, n / renderer_config::kTerrainTransitionDivisor)));
   glProgramUniform1i(p, loc(p, "uHeightPeriod"), GLint(m_slots * m_geometry.tile_px));
@@ -405,6 +438,7 @@ std::vector<glm::vec4> TerrainRenderer::ringVertices(const Camera& camera, const
 void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
                            const ClipmapRenderer& colour) {
   const GLuint p = m_program[colour.overlay() == Overlay::kOff ? 0 : 1];
+  updateCoarsest(camera, colour);
   colour.bindColour(p, camera, viewport);
   setFrameUniforms(p, camera, viewport);
   drawRings(p, camera, viewport);
@@ -434,6 +468,7 @@ void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewpo
   glClearNamedFramebufferfv(m_position_fbo, GL_COLOR, 0, none);
   glClearNamedFramebufferfi(m_position_fbo, GL_DEPTH_STENCIL, 0, 1.0f, 0);
   const GLuint p = m_position_program;
+  updateCoarsest(camera, colour);
   colour.bindColour(p, camera, viewport);  // the image's extent (uImageRel)
   setFrameUniforms(p, camera, viewport);
   drawRings(p, camera, viewport);
@@ -448,7 +483,24 @@ void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewpo
   glBindFramebuffer(GL_FRAMEBUFFER, GLuint(previous_fbo));
 }
 
+TerrainRenderer::Frustum TerrainRenderer::frustum(const Camera& camera, const Viewport& viewport) const {
+  // Planes of the camera-relative view-projection (Gribb & Hartmann).
+  const glm::dmat4 vp = cameraProjection(camera, viewport, farDistance(camera)) * cameraRelativeView(camera);
+  Frustum planes;
+  for (int i = 0; i < 3; ++i) {
+    const glm::dvec4 row_w(vp[0][3], vp[1][3], vp[2][3], vp[3][3]);
+    const glm::dvec4 row_i(vp[0][i], vp[1][i], vp[2][i], vp[3][i]);
+    planes[size_t(2 * i)] = row_w + row_i;
+    planes[size_t(2 * i + 1)] = row_w - row_i;
+  }
+  return planes;
+}
+
 void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport& viewport) {
+  if (m_config.full_resolution) {
+    drawPatches(p, camera, viewport);
+    return;
+  }
   m_frame = TerrainFrame{};
   const uint32_t n = m_config.ring_cells;
   const uint32_t coarsest = m_coarsest;
@@ -467,65 +519,12 @@ void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport
   glBindVertexArray(m_vao);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
-  // Frustum planes of the camera-relative view-projection (Gribb &
-  // Hartmann), for the block test below.
-  const TerrainMapping& m = m_config.mapping;
-  const double far_dist = farDistance(camera);
-  const glm::dmat4 vp = cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera);
-  std::array<glm::dvec4, 6> planes;
-  for (int i = 0; i < 3; ++i) {
-    const glm::dvec4 row_w(vp[0][3], vp[1][3], vp[2][3], vp[3][3]);
-    const glm::dvec4 row_i(vp[0][i], vp[1][i], vp[2][i], vp[3][i]);
-    planes[size_t(2 * i)] = row_w + row_i;
-    planes[size_t(2 * i + 1)] = row_w - row_i;
-  }
-  const glm::dvec2 cam = cameraSamples(m, camera);
-  const uint32_t block_cells = n / kBlocks;
-  std::vector<GLsizei> counts;
-  std::vector<const void*> offsets;
+  const Frustum planes = frustum(camera, viewport);
   for (uint32_t l = uint32_t(finest); l <= coarsest; ++l) {
     const glm::i64vec2 o = origins[l];
     const int config = l == uint32_t(finest) ? 0 : holeConfig(origins[l - 1], o, n);
     if (config < 0 || config > 4) continue;  // cannot happen: origins nest (see ringOrigin)
-    setRingUniforms(p, camera, l, o);
-    counts.clear();
-    offsets.clear();
-    const double spacing = std::ldexp(1.0, int(l));
-    for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
-      if (m_index_count[config][b] == 0) continue;
-      // The block's box, camera-relative: its cells (plus the two samples
-      // the transition and normals reach beyond them) and the heights of
-      // the tiles under it.
-      const glm::i64vec2 c0 = o + glm::i64vec2((b % kBlocks) * block_cells, (b / kBlocks) * block_cells);
-      const glm::i64vec2 c1 = c0 + glm::i64vec2(block_cells, block_cells);
-      const glm::vec2 h = heightBounds(l, glm::max(c0 - int64_t(2), o - int64_t(1)),
-                                       glm::min(c1 + int64_t(2), o + int64_t(n + 1)));
-      const glm::dvec2 x0 = (glm::dvec2(c0) * spacing - cam) * m.world_per_sample;
-      const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
-      const double y0 = double(h.x) * m.world_per_height - camera.position.y;
-      const double y1 = double(h.y) * m.world_per_height - camera.position.y;
-      bool outside = false;
-      for (const glm::dvec4& pl : planes) {
-        // The box corner farthest along the plane's normal.
-        const glm::dvec3 far_corner(pl.x >= 0 ? x1.x : x0.x, pl.y >= 0 ? y1 : y0, pl.z >= 0 ? x1.y : x0.y);
-        if (glm::dot(glm::dvec3(pl), far_corner) + pl.w < 0.0) {
-          outside = true;
-          break;
-        }
-      }
-      if (outside) {
-        ++m_frame.culled_blocks;
-        continue;
-      }
-      counts.push_back(GLsizei(m_index_count[config][b]));
-      offsets.push_back(reinterpret_cast<const void*>(uintptr_t(m_first_index[config][b]) * sizeof(uint32_t)));
-      m_frame.triangles += m_index_count[config][b] / 3;
-      ++m_frame.blocks;
-    }
-    if (!counts.empty()) {
-      glMultiDrawElements(GL_TRIANGLES, counts.data(), GL_UNSIGNED_INT, offsets.data(),
-                          GLsizei(counts.size()));
-    }
+    drawGrid(p, camera, planes, l, o, config);
     ++m_frame.rings;
   }
   m_frame.finest_level = uint32_t(finest);
@@ -533,6 +532,79 @@ void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport
   glDisable(GL_DEPTH_TEST);
   glBindVertexArray(0);
   glUseProgram(0);
+}
+
+void TerrainRenderer::drawPatches(uint32_t p, const Camera& camera, const Viewport& viewport) {
+  m_frame = TerrainFrame{};
+  const int64_t n = m_config.ring_cells;
+  const TerrainMapping& m = m_config.mapping;
+  // Samples to cover: the height field, and the colour image beyond it
+  // (where the rings show the edge samples clamped), one more each side.
+  const LevelInfo& l0 = m_geometry.levels[0];
+  const glm::dvec2 img0 = (-m.sample0_world) / m.world_per_sample;
+  const glm::dvec2 img1 = (m_image_px - m.sample0_world) / m.world_per_sample;
+  const int64_t s0x = std::min<int64_t>(0, int64_t(std::floor(img0.x)) - 1);
+  const int64_t s0y = std::min<int64_t>(0, int64_t(std::floor(img0.y)) - 1);
+  const int64_t s1x = std::max<int64_t>(int64_t(l0.width_px) - 1, int64_t(std::ceil(img1.x)) + 1);
+  const int64_t s1y = std::max<int64_t>(int64_t(l0.height_px) - 1, int64_t(std::ceil(img1.y)) + 1);
+  auto floorDiv = [](int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); };
+  glUseProgram(p);
+  glBindVertexArray(m_vao);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  const Frustum planes = frustum(camera, viewport);
+  for (int64_t py = floorDiv(s0y, n); py * n < s1y; ++py)
+    for (int64_t px = floorDiv(s0x, n); px * n < s1x; ++px) drawGrid(p, camera, planes, 0, {px * n, py * n}, 0);
+  m_frame.rings = 1;
+  glDisable(GL_DEPTH_TEST);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+void TerrainRenderer::drawGrid(uint32_t p, const Camera& camera, const Frustum& planes, uint32_t l,
+                               const glm::i64vec2& o, int config) {
+  const uint32_t n = m_config.ring_cells;
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 cam = cameraSamples(m, camera);
+  const uint32_t block_cells = n / kBlocks;
+  setRingUniforms(p, camera, l, o);
+  std::vector<GLsizei> counts;
+  std::vector<const void*> offsets;
+  const double spacing = std::ldexp(1.0, int(l));
+  for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
+    if (m_index_count[config][b] == 0) continue;
+    // The block's box, camera-relative: its cells (plus the two samples
+    // the transition and normals reach beyond them) and the heights of
+    // the tiles under it.
+    const glm::i64vec2 c0 = o + glm::i64vec2((b % kBlocks) * block_cells, (b / kBlocks) * block_cells);
+    const glm::i64vec2 c1 = c0 + glm::i64vec2(block_cells, block_cells);
+    const glm::vec2 h = heightBounds(l, glm::max(c0 - int64_t(2), o - int64_t(1)),
+                                     glm::min(c1 + int64_t(2), o + int64_t(n + 1)));
+    const glm::dvec2 x0 = (glm::dvec2(c0) * spacing - cam) * m.world_per_sample;
+    const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
+    const double y0 = double(h.x) * m.world_per_height - camera.position.y;
+    const double y1 = double(h.y) * m.world_per_height - camera.position.y;
+    bool outside = false;
+    for (const glm::dvec4& pl : planes) {
+      // The box corner farthest along the plane's normal.
+      const glm::dvec3 far_corner(pl.x >= 0 ? x1.x : x0.x, pl.y >= 0 ? y1 : y0, pl.z >= 0 ? x1.y : x0.y);
+      if (glm::dot(glm::dvec3(pl), far_corner) + pl.w < 0.0) {
+        outside = true;
+        break;
+      }
+    }
+    if (outside) {
+      ++m_frame.culled_blocks;
+      continue;
+    }
+    counts.push_back(GLsizei(m_index_count[config][b]));
+    offsets.push_back(reinterpret_cast<const void*>(uintptr_t(m_first_index[config][b]) * sizeof(uint32_t)));
+    m_frame.triangles += m_index_count[config][b] / 3;
+    ++m_frame.blocks;
+  }
+  if (!counts.empty()) {
+    glMultiDrawElements(GL_TRIANGLES, counts.data(), GL_UNSIGNED_INT, offsets.data(), GLsizei(counts.size()));
+  }
 }
 
 }  // namespace clipstream

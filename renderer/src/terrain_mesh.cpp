@@ -52,4 +52,16 @@ std::vector<uint32_t> ringTriangles(uint32_t n, int hole_x, int hole_y) {
   return out;
 }
 
+std::vector<uint32_t> gridTriangles(uint32_t n) {
+  std::vector<uint32_t> out;
+  out.reserve(size_t(n) * n * 6);
+  for (uint32_t j = 0; j < n; ++j)
+    for (uint32_t i = 0; i < n; ++i) {
+      const uint32_t a = vertexIndex(n, i, j), b = vertexIndex(n, i + 1, j);
+      const uint32_t d = vertexIndex(n, i, j + 1), e = vertexIndex(n, i + 1, j + 1);
+      out.insert(out.end(), {a, b, e, a, e, d});
+    }
+  return out;
+}
+
 }  // namespace clipstream::terrain_mesh

@@ -20,4 +20,9 @@ inline uint32_t vertexIndex(uint32_t n, uint32_t i, uint32_t j) { return j * (n 
 // where two rings meet (the edge-stitching of crack-free chunk LOD).
 std::vector<uint32_t> ringTriangles(uint32_t n, int hole_x, int hole_y);
 
+// Triangles of a plain grid of n x n cells, every cell cut along the same
+// diagonal as a ring's: the full-resolution mesh's patches
+// (TerrainConfig::full_resolution), which meet each other vertex for vertex.
+std::vector<uint32_t> gridTriangles(uint32_t n);
+
 }  // namespace clipstream::terrain_mesh

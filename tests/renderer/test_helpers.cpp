@@ -144,11 +144,14 @@ Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDam
 }
 
 size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, const Viewport& viewport,
-                     double lowest, double lo, double hi, size_t* ground, std::vector<uint8_t>* marked) {
+                     double lowest, double lo, double hi, size_t* ground, std::vector<uint8_t>* marked,
+                     double highest) {
   if (marked) *marked = rgba;
   if (ground) *ground = 0;
   Camera lowered = camera;
   lowered.position.y -= lowest;
+  Camera top = camera;
+  top.position.y -= highest;
   size_t cracks = 0;
   for (uint32_t py = 0; py < viewport.height_px; ++py)
     for (uint32_t px = 0; px < viewport.width_px; ++px) {
@@ -158,6 +161,12 @@ size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, con
       glm::dvec2 hit;
       if (!background || !groundHit(lowered, viewport, px + 0.5, py + 0.5, &hit)) continue;
       if (hit.x < lo || hit.y < lo || hit.x > hi || hit.y > hi) continue;
+      if (!std::isnan(highest)) {
+        // The ray must also come down through y = highest inside the square.
+        glm::dvec2 enter;
+        if (top.position.y > 0.0 && !groundHit(top, viewport, px + 0.5, py + 0.5, &enter)) continue;
+        if (top.position.y > 0.0 && (enter.x < lo || enter.y < lo || enter.x > hi || enter.y > hi)) continue;
+      }
       ++cracks;
       if (marked) {
         uint8_t* m = marked->data() + (size_t(py) * viewport.width_px + px) * 4;

@@ -17,6 +17,7 @@
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/tile_source.h>
 
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
@@ -55,10 +56,12 @@ std::vector<uint8_t> renderFrame(ClipmapRenderer& renderer, OffscreenTarget& tar
 // above that plane everywhere, so such a ray met it first: each is a crack
 // or a hole. *ground (optional) receives the pixels that show anything
 // but the background; *marked (optional) a copy of the frame with the
-// cracks painted red, for dumpPpm().
+// cracks painted red, for dumpPpm(). With `highest` (above every ground),
+// only rays that also cross y = highest inside the square count: a camera
+// outside the square sees under its edge, where no ground is drawn.
 size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, const Viewport& viewport,
                      double lowest, double lo, double hi, size_t* ground = nullptr,
-                     std::vector<uint8_t>* marked = nullptr);
+                     std::vector<uint8_t>* marked = nullptr, double highest = NAN);
 
 // Writes a PPM to $CLIPSTREAM_TEST_DUMP/<name>.ppm when that variable is set
 // (for looking at a failing comparison); does nothing otherwise.

@@ -50,6 +50,7 @@ struct HeightField {
     return out;
   }
   float lowest() const { return *std::min_element(samples.begin(), samples.end()); }
+  float highest() const { return *std::max_element(samples.begin(), samples.end()); }
 };
 
 // Rolling hills, a sharp ridge and a 40-unit cliff: what rings must stitch.
@@ -236,6 +237,24 @@ TEST(Terrain, NoCrackAtRestOrWhileRingsMoveAcrossLevelBorders) {
   EXPECT_GT(culled, drawn / 4) << "drawn " << drawn;
 }
 
+TEST(Terrain, SeenFromOutsideItsCornerTheWholeFieldIsDrawn) {
+  CLIPSTREAM_REQUIRE_GL();
+  // 200 samples beyond a corner of the field, high, looking across it to
+  // the opposite corner 1224 samples away: the outermost ring must reach
+  // that far from the camera, not only as far as the field is wide.
+  const Camera camera = overField(-400.0, 2448.0, 900.0, 0.785, -0.42);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  uploadRings(*s.terrain, s.field, camera);
+  const std::vector<uint8_t> rgba = drawTerrain(s, camera);
+  EXPECT_GT(groundPixels(rgba), rgba.size() / 4 / 8);
+  std::vector<uint8_t> marked;
+  const size_t cracks = test::terrainCracks(rgba, camera, kViewport, s.field.lowest(), 4.0, 2044.0, nullptr,
+                                            &marked, s.field.highest());
+  if (cracks > 0) test::dumpPpm("terrain_far_corner", marked, kViewport);
+  EXPECT_EQ(cracks, 0u) << "ground of the field left undrawn";
+}
+
 TEST(Terrain, MissingFineHeightTilesCoarsenTheGeometryWithoutHoles) {
   CLIPSTREAM_REQUIRE_GL();
   const Camera camera = overField(900.0, 1100.0, 140.0, 2.0, -0.5);
@@ -318,6 +337,49 @@ TEST(Terrain, GroundHeightFollowsTheFinestResidentLevel) {
   // Half-way along x between two samples: their mean (on the cell's edge).
   ASSERT_TRUE(s.terrain->groundHeight({1002.0, 777.0}, &h));
   EXPECT_NEAR(h, 0.5 * (s.field.at(0, 500, 388) + s.field.at(0, 501, 388)), 1e-4);
+}
+
+TEST(Terrain, GroundHeightIsAboveEverySurfaceTheNextFrameMayDraw) {
+  CLIPSTREAM_REQUIRE_GL();
+  // Only the rings from level 2 out are resident and drawn; then level 0's
+  // tiles arrive. Until a frame draws the level-0 ring, the ground under a
+  // point is the highest of the level-0 to level-2 surfaces there (the
+  // drawn ring may lie above the finer one, where it bridges a hollow);
+  // once it is drawn, the level-0 surface alone.
+  const Camera camera = overField(1001.0, 777.0, 150.0, 0.0, -0.5);
+  TerrainScene s = makeScene(camera);
+  ASSERT_TRUE(s.terrain);
+  uploadRings(*s.terrain, s.field, camera, 2);
+  s.target->bind();
+  s.terrain->draw(camera, kViewport, *s.colour);
+  ASSERT_EQ(s.terrain->lastFrame().finest_level, 2u);
+  // Level-0 samples (496 + k, 388): world (2 i + 1, 777).
+  std::vector<double> coarse(16);
+  for (int k = 0; k < 16; ++k) {
+    uint32_t level = 99;
+    ASSERT_TRUE(s.terrain->groundHeight({2.0 * (496 + k) + 1.0, 777.0}, &coarse[size_t(k)], &level));
+    EXPECT_EQ(level, 2u);
+  }
+  uploadRings(*s.terrain, s.field, camera, 0);
+  int above = 0;  // points where the drawn level-2 surface lies above level 0's
+  for (int k = 0; k < 16; ++k) {
+    double h = 0.0;
+    uint32_t level = 99;
+    ASSERT_TRUE(s.terrain->groundHeight({2.0 * (496 + k) + 1.0, 777.0}, &h, &level));
+    EXPECT_EQ(level, 0u);
+    const double fine = s.field.at(0, uint64_t(496 + k), 388);
+    EXPECT_GE(h, coarse[size_t(k)]) << k;
+    EXPECT_GE(h, fine) << k;
+    if (coarse[size_t(k)] > fine) ++above;
+  }
+  EXPECT_GT(above, 0) << "no point where the coarser surface is higher: the test cannot tell";
+  s.terrain->draw(camera, kViewport, *s.colour);
+  ASSERT_EQ(s.terrain->lastFrame().finest_level, 0u);
+  for (int k = 0; k < 16; ++k) {
+    double h = 0.0;
+    ASSERT_TRUE(s.terrain->groundHeight({2.0 * (496 + k) + 1.0, 777.0}, &h));
+    EXPECT_FLOAT_EQ(float(h), s.field.at(0, uint64_t(496 + k), 388)) << k;
+  }
 }
 
 // Uploads, for this camera, the tiles every ring reads, fetched from a

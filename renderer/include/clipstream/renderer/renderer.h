@@ -116,6 +116,7 @@ class ClipmapRenderer {
 
   const UsableMap& usableMap() const { return m_front_map; }
   const UploadStats& lastUploads() const { return m_stats; }
+  const PyramidGeometry& geometry() const { return m_geometry; }
   uint64_t textureBytes() const { return m_texture_bytes; }
 
  private:

@@ -19,6 +19,7 @@
 
 #include <glm/glm.hpp>
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -38,6 +39,14 @@ struct TerrainConfig {
   // every tile of a window it hands over has a slot of its own; 0: only
   // what the rings read.
   uint32_t clip_tiles = 0;
+  // The full-resolution mesh instead of rings: one vertex per level-0
+  // sample over the whole height field (and the colour image beyond it),
+  // drawn as patches of ring_cells x ring_cells cells with the rings'
+  // vertex shader, so wherever the finest ring lies its vertices are
+  // bit-identical. The stack then holds level 0 whole (uploadTile ignores
+  // other levels). The accuracy reference of terrain flights
+  // (eval/terrain_accuracy.h); for measuring, not for display.
+  bool full_resolution = false;
 };
 
 // What the last draw() drew.
@@ -84,14 +93,19 @@ class TerrainRenderer {
   // missing height tile coarsens the geometry, never opens a hole.
   void draw(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour);
 
-  // The ground height (world units) at world point (x, z), from the finest
-  // level whose tile there is in the stack, on the surface the rings draw
-  // (cells cut along the same diagonal); false when no level holds it.
-  // `level` (optional) receives the level used.
+  // The ground height (world units) at world point (x, z) on the surface
+  // the rings draw there (cells cut along the same diagonal), from the
+  // resident tiles: the highest of the surfaces of the finest level whose
+  // tile there is resident and of every level up to the innermost ring
+  // drawn last, so that a camera kept above it is above the ground whichever
+  // of those rings the next frame draws (a coarser ring bridging a valley
+  // lies above the finer surface). False when no level holds the point.
+  // `level` (optional) receives the finest level resident there.
   bool groundHeight(const glm::dvec2& world_xz, double* height, uint32_t* level = nullptr) const;
 
   // The camera-relative world position (x, y, z) each pixel shows, 4
-  // floats a pixel (w = 1 on terrain, 0 elsewhere), top row first, drawn
+  // floats a pixel (w = 1 + the transition weight on terrain, so 1 outside
+  // the transition bands; 0 elsewhere), top row first, drawn
   // with the same rings, culling and residency as draw() into the
   // renderer's own float target. For measuring the geometric error; it
   // replaces lastFrame(). GL thread.
@@ -137,10 +151,24 @@ class TerrainRenderer {
  private:
   TerrainRenderer() = default;
   void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
+  // The coarsest ring level needed with the camera at `cam` (level-0
+  // samples), and setting it (with the colour image's extent) for a frame.
+  uint32_t coarsestFor(const glm::dvec2& cam) const;
+  void updateCoarsest(const Camera& camera, const ClipmapRenderer& colour);
   double farDistance(const Camera& camera) const;
   // Draws the resident rings with `program` (its uniforms set by the caller
   // for the frame), culling blocks; fills m_frame.
   void drawRings(uint32_t program, const Camera& camera, const Viewport& viewport);
+  // The full_resolution mesh: every patch over the height field and the
+  // colour image (m_image_px), culled by blocks.
+  void drawPatches(uint32_t program, const Camera& camera, const Viewport& viewport);
+  using Frustum = std::array<glm::dvec4, 6>;
+  Frustum frustum(const Camera& camera, const Viewport& viewport) const;
+  // Draws the blocks of index pattern `config` of the grid whose vertex
+  // (0, 0) is `origin` (level samples) at `level` that meet the frustum;
+  // counts them in m_frame.
+  void drawGrid(uint32_t program, const Camera& camera, const Frustum& planes, uint32_t level,
+                const glm::i64vec2& origin, int config);
   void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
                        const glm::i64vec2& origin) const;
   bool levelResident(uint32_t level, const glm::i64vec2& origin) const;
@@ -152,12 +180,15 @@ class TerrainRenderer {
   PyramidGeometry m_geometry;
   TerrainConfig m_config;
   uint32_t m_slots = 0;        // tiles per stack layer side (toroidal period)
-  uint32_t m_coarsest = 0;     // outermost ring level: covers the whole height field
+  // Outermost ring level: covers the whole height field and colour image
+  // from the camera of the last draw (updateCoarsest()).
+  uint32_t m_coarsest = 0;
   uint32_t m_program[2] = {0, 0};  // without / with the overlay
   uint32_t m_feedback_program = 0; // ringVertices()
   uint32_t m_position_program = 0; // readPositions()
   uint32_t m_position_fbo = 0, m_position_color = 0, m_position_depth = 0;
   Viewport m_position_size{0, 0};
+  glm::dvec2 m_image_px{0.0};  // the colour image's size (world units) at the last draw
   uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
   uint32_t m_heights = 0;      // R32F array texture
   // Index buffer ranges: [0] no hole, [1 + hx + 2 hy] hole at (n/4 + hx, n/4 + hy).
