@@ -51,7 +51,18 @@ std::shared_ptr<const std::vector<uint8_t>> IdealReference::tile(const TileKey& 
 }
 
 Status IdealReference::render(const Camera& camera, std::vector<uint8_t>* rgba) {
+  if (Status s = prepare(camera, false); !s) return s;
+  m_target->bind();
+  ClipmapRenderer::clearSky();
+  m_renderer->draw(camera, m_viewport);
+  m_target->readRgba(rgba);
+  return Status::ok();
+}
+
+Status IdealReference::prepare(const Camera& camera, bool every_level) {
   m_plan = planClipmap(m_geometry, m_viewport, camera, m_planner);
+  if (every_level)
+    for (ClipLevelPlan& lp : m_plan.stack) lp.needed = true;
   if (m_plan.pyramid_level != m_loaded.size())
     return Status::error(ErrorCode::kInvalidArgument, "ideal reference: plan changed its pyramid level");
   m_renderer->beginFrame();
@@ -81,10 +92,6 @@ Status IdealReference::render(const Camera& camera, std::vector<uint8_t>* rgba) 
   m_renderer->setResidency(residency);
   m_renderer->setMaxTextureLod(0);
   m_renderer->endUploads();
-  m_target->bind();
-  ClipmapRenderer::clearSky();
-  m_renderer->draw(camera, m_viewport);
-  m_target->readRgba(rgba);
   return Status::ok();
 }
 

@@ -120,8 +120,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   // frames 7 frames earlier in 5 of 6 runs (docs/benchmarks.md), a change of
   // results this loop must not make.
   std::unique_ptr<FlyAccuracy> accuracy;
-  // The reference draws the flat plane: over terrain it would judge the
-  // wrong picture, so it is not run (docs/terrain.md, "Status").
+  // This reference draws the flat plane; over terrain the TerrainReference
+  // below judges the frames instead (docs/terrain.md, "Accuracy").
   if (!o.terrain && (o.reference_every > 0 || o.sample_tiles)) {
     AccuracyOptions ao;
     ao.ground_truth = o.ground_truth_every > 0;
@@ -136,9 +136,20 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     first = cameraAboveGround(first, o.terrain->source->elevationInfo().max_height *
                                          o.terrain->alignment.world_per_height);
   }
+  // Over terrain the judged frames are measured against the full-resolution
+  // surface (geometric error) and the full-resolution mesh with the ideal
+  // texture (PSNR).
   std::unique_ptr<ReferenceSurface> surface;
+  std::unique_ptr<TerrainReference> terrain_reference;
   if (o.terrain && o.terrain->source && o.reference_every > 0) {
     if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, &surface); !s) return s;
+    TerrainConfig tc;
+    tc.ring_cells = o.terrain->ring_cells;
+    tc.mapping = o.terrain->alignment;
+    if (Status s = TerrainReference::create(o.source, *o.terrain->source, tc, o.viewport, o.streamer.planner,
+                                            &terrain_reference);
+        !s)
+      return s;
   }
   std::unique_ptr<Flight> flight;
   if (Status s = Flight::create(watched, fc, first, &flight); !s) return s;
@@ -178,6 +189,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     std::vector<uint8_t> rgba;
   };
   std::vector<Candidate> candidates;
+  std::vector<uint8_t> streamed_rgba, reference_rgba;  // terrain frames judged
+  std::vector<float> reference_xyzw;
   run->frames.reserve(std::min<uint32_t>(total, 100000));  // grows past that as frames come
   const auto run_start = Clock::now();
   watched->arm(true);
@@ -201,6 +214,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       if (Status s = flight->resize(o.resize_to, previous); !s) return s;
       if (accuracy)
         if (Status s = accuracy->resize(o.resize_to); !s) return s;
+      if (terrain_reference)
+        if (Status s = terrain_reference->resize(o.resize_to); !s) return s;
       watched->arm(true);
     }
     FlightRunFrame f;
@@ -216,6 +231,18 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       std::vector<float> xyzw;
       flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw);
       f.geometry = geometricError(xyzw, camera, flight->viewport(), *surface);
+      flight->target()->readRgba(&streamed_rgba);
+      if (Status s = terrain_reference->render(camera, &reference_rgba, &reference_xyzw); !s) return s;
+      const TerrainFrameError te = compareTerrainFrames(streamed_rgba, xyzw, reference_rgba, reference_xyzw, flight->viewport());
+      f.accuracy.measured = true;
+      f.accuracy.error = te.error;
+      f.terrain_agree_pixels = te.agree_pixels;
+      f.terrain_agree_mismatched = te.agree_mismatched;
+      if (i + 1 == total) run->final_max_abs_error = te.error.max_abs_error;
+      if (i >= o.frames) {
+        run->terrain_rest_agree_pixels += te.agree_pixels;
+        run->terrain_rest_agree_mismatched += te.agree_mismatched;
+      }
       if (f.geometry.pixels > 0) {
         const bool rest = i >= o.frames;
         run->geometry_frames += 1;

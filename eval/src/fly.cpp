@@ -192,10 +192,6 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
         !s)
       return s;
     for (const std::string& w : notes) (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
-    if (o.reference)
-      (warnings ? *warnings : log) << "clipstream-fly: warning: over terrain --reference measures the "
-                                      "geometric error against the full-resolution mesh; the image "
-                                      "(PSNR) reference is not run yet (docs/terrain.md)\n";
     r.terrain = std::move(terrain);
   }
   {
@@ -281,7 +277,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.upload_tiles = o.upload_tiles;
   d.cache_mb = o.cache_mb;
   d.warmup_frames = o.warmup_frames;
-  d.reference = o.reference && !r.terrain;
+  d.reference = o.reference;
   d.throttle = o.throttle;
   d.prefetch = o.prefetch;
   d.frustum_priority = o.frustum_priority;

@@ -111,6 +111,8 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       j["geo_error_mean_px"] = f.geometry.mean_px;
       j["geo_error_p95_px"] = f.geometry.p95_px;
       j["geo_error_max_px"] = f.geometry.max_px;
+      j["texture_agree_pixels"] = f.terrain_agree_pixels;
+      j["texture_agree_mismatched"] = f.terrain_agree_mismatched;
     }
     if (r.terrain_rings > 0 || r.height_tiles_uploaded > 0) {
       j["terrain_triangles"] = r.terrain_triangles;
@@ -162,6 +164,8 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["geo_error_rest_mean_px"] = run.geometry_rest_mean_px;
   acc["geo_error_rest_p95_px"] = run.geometry_rest_p95_px;
   acc["geo_error_rest_max_px"] = run.geometry_rest_max_px;
+  acc["texture_agree_pixels_rest"] = run.terrain_rest_agree_pixels;
+  acc["texture_agree_mismatched_rest"] = run.terrain_rest_agree_mismatched;
   const Means m = meansOf(run);
   nlohmann::json summary = {
       {"source", run.source},
@@ -241,6 +245,10 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("geo_error_max_px", run.geometry_frames ? num(run.geometry_max_px) : std::string());
   add("geo_error_rest_mean_px", run.geometry_rest_frames ? num(run.geometry_rest_mean_px) : std::string());
   add("geo_error_rest_p95_px", run.geometry_rest_frames ? num(run.geometry_rest_p95_px) : std::string());
+  add("texture_agree_pixels_rest",
+      run.geometry_rest_frames ? std::to_string(run.terrain_rest_agree_pixels) : std::string());
+  add("texture_agree_mismatched_rest",
+      run.geometry_rest_frames ? std::to_string(run.terrain_rest_agree_mismatched) : std::string());
   return keys + "\n" + values + "\n";
 }
 
@@ -288,6 +296,10 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     if (run.geometry_rest_frames > 0) {
       row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");
       row("geo_error_rest_p95_px", run.geometry_rest_p95_px, "%.3f");
+      // Where the geometry agrees with the full-resolution mesh to the bit,
+      // the texture must too.
+      row("texture_agree_pixels_rest", double(run.terrain_rest_agree_pixels), "%.0f");
+      row("texture_agree_mismatched_rest", double(run.terrain_rest_agree_mismatched), "%.0f");
     }
   }
   if (d.reference) {

@@ -70,7 +70,7 @@ GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camer
   for (uint32_t py = 0; py < viewport.height_px; ++py)
     for (uint32_t px = 0; px < viewport.width_px; ++px) {
       const float* p = xyzw.data() + (size_t(py) * viewport.width_px + px) * 4;
-      if (p[3] != 1.0f) continue;
+      if (p[3] < 1.0f) continue;
       const double wx = camera.position.x + double(p[0]), wz = camera.position.z + double(p[2]);
       const double y_rel = surface.heightAt(wx, wz) - camera.position.y;
       const glm::dvec4 clip = vp * glm::dvec4(double(p[0]), y_rel, double(p[2]), 1.0);
@@ -92,6 +92,102 @@ GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camer
   }
   e.mean_px = sum / double(errors.size());
   e.p95_px = percentileOf(std::move(errors), 0.95);
+  return e;
+}
+
+Status TerrainReference::create(std::shared_ptr<TileSource> colour, TileSource& heights,
+                                const TerrainConfig& terrain, const Viewport& viewport,
+                                const PlannerConfig& planner, std::unique_ptr<TerrainReference>* out) {
+  out->reset();
+  if (heights.content() != TileContent::kHeightF32) {
+    return Status::error(ErrorCode::kInvalidArgument, "terrain reference: not a height source");
+  }
+  const PyramidGeometry& g = heights.geometry();
+  if (g.levelCount() == 0 || g.width_px * g.height_px > kMaxReferenceSamples) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "terrain reference: " + std::to_string(g.width_px) + "x" +
+                             std::to_string(g.height_px) + " samples is more than the " +
+                             std::to_string(kMaxReferenceSamples) + " drawn at full resolution");
+  }
+  std::unique_ptr<TerrainReference> r(new TerrainReference());
+  TerrainConfig tc = terrain;
+  tc.full_resolution = true;
+  tc.clip_tiles = 0;
+  if (Status s = TerrainRenderer::create(g, tc, &r->m_mesh); !s) return s;
+  Status failed;
+  const uint32_t missing = r->m_mesh->preloadCoarseLevels([&](const TileKey& key) {
+    auto bytes = std::make_shared<std::vector<uint8_t>>();
+    if (Status s = heights.fetch(key, bytes.get()); !s) {
+      if (failed.isOk()) failed = s;
+      return std::shared_ptr<const std::vector<uint8_t>>();
+    }
+    return std::shared_ptr<const std::vector<uint8_t>>(std::move(bytes));
+  });
+  if (missing > 0) {
+    return failed.isOk() ? Status::error(ErrorCode::kCorruptTile, "terrain reference: a height tile of the wrong size")
+                         : failed;
+  }
+  if (Status s = IdealReference::create(std::move(colour), viewport, planner, &r->m_colour); !s) return s;
+  if (Status s = r->resize(viewport); !s) return s;
+  *out = std::move(r);
+  return Status::ok();
+}
+
+Status TerrainReference::resize(const Viewport& viewport) {
+  m_viewport = viewport;
+  m_target.reset();
+  if (Status s = m_colour->resize(viewport); !s) return s;
+  return OffscreenTarget::create(viewport, &m_target);
+}
+
+Status TerrainReference::render(const Camera& camera, std::vector<uint8_t>* rgba, std::vector<float>* xyzw) {
+  if (Status s = m_colour->prepare(camera, true); !s) return s;
+  m_target->bind();
+  ClipmapRenderer::clearSky();
+  m_mesh->draw(camera, m_viewport, m_colour->renderer());
+  m_target->readRgba(rgba);
+  m_mesh->readPositions(camera, m_viewport, m_colour->renderer(), xyzw);
+  m_target->bind();
+  return Status::ok();
+}
+
+TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba,
+                                       const std::vector<float>& streamed_xyzw,
+                                       const std::vector<uint8_t>& reference_rgba,
+                                       const std::vector<float>& reference_xyzw, const Viewport& viewport) {
+  TerrainFrameError e;
+  e.error = compareFrames(streamed_rgba, reference_rgba);
+  const uint32_t w = viewport.width_px, h = viewport.height_px;
+  const size_t pixels = size_t(w) * h;
+  if (streamed_rgba.size() != pixels * 4 || reference_rgba.size() != pixels * 4 ||
+      streamed_xyzw.size() != pixels * 4 || reference_xyzw.size() != pixels * 4) {
+    return e;
+  }
+  std::vector<uint8_t> same(pixels, 0);
+  for (size_t p = 0; p < pixels; ++p) {
+    const float* a = streamed_xyzw.data() + p * 4;
+    const float* b = reference_xyzw.data() + p * 4;
+    same[p] = a[3] == 1.0f && b[3] == 1.0f && std::memcmp(a, b, 3 * sizeof(float)) == 0;
+  }
+  // w = 1 exactly: outside the streamed rings' transition bands, whose
+  // blended normals shade differently at the same position.
+  // The texture's level comes from derivatives across the pixel's 2x2 quad
+  // (columns 2k, 2k + 1; GL rows, counted from the bottom, 2k, 2k + 1): the
+  // geometry agrees at a pixel when it agrees at all four.
+  for (uint32_t y = 0; y < h; ++y) {
+    const uint32_t gl_row = h - 1 - y;
+    if ((gl_row ^ 1u) >= h) continue;
+    const uint32_t y2 = h - 1 - (gl_row ^ 1u);
+    for (uint32_t x = 0; x < w; ++x) {
+      if ((x ^ 1u) >= w) continue;
+      const size_t p = size_t(y) * w + x;
+      if (!same[p] || !same[size_t(y) * w + (x ^ 1u)] || !same[size_t(y2) * w + x] ||
+          !same[size_t(y2) * w + (x ^ 1u)])
+        continue;
+      ++e.agree_pixels;
+      if (std::memcmp(&streamed_rgba[p * 4], &reference_rgba[p * 4], 3) != 0) ++e.agree_mismatched;
+    }
+  }
   return e;
 }
 

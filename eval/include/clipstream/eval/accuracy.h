@@ -46,6 +46,14 @@ class IdealReference {
   // callers rebind theirs.
   Status render(const Camera& camera, std::vector<uint8_t>* rgba);
 
+  // The first half of render(): plans for `camera` and loads what is
+  // missing, drawing nothing. With `every_level`, every stack level's
+  // window counts as needed, not only those the flat plane's footprint
+  // asks for (over terrain, ground may come near wherever the frame looks).
+  // renderer() then textures any geometry with the ideal stack.
+  Status prepare(const Camera& camera, bool every_level);
+  const ClipmapRenderer& renderer() const { return *m_renderer; }
+
   // Recreates the renderer and target for a new viewport (clip size
   // follows the viewport); the tile cache is kept.
   Status resize(const Viewport& viewport);

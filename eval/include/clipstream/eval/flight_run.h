@@ -57,8 +57,8 @@ struct FlightRunOptions {
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
   // Terrain under the colour layer (FlightConfig::terrain). Path heights
   // then mean heights above the ground under the camera, never less than
-  // kTerrainClearance; the flat image reference is not run, and judged
-  // frames (reference_every) measure the geometric error instead.
+  // kTerrainClearance; judged frames (reference_every) are compared with
+  // the TerrainReference (PSNR) and measure the geometric error.
   std::optional<TerrainLayerConfig> terrain;
 
   // Measurement.
@@ -93,8 +93,14 @@ struct FlightRunFrame {
   FrameSample sample;
   double t_s = 0.0;            // path time shown
   double readback_ms = 0.0;    // reading a saved frame back (FlightRunOptions::on_frame); 0 if not saved
-  AccuracyFrame accuracy;      // when judged
+  // When judged: against the IdealReference, or over terrain against the
+  // TerrainReference (then hole_pixels is not counted: a silhouette of
+  // coarser geometry is no hole; the crack tests cover holes).
+  AccuracyFrame accuracy;
   GeometryError geometry;      // over terrain, when judged (reference_every)
+  // Over terrain, when judged: pixels showing the reference's world
+  // position to the bit, and of them those whose colour differs.
+  uint32_t terrain_agree_pixels = 0, terrain_agree_mismatched = 0;
 };
 
 struct FlightRun {
@@ -134,6 +140,10 @@ struct FlightRun {
   uint32_t geometry_frames = 0, geometry_rest_frames = 0;
   double geometry_mean_px = 0.0, geometry_p95_px = 0.0, geometry_max_px = 0.0;
   double geometry_rest_mean_px = 0.0, geometry_rest_p95_px = 0.0, geometry_rest_max_px = 0.0;
+  // Over the judged rest frames: pixels where the geometry agrees with the
+  // reference to the bit, and of them those whose colour differs (0 when
+  // the texture is bit-identical wherever the geometry agrees).
+  uint64_t terrain_rest_agree_pixels = 0, terrain_rest_agree_mismatched = 0;
 };
 
 // The camera of a terrain flight: `path_camera` with its height taken as

@@ -4,9 +4,15 @@
 // show it (docs/terrain.md, "Accuracy").
 //
 // Thread rule: ReferenceSurface is immutable after load() and may be read
-// from any thread; geometricError() is a pure function.
+// from any thread; geometricError() and compareTerrainFrames() are pure
+// functions. TerrainReference is owned by the GL thread, like
+// TerrainRenderer.
 #pragma once
 
+#include <clipstream/eval/accuracy.h>
+#include <clipstream/eval/metrics.h>
+#include <clipstream/renderer/renderer.h>
+#include <clipstream/renderer/terrain.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
@@ -50,11 +56,61 @@ struct GeometryError {
 };
 
 // For every pixel showing terrain in `xyzw` (TerrainRenderer::
-// readPositions(): camera-relative x, y, z and w = 1), the distance in
+// readPositions(): camera-relative x, y, z and w >= 1), the distance in
 // pixels between the pixel's centre and where the ground point (x, z) at
 // the full-resolution surface's height projects for this camera. A point
 // behind the camera counts as the viewport's width.
 GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera,
                              const Viewport& viewport, const ReferenceSurface& surface);
+
+// The reference a terrain frame is judged against: the full-resolution
+// mesh (one vertex per DEM sample, TerrainConfig::full_resolution) drawn
+// with the ideal texture (IdealReference with every stack level's window
+// loaded, MaxTextureLOD 0), lit as the streamed terrain is. The same vertex
+// shader as the rings makes every vertex of the finest ring bit-identical
+// to the reference's, so at rest, where the geometry agrees, the texture
+// must agree to the bit too. Fetches synchronously: for measuring only.
+class TerrainReference {
+ public:
+  // Reads level 0 of `heights` whole (at most kMaxReferenceSamples, else
+  // kInvalidArgument) and creates the colour reference for `viewport`.
+  // `terrain` is the streamed terrain's configuration (its ring size is the
+  // reference's patch size, its mapping the reference's).
+  static Status create(std::shared_ptr<TileSource> colour, TileSource& heights,
+                       const TerrainConfig& terrain, const Viewport& viewport,
+                       const PlannerConfig& planner, std::unique_ptr<TerrainReference>* out);
+  // Draws `camera`'s frame into its own target and reads back its colour
+  // (RGBA8) and its positions (as TerrainRenderer::readPositions), top row
+  // first. Leaves its own framebuffer bound.
+  Status render(const Camera& camera, std::vector<uint8_t>* rgba, std::vector<float>* xyzw);
+  Status resize(const Viewport& viewport);
+  // Triangles the last render() drew.
+  uint64_t triangles() const { return m_mesh->lastFrame().triangles; }
+
+ private:
+  TerrainReference() = default;
+  Viewport m_viewport;
+  std::unique_ptr<IdealReference> m_colour;
+  std::unique_ptr<TerrainRenderer> m_mesh;
+  std::unique_ptr<OffscreenTarget> m_target;
+};
+
+// A streamed terrain frame against its TerrainReference.
+struct TerrainFrameError {
+  FrameError error;              // PSNR over the whole frame
+  uint32_t agree_pixels = 0;     // pixels where the geometry agrees (compareTerrainFrames())
+  uint32_t agree_mismatched = 0; // ... of them, pixels whose colour differs
+};
+
+// Compares colour and positions of a streamed frame with the reference's
+// (each `viewport`'s pixels, top row first; a size mismatch leaves the
+// agreement counts 0). The geometry agrees at a pixel when all four pixels
+// of its 2x2 quad (the GPU's derivative quad, which picks the texture's
+// level) show the reference's world positions to the bit, outside the
+// streamed rings' transition bands (w = 1: the normals are the ring's own).
+TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba,
+                                       const std::vector<float>& streamed_xyzw,
+                                       const std::vector<uint8_t>& reference_rgba,
+                                       const std::vector<float>& reference_xyzw, const Viewport& viewport);
 
 }  // namespace clipstream
