@@ -584,7 +584,13 @@ void TerrainRenderer::drawGrid(uint32_t p, const Camera& camera, const Frustum& 
     const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
     const double y0 = double(h.x) * m.world_per_height - camera.position.y;
     const double y1 = double(h.y) * m.world_per_height - camera.position.y;
-    bool outside = false;
+    // Ground outside the colour image is not drawn (the fragment shader
+    // discards it): a block wholly outside costs vertices for nothing. Its
+    // triangles reach two cells beyond its cells (they are filed by centroid).
+    const glm::dvec2 reach = 2.0 * spacing * m.world_per_sample;
+    bool outside = x1.x + reach.x <= -camera.position.x || x1.y + reach.y <= -camera.position.z ||
+                   x0.x - reach.x >= m_image_px.x - camera.position.x ||
+                   x0.y - reach.y >= m_image_px.y - camera.position.z;
     for (const glm::dvec4& pl : planes) {
       // The box corner farthest along the plane's normal.
       const glm::dvec3 far_corner(pl.x >= 0 ? x1.x : x0.x, pl.y >= 0 ? y1 : y0, pl.z >= 0 ? x1.y : x0.y);
