@@ -68,6 +68,10 @@ struct TileStoreReader::Impl {
     bytes_read.fetch_add(bytes, std::memory_order_relaxed);
     return source->read(data, bytes, offset);
   }
+  void readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const {
+    for (const ByteRange& r : ranges) bytes_read.fetch_add(r.bytes, std::memory_order_relaxed);
+    source->readMany(ranges, statuses);
+  }
 
   Status bad(ErrorCode code, const std::string& what) const {
     return Status::error(code, path + ": " + what);
@@ -77,6 +81,14 @@ struct TileStoreReader::Impl {
   // Reads and checks one index page without publishing it.
   Status readPage(uint32_t level_index, uint32_t px, uint32_t py,
                   std::unique_ptr<Page>* out) const;
+  // Checks one index page's bytes (read from the file or a cache).
+  Status decodePage(uint32_t level_index, uint32_t px, uint32_t py, std::span<const uint8_t> bytes,
+                    std::unique_ptr<Page>* out) const;
+  // Publishes a page unless another thread did first; returns the published one.
+  const Page* publish(uint32_t level_index, size_t page_index, std::unique_ptr<Page> page) const;
+  // Reads every index page these tiles need that is not loaded yet, all in
+  // flight at once (a batch spanning pages costs one round trip for them).
+  void loadPagesOf(std::span<const TileKey> keys) const;
   // Returns the published page, reading and publishing it on first use.
   Status loadPage(uint32_t level_index, uint32_t px, uint32_t py, const Page** out) const;
   // Published page or, if not loaded yet, a private copy kept in *scratch:
@@ -351,11 +363,19 @@ Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32
                                        std::unique_ptr<Page>* out) const {
   const LevelRead& level = levels[level_index];
   const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
-  const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
-                            ") of level " + std::to_string(level_index);
   std::vector<uint8_t> bytes(dir.bytes);
   Status status = read(bytes.data(), bytes.size(), dir.offset);
   if (!status) return status;
+  return decodePage(level_index, px, py, bytes, out);
+}
+
+Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint32_t py,
+                                         std::span<const uint8_t> bytes,
+                                         std::unique_ptr<Page>* out) const {
+  const LevelRead& level = levels[level_index];
+  const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+  const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
+                            ") of level " + std::to_string(level_index);
   auto page = std::make_unique<Page>();
   // Its size was checked against the page's tile count at open.
   switch (format::decodeIndexPage(bytes, dir.checksum, entry_bytes, &page->entries)) {
@@ -390,6 +410,20 @@ Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32
   return Status::ok();
 }
 
+const Page* TileStoreReader::Impl::publish(uint32_t level_index, size_t page_index,
+                                           std::unique_ptr<Page> page) const {
+  const LevelRead& level = levels[level_index];
+  const Page* expected = nullptr;
+  const Page* mine = page.get();
+  if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
+                                                      std::memory_order_acquire)) {
+    page.release();
+    pages_loaded.fetch_add(1, std::memory_order_relaxed);
+    return mine;
+  }
+  return expected;  // another thread published first; ours is freed
+}
+
 Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32_t py,
                                        const Page** out) const {
   const LevelRead& level = levels[level_index];
@@ -402,17 +436,45 @@ Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32
   std::unique_ptr<Page> page;
   Status status = readPage(level_index, px, py, &page);
   if (!status) return status;
-  const Page* expected = nullptr;
-  const Page* mine = page.get();
-  if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
-                                                      std::memory_order_acquire)) {
-    page.release();
-    pages_loaded.fetch_add(1, std::memory_order_relaxed);
-    *out = mine;
-  } else {
-    *out = expected;  // another thread published first; ours is freed
-  }
+  *out = publish(level_index, page_index, std::move(page));
   return Status::ok();
+}
+
+void TileStoreReader::Impl::loadPagesOf(std::span<const TileKey> keys) const {
+  struct Wanted {
+    uint32_t level = 0, px = 0, py = 0;
+    std::vector<uint8_t> bytes;
+  };
+  std::vector<Wanted> wanted;
+  for (const TileKey& key : keys) {
+    if (!info.geometry.contains(key)) continue;
+    const LevelRead& level = levels[key.level];
+    const uint32_t px = key.x / format::kPageTiles, py = key.y / format::kPageTiles;
+    const size_t page_index = size_t(py) * level.pages_x + px;
+    if (level.directory[page_index].flags & format::kPageFlagConstant) continue;
+    if (level.pages[page_index].load(std::memory_order_acquire) != nullptr) continue;
+    bool listed = false;
+    for (const Wanted& w : wanted) listed |= w.level == key.level && w.px == px && w.py == py;
+    if (!listed) wanted.push_back({key.level, px, py, {}});
+  }
+  if (wanted.size() < 2) return;  // one page: locate() reads it as before
+  std::vector<ByteRange> ranges(wanted.size());
+  std::vector<Status> statuses(wanted.size());
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    Wanted& w = wanted[i];
+    const LevelRead& level = levels[w.level];
+    const PageDirEntry& dir = level.directory[size_t(w.py) * level.pages_x + w.px];
+    w.bytes.resize(dir.bytes);
+    ranges[i] = ByteRange{w.bytes.data(), w.bytes.size(), dir.offset};
+  }
+  readMany(ranges, statuses);
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    const Wanted& w = wanted[i];
+    std::unique_ptr<Page> page;
+    // A failure is left for locate(), which reads the page again and reports.
+    if (!statuses[i] || !decodePage(w.level, w.px, w.py, w.bytes, &page)) continue;
+    publish(w.level, size_t(w.py) * levels[w.level].pages_x + w.px, std::move(page));
+  }
 }
 
 Status TileStoreReader::Impl::peekPage(uint32_t level_index, uint32_t px, uint32_t py,
@@ -495,6 +557,7 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
                                    std::span<Status> statuses) const {
   const Impl& impl = *m_impl;
   const size_t n = std::min({keys.size(), out.size(), statuses.size()});
+  impl.loadPagesOf(keys.first(n));
   // Locate everything; payloads to read, in file order.
   std::vector<size_t> order;
   for (size_t i = 0; i < n; ++i) {
@@ -506,7 +569,12 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return out[a].location.offset < out[b].location.offset;
   });
-  std::vector<uint8_t> buffer;
+  // Runs of payloads close together: [first, last) of `order` each.
+  struct Run {
+    size_t first = 0, last = 0;
+    uint64_t begin = 0, end = 0;
+  };
+  std::vector<Run> runs;
   for (size_t first = 0; first < order.size();) {
     // Grow the run while the next payload starts close to this one's end.
     const uint64_t begin = out[order[first]].location.offset;
@@ -521,29 +589,50 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
       end = next_end;
       ++last;
     }
-    if (last == first + 1) {
-      const size_t i = order[first];
-      statuses[i] = impl.readPayload(keys[i], &out[i]);
-      first = last;
-      continue;
+    runs.push_back({first, last, begin, end});
+    first = last;
+  }
+  // Every run is in flight at once (one round trip for the batch). A run of
+  // one tile is read straight into its payload; longer runs into a buffer
+  // each, then split.
+  std::vector<std::vector<uint8_t>> buffers(runs.size());
+  std::vector<ByteRange> ranges(runs.size());
+  std::vector<Status> run_status(runs.size());
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const Run& run = runs[r];
+    uint8_t* data = nullptr;
+    if (run.last == run.first + 1) {
+      std::vector<uint8_t>& payload = out[order[run.first]].payload;
+      payload.resize(static_cast<size_t>(run.end - run.begin));
+      data = payload.data();
+    } else {
+      buffers[r].resize(static_cast<size_t>(run.end - run.begin));
+      data = buffers[r].data();
     }
-    buffer.resize(static_cast<size_t>(end - begin));
-    const Status status = impl.read(buffer.data(), buffer.size(), begin);
-    for (size_t k = first; k < last; ++k) {
+    ranges[r] = ByteRange{data, static_cast<size_t>(run.end - run.begin), run.begin};
+  }
+  impl.readMany(ranges, run_status);
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const Run& run = runs[r];
+    const Status& status = run_status[r];
+    for (size_t k = run.first; k < run.last; ++k) {
       const size_t i = order[k];
       if (!status) {
+        out[i].payload.clear();
         statuses[i] = Status::error(status.code, format::keyText(keys[i]) + ": " + status.message);
         continue;
       }
       const TileLocation& location = out[i].location;
-      const uint8_t* payload = buffer.data() + (location.offset - begin);
-      out[i].payload.assign(payload, payload + location.stored_bytes);
+      if (run.last != run.first + 1) {
+        const uint8_t* payload = buffers[r].data() + (location.offset - run.begin);
+        out[i].payload.assign(payload, payload + location.stored_bytes);
+      }
+      // Checked before any decompression, as readRaw() does.
       if (format::tileChecksum(out[i].payload.data(), out[i].payload.size()) != location.checksum) {
         statuses[i] = Status::error(ErrorCode::kCorruptTile,
                                     format::keyText(keys[i]) + ": payload checksum mismatch");
       }
     }
-    first = last;
   }
 }
 

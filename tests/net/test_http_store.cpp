@@ -19,6 +19,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -382,6 +383,8 @@ TEST_F(HttpStore, ConnectionsAreKeptAlive) {
   }
   EXPECT_GT(remote->remoteStats().requests, 10u);
   EXPECT_EQ(proxy->connections(), 1u) << "every request on one kept-alive connection";
+  EXPECT_EQ(remote->remoteStats().connections, 1u);
+  EXPECT_EQ(remote->remoteStats().http2_requests, 0u) << "http:// is HTTP/1.1";
 }
 
 TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
@@ -508,6 +511,73 @@ TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
     const Status rs = remote->readTile(key, &b);
     ASSERT_TRUE(rs.isOk()) << rs.toString();
     EXPECT_EQ(a, b);
+  }
+}
+
+// HTTP/2 over TLS: nginx offers h2 (ALPN); every request of a batch read
+// with coalescing off is in flight at once, all as streams of the one
+// connection, and the bytes equal the file's. With RemoteOptions::http2
+// off the same server is read over HTTP/1.1.
+TEST(HttpsStore, Http2MultiplexesABatchOnOneConnectionWithTheSameBytes) {
+  test::TempDir dir("http2-store");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string local_path = dir.file("www/store.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  std::unique_ptr<NginxServer> server;
+  const Status started =
+      NginxServer::start(dir.path().string(), dir.file("www"), &server, true, true);
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
+
+  for (const bool http2 : {true, false}) {
+    SCOPED_TRACE(http2 ? "HTTP/2" : "HTTP/1.1");
+    RemoteOptions options;
+    options.ca_file = server->certificateFile();
+    options.http2 = http2;
+    options.coalesce_gap_bytes = 0;  // one request per payload, all at once
+    options.coalesce_max_bytes = 1;
+    options.connections = 8;
+    server->clearLog();
+    std::unique_ptr<TileStoreReader> remote;
+    const Status opened = TileStoreReader::open(server->url("store.cstore"), options, &remote);
+    ASSERT_TRUE(opened.isOk()) << opened.toString();
+    std::vector<RawTile> raws(keys.size());
+    std::vector<Status> statuses(keys.size());
+    remote->readRawBatch(keys, raws, statuses);
+    size_t payloads = 0;
+    for (size_t i = 0; i < keys.size(); ++i) {
+      ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+      RawTile expected;
+      ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+      EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
+      payloads += expected.payload.empty() ? 0 : 1;
+    }
+    const RemoteStats stats = remote->remoteStats();
+    // Open (3 at most), the index pages, then one request per payload
+    // beyond the first 64 KiB.
+    EXPECT_GT(stats.requests, 10u);
+    EXPECT_EQ(stats.failures, 0u);
+    const std::vector<LoggedRequest> log = server->requests(stats.requests);
+    ASSERT_EQ(log.size(), stats.requests);
+    for (const LoggedRequest& r : log) {
+      EXPECT_EQ(r.status, 206);
+      EXPECT_EQ(r.protocol, http2 ? "HTTP/2.0" : "HTTP/1.1");
+    }
+    if (http2) {
+      EXPECT_EQ(stats.http2_requests, stats.requests);
+      EXPECT_EQ(stats.connections, 1u) << "every stream on one connection";
+    } else {
+      EXPECT_EQ(stats.http2_requests, 0u);
+      EXPECT_GE(stats.connections, 1u);
+      EXPECT_LE(stats.connections, options.connections);
+    }
+    EXPECT_GT(payloads, 10u);
   }
 }
 

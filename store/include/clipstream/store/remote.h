@@ -23,11 +23,16 @@ std::string displayStorePath(const std::string& path);
 // Tunables of the URL byte source. The defaults and their reasons are in
 // docs/decisions.md ("Stores over HTTP"); benchmarks in docs/benchmarks.md.
 struct RemoteOptions {
-  // Range requests in flight at once, each on its own kept-alive
-  // connection; a reader thread beyond this waits for a free connection.
-  // The streamer starts this many loader threads for a URL store unless
-  // told otherwise (StreamerConfig::io_threads).
+  // Range requests in flight at once, and the most connections opened to
+  // the server. Over HTTP/1.1 each request in flight holds a kept-alive
+  // connection of its own (requests beyond that wait for one); over HTTP/2
+  // they are streams multiplexed on one connection. The streamer starts
+  // this many loader threads for a URL store unless told otherwise
+  // (StreamerConfig::io_threads).
   unsigned connections = 32;
+  // Offer HTTP/2 to https:// servers (ALPN); the server decides. false:
+  // HTTP/1.1 only. http:// is always HTTP/1.1 (docs/decisions.md, "HTTP/2").
+  bool http2 = true;
   // Connecting (TCP + TLS) may take this long before the attempt fails.
   uint32_t connect_timeout_ms = 5000;
   // A transfer that moves no byte for this long is a stall and fails.
@@ -60,6 +65,8 @@ struct RemoteStats {
   uint64_t retries = 0;    // of those, repeats after a transient failure
   uint64_t bytes = 0;      // body bytes received (payloads, index, header)
   uint64_t failures = 0;   // reads that returned an error
+  uint64_t http2_requests = 0;  // of the requests, those answered over HTTP/2
+  uint64_t connections = 0;     // connections opened (TCP, and TLS for https)
 };
 
 }  // namespace clipstream
