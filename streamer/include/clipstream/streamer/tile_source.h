@@ -69,7 +69,8 @@ class TileSource {
   // source where one read of neighbours costs about what one tile does (a
   // store over HTTP: one range request instead of several round trips).
   // The streamer then hands a loader up to this many queued tiles of one
-  // level and row at once. 1 = fetch tiles one by one.
+  // level and one aligned square (4 x 4 tiles for 16, 8 x 8 for 64) at
+  // once. 1 = fetch tiles one by one.
   virtual size_t maxBatch() const { return 1; }
 
   // fetchWithInfo() for several tiles: *rgba[i], statuses[i] and infos[i]
