@@ -2,6 +2,7 @@
 // metadata at open; index pages are read on first use, outside any lock,
 // and published with a compare-and-swap (a racing loser frees its copy).
 #include "byte_source.h"
+#include "disk_cache.h"
 #include "format.h"
 
 #include <clipstream/store/tile_store.h>
@@ -56,6 +57,10 @@ struct TileStoreReader::Impl {
   std::vector<LevelRead> levels;
   mutable std::atomic<uint64_t> bytes_read{0};
   mutable std::atomic<uint64_t> pages_loaded{0};
+  // The disk cache of a URL store (RemoteOptions::disk_cache_dir), or null.
+  std::shared_ptr<DiskCache> disk_cache;
+  std::string cache_key;  // this store version's sub-folder
+  mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
 
   ~Impl() {
     for (LevelRead& level : levels) {
@@ -71,6 +76,70 @@ struct TileStoreReader::Impl {
   void readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const {
     for (const ByteRange& r : ranges) bytes_read.fetch_add(r.bytes, std::memory_order_relaxed);
     source->readMany(ranges, statuses);
+  }
+
+  // The disk cache's copy of a payload, checked against its checksum like
+  // the server's bytes; false (and a torn or wrong copy removed) otherwise.
+  bool cachedPayload(const TileKey& key, const TileLocation& location,
+                     std::vector<uint8_t>* payload) const {
+    if (!disk_cache) return false;
+    const std::string name = "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
+                             std::to_string(key.y);
+    switch (disk_cache->get(cache_key, name, location.stored_bytes, payload)) {
+      case DiskCache::Lookup::kHit:
+        if (format::tileChecksum(payload->data(), payload->size()) == location.checksum) {
+          disk_hits.fetch_add(1, std::memory_order_relaxed);
+          return true;
+        }
+        disk_cache->drop(cache_key, name);
+        [[fallthrough]];
+      case DiskCache::Lookup::kBad:
+        disk_dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case DiskCache::Lookup::kMiss:
+        break;
+    }
+    disk_misses.fetch_add(1, std::memory_order_relaxed);
+    payload->clear();
+    return false;
+  }
+  void keepPayload(const TileKey& key, std::span<const uint8_t> payload) const {
+    if (!disk_cache) return;
+    disk_cache->put(cache_key, "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
+                                   std::to_string(key.y),
+                    payload);
+  }
+  static std::string pageName(uint32_t level_index, uint32_t px, uint32_t py) {
+    return "p" + std::to_string(level_index) + "-" + std::to_string(px) + "-" + std::to_string(py);
+  }
+  // The disk cache's copy of an index page, checked like the server's.
+  bool cachedPage(uint32_t level_index, uint32_t px, uint32_t py,
+                  std::unique_ptr<Page>* out) const {
+    if (!disk_cache) return false;
+    const LevelRead& level = levels[level_index];
+    const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+    const std::string name = pageName(level_index, px, py);
+    std::vector<uint8_t> bytes;
+    switch (disk_cache->get(cache_key, name, dir.bytes, &bytes)) {
+      case DiskCache::Lookup::kHit:
+        if (decodePage(level_index, px, py, bytes, out)) {
+          disk_hits.fetch_add(1, std::memory_order_relaxed);
+          return true;
+        }
+        disk_cache->drop(cache_key, name);
+        [[fallthrough]];
+      case DiskCache::Lookup::kBad:
+        disk_dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case DiskCache::Lookup::kMiss:
+        break;
+    }
+    disk_misses.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  void keepPage(uint32_t level_index, uint32_t px, uint32_t py,
+                std::span<const uint8_t> bytes) const {
+    if (disk_cache) disk_cache->put(cache_key, pageName(level_index, px, py), bytes);
   }
 
   Status bad(ErrorCode code, const std::string& what) const {
@@ -105,6 +174,11 @@ Status TileStoreReader::Impl::openImpl() {
   Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source)
                                    : openFileSource(path, &source);
   if (!opened) return opened;
+  if (!remote.disk_cache_dir.empty() && isStoreUrl(path) && !source->version().empty()) {
+    Status cache = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache);
+    if (!cache) return cache;
+    cache_key = DiskCache::storeKey(path, source->version());
+  }
   path = displayStorePath(path);  // from here on `path` only names the store in messages
   const uint64_t actual_bytes = source->size();
 
@@ -361,12 +435,15 @@ Status TileStoreReader::Impl::openImpl() {
 
 Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32_t py,
                                        std::unique_ptr<Page>* out) const {
+  if (cachedPage(level_index, px, py, out)) return Status::ok();
   const LevelRead& level = levels[level_index];
   const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
   std::vector<uint8_t> bytes(dir.bytes);
   Status status = read(bytes.data(), bytes.size(), dir.offset);
   if (!status) return status;
-  return decodePage(level_index, px, py, bytes, out);
+  status = decodePage(level_index, px, py, bytes, out);
+  if (status) keepPage(level_index, px, py, bytes);
+  return status;
 }
 
 Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint32_t py,
@@ -455,7 +532,12 @@ void TileStoreReader::Impl::loadPagesOf(std::span<const TileKey> keys) const {
     if (level.pages[page_index].load(std::memory_order_acquire) != nullptr) continue;
     bool listed = false;
     for (const Wanted& w : wanted) listed |= w.level == key.level && w.px == px && w.py == py;
-    if (!listed) wanted.push_back({key.level, px, py, {}});
+    if (listed) continue;
+    if (std::unique_ptr<Page> page; cachedPage(key.level, px, py, &page)) {
+      publish(key.level, page_index, std::move(page));
+      continue;
+    }
+    wanted.push_back({key.level, px, py, {}});
   }
   if (wanted.size() < 2) return;  // one page: locate() reads it as before
   std::vector<ByteRange> ranges(wanted.size());
@@ -473,6 +555,7 @@ void TileStoreReader::Impl::loadPagesOf(std::span<const TileKey> keys) const {
     std::unique_ptr<Page> page;
     // A failure is left for locate(), which reads the page again and reports.
     if (!statuses[i] || !decodePage(w.level, w.px, w.py, w.bytes, &page)) continue;
+    keepPage(w.level, w.px, w.py, w.bytes);
     publish(w.level, size_t(w.py) * levels[w.level].pages_x + w.px, std::move(page));
   }
 }
@@ -540,6 +623,7 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
   out->key = key;
   out->payload.clear();
   if (out->location.constant) return Status::ok();
+  if (cachedPayload(key, out->location, &out->payload)) return Status::ok();
   out->payload.resize(out->location.stored_bytes);
   Status status = read(out->payload.data(), out->payload.size(), out->location.offset);
   if (!status) {
@@ -550,6 +634,7 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
     return Status::error(ErrorCode::kCorruptTile,
                          format::keyText(key) + ": payload checksum mismatch");
   }
+  keepPayload(key, out->payload);
   return Status::ok();
 }
 
@@ -564,7 +649,9 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
     out[i].key = keys[i];
     out[i].payload.clear();
     statuses[i] = impl.locate(keys[i], &out[i].location);
-    if (statuses[i] && !out[i].location.constant) order.push_back(i);
+    if (statuses[i] && !out[i].location.constant &&
+        !impl.cachedPayload(keys[i], out[i].location, &out[i].payload))
+      order.push_back(i);
   }
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return out[a].location.offset < out[b].location.offset;
@@ -631,6 +718,8 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
       if (format::tileChecksum(out[i].payload.data(), out[i].payload.size()) != location.checksum) {
         statuses[i] = Status::error(ErrorCode::kCorruptTile,
                                     format::keyText(keys[i]) + ": payload checksum mismatch");
+      } else {
+        impl.keepPayload(keys[i], out[i].payload);
       }
     }
   }
@@ -674,7 +763,13 @@ unsigned TileStoreReader::suggestedReadThreads() const {
   return m_impl->source->suggestedReadThreads();
 }
 
-RemoteStats TileStoreReader::remoteStats() const { return m_impl->source->remoteStats(); }
+RemoteStats TileStoreReader::remoteStats() const {
+  RemoteStats stats = m_impl->source->remoteStats();
+  stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
+  stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
+  stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
+  return stats;
+}
 
 Status TileStoreReader::locate(const TileKey& key, TileLocation* out) const {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");

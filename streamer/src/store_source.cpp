@@ -69,6 +69,7 @@ class StoreSource final : public TileSource {
 
   std::string describe() const override { return "store:" + m_path; }
   unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+  RemoteStats remoteStats() const override { return m_reader->remoteStats(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;
@@ -117,6 +118,7 @@ class ElevationStoreSource final : public TileSource {
 
   std::string describe() const override { return "elevation:" + m_path; }
   unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+  RemoteStats remoteStats() const override { return m_reader->remoteStats(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;

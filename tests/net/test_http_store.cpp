@@ -417,6 +417,208 @@ TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
   EXPECT_NE(cut.message.find(proxy->url("store.cstore")), std::string::npos) << cut.message;
 }
 
+// ---- Disk cache (RemoteOptions::disk_cache_dir) ----
+
+// The files of a disk cache folder: entries only, their total size.
+struct CacheFolder {
+  std::vector<std::string> entries;  // paths of the entry files
+  uint64_t bytes = 0;
+};
+CacheFolder cacheFolder(const std::string& dir) {
+  CacheFolder folder;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir, ec)) {
+    if (!e.is_regular_file()) continue;
+    folder.entries.push_back(e.path().string());
+    folder.bytes += e.file_size();
+  }
+  std::sort(folder.entries.begin(), folder.entries.end());
+  return folder;
+}
+
+// Reads `keys` with `reader` and compares each payload with the local file's.
+void expectSamePayloads(const TileStoreReader& reader, const TileStoreReader& local,
+                        const std::vector<TileKey>& keys) {
+  for (const TileKey& key : keys) {
+    RawTile a, b;
+    ASSERT_TRUE(local.readRaw(key, &a).isOk());
+    const Status s = reader.readRaw(key, &b);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_EQ(a.payload, b.payload) << "level " << key.level << " tile " << key.x << "," << key.y;
+  }
+}
+
+TEST_F(HttpStore, DiskCacheServesASecondOpenEvenWithTheServerStopped) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");  // made by the reader
+  options.retries = 0;
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  const std::vector<TileKey> cached(keys.begin(), keys.begin() + keys.size() / 2);
+  uint64_t first_requests = 0;
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, cached);
+    const RemoteStats stats = remote->remoteStats();
+    EXPECT_EQ(stats.disk_cache_hits, 0u);
+    EXPECT_GT(stats.disk_cache_misses, 5u);
+    first_requests = stats.requests;
+  }
+  EXPECT_FALSE(cacheFolder(options.disk_cache_dir).entries.empty());
+  // A second open (a new cache instance: the folder is scanned again) reads
+  // the same tiles from the folder: no request beyond the open's.
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const uint64_t open_requests = remote->remoteStats().requests;
+  EXPECT_LT(open_requests, first_requests);
+  expectSamePayloads(*remote, *local, cached);
+  RemoteStats stats = remote->remoteStats();
+  EXPECT_EQ(stats.requests, open_requests);
+  EXPECT_GT(stats.disk_cache_hits, 5u);
+  EXPECT_EQ(stats.disk_cache_dropped, 0u);
+  // With the server gone, cached tiles are still served; the others fail
+  // as unavailable (and would be retried by the streamer).
+  m_server->stop();
+  expectSamePayloads(*remote, *local, cached);
+  size_t unavailable = 0;
+  for (size_t i = cached.size(); i < keys.size(); ++i) {
+    RawTile raw;
+    const Status s = remote->readRaw(keys[i], &raw);
+    if (!s) {
+      EXPECT_EQ(s.code, ErrorCode::kUnavailable) << s.toString();
+      ++unavailable;
+    }
+  }
+  EXPECT_GT(unavailable, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheKeepsItsCapByEvictingTheLeastRecentlyUsed) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  options.disk_cache_bytes = 100 << 10;  // a sixth of the store
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  expectSamePayloads(*remote, *local, keys);
+  const CacheFolder folder = cacheFolder(options.disk_cache_dir);
+  EXPECT_LE(folder.bytes, options.disk_cache_bytes);
+  EXPECT_GT(folder.bytes, options.disk_cache_bytes / 2) << "the cap is used, not emptied";
+  // The last tiles read are the ones kept: reading them again is all hits.
+  // The first ones beyond the first 64 KiB (which the open keeps in memory)
+  // were evicted: read again from the server, with the same bytes.
+  std::vector<TileKey> last, first;
+  for (size_t i = keys.size(); i-- > 0 && last.size() < 3;) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant) last.push_back(keys[i]);
+  }
+  for (size_t i = 0; i < keys.size() && first.size() < 2; ++i) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant && location.offset >= (64 << 10)) first.push_back(keys[i]);
+  }
+  const RemoteStats before = remote->remoteStats();
+  expectSamePayloads(*remote, *local, last);
+  const RemoteStats after = remote->remoteStats();
+  EXPECT_EQ(after.requests, before.requests);
+  EXPECT_EQ(after.disk_cache_hits - before.disk_cache_hits, 3u);
+  expectSamePayloads(*remote, *local, first);
+  EXPECT_EQ(remote->remoteStats().requests, after.requests + 2);
+  EXPECT_EQ(remote->remoteStats().disk_cache_hits, after.disk_cache_hits);
+  EXPECT_LE(cacheFolder(options.disk_cache_dir).bytes, options.disk_cache_bytes);
+}
+
+TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  // Damage two tile entries the way a crash or a bad disk would: one cut
+  // short, one with a flipped byte in its payload. Two tiles of the last
+  // row of level 0, far beyond the first 64 KiB the open keeps in memory.
+  const PyramidGeometry& g = local->geometry();
+  std::vector<std::string> names;
+  for (uint32_t x = g.levels[0].tiles_x; x-- > 0 && names.size() < 2;) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate({0, x, g.levels[0].tiles_y - 1}, &location).isOk());
+    if (!location.constant) {
+      names.push_back("t0-" + std::to_string(x) + "-" + std::to_string(g.levels[0].tiles_y - 1));
+    }
+  }
+  std::vector<std::string> tiles;
+  for (const std::string& name : names) {
+    for (const std::string& path : cacheFolder(options.disk_cache_dir).entries) {
+      if (std::filesystem::path(path).filename() == name) tiles.push_back(path);
+    }
+  }
+  ASSERT_EQ(tiles.size(), 2u);
+  std::vector<uint8_t> bytes = test::readBytes(tiles[0]);
+  const size_t whole_size = bytes.size();
+  bytes.resize(bytes.size() / 2);
+  test::writeBytes(tiles[0], bytes);
+  bytes = test::readBytes(tiles[1]);
+  bytes[bytes.size() - 10] ^= 0x01;
+  test::writeBytes(tiles[1], bytes);
+
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const uint64_t open_requests = remote->remoteStats().requests;
+  expectSamePayloads(*remote, *local, keys);
+  const RemoteStats stats = remote->remoteStats();
+  EXPECT_EQ(stats.disk_cache_dropped, 2u);
+  EXPECT_EQ(stats.requests - open_requests, 2u) << "the two tiles were fetched again";
+  // The cut entry is whole again in the folder.
+  EXPECT_EQ(test::readBytes(tiles[0]).size(), whole_size);
+  std::unique_ptr<TileStoreReader> again;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &again).isOk());
+  expectSamePayloads(*again, *local, keys);
+  EXPECT_EQ(again->remoteStats().disk_cache_dropped, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheNeverServesTheEntriesOfAReplacedStore) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  // Another store of the same shape under the same name: other bytes at
+  // the same offsets.
+  test::SyntheticStoreSpec other = storeSpec();
+  other.constant = test::ConstantTiles::kNone;
+  const std::string other_path = m_dir.file("other.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).isOk());
+  publish(other_path, "store.cstore", 100);
+  std::unique_ptr<TileStoreReader> other_local, remote;
+  ASSERT_TRUE(TileStoreReader::open(other_path, &other_local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  expectSamePayloads(*remote, *other_local, keys);
+  EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u);
+  EXPECT_GT(remote->remoteStats().disk_cache_misses, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheFolderThatCannotBeMadeIsNamed) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("no/such/parent/cache");
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(m_server->url("store.cstore"), options, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kNotFound) << s.toString();
+  EXPECT_NE(s.message.find(options.disk_cache_dir), std::string::npos) << s.message;
+}
+
 TEST_F(HttpStore, AbsurdConnectionCountIsRefused) {
   RemoteOptions options;
   options.connections = 0;

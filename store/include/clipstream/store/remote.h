@@ -53,6 +53,19 @@ struct RemoteOptions {
   uint32_t batch_tiles = 16;
   uint32_t coalesce_gap_bytes = 64 << 10;
   uint32_t coalesce_max_bytes = 2 << 20;
+  // A persistent disk cache below the streamer's RAM cache, off when empty:
+  // index pages and tile payloads read from the URL are kept as files in
+  // this folder (made if missing; its parent must exist), keyed by the URL
+  // and the file's version (strong ETag, else Last-Modified, with the
+  // size), so a store replaced on the server never uses the old entries.
+  // Every entry is checked against the checksum the store's index records,
+  // like the server's bytes; a torn or damaged one is removed and fetched
+  // again. Stores without ETag or Last-Modified are not cached. Ignored for
+  // local files. One folder may serve many stores and programs.
+  std::string disk_cache_dir;
+  // The folder's cap: least recently used entries are removed to stay
+  // under it. The first store opened with a folder in a process sets it.
+  uint64_t disk_cache_bytes = uint64_t(1) << 30;
 };
 
 // Most connections a RemoteOptions may ask for (each holds a socket and,
@@ -67,6 +80,10 @@ struct RemoteStats {
   uint64_t failures = 0;   // reads that returned an error
   uint64_t http2_requests = 0;  // of the requests, those answered over HTTP/2
   uint64_t connections = 0;     // connections opened (TCP, and TLS for https)
+  // Disk cache (RemoteOptions::disk_cache_dir) lookups of this store:
+  uint64_t disk_cache_hits = 0;     // served from the folder, checksum verified
+  uint64_t disk_cache_misses = 0;   // not there: read from the server, then kept
+  uint64_t disk_cache_dropped = 0;  // there but torn or damaged: removed, read again
 };
 
 }  // namespace clipstream

@@ -86,6 +86,11 @@ class TileSource {
   // HTTP wants one per connection, since each thread waits out a round trip.
   // 0 = no preference (the streamer runs one per core).
   virtual unsigned suggestedLoaderThreads() const { return 0; }
+
+  // What reading a store by URL cost so far (requests, bytes, connections,
+  // disk cache hits; TileStoreReader::remoteStats()). All zero for other
+  // sources. Any thread.
+  virtual RemoteStats remoteStats() const { return {}; }
 };
 
 // Opens a colour tile store file, or a URL of one (isStoreUrl()), as a
