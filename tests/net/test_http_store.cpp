@@ -651,6 +651,18 @@ TEST_F(HttpStore, InfoToolVerifiesAStoreByUrlAndNamesA404) {
   EXPECT_EQ(code, 0) << output;
   EXPECT_NE(output.find(url), std::string::npos) << output;
   EXPECT_NE(output.find("verify: OK"), std::string::npos) << output;
+  // --disk-cache keeps what was read; a second run verifies from it.
+  const std::string cache = m_dir.file("cache");
+  const std::string cached_run = std::string("'") + CLIPSTREAM_INFO_EXE + "' --verify --disk-cache '" +
+                                 cache + "' --disk-cache-mb 64 '" + url + "'";
+  const auto [first_code, first_output] = runProgram(cached_run);
+  EXPECT_EQ(first_code, 0) << first_output;
+  EXPECT_GT(cacheFolder(cache).entries.size(), 10u);
+  m_server->clearLog();
+  const auto [second_code, second_output] = runProgram(cached_run);
+  EXPECT_EQ(second_code, 0) << second_output;
+  EXPECT_NE(second_output.find("verify: OK"), std::string::npos) << second_output;
+  EXPECT_LE(m_server->requests().size(), 3u) << "only the open's requests";
   const std::string missing = m_server->url("missing.cstore");
   const auto [missing_code, missing_output] =
       runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' '" + missing + "'");
