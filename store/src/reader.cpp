@@ -57,6 +57,9 @@ struct TileStoreReader::Impl {
   std::vector<LevelRead> levels;
   mutable std::atomic<uint64_t> bytes_read{0};
   mutable std::atomic<uint64_t> pages_loaded{0};
+  // The payload order the first telling index page showed (learnOrder()):
+  // 0 not known yet, 1 rows, 2 curve.
+  mutable std::atomic<int> order_seen{0};
   // The disk cache of a URL store (RemoteOptions::disk_cache_dir), or null.
   std::shared_ptr<DiskCache> disk_cache;
   std::string cache_key;  // this store version's sub-folder
@@ -153,6 +156,8 @@ struct TileStoreReader::Impl {
   // Checks one index page's bytes (read from the file or a cache).
   Status decodePage(uint32_t level_index, uint32_t px, uint32_t py, std::span<const uint8_t> bytes,
                     std::unique_ptr<Page>* out) const;
+  // Notes the payload order a page shows (order_seen), if not known yet.
+  void learnOrder(uint32_t level_index, uint32_t px, uint32_t py, const Page& page) const;
   // Publishes a page unless another thread did first; returns the published one.
   const Page* publish(uint32_t level_index, size_t page_index, std::unique_ptr<Page> page) const;
   // Reads every index page these tiles need that is not loaded yet, all in
@@ -487,9 +492,45 @@ Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint
   return Status::ok();
 }
 
+void TileStoreReader::Impl::learnOrder(uint32_t level_index, uint32_t px, uint32_t py,
+                                       const Page& page) const {
+  if (order_seen.load(std::memory_order_relaxed) != 0) return;
+  const LevelInfo& level_info = info.geometry.levels[level_index];
+  // A level two tiles wide lies in aligned squares in either order.
+  if (level_info.tiles_x <= 2) return;
+  const uint32_t w = format::pageSpan(level_info.tiles_x, px);
+  const uint32_t h = format::pageSpan(level_info.tiles_y, py);
+  uint32_t together = 0, apart = 0;
+  for (uint32_t y = 0; y + 1 < h; y += 2) {
+    for (uint32_t x = 0; x + 1 < w; x += 2) {
+      const format::TileEntry* square[4] = {
+          &page.entries[size_t(y) * w + x], &page.entries[size_t(y) * w + x + 1],
+          &page.entries[size_t(y + 1) * w + x], &page.entries[size_t(y + 1) * w + x + 1]};
+      uint64_t first = UINT64_MAX, end = 0, bytes = 0;
+      bool payloads = true;
+      for (const format::TileEntry* e : square) {
+        payloads &= e->stored_bytes > 0;
+        first = std::min(first, e->offset_or_value);
+        end = std::max(end, e->offset_or_value + e->stored_bytes);
+        bytes += e->stored_bytes;
+      }
+      if (!payloads) continue;
+      (end - first == bytes ? together : apart) += 1;
+    }
+  }
+  // Four squares tell; nine in ten together is a curve (the written order
+  // puts a row's payloads between the halves of every square).
+  if (together + apart < 4) return;
+  int expected = 0;
+  order_seen.compare_exchange_strong(expected, together * 10 >= (together + apart) * 9 ? 2 : 1,
+                                     std::memory_order_relaxed);
+}
+
 const Page* TileStoreReader::Impl::publish(uint32_t level_index, size_t page_index,
                                            std::unique_ptr<Page> page) const {
   const LevelRead& level = levels[level_index];
+  learnOrder(level_index, uint32_t(page_index % level.pages_x),
+             uint32_t(page_index / level.pages_x), *page);
   const Page* expected = nullptr;
   const Page* mine = page.get();
   if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
@@ -723,6 +764,11 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
       }
     }
   }
+}
+
+BatchShape TileStoreReader::suggestedBatchShape() const {
+  return m_impl->order_seen.load(std::memory_order_relaxed) == 2 ? BatchShape::kSquare
+                                                                 : BatchShape::kRow;
 }
 
 unsigned TileStoreReader::suggestedBatchTiles() const {

@@ -45,6 +45,7 @@ class StoreSource final : public TileSource {
   }
 
   size_t maxBatch() const override { return m_reader->suggestedBatchTiles(); }
+  BatchShape batchShape() const override { return m_reader->suggestedBatchShape(); }
 
   void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
                   std::span<Status> statuses, std::span<FetchInfo> infos) override {

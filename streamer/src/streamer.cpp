@@ -458,23 +458,27 @@ void Streamer::Impl::workerLoop() {
     rereads.push_back(reread);
     Layer& layer = layers[request.key.layer];
     // A source that reads neighbours in one request (a store over HTTP)
-    // gets the queued tiles of the popped tile's layer and level inside the
-    // aligned square of batchSide(max_batch) tiles holding it: tiles close
-    // in the image, which the source reads with as few range requests as
-    // the file's payload order allows, all in flight at once. Only the
-    // front of the queue is searched, so the batch stays among the
-    // best-ranked tiles and the scan is bounded.
+    // gets more queued tiles of the popped tile's layer and level: those of
+    // its row within max_batch columns, or those of its aligned square of
+    // batchSide(max_batch) tiles, as the source's file favours (written row
+    // by row, or along a curve). The source reads what lies together with
+    // one range request and the rest at the same time. Only the front of
+    // the queue is searched, so the batch stays among the best-ranked tiles
+    // and the scan is bounded.
     const size_t max_batch = std::clamp<size_t>(layer.spec.source->maxBatch(), 1, kMaxBatchTiles);
     if (max_batch > 1) {
       taken.clear();
       const TileKey& first = request.key.key;
+      const bool squares = layer.spec.source->batchShape() == BatchShape::kSquare;
       const uint32_t side = batchSide(max_batch);
       const size_t scan = std::min(queue.size(), kBatchScanRequests);
       for (size_t i = 0; i < scan && tiles.size() < max_batch && !no_room; ++i) {
         const LayerTile& t = queue[i].key;
-        if (t.layer != request.key.layer || t.key.level != first.level ||
-            t.key.x / side != first.x / side || t.key.y / side != first.y / side)
-          continue;
+        if (t.layer != request.key.layer || t.key.level != first.level) continue;
+        const bool near = squares ? t.key.x / side == first.x / side && t.key.y / side == first.y / side
+                                  : t.key.y == first.y &&
+                                        std::abs(int64_t(t.key.x) - int64_t(first.x)) < int64_t(max_batch);
+        if (!near) continue;
         if (admit(queue[i], true, &reread, &no_room)) {
           tiles.push_back(t);
           rereads.push_back(reread);

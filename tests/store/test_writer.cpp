@@ -225,11 +225,15 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
     ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
     std::unique_ptr<TileStoreReader> reader;
     ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+    // The reader tells the order from the first index page it loads.
+    EXPECT_EQ(reader->suggestedBatchShape(), BatchShape::kRow) << "nothing loaded yet";
     std::vector<uint8_t> pixels;
     for (const TileKey& key : keys) {
       ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
       ASSERT_EQ(pixels, syntheticTile(g, key));
     }
+    EXPECT_EQ(reader->suggestedBatchShape(),
+              order == PayloadOrder::kCurve ? BatchShape::kSquare : BatchShape::kRow);
     for (const uint32_t side : {2u, 4u, 8u}) {
       size_t together = 0, apart = 0;
       squares(*reader, side, &together, &apart);

@@ -68,6 +68,12 @@ struct RemoteOptions {
   uint64_t disk_cache_bytes = uint64_t(1) << 30;
 };
 
+// The shape of a batch of tiles worth reading together: the tiles that lie
+// together in a store's file. kRow for a store written row by row (a row
+// segment of a level is one stretch), kSquare for one in curve order
+// (PayloadOrder::kCurve: an aligned square is one stretch).
+enum class BatchShape { kRow, kSquare };
+
 // Most connections a RemoteOptions may ask for (each holds a socket and,
 // in the streamer, a loader thread).
 inline constexpr unsigned kMaxRemoteConnections = 256;

@@ -147,6 +147,12 @@ class TileStoreReader {
   // batch_tiles for a URL, 1 for a local file (a local read costs no round
   // trip, so batching gains nothing).
   unsigned suggestedBatchTiles() const;
+  // Which tiles lie together in this file, as its index pages show:
+  // kSquare once a loaded page shows its aligned 2 x 2 squares of tiles
+  // lying in one stretch each (a store in curve order), kRow otherwise and
+  // until a page has told (the file records no order; docs/tile-store.md).
+  // Any thread; a relaxed atomic read.
+  BatchShape suggestedBatchShape() const;
 
   // readRaw + decode. `pixels` is resized to tileBytes().
   Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
