@@ -15,8 +15,11 @@
 // Usage: bench_store_http STORE.cstore [COG.tif] [--rtt 0,20,50,100]
 //                         [--connections 1,4,8,16,32,64] [--teleports 4] [--no-coalesce]
 //                         [--batch N] [--protocols http,https1,h2] [--glide N]
+//                         [--disk-cache DIR]
 // --no-coalesce: one range request per tile (RemoteOptions::batch_tiles = 1).
 // --batch N: RemoteOptions::batch_tiles (tiles the streamer hands a loader).
+// --disk-cache DIR: RemoteOptions::disk_cache_dir for every store opened
+// (run twice: the first run fills it, the second reads from it).
 // --glide N: after the teleports, a flight on the store opened afresh: the
 // camera glides across the image (from 20 % to 80 % of its width, at
 // mid-height) in N steps, each settled before the next; one more row
@@ -133,6 +136,7 @@ int main(int argc, char** argv) {
   bool coalesce = true;
   unsigned batch = RemoteOptions{}.batch_tiles;
   size_t glide_steps = 0;
+  std::string disk_cache;
   std::vector<std::string> protocols = {"http"};
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -142,6 +146,8 @@ int main(int argc, char** argv) {
       connections = parseList(argv[++i]);
     } else if (arg == "--no-coalesce") {
       coalesce = false;
+    } else if (arg == "--disk-cache" && i + 1 < argc) {
+      disk_cache = argv[++i];
     } else if (arg == "--glide" && i + 1 < argc) {
       glide_steps = std::strtoul(argv[++i], nullptr, 10);
     } else if (arg == "--batch" && i + 1 < argc) {
@@ -249,6 +255,7 @@ int main(int argc, char** argv) {
       remote.connections = unsigned(count);
       remote.batch_tiles = coalesce ? batch : 1;
       remote.http2 = protocol == "h2";
+      remote.disk_cache_dir = disk_cache;
       if (tls) remote.ca_file = tls_server->certificateFile();
       size_t log_from = host.requests().size();
       const Clock::time_point open_start = Clock::now();
