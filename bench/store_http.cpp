@@ -14,7 +14,21 @@
 //
 // Usage: bench_store_http STORE.cstore [COG.tif] [--rtt 0,20,50,100]
 //                         [--connections 1,4,8,16,32,64] [--teleports 4] [--no-coalesce]
+//                         [--batch N] [--protocols http,https1,h2] [--glide N]
+//                         [--disk-cache DIR]
 // --no-coalesce: one range request per tile (RemoteOptions::batch_tiles = 1).
+// --batch N: RemoteOptions::batch_tiles (tiles the streamer hands a loader).
+// --disk-cache DIR: RemoteOptions::disk_cache_dir for every store opened
+// (run twice: the first run fills it, the second reads from it).
+// --glide N: after the teleports, a flight on the store opened afresh: the
+// camera glides across the image (from 20 % to 80 % of its width, at
+// mid-height) in N steps, each settled before the next; one more row
+// ("glide") with the requests and bytes of the steps after the first (its
+// sharp_median_s column is the whole glide's time).
+// --protocols: http = cleartext HTTP/1.1 (the default); https1 = TLS with
+// HTTP/1.1 only (RemoteOptions::http2 off); h2 = TLS with HTTP/2 (ALPN).
+// The TLS rows go to a second nginx with `listen ... ssl http2` and a
+// self-signed certificate, through the same kind of proxy.
 // COG: made with gdal_translate -of COG (docs/benchmarks.md); the GDAL rows
 // need /usr/bin/python3 with GDAL (python3-gdal) and bench/gdal_read_windows.py.
 #include <clipstream/store/tile_store.h>
@@ -120,6 +134,10 @@ int main(int argc, char** argv) {
   std::vector<double> connections = {1, 4, 8, 16, 32, 64};
   size_t teleports = 4;
   bool coalesce = true;
+  unsigned batch = RemoteOptions{}.batch_tiles;
+  size_t glide_steps = 0;
+  std::string disk_cache;
+  std::vector<std::string> protocols = {"http"};
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--rtt" && i + 1 < argc) {
@@ -128,6 +146,23 @@ int main(int argc, char** argv) {
       connections = parseList(argv[++i]);
     } else if (arg == "--no-coalesce") {
       coalesce = false;
+    } else if (arg == "--disk-cache" && i + 1 < argc) {
+      disk_cache = argv[++i];
+    } else if (arg == "--glide" && i + 1 < argc) {
+      glide_steps = std::strtoul(argv[++i], nullptr, 10);
+    } else if (arg == "--batch" && i + 1 < argc) {
+      batch = unsigned(std::clamp<unsigned long>(std::strtoul(argv[++i], nullptr, 10), 1, 64));
+    } else if (arg == "--protocols" && i + 1 < argc) {
+      protocols.clear();
+      std::stringstream in(argv[++i]);
+      std::string item;
+      while (std::getline(in, item, ',')) {
+        if (item != "http" && item != "https1" && item != "h2") {
+          std::fprintf(stderr, "unknown protocol %s (http, https1, h2)\n", item.c_str());
+          return 2;
+        }
+        protocols.push_back(item);
+      }
     } else if (arg == "--teleports" && i + 1 < argc) {
       teleports = std::clamp<size_t>(std::strtoul(argv[++i], nullptr, 10), 1, std::size(kPlaces));
     } else if (store_path.empty()) {
@@ -136,7 +171,8 @@ int main(int argc, char** argv) {
       cog_path = arg;
     } else {
       std::fprintf(stderr, "usage: %s STORE.cstore [COG.tif] [--rtt LIST] [--connections LIST] "
-                           "[--teleports N] [--no-coalesce]\n", argv[0]);
+                           "[--teleports N] [--no-coalesce] [--batch N] [--protocols LIST]\n",
+                   argv[0]);
       return 2;
     }
   }
@@ -156,8 +192,15 @@ int main(int argc, char** argv) {
   fs::create_directories(work / "www");
   fs::copy_file(store_path, work / "www/store.cstore");
   if (!cog_path.empty()) fs::copy_file(cog_path, work / "www/cog.tif");
-  std::unique_ptr<test::NginxServer> server;
+  std::unique_ptr<test::NginxServer> server, tls_server;
   Status s = test::NginxServer::start(work.string(), (work / "www").string(), &server);
+  const bool tls_wanted = std::find(protocols.begin(), protocols.end(), "http") == protocols.end() ||
+                          protocols.size() > 1;
+  if (s && tls_wanted) {
+    fs::create_directories(work / "tls");
+    s = test::NginxServer::start((work / "tls").string(), (work / "www").string(), &tls_server,
+                                 true, true);
+  }
   if (!s) {
     std::fprintf(stderr, "%s\n", s.toString().c_str());
     return 1;
@@ -171,13 +214,15 @@ int main(int argc, char** argv) {
   const uint64_t store_bytes = local->info().file_bytes;
   local.reset();
   std::printf("# store %s: %llux%llu %s, tile %u, %u levels, %.1f MiB; %zu teleports, camera %g "
-              "texels up, viewport %ux%u, prefetch off, coalescing %s\n",
+              "texels up, viewport %ux%u, prefetch off, coalescing %s, batch %u tiles\n",
               store_path.c_str(), (unsigned long long)geometry.width_px,
               (unsigned long long)geometry.height_px, pixelFormatName(geometry.format),
               geometry.tile_px, geometry.levelCount(), store_bytes / 1048576.0, teleports, kHeight,
-              kViewport.width_px, kViewport.height_px, coalesce ? "on" : "off");
-  std::printf("reader\trtt_ms\tin_flight\topen_ms\topen_requests\tsharp_median_s\tsharp_max_s\t"
-              "tiles\ttiles_per_s\trequests\trequests_per_tile\tMiB\n");
+              kViewport.width_px, kViewport.height_px, coalesce ? "on" : "off",
+              coalesce ? batch : 1u);
+  std::printf("reader\tprotocol\trtt_ms\tin_flight\tconnections\topen_ms\topen_requests\t"
+              "sharp_median_s\tsharp_max_s\ttiles\ttiles_per_s\trequests\trequests_per_tile\t"
+              "MiB\n");
 
   auto place = [&](size_t i) {
     return lookingDown(kPlaces[i][0] * double(geometry.width_px),
@@ -187,27 +232,41 @@ int main(int argc, char** argv) {
       lookingDown(0.5 * double(geometry.width_px), 0.5 * double(geometry.height_px));
 
   for (const double rtt : rtts) {
-    std::unique_ptr<test::DelayProxy> proxy;
+    std::unique_ptr<test::DelayProxy> proxy, tls_proxy;
     if (Status ps = test::DelayProxy::start(server->port(), rtt, &proxy); !ps) {
       std::fprintf(stderr, "%s\n", ps.toString().c_str());
       return 1;
     }
+    if (tls_server) {
+      if (Status ps = test::DelayProxy::start(tls_server->port(), rtt, &tls_proxy); !ps) {
+        std::fprintf(stderr, "%s\n", ps.toString().c_str());
+        return 1;
+      }
+    }
     std::vector<std::string> windows(teleports);
+    for (const std::string& protocol : protocols) {
+    const bool tls = protocol != "http";
+    const test::NginxServer& host = tls ? *tls_server : *server;
+    const std::string url = tls ? "https://127.0.0.1:" + std::to_string(tls_proxy->port()) +
+                                      "/store.cstore"
+                                : proxy->url("store.cstore");
     for (const double count : connections) {
       RemoteOptions remote;
       remote.connections = unsigned(count);
-      if (!coalesce) remote.batch_tiles = 1;
-      size_t log_from = server->requests().size();
+      remote.batch_tiles = coalesce ? batch : 1;
+      remote.http2 = protocol == "h2";
+      remote.disk_cache_dir = disk_cache;
+      if (tls) remote.ca_file = tls_server->certificateFile();
+      size_t log_from = host.requests().size();
       const Clock::time_point open_start = Clock::now();
       Status open_status;
-      std::shared_ptr<TileSource> source =
-          openStoreSource(proxy->url("store.cstore"), remote, &open_status);
+      std::shared_ptr<TileSource> source = openStoreSource(url, remote, &open_status);
       if (!source) {
         std::fprintf(stderr, "%s\n", open_status.toString().c_str());
         return 1;
       }
       const double open_ms = secondsSince(open_start) * 1000.0;
-      const LogTotals open_log = logSince(*server, log_from);
+      const LogTotals open_log = logSince(host, log_from);
       StreamerConfig config;
       config.prefetch = false;
       Streamer streamer(source, config);
@@ -216,7 +275,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "start place did not settle in %g s\n", kSettleTimeoutS);
         return 1;
       }
-      log_from = server->requests().size();
+      log_from = host.requests().size();
       std::vector<double> seconds;
       uint64_t tiles = 0;
       bool timed_out = false;
@@ -228,19 +287,58 @@ int main(int argc, char** argv) {
         tiles += streamer.stats().total.loads - loads_before;
         windows[t] = planWindows(streamer.plan());
       }
-      const LogTotals log = logSince(*server, log_from);
+      const LogTotals log = logSince(host, log_from);
+      const uint64_t connections_opened = source->remoteStats().connections;
       streamer.shutdown();
+      // The flight, on a store opened afresh (nothing cached): small steps,
+      // each settled, as a smooth camera asks; counted after the first.
+      LogTotals glide_log;
+      uint64_t glide_tiles = 0;
+      double glide_s = 0.0;
+      if (glide_steps > 0) {
+        std::shared_ptr<TileSource> glide_source = openStoreSource(url, remote, &open_status);
+        if (!glide_source) {
+          std::fprintf(stderr, "%s\n", open_status.toString().c_str());
+          return 1;
+        }
+        Streamer glider(glide_source, config);
+        auto at = [&](size_t step) {
+          const double f = 0.2 + 0.6 * double(step) / double(glide_steps);
+          return lookingDown(f * double(geometry.width_px), 0.5 * double(geometry.height_px));
+        };
+        if (!settle(glider, at(0), epoch)) timed_out = true;
+        const size_t glide_from = host.requests().size();
+        const uint64_t loads_before = glider.stats().total.loads;
+        const Clock::time_point glide_start = Clock::now();
+        for (size_t step = 1; step <= glide_steps; ++step) {
+          if (!settle(glider, at(step), epoch)) timed_out = true;
+        }
+        glide_s = secondsSince(glide_start);
+        glide_tiles = glider.stats().total.loads - loads_before;
+        glide_log = logSince(host, glide_from);
+        glider.shutdown();
+      }
       std::vector<double> sorted = seconds;
       std::sort(sorted.begin(), sorted.end());
       double total_s = 0.0;
       for (double v : seconds) total_s += v;
-      std::printf("clipstream\t%g\t%u\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
-                  rtt, remote.connections, open_ms, (unsigned long long)open_log.requests,
-                  sorted[sorted.size() / 2], sorted.back(), timed_out ? " (timeout)" : "",
-                  (unsigned long long)tiles, total_s > 0 ? double(tiles) / total_s : 0.0,
-                  (unsigned long long)log.requests,
+      std::printf("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
+                  "%.2f\n",
+                  protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
+                  open_ms, (unsigned long long)open_log.requests, sorted[sorted.size() / 2],
+                  sorted.back(), timed_out ? " (timeout)" : "", (unsigned long long)tiles,
+                  total_s > 0 ? double(tiles) / total_s : 0.0, (unsigned long long)log.requests,
                   tiles ? double(log.requests) / double(tiles) : 0.0, log.bytes / 1048576.0);
+      if (glide_steps > 0) {
+        std::printf("glide\t%s\t%g\t%u\t-\t-\t-\t%.3f\t-\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
+                    protocol.c_str(), rtt, remote.connections, glide_s,
+                    (unsigned long long)glide_tiles, glide_s > 0 ? double(glide_tiles) / glide_s : 0.0,
+                    (unsigned long long)glide_log.requests,
+                    glide_tiles ? double(glide_log.requests) / double(glide_tiles) : 0.0,
+                    glide_log.bytes / 1048576.0);
+      }
       std::fflush(stdout);
+    }
     }
     // GDAL over the same proxy: the stack windows of each teleport.
     if (!cog_path.empty()) {
@@ -262,7 +360,7 @@ int main(int argc, char** argv) {
       const double all_s = secondsSince(gdal_start);
       const LogTotals log = logSince(*server, log_from);
       if (seconds.size() != windows.size()) {
-        std::printf("gdal\t%g\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
+        std::printf("gdal\thttp\t%g\t-\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
         continue;
       }
       std::vector<double> sorted = seconds;
@@ -271,13 +369,14 @@ int main(int argc, char** argv) {
       for (double v : seconds) read_s += v;
       // GDAL's open is the process's run time less the reads (includes the
       // interpreter start, a few tens of milliseconds).
-      std::printf("gdal_vsicurl\t%g\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
+      std::printf("gdal_vsicurl\thttp\t%g\t-\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
                   (all_s - read_s) * 1000.0, sorted[sorted.size() / 2], sorted.back(),
                   (unsigned long long)log.requests, log.bytes / 1048576.0);
       std::fflush(stdout);
     }
   }
   server.reset();
+  tls_server.reset();
   std::error_code ec;
   fs::remove_all(work, ec);
   return 0;

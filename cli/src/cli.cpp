@@ -127,6 +127,15 @@ CLI::Validator wholeInRange(int64_t lo, int64_t hi) {
       "INT in " + bounds, "RANGE");
 }
 
+std::optional<PayloadOrder> parsePayloadOrder(const std::string& text) {
+  std::string lower = text;
+  for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+  for (PayloadOrder order : {PayloadOrder::kWritten, PayloadOrder::kCurve}) {
+    if (lower == payloadOrderName(order)) return order;
+  }
+  return std::nullopt;
+}
+
 std::optional<PixelFormat> parsePixelFormat(const std::string& text) {
   std::string upper = text;
   for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
@@ -173,6 +182,23 @@ int finish(const CLI::App& app, int code) {
     return kExitFailure;
   }
   return code;
+}
+
+void addRemoteOptions(CLI::App& app, RemoteOptions* remote) {
+  app.add_option("--http-connections", remote->connections,
+                 "Requests in flight to a store given as a URL (HTTP/1.1: one kept-alive "
+                 "connection each; HTTP/2: streams of one connection)")
+      ->transform(wholeInRange(1, kMaxRemoteConnections));
+  app.add_option("--disk-cache", remote->disk_cache_dir,
+                 "Keep what is read from a store URL in this folder (made if missing), "
+                 "checked and reused by later runs (default: off)");
+  app.add_option_function<uint64_t>(
+         "--disk-cache-mb",
+         [remote](uint64_t mb) { remote->disk_cache_bytes = mb << 20; },
+         "Cap of the --disk-cache folder in MiB (default " +
+             std::to_string(RemoteOptions{}.disk_cache_bytes >> 20) + "); least recently used "
+             "entries go first")
+      ->transform(wholeInRange(1, int64_t(1) << 30));
 }
 
 }  // namespace clipstream::cli

@@ -135,8 +135,10 @@ Status checkFlyOptions(const FlyOptions& o) {
   if (o.upload_tiles == 0) return bad("uploads per frame must be at least 1");
   if (o.io_threads > kMaxIoThreads)
     return bad("io threads must be at most " + std::to_string(kMaxIoThreads));
-  if (o.http_connections == 0 || o.http_connections > kMaxRemoteConnections)
+  if (o.remote.connections == 0 || o.remote.connections > kMaxRemoteConnections)
     return bad("HTTP connections must be from 1 to " + std::to_string(kMaxRemoteConnections));
+  if (!o.remote.disk_cache_dir.empty() && o.remote.disk_cache_bytes == 0)
+    return bad("the disk cache cap must be at least 1 MiB");
   if (!std::isfinite(o.fault_latency_ms) || o.fault_latency_ms < 0.0 || o.fault_latency_ms > kMaxFlyDelayMs)
     return bad("fault latency must be from 0 to " + std::to_string(int(kMaxFlyDelayMs)) + " ms");
   if (!std::isfinite(o.rest_frame_ms) || o.rest_frame_ms < 0.0 || o.rest_frame_ms > kMaxFlyDelayMs)
@@ -165,9 +167,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
                            "procedural size " + std::to_string(o.procedural_px) + " not supported");
   } else {
     Status s;
-    RemoteOptions remote;
-    remote.connections = o.http_connections;
-    source = openStoreSource(o.store_path, remote, &s);
+    source = openStoreSource(o.store_path, o.remote, &s);
     if (!source) return s.isOk() ? Status::error(ErrorCode::kIo, "cannot open " + o.store_path) : s;
   }
   if (o.fault_latency_ms > 0.0 || o.fault_corrupt_fraction > 0.0) {
@@ -183,8 +183,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.source = source;
   if (!o.elevation_path.empty()) {
     TerrainLayerConfig terrain;
-    RemoteOptions remote;
-    remote.connections = o.http_connections;
+    const RemoteOptions& remote = o.remote;
     std::vector<std::string> notes;
     if (Status s = openTerrainLayer(o.procedural_px > 0 ? std::string() : o.store_path, geometry,
                                     o.elevation_path, o.vertical_scale, o.stretch_elevation,

@@ -33,9 +33,7 @@ int main(int argc, char** argv) {
   app.add_option("--io-threads", o.io_threads,
                  "Loader threads (0 = cores; for a URL store, one per HTTP connection)")
       ->transform(cli::wholeInRange(0, kMaxIoThreads));
-  app.add_option("--http-connections", o.http_connections,
-                 "Requests in flight to a store given as a URL (kept-alive connections)")
-      ->transform(cli::wholeInRange(1, kMaxRemoteConnections));
+  cli::addRemoteOptions(app, &o.remote);
   app.add_option("--out", o.out_dir,
                  "Output directory (holds one run: an earlier run's frames and statistics there are "
                  "removed first)");

@@ -48,10 +48,8 @@ int main(int argc, char** argv) {
   uint64_t procedural_px = 0, cache_mb = 512;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
   app.add_option("store", store_path, "Tile store file or http(s):// URL (omit with --procedural)");
-  unsigned http_connections = RemoteOptions{}.connections;
-  app.add_option("--http-connections", http_connections,
-                 "Requests in flight to a store given as a URL (kept-alive connections)")
-      ->transform(cli::wholeInRange(1, kMaxRemoteConnections));
+  RemoteOptions remote;
+  cli::addRemoteOptions(app, &remote);
   app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--size", size, "Window WIDTHxHEIGHT");
@@ -95,8 +93,6 @@ int main(int argc, char** argv) {
     source = makeProceduralSource(spec);
   } else if (!store_path.empty()) {
     Status s;
-    RemoteOptions remote;
-    remote.connections = http_connections;
     source = openStoreSource(store_path, remote, &s);
     if (!source) {
       cli::printError(app, s.toString());
@@ -111,8 +107,6 @@ int main(int argc, char** argv) {
   if (!elevation_path.empty()) {
     TerrainLayerConfig layer;
     std::vector<std::string> notes;
-    RemoteOptions remote;
-    remote.connections = http_connections;
     if (Status s = openTerrainLayer(procedural_px > 0 ? std::string() : store_path, g, elevation_path,
                                     vertical_scale, stretch_elevation,
                                     renderer_config::kTerrainRingCells, &layer, &notes, remote);

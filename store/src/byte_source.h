@@ -8,9 +8,18 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 
 namespace clipstream {
+
+// One range of a ByteSource::readMany() call: `bytes` bytes at `offset`
+// into `data` (owned by the caller).
+struct ByteRange {
+  void* data = nullptr;
+  size_t bytes = 0;
+  uint64_t offset = 0;
+};
 
 // Thread-safe: read() and the counters from any number of threads at once,
 // no lock held across I/O. prefetch() only while the reader is being opened
@@ -26,6 +35,20 @@ class ByteSource {
   // ends first; kIo / kNotFound / kUnavailable (transient, may be retried)
   // with a message naming the path or URL.
   virtual Status read(void* data, size_t bytes, uint64_t offset) const = 0;
+
+  // read() for several ranges: statuses[i] for ranges[i] (spans of equal
+  // size). A remote source has them all in flight at once (HTTP/2 streams
+  // on one connection, or several connections), so together they cost one
+  // round trip; a local file reads them one after another.
+  virtual void readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const {
+    for (size_t i = 0; i < ranges.size() && i < statuses.size(); ++i)
+      statuses[i] = read(ranges[i].data, ranges[i].bytes, ranges[i].offset);
+  }
+
+  // What names this version of the file, "" when nothing does: for a URL
+  // the strong ETag, else the Last-Modified date, with the size. Constant
+  // from open on. The disk cache keys its entries by URL and this.
+  virtual std::string version() const { return {}; }
 
   // A hint that [offset, offset + bytes) is read next in small pieces: a
   // remote source fetches it in one request and serves those reads from

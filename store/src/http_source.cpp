@@ -1,8 +1,15 @@
 // ByteSource over an http:// or https:// URL: HTTP range requests through
-// libcurl, a pool of kept-alive connections (one request in flight on
-// each), retries with back-off for transient failures, and a version check
-// on every response so that a store replaced on the server is reported and
-// never mixed with the one that was opened.
+// libcurl's multi interface, driven by one thread per source; HTTP/2
+// streams multiplexed on one connection when an https:// server offers h2
+// (ALPN), else up to RemoteOptions::connections kept-alive HTTP/1.1
+// connections; retries with back-off for transient failures, and a version
+// check on every response so that a store replaced on the server is
+// reported and never mixed with the one that was opened.
+//
+// Threads: reader threads prepare their easy handles, hand them to the
+// transfer loop (TransferLoop) and wait; the loop's thread runs every
+// transfer, libcurl's callbacks included, and hands each handle back under
+// the loop's mutex. A handle belongs to one side at a time.
 //
 // Versions: the first request records the file's size, ETag and
 // Last-Modified. Every later request carries If-Range with the strong ETag
@@ -20,8 +27,11 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstring>
+#include <memory>
 #include <mutex>
+#include <span>
 #include <string_view>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -33,6 +43,9 @@ namespace {
 constexpr size_t kOpenBytes = size_t(64) << 10;
 // prefetch() ignores hints larger than this (they are read piecewise).
 constexpr uint64_t kMaxPrefetchBytes = uint64_t(16) << 20;
+// The transfer loop wakes at least this often (curl's own timers: connect
+// and stall timeouts, retransmissions) when no socket is ready.
+constexpr int kLoopPollMs = 100;
 // Error bodies (an HTML "404 Not Found" page) are discarded up to this size;
 // a larger one is cut off.
 constexpr size_t kMaxErrorBodyBytes = size_t(64) << 10;
@@ -101,16 +114,20 @@ std::string displayUrl(const std::string& url) {
   return printableText(shown, 500);
 }
 
-// One request's state, shared with libcurl's callbacks.
+// One request's state, shared with libcurl's callbacks (which run on the
+// transfer loop's thread while the request is in flight).
 struct Transfer {
   CURL* curl = nullptr;
   uint8_t* data = nullptr;
   size_t capacity = 0;
+  uint64_t offset = 0;
   size_t got = 0;
   size_t discarded = 0;
   bool overflow = false;      // the server sent more than the range asked for
   bool cut_whole_body = false;  // a 200 answer (the whole file) was cut off
+  std::string range;          // "FIRST-LAST", for CURLOPT_RANGE and messages
   std::string etag, last_modified, content_range;
+  char error_text[CURL_ERROR_SIZE] = {};
 };
 
 size_t onHeader(char* buffer, size_t size, size_t count, void* user) {
@@ -215,12 +232,130 @@ bool isTransient(long http_code) {
   return http_code == 408 || http_code == 429 || (http_code >= 500 && http_code <= 599);
 }
 
+// One curl multi handle and the thread that drives it. Reader threads hand
+// it prepared easy handles (performAll()) and sleep until their transfers
+// finished; the multi handle keeps the connections (HTTP/2: one, its
+// requests multiplexed as streams; HTTP/1.1: up to the connection limit,
+// further requests queued inside libcurl until one is free).
+//
+// Thread-safe: performAll() from any number of threads at once. The
+// destructor runs when no performAll() is in progress.
+class TransferLoop {
+ public:
+  TransferLoop() = default;
+  ~TransferLoop() {
+    if (m_thread.joinable()) {
+      {
+        std::lock_guard<std::mutex> lock(m_mutex);
+        m_stopping = true;
+      }
+      curl_multi_wakeup(m_multi);
+      m_thread.join();
+    }
+    if (m_multi != nullptr) curl_multi_cleanup(m_multi);
+  }
+  TransferLoop(const TransferLoop&) = delete;
+  TransferLoop& operator=(const TransferLoop&) = delete;
+
+  // Creates the multi handle (`connections` connections to the server at
+  // most) and starts the thread. kOutOfMemory / kIo when either fails.
+  Status start(unsigned connections) {
+    m_multi = curl_multi_init();
+    if (m_multi == nullptr) return Status::error(ErrorCode::kOutOfMemory, "curl_multi_init failed");
+    curl_multi_setopt(m_multi, CURLMOPT_PIPELINING, long(CURLPIPE_MULTIPLEX));
+    curl_multi_setopt(m_multi, CURLMOPT_MAX_HOST_CONNECTIONS, long(connections));
+    curl_multi_setopt(m_multi, CURLMOPT_MAX_TOTAL_CONNECTIONS, long(connections));
+    // Keep every connection alive between requests (the default cache
+    // shrinks with the handles added).
+    curl_multi_setopt(m_multi, CURLMOPT_MAXCONNECTS, long(connections));
+    try {
+      m_thread = std::thread([this] { run(); });
+    } catch (const std::system_error& e) {
+      return Status::error(ErrorCode::kIo, std::string("cannot start the HTTP thread: ") + e.what());
+    }
+    return Status::ok();
+  }
+
+  // Runs every handle's transfer, all at once; returns when all finished,
+  // with results[i] the outcome of handles[i]. The handles come back
+  // removed from the multi handle, their callbacks done.
+  void performAll(std::span<CURL* const> handles, std::span<CURLcode> results) {
+    Group group;
+    std::vector<Job> jobs(handles.size());
+    std::unique_lock<std::mutex> lock(m_mutex);
+    group.remaining = handles.size();
+    for (size_t i = 0; i < handles.size(); ++i) {
+      jobs[i] = Job{handles[i], &results[i], &group};
+      m_incoming.push_back(&jobs[i]);
+    }
+    lock.unlock();
+    curl_multi_wakeup(m_multi);
+    lock.lock();
+    group.done.wait(lock, [&] { return group.remaining == 0; });
+  }
+
+ private:
+  struct Group {
+    size_t remaining = 0;  // guarded by m_mutex
+    std::condition_variable done;
+  };
+  struct Job {
+    CURL* curl = nullptr;
+    CURLcode* result = nullptr;
+    Group* group = nullptr;
+  };
+
+  void finish(Job* job, CURLcode rc) {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    *job->result = rc;
+    // Notified under the lock: the waiter cannot return (and destroy the
+    // group) before the lock is released.
+    if (--job->group->remaining == 0) job->group->done.notify_all();
+  }
+
+  void run() {
+    std::vector<Job*> adding;
+    for (;;) {
+      {
+        std::lock_guard<std::mutex> lock(m_mutex);
+        if (m_stopping) return;
+        adding.swap(m_incoming);
+      }
+      for (Job* job : adding) {
+        curl_easy_setopt(job->curl, CURLOPT_PRIVATE, static_cast<void*>(job));
+        if (curl_multi_add_handle(m_multi, job->curl) != CURLM_OK) finish(job, CURLE_OUT_OF_MEMORY);
+      }
+      adding.clear();
+      int running = 0;
+      curl_multi_perform(m_multi, &running);
+      int left = 0;
+      while (CURLMsg* message = curl_multi_info_read(m_multi, &left)) {
+        if (message->msg != CURLMSG_DONE) continue;
+        CURL* curl = message->easy_handle;
+        const CURLcode rc = message->data.result;
+        void* job = nullptr;
+        curl_easy_getinfo(curl, CURLINFO_PRIVATE, &job);
+        curl_multi_remove_handle(m_multi, curl);  // `message` is invalid from here
+        finish(static_cast<Job*>(job), rc);
+      }
+      curl_multi_poll(m_multi, nullptr, 0, kLoopPollMs, nullptr);
+    }
+  }
+
+  CURLM* m_multi = nullptr;
+  std::thread m_thread;
+  std::mutex m_mutex;  // guards m_incoming, m_stopping and every Group's remaining
+  std::vector<Job*> m_incoming;
+  bool m_stopping = false;
+};
+
 class HttpSource final : public ByteSource {
  public:
   HttpSource(std::string url, const RemoteOptions& options)
       : m_url(std::move(url)), m_shown(displayUrl(m_url)), m_options(options) {}
 
   ~HttpSource() override {
+    m_loop.reset();  // no transfer in flight; the loop goes before the handles
     for (CURL* curl : m_idle) curl_easy_cleanup(curl);
     if (m_if_range) curl_slist_free_all(m_if_range);
   }
@@ -229,6 +364,8 @@ class HttpSource final : public ByteSource {
 
   uint64_t size() const override { return m_size; }
   Status read(void* data, size_t bytes, uint64_t offset) const override;
+  void readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const override;
+  std::string version() const override { return m_version; }
   void prefetch(uint64_t offset, uint64_t bytes) override;
   unsigned suggestedReadThreads() const override { return m_options.connections; }
   RemoteStats remoteStats() const override {
@@ -237,6 +374,8 @@ class HttpSource final : public ByteSource {
     stats.retries = m_retries.load(std::memory_order_relaxed);
     stats.bytes = m_bytes.load(std::memory_order_relaxed);
     stats.failures = m_failures.load(std::memory_order_relaxed);
+    stats.http2_requests = m_http2_requests.load(std::memory_order_relaxed);
+    stats.connections = m_connections.load(std::memory_order_relaxed);
     return stats;
   }
 
@@ -246,15 +385,25 @@ class HttpSource final : public ByteSource {
     uint64_t offset = 0;
     std::vector<uint8_t> bytes;
   };
+  // One range of a fetch(): where it goes, what came back.
+  struct Piece {
+    uint8_t* data = nullptr;
+    size_t bytes = 0;
+    uint64_t offset = 0;
+    size_t got = 0;  // bytes delivered (the open request may get fewer than asked)
+    Status status;
+  };
 
   CURL* acquire() const;
   void release(CURL* curl) const;
-  // One request for [offset, offset + bytes) into data; *got receives the
-  // bytes delivered (the open request may get fewer than asked).
-  Outcome attempt(CURL* curl, uint8_t* data, size_t bytes, uint64_t offset, bool opening,
-                  size_t* got, Status* status) const;
-  // attempt() with retries for transient outcomes.
-  Status fetch(uint8_t* data, size_t bytes, uint64_t offset, bool opening, size_t* got) const;
+  // Sets up `curl` for one request of [offset, offset + bytes) into data.
+  void prepare(CURL* curl, Transfer* t, uint8_t* data, size_t bytes, uint64_t offset,
+               bool opening) const;
+  // Judges a finished request; *got receives the bytes delivered.
+  Outcome judge(const Transfer& t, CURLcode rc, bool opening, size_t* got, Status* status) const;
+  // Every piece's request at once, each retried on its own while transient
+  // (all retries of one round wait the same back-off).
+  void fetch(std::span<Piece> pieces, bool opening) const;
   Status changed(const std::string& why) const;
   Status fail(ErrorCode code, const std::string& what) const {
     return Status::error(code, m_shown + ": " + what);
@@ -263,21 +412,21 @@ class HttpSource final : public ByteSource {
   const std::string m_url;
   const std::string m_shown;
   const RemoteOptions m_options;
+  std::unique_ptr<TransferLoop> m_loop;  // set by open()
   // Set by open(), then immutable.
   uint64_t m_size = 0;
-  std::string m_etag, m_last_modified;
+  std::string m_etag, m_last_modified, m_version;
   curl_slist* m_if_range = nullptr;
-  // What the open request found; written by attempt() during open() only.
+  // What the open request found; written by judge() during open() only.
   mutable uint64_t m_size_at_open = 0;
   mutable std::string m_etag_at_open, m_last_modified_at_open;
   // Filled during open only (prefetch()), read-only afterwards.
   std::vector<Window> m_windows;
 
-  // The connection pool; guarded by m_pool_mutex.
+  // Easy handles not in use (each keeps its options; the connections live
+  // in the multi handle); guarded by m_pool_mutex.
   mutable std::mutex m_pool_mutex;
-  mutable std::condition_variable m_pool_cv;
   mutable std::vector<CURL*> m_idle;
-  mutable unsigned m_created = 0;
 
   // Sticky: once the server holds another version every read fails.
   mutable std::once_flag m_changed_once;
@@ -285,32 +434,33 @@ class HttpSource final : public ByteSource {
   mutable std::string m_changed_message;  // written once before m_changed turns true
 
   mutable std::atomic<uint64_t> m_requests{0}, m_retries{0}, m_bytes{0}, m_failures{0};
+  mutable std::atomic<uint64_t> m_http2_requests{0}, m_connections{0};
 };
 
 CURL* HttpSource::acquire() const {
   {
-    std::unique_lock<std::mutex> lock(m_pool_mutex);
-    m_pool_cv.wait(lock, [&] { return !m_idle.empty() || m_created < m_options.connections; });
+    std::lock_guard<std::mutex> lock(m_pool_mutex);
     if (!m_idle.empty()) {
       CURL* curl = m_idle.back();
       m_idle.pop_back();
       return curl;
     }
-    ++m_created;
   }
   CURL* curl = curl_easy_init();
-  if (curl == nullptr) {
-    std::lock_guard<std::mutex> lock(m_pool_mutex);
-    --m_created;
-    m_pool_cv.notify_one();
-    return nullptr;
-  }
+  if (curl == nullptr) return nullptr;
   curl_easy_setopt(curl, CURLOPT_URL, m_url.c_str());
   curl_easy_setopt(curl, CURLOPT_NOSIGNAL, 1L);  // threads: no SIGALRM for timeouts
   curl_easy_setopt(curl, CURLOPT_PROTOCOLS_STR, "http,https");
   curl_easy_setopt(curl, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
   curl_easy_setopt(curl, CURLOPT_FOLLOWLOCATION, 1L);  // object stores may redirect
   curl_easy_setopt(curl, CURLOPT_MAXREDIRS, 5L);
+  // HTTP/2 where TLS negotiates it (ALPN), HTTP/1.1 otherwise; cleartext
+  // stays HTTP/1.1 (docs/decisions.md, "HTTP/2").
+  curl_easy_setopt(curl, CURLOPT_HTTP_VERSION,
+                   m_options.http2 ? long(CURL_HTTP_VERSION_2TLS) : long(CURL_HTTP_VERSION_1_1));
+  // A new request waits for a connection being set up rather than opening
+  // another, so that HTTP/2 requests share one connection.
+  curl_easy_setopt(curl, CURLOPT_PIPEWAIT, 1L);
   curl_easy_setopt(curl, CURLOPT_CONNECTTIMEOUT_MS, long(m_options.connect_timeout_ms));
   // A stall: under one byte per second for the stall time (whole seconds).
   curl_easy_setopt(curl, CURLOPT_LOW_SPEED_LIMIT, 1L);
@@ -327,7 +477,6 @@ CURL* HttpSource::acquire() const {
 void HttpSource::release(CURL* curl) const {
   std::lock_guard<std::mutex> lock(m_pool_mutex);
   m_idle.push_back(curl);
-  m_pool_cv.notify_one();
 }
 
 Status HttpSource::changed(const std::string& why) const {
@@ -339,27 +488,36 @@ Status HttpSource::changed(const std::string& why) const {
   return Status::error(ErrorCode::kIo, m_changed_message);
 }
 
-HttpSource::Outcome HttpSource::attempt(CURL* curl, uint8_t* data, size_t bytes, uint64_t offset,
-                                        bool opening, size_t* got, Status* status) const {
-  Transfer t;
-  t.curl = curl;
-  t.data = data;
-  t.capacity = bytes;
-  const std::string range = std::to_string(offset) + "-" + std::to_string(offset + bytes - 1);
-  char error_text[CURL_ERROR_SIZE] = {};
-  curl_easy_setopt(curl, CURLOPT_RANGE, range.c_str());
+void HttpSource::prepare(CURL* curl, Transfer* t, uint8_t* data, size_t bytes, uint64_t offset,
+                         bool opening) const {
+  t->curl = curl;
+  t->data = data;
+  t->capacity = bytes;
+  t->offset = offset;
+  t->range = std::to_string(offset) + "-" + std::to_string(offset + bytes - 1);
+  curl_easy_setopt(curl, CURLOPT_RANGE, t->range.c_str());
   curl_easy_setopt(curl, CURLOPT_HTTPHEADER, opening ? nullptr : m_if_range);
-  curl_easy_setopt(curl, CURLOPT_HEADERDATA, &t);
-  curl_easy_setopt(curl, CURLOPT_WRITEDATA, &t);
-  curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, error_text);
-  m_requests.fetch_add(1, std::memory_order_relaxed);
-  const CURLcode rc = curl_easy_perform(curl);
+  curl_easy_setopt(curl, CURLOPT_HEADERDATA, t);
+  curl_easy_setopt(curl, CURLOPT_WRITEDATA, t);
+  curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, t->error_text);
+}
+
+HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool opening, size_t* got,
+                                      Status* status) const {
+  CURL* curl = t.curl;
+  const size_t bytes = t.capacity;
+  const uint64_t offset = t.offset;
   curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, nullptr);
   m_bytes.fetch_add(t.got, std::memory_order_relaxed);
-  long code = 0;
+  long code = 0, version = 0, connects = 0;
   curl_easy_getinfo(curl, CURLINFO_RESPONSE_CODE, &code);
+  curl_easy_getinfo(curl, CURLINFO_HTTP_VERSION, &version);
+  curl_easy_getinfo(curl, CURLINFO_NUM_CONNECTS, &connects);
+  if (version == CURL_HTTP_VERSION_2_0) m_http2_requests.fetch_add(1, std::memory_order_relaxed);
+  m_connections.fetch_add(uint64_t(std::max(0L, connects)), std::memory_order_relaxed);
   *got = t.got;
-  const std::string what = "bytes " + range;
+  const std::string what = "bytes " + t.range;
+  const char* error_text = t.error_text;
 
   if (opening && code == 200 && rc == CURLE_OK && t.got == 0 && !t.cut_whole_body) {
     // An empty file: nginx answers a range of it with an empty 200. The
@@ -461,41 +619,76 @@ HttpSource::Outcome HttpSource::attempt(CURL* curl, uint8_t* data, size_t bytes,
   return Outcome::kOk;
 }
 
-Status HttpSource::fetch(uint8_t* data, size_t bytes, uint64_t offset, bool opening,
-                         size_t* got) const {
+void HttpSource::fetch(std::span<Piece> pieces, bool opening) const {
   if (m_changed.load(std::memory_order_acquire)) {
-    m_failures.fetch_add(1, std::memory_order_relaxed);
-    return Status::error(ErrorCode::kIo, m_changed_message);
+    for (Piece& piece : pieces) piece.status = Status::error(ErrorCode::kIo, m_changed_message);
+    m_failures.fetch_add(pieces.size(), std::memory_order_relaxed);
+    return;
   }
-  CURL* curl = acquire();
-  if (curl == nullptr) return fail(ErrorCode::kOutOfMemory, "cannot create an HTTP handle");
-  Status status;
-  for (uint32_t attempt_index = 0;; ++attempt_index) {
-    const Outcome outcome = attempt(curl, data, bytes, offset, opening, got, &status);
-    if (outcome != Outcome::kTransient || attempt_index >= m_options.retries) break;
-    m_retries.fetch_add(1, std::memory_order_relaxed);
+  std::vector<Piece*> todo;
+  for (Piece& piece : pieces) todo.push_back(&piece);
+  std::vector<Transfer> transfers;
+  std::vector<CURL*> handles;
+  std::vector<CURLcode> results;
+  std::vector<Piece*> again;
+  for (uint32_t attempt_index = 0; !todo.empty(); ++attempt_index) {
+    transfers.assign(todo.size(), Transfer{});
+    handles.clear();
+    for (size_t i = 0; i < todo.size(); ++i) {
+      CURL* curl = acquire();
+      if (curl == nullptr) {
+        // Without a handle this piece fails now; the others still run.
+        todo[i]->status = fail(ErrorCode::kOutOfMemory, "cannot create an HTTP handle");
+        continue;
+      }
+      prepare(curl, &transfers[handles.size()], todo[i]->data, todo[i]->bytes, todo[i]->offset,
+              opening);
+      handles.push_back(curl);
+      todo[handles.size() - 1] = todo[i];
+    }
+    todo.resize(handles.size());
+    results.assign(handles.size(), CURLE_OK);
+    m_requests.fetch_add(handles.size(), std::memory_order_relaxed);
+    m_loop->performAll(handles, results);
+    again.clear();
+    for (size_t i = 0; i < handles.size(); ++i) {
+      const Outcome outcome = judge(transfers[i], results[i], opening, &todo[i]->got,
+                                    &todo[i]->status);
+      release(handles[i]);
+      if (outcome == Outcome::kTransient && attempt_index < m_options.retries) {
+        again.push_back(todo[i]);
+      }
+    }
+    todo.swap(again);
+    if (todo.empty()) break;
+    m_retries.fetch_add(todo.size(), std::memory_order_relaxed);
     const uint64_t wait_ms = uint64_t(m_options.retry_base_ms) << std::min(attempt_index, 16u);
     std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));
   }
-  release(curl);
-  if (!status) {
+  for (Piece& piece : pieces) {
+    if (piece.status) continue;
     m_failures.fetch_add(1, std::memory_order_relaxed);
-    if (status.code == ErrorCode::kTruncated && !opening) status.code = ErrorCode::kUnavailable;
+    if (piece.status.code == ErrorCode::kTruncated && !opening) {
+      piece.status.code = ErrorCode::kUnavailable;
+    }
   }
-  return status;
 }
 
 Status HttpSource::open() {
   initCurlOnce();
+  m_loop = std::make_unique<TransferLoop>();
+  if (Status started = m_loop->start(m_options.connections); !started) {
+    return fail(started.code, started.message);
+  }
   std::vector<uint8_t> first(kOpenBytes);
-  size_t got = 0;
-  Status status = fetch(first.data(), first.size(), 0, true, &got);
-  if (!status) return status;
+  Piece piece{first.data(), first.size(), 0};
+  fetch(std::span<Piece>(&piece, 1), true);
+  if (!piece.status) return piece.status;
   m_size = m_size_at_open;
   m_etag = m_etag_at_open;
   m_last_modified = m_last_modified_at_open;
-  first.resize(got);
-  if (got > 0) m_windows.push_back({0, std::move(first)});
+  first.resize(piece.got);
+  if (piece.got > 0) m_windows.push_back({0, std::move(first)});
   // If-Range needs a strong validator: the ETag unless weak, else the date.
   std::string validator;
   if (!m_etag.empty() && !m_etag.starts_with("W/")) {
@@ -503,7 +696,10 @@ Status HttpSource::open() {
   } else if (!m_last_modified.empty()) {
     validator = m_last_modified;
   }
-  if (!validator.empty()) m_if_range = curl_slist_append(nullptr, ("If-Range: " + validator).c_str());
+  if (!validator.empty()) {
+    m_if_range = curl_slist_append(nullptr, ("If-Range: " + validator).c_str());
+    m_version = validator + " " + std::to_string(m_size);
+  }
   return Status::ok();
 }
 
@@ -515,27 +711,48 @@ void HttpSource::prefetch(uint64_t offset, uint64_t bytes) {
   Window window;
   window.offset = offset;
   window.bytes.resize(static_cast<size_t>(bytes));
-  size_t got = 0;
-  if (fetch(window.bytes.data(), window.bytes.size(), offset, false, &got)) {
-    m_windows.push_back(std::move(window));
+  Piece piece{window.bytes.data(), window.bytes.size(), offset};
+  fetch(std::span<Piece>(&piece, 1), false);
+  if (piece.status) m_windows.push_back(std::move(window));
+}
+
+void HttpSource::readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const {
+  const size_t n = std::min(ranges.size(), statuses.size());
+  std::vector<Piece> pieces;
+  std::vector<size_t> index;
+  for (size_t i = 0; i < n; ++i) {
+    const ByteRange& r = ranges[i];
+    statuses[i] = Status::ok();
+    if (r.bytes == 0) continue;
+    if (r.offset > m_size || r.bytes > m_size - r.offset) {
+      statuses[i] = fail(ErrorCode::kTruncated,
+                         "the file is " + std::to_string(m_size) + " bytes, needed " +
+                             std::to_string(r.bytes) + " bytes from byte " +
+                             std::to_string(r.offset));
+      continue;
+    }
+    bool served = false;
+    for (const Window& w : m_windows) {
+      if (r.offset >= w.offset && r.offset + r.bytes <= w.offset + w.bytes.size()) {
+        std::memcpy(r.data, w.bytes.data() + (r.offset - w.offset), r.bytes);
+        served = true;
+        break;
+      }
+    }
+    if (served) continue;
+    pieces.push_back(Piece{static_cast<uint8_t*>(r.data), r.bytes, r.offset});
+    index.push_back(i);
   }
+  if (pieces.empty()) return;
+  fetch(pieces, false);
+  for (size_t k = 0; k < pieces.size(); ++k) statuses[index[k]] = pieces[k].status;
 }
 
 Status HttpSource::read(void* data, size_t bytes, uint64_t offset) const {
-  if (bytes == 0) return Status::ok();
-  if (offset > m_size || bytes > m_size - offset) {
-    return fail(ErrorCode::kTruncated, "the file is " + std::to_string(m_size) + " bytes, needed " +
-                                           std::to_string(bytes) + " bytes from byte " +
-                                           std::to_string(offset));
-  }
-  for (const Window& w : m_windows) {
-    if (offset >= w.offset && offset + bytes <= w.offset + w.bytes.size()) {
-      std::memcpy(data, w.bytes.data() + (offset - w.offset), bytes);
-      return Status::ok();
-    }
-  }
-  size_t got = 0;
-  return fetch(static_cast<uint8_t*>(data), bytes, offset, false, &got);
+  const ByteRange range{data, bytes, offset};
+  Status status;
+  readMany(std::span<const ByteRange>(&range, 1), std::span<Status>(&status, 1));
+  return status;
 }
 
 }  // namespace

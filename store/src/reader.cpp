@@ -2,6 +2,7 @@
 // metadata at open; index pages are read on first use, outside any lock,
 // and published with a compare-and-swap (a racing loser frees its copy).
 #include "byte_source.h"
+#include "disk_cache.h"
 #include "format.h"
 
 #include <clipstream/store/tile_store.h>
@@ -56,6 +57,13 @@ struct TileStoreReader::Impl {
   std::vector<LevelRead> levels;
   mutable std::atomic<uint64_t> bytes_read{0};
   mutable std::atomic<uint64_t> pages_loaded{0};
+  // The payload order the first telling index page showed (learnOrder()):
+  // 0 not known yet, 1 rows, 2 curve.
+  mutable std::atomic<int> order_seen{0};
+  // The disk cache of a URL store (RemoteOptions::disk_cache_dir), or null.
+  std::shared_ptr<DiskCache> disk_cache;
+  std::string cache_key;  // this store version's sub-folder
+  mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
 
   ~Impl() {
     for (LevelRead& level : levels) {
@@ -68,6 +76,74 @@ struct TileStoreReader::Impl {
     bytes_read.fetch_add(bytes, std::memory_order_relaxed);
     return source->read(data, bytes, offset);
   }
+  void readMany(std::span<const ByteRange> ranges, std::span<Status> statuses) const {
+    for (const ByteRange& r : ranges) bytes_read.fetch_add(r.bytes, std::memory_order_relaxed);
+    source->readMany(ranges, statuses);
+  }
+
+  // The disk cache's copy of a payload, checked against its checksum like
+  // the server's bytes; false (and a torn or wrong copy removed) otherwise.
+  bool cachedPayload(const TileKey& key, const TileLocation& location,
+                     std::vector<uint8_t>* payload) const {
+    if (!disk_cache) return false;
+    const std::string name = "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
+                             std::to_string(key.y);
+    switch (disk_cache->get(cache_key, name, location.stored_bytes, payload)) {
+      case DiskCache::Lookup::kHit:
+        if (format::tileChecksum(payload->data(), payload->size()) == location.checksum) {
+          disk_hits.fetch_add(1, std::memory_order_relaxed);
+          return true;
+        }
+        disk_cache->drop(cache_key, name);
+        [[fallthrough]];
+      case DiskCache::Lookup::kBad:
+        disk_dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case DiskCache::Lookup::kMiss:
+        break;
+    }
+    disk_misses.fetch_add(1, std::memory_order_relaxed);
+    payload->clear();
+    return false;
+  }
+  void keepPayload(const TileKey& key, std::span<const uint8_t> payload) const {
+    if (!disk_cache) return;
+    disk_cache->put(cache_key, "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
+                                   std::to_string(key.y),
+                    payload);
+  }
+  static std::string pageName(uint32_t level_index, uint32_t px, uint32_t py) {
+    return "p" + std::to_string(level_index) + "-" + std::to_string(px) + "-" + std::to_string(py);
+  }
+  // The disk cache's copy of an index page, checked like the server's.
+  bool cachedPage(uint32_t level_index, uint32_t px, uint32_t py,
+                  std::unique_ptr<Page>* out) const {
+    if (!disk_cache) return false;
+    const LevelRead& level = levels[level_index];
+    const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+    const std::string name = pageName(level_index, px, py);
+    std::vector<uint8_t> bytes;
+    switch (disk_cache->get(cache_key, name, dir.bytes, &bytes)) {
+      case DiskCache::Lookup::kHit:
+        if (decodePage(level_index, px, py, bytes, out)) {
+          disk_hits.fetch_add(1, std::memory_order_relaxed);
+          return true;
+        }
+        disk_cache->drop(cache_key, name);
+        [[fallthrough]];
+      case DiskCache::Lookup::kBad:
+        disk_dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case DiskCache::Lookup::kMiss:
+        break;
+    }
+    disk_misses.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  void keepPage(uint32_t level_index, uint32_t px, uint32_t py,
+                std::span<const uint8_t> bytes) const {
+    if (disk_cache) disk_cache->put(cache_key, pageName(level_index, px, py), bytes);
+  }
 
   Status bad(ErrorCode code, const std::string& what) const {
     return Status::error(code, path + ": " + what);
@@ -77,6 +153,16 @@ struct TileStoreReader::Impl {
   // Reads and checks one index page without publishing it.
   Status readPage(uint32_t level_index, uint32_t px, uint32_t py,
                   std::unique_ptr<Page>* out) const;
+  // Checks one index page's bytes (read from the file or a cache).
+  Status decodePage(uint32_t level_index, uint32_t px, uint32_t py, std::span<const uint8_t> bytes,
+                    std::unique_ptr<Page>* out) const;
+  // Notes the payload order a page shows (order_seen), if not known yet.
+  void learnOrder(uint32_t level_index, uint32_t px, uint32_t py, const Page& page) const;
+  // Publishes a page unless another thread did first; returns the published one.
+  const Page* publish(uint32_t level_index, size_t page_index, std::unique_ptr<Page> page) const;
+  // Reads every index page these tiles need that is not loaded yet, all in
+  // flight at once (a batch spanning pages costs one round trip for them).
+  void loadPagesOf(std::span<const TileKey> keys) const;
   // Returns the published page, reading and publishing it on first use.
   Status loadPage(uint32_t level_index, uint32_t px, uint32_t py, const Page** out) const;
   // Published page or, if not loaded yet, a private copy kept in *scratch:
@@ -93,6 +179,11 @@ Status TileStoreReader::Impl::openImpl() {
   Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source)
                                    : openFileSource(path, &source);
   if (!opened) return opened;
+  if (!remote.disk_cache_dir.empty() && isStoreUrl(path) && !source->version().empty()) {
+    Status cache = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache);
+    if (!cache) return cache;
+    cache_key = DiskCache::storeKey(path, source->version());
+  }
   path = displayStorePath(path);  // from here on `path` only names the store in messages
   const uint64_t actual_bytes = source->size();
 
@@ -349,13 +440,24 @@ Status TileStoreReader::Impl::openImpl() {
 
 Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32_t py,
                                        std::unique_ptr<Page>* out) const {
+  if (cachedPage(level_index, px, py, out)) return Status::ok();
+  const LevelRead& level = levels[level_index];
+  const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
+  std::vector<uint8_t> bytes(dir.bytes);
+  Status status = read(bytes.data(), bytes.size(), dir.offset);
+  if (!status) return status;
+  status = decodePage(level_index, px, py, bytes, out);
+  if (status) keepPage(level_index, px, py, bytes);
+  return status;
+}
+
+Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint32_t py,
+                                         std::span<const uint8_t> bytes,
+                                         std::unique_ptr<Page>* out) const {
   const LevelRead& level = levels[level_index];
   const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
   const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
                             ") of level " + std::to_string(level_index);
-  std::vector<uint8_t> bytes(dir.bytes);
-  Status status = read(bytes.data(), bytes.size(), dir.offset);
-  if (!status) return status;
   auto page = std::make_unique<Page>();
   // Its size was checked against the page's tile count at open.
   switch (format::decodeIndexPage(bytes, dir.checksum, entry_bytes, &page->entries)) {
@@ -390,6 +492,56 @@ Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32
   return Status::ok();
 }
 
+void TileStoreReader::Impl::learnOrder(uint32_t level_index, uint32_t px, uint32_t py,
+                                       const Page& page) const {
+  if (order_seen.load(std::memory_order_relaxed) != 0) return;
+  const LevelInfo& level_info = info.geometry.levels[level_index];
+  // A level two tiles wide lies in aligned squares in either order.
+  if (level_info.tiles_x <= 2) return;
+  const uint32_t w = format::pageSpan(level_info.tiles_x, px);
+  const uint32_t h = format::pageSpan(level_info.tiles_y, py);
+  uint32_t together = 0, apart = 0;
+  for (uint32_t y = 0; y + 1 < h; y += 2) {
+    for (uint32_t x = 0; x + 1 < w; x += 2) {
+      const format::TileEntry* square[4] = {
+          &page.entries[size_t(y) * w + x], &page.entries[size_t(y) * w + x + 1],
+          &page.entries[size_t(y + 1) * w + x], &page.entries[size_t(y + 1) * w + x + 1]};
+      uint64_t first = UINT64_MAX, end = 0, bytes = 0;
+      bool payloads = true;
+      for (const format::TileEntry* e : square) {
+        payloads &= e->stored_bytes > 0;
+        first = std::min(first, e->offset_or_value);
+        end = std::max(end, e->offset_or_value + e->stored_bytes);
+        bytes += e->stored_bytes;
+      }
+      if (!payloads) continue;
+      (end - first == bytes ? together : apart) += 1;
+    }
+  }
+  // Four squares tell; nine in ten together is a curve (the written order
+  // puts a row's payloads between the halves of every square).
+  if (together + apart < 4) return;
+  int expected = 0;
+  order_seen.compare_exchange_strong(expected, together * 10 >= (together + apart) * 9 ? 2 : 1,
+                                     std::memory_order_relaxed);
+}
+
+const Page* TileStoreReader::Impl::publish(uint32_t level_index, size_t page_index,
+                                           std::unique_ptr<Page> page) const {
+  const LevelRead& level = levels[level_index];
+  learnOrder(level_index, uint32_t(page_index % level.pages_x),
+             uint32_t(page_index / level.pages_x), *page);
+  const Page* expected = nullptr;
+  const Page* mine = page.get();
+  if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
+                                                      std::memory_order_acquire)) {
+    page.release();
+    pages_loaded.fetch_add(1, std::memory_order_relaxed);
+    return mine;
+  }
+  return expected;  // another thread published first; ours is freed
+}
+
 Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32_t py,
                                        const Page** out) const {
   const LevelRead& level = levels[level_index];
@@ -402,17 +554,51 @@ Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32
   std::unique_ptr<Page> page;
   Status status = readPage(level_index, px, py, &page);
   if (!status) return status;
-  const Page* expected = nullptr;
-  const Page* mine = page.get();
-  if (level.pages[page_index].compare_exchange_strong(expected, mine, std::memory_order_acq_rel,
-                                                      std::memory_order_acquire)) {
-    page.release();
-    pages_loaded.fetch_add(1, std::memory_order_relaxed);
-    *out = mine;
-  } else {
-    *out = expected;  // another thread published first; ours is freed
-  }
+  *out = publish(level_index, page_index, std::move(page));
   return Status::ok();
+}
+
+void TileStoreReader::Impl::loadPagesOf(std::span<const TileKey> keys) const {
+  struct Wanted {
+    uint32_t level = 0, px = 0, py = 0;
+    std::vector<uint8_t> bytes;
+  };
+  std::vector<Wanted> wanted;
+  for (const TileKey& key : keys) {
+    if (!info.geometry.contains(key)) continue;
+    const LevelRead& level = levels[key.level];
+    const uint32_t px = key.x / format::kPageTiles, py = key.y / format::kPageTiles;
+    const size_t page_index = size_t(py) * level.pages_x + px;
+    if (level.directory[page_index].flags & format::kPageFlagConstant) continue;
+    if (level.pages[page_index].load(std::memory_order_acquire) != nullptr) continue;
+    bool listed = false;
+    for (const Wanted& w : wanted) listed |= w.level == key.level && w.px == px && w.py == py;
+    if (listed) continue;
+    if (std::unique_ptr<Page> page; cachedPage(key.level, px, py, &page)) {
+      publish(key.level, page_index, std::move(page));
+      continue;
+    }
+    wanted.push_back({key.level, px, py, {}});
+  }
+  if (wanted.size() < 2) return;  // one page: locate() reads it as before
+  std::vector<ByteRange> ranges(wanted.size());
+  std::vector<Status> statuses(wanted.size());
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    Wanted& w = wanted[i];
+    const LevelRead& level = levels[w.level];
+    const PageDirEntry& dir = level.directory[size_t(w.py) * level.pages_x + w.px];
+    w.bytes.resize(dir.bytes);
+    ranges[i] = ByteRange{w.bytes.data(), w.bytes.size(), dir.offset};
+  }
+  readMany(ranges, statuses);
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    const Wanted& w = wanted[i];
+    std::unique_ptr<Page> page;
+    // A failure is left for locate(), which reads the page again and reports.
+    if (!statuses[i] || !decodePage(w.level, w.px, w.py, w.bytes, &page)) continue;
+    keepPage(w.level, w.px, w.py, w.bytes);
+    publish(w.level, size_t(w.py) * levels[w.level].pages_x + w.px, std::move(page));
+  }
 }
 
 Status TileStoreReader::Impl::peekPage(uint32_t level_index, uint32_t px, uint32_t py,
@@ -478,6 +664,7 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
   out->key = key;
   out->payload.clear();
   if (out->location.constant) return Status::ok();
+  if (cachedPayload(key, out->location, &out->payload)) return Status::ok();
   out->payload.resize(out->location.stored_bytes);
   Status status = read(out->payload.data(), out->payload.size(), out->location.offset);
   if (!status) {
@@ -488,6 +675,7 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
     return Status::error(ErrorCode::kCorruptTile,
                          format::keyText(key) + ": payload checksum mismatch");
   }
+  keepPayload(key, out->payload);
   return Status::ok();
 }
 
@@ -495,18 +683,26 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
                                    std::span<Status> statuses) const {
   const Impl& impl = *m_impl;
   const size_t n = std::min({keys.size(), out.size(), statuses.size()});
+  impl.loadPagesOf(keys.first(n));
   // Locate everything; payloads to read, in file order.
   std::vector<size_t> order;
   for (size_t i = 0; i < n; ++i) {
     out[i].key = keys[i];
     out[i].payload.clear();
     statuses[i] = impl.locate(keys[i], &out[i].location);
-    if (statuses[i] && !out[i].location.constant) order.push_back(i);
+    if (statuses[i] && !out[i].location.constant &&
+        !impl.cachedPayload(keys[i], out[i].location, &out[i].payload))
+      order.push_back(i);
   }
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return out[a].location.offset < out[b].location.offset;
   });
-  std::vector<uint8_t> buffer;
+  // Runs of payloads close together: [first, last) of `order` each.
+  struct Run {
+    size_t first = 0, last = 0;
+    uint64_t begin = 0, end = 0;
+  };
+  std::vector<Run> runs;
   for (size_t first = 0; first < order.size();) {
     // Grow the run while the next payload starts close to this one's end.
     const uint64_t begin = out[order[first]].location.offset;
@@ -521,30 +717,58 @@ void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawT
       end = next_end;
       ++last;
     }
-    if (last == first + 1) {
-      const size_t i = order[first];
-      statuses[i] = impl.readPayload(keys[i], &out[i]);
-      first = last;
-      continue;
+    runs.push_back({first, last, begin, end});
+    first = last;
+  }
+  // Every run is in flight at once (one round trip for the batch). A run of
+  // one tile is read straight into its payload; longer runs into a buffer
+  // each, then split.
+  std::vector<std::vector<uint8_t>> buffers(runs.size());
+  std::vector<ByteRange> ranges(runs.size());
+  std::vector<Status> run_status(runs.size());
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const Run& run = runs[r];
+    uint8_t* data = nullptr;
+    if (run.last == run.first + 1) {
+      std::vector<uint8_t>& payload = out[order[run.first]].payload;
+      payload.resize(static_cast<size_t>(run.end - run.begin));
+      data = payload.data();
+    } else {
+      buffers[r].resize(static_cast<size_t>(run.end - run.begin));
+      data = buffers[r].data();
     }
-    buffer.resize(static_cast<size_t>(end - begin));
-    const Status status = impl.read(buffer.data(), buffer.size(), begin);
-    for (size_t k = first; k < last; ++k) {
+    ranges[r] = ByteRange{data, static_cast<size_t>(run.end - run.begin), run.begin};
+  }
+  impl.readMany(ranges, run_status);
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const Run& run = runs[r];
+    const Status& status = run_status[r];
+    for (size_t k = run.first; k < run.last; ++k) {
       const size_t i = order[k];
       if (!status) {
+        out[i].payload.clear();
         statuses[i] = Status::error(status.code, format::keyText(keys[i]) + ": " + status.message);
         continue;
       }
       const TileLocation& location = out[i].location;
-      const uint8_t* payload = buffer.data() + (location.offset - begin);
-      out[i].payload.assign(payload, payload + location.stored_bytes);
+      if (run.last != run.first + 1) {
+        const uint8_t* payload = buffers[r].data() + (location.offset - run.begin);
+        out[i].payload.assign(payload, payload + location.stored_bytes);
+      }
+      // Checked before any decompression, as readRaw() does.
       if (format::tileChecksum(out[i].payload.data(), out[i].payload.size()) != location.checksum) {
         statuses[i] = Status::error(ErrorCode::kCorruptTile,
                                     format::keyText(keys[i]) + ": payload checksum mismatch");
+      } else {
+        impl.keepPayload(keys[i], out[i].payload);
       }
     }
-    first = last;
   }
+}
+
+BatchShape TileStoreReader::suggestedBatchShape() const {
+  return m_impl->order_seen.load(std::memory_order_relaxed) == 2 ? BatchShape::kSquare
+                                                                 : BatchShape::kRow;
 }
 
 unsigned TileStoreReader::suggestedBatchTiles() const {
@@ -585,7 +809,13 @@ unsigned TileStoreReader::suggestedReadThreads() const {
   return m_impl->source->suggestedReadThreads();
 }
 
-RemoteStats TileStoreReader::remoteStats() const { return m_impl->source->remoteStats(); }
+RemoteStats TileStoreReader::remoteStats() const {
+  RemoteStats stats = m_impl->source->remoteStats();
+  stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
+  stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
+  stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
+  return stats;
+}
 
 Status TileStoreReader::locate(const TileKey& key, TileLocation* out) const {
   if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");

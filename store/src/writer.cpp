@@ -4,6 +4,13 @@
 // without holding payloads in RAM. Index pages are serialised to their own
 // temporary file as soon as every tile of the page has been written, so RAM
 // holds entries only for pages still being filled.
+//
+// PayloadOrder::kCurve: level 0 spills too, and finish() copies each level's
+// payloads into the output along a Hilbert curve over the level's tile grid.
+// The curve covers each index page (an aligned square of 64 x 64 tiles) in
+// one stretch, so the copy goes page by page, rewriting each page (same
+// size, new offsets and checksum) in its temporary file: one page's entries
+// and one payload in RAM at a time.
 #include "file_io.h"
 #include "format.h"
 
@@ -15,6 +22,7 @@
 #include <unistd.h>
 #include <zstd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <filesystem>
@@ -42,6 +50,29 @@ struct PageBuild {
   uint64_t constant_value = 0;
   uint64_t checksum = 0;
 };
+
+// Position of (x, y) along a Hilbert curve over a square grid of `side`
+// cells (a power of two). Every aligned square of 2^k cells is one stretch
+// of the curve.
+uint64_t hilbertIndex(uint64_t side, uint64_t x, uint64_t y) {
+  uint64_t d = 0;
+  for (uint64_t s = side / 2; s > 0; s /= 2) {
+    const uint64_t rx = (x & s) ? 1 : 0;
+    const uint64_t ry = (y & s) ? 1 : 0;
+    d += s * s * ((3 * rx) ^ ry);
+    if (ry == 0) {  // rotate the quadrant so the curve stays continuous
+      if (rx == 1) {
+        x = side - 1 - x;
+        y = side - 1 - y;
+      }
+      std::swap(x, y);
+    }
+  }
+  return d;
+}
+static_assert((format::kPageTiles & (format::kPageTiles - 1)) == 0,
+              "index pages are aligned squares of a power-of-two side, so the curve visits "
+              "each page's tiles in one stretch");
 
 struct LevelBuild {
   int fd = -1;              // level 0 shares the main output
@@ -107,10 +138,17 @@ struct TileStoreWriter::Impl {
     return Status::ok();
   }
 
+  bool curveOrder() const { return options.payload_order == PayloadOrder::kCurve; }
+
   uint64_t payloadBase(uint32_t level_index) const {
-    // Level 0 payloads live in the main file right after the header.
-    return level_index == 0 ? format::kHeaderBytes : 0;
+    // Level 0 payloads live in the main file right after the header (unless
+    // they are reordered at finish()).
+    return level_index == 0 && !curveOrder() ? format::kHeaderBytes : 0;
   }
+
+  // kCurve: copies level `l`'s payloads from its spill file into the output
+  // at `level_start`, page by page along the curve, and rewrites the pages.
+  Status reorderLevel(uint32_t l, uint64_t level_start);
 
   void pageSpan(uint32_t level_index, uint32_t px, uint32_t py, uint32_t* w, uint32_t* h) const {
     const LevelInfo& info = geometry.levels[level_index];
@@ -216,6 +254,14 @@ struct TileStoreWriter::Impl {
   Status finishLocked();
 };
 
+const char* payloadOrderName(PayloadOrder order) {
+  switch (order) {
+    case PayloadOrder::kWritten: return "written";
+    case PayloadOrder::kCurve: return "curve";
+  }
+  return "unknown";
+}
+
 TileStoreWriter::TileStoreWriter() : m_impl(std::make_unique<Impl>()) {}
 TileStoreWriter::~TileStoreWriter() = default;
 
@@ -304,7 +350,11 @@ Status TileStoreWriter::create(const std::string& path, const PyramidGeometry& g
     level.pages_y = format::pagesAlong(geometry.levels[i].tiles_y);
     level.pages.resize(size_t(level.pages_x) * level.pages_y);
   }
-  impl.levels[0].fd = impl.main_fd;
+  if (options.payload_order != PayloadOrder::kWritten &&
+      options.payload_order != PayloadOrder::kCurve) {
+    return Status::error(ErrorCode::kInvalidArgument, "unknown payload order");
+  }
+  if (!impl.curveOrder()) impl.levels[0].fd = impl.main_fd;
   *out = std::move(writer);
   return Status::ok();
 }
@@ -379,8 +429,9 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
     file_offset = impl.payloadBase(key.level) + entry.offset_or_value;
   }
   // The payload is written outside the lock: its range is reserved above.
-  const std::string& file_path =
-      key.level == 0 ? impl.main_temp : impl.levels[key.level].temp_path;
+  const std::string& file_path = impl.levels[key.level].temp_path.empty()
+                                    ? impl.main_temp
+                                    : impl.levels[key.level].temp_path;
   Status status = fileio::pwriteAll(fd, tile.payload.data(), tile.payload.size(), file_offset,
                                     file_path);
   std::lock_guard<std::mutex> lock(impl.mutex);
@@ -498,6 +549,73 @@ Status TileStoreWriter::finish() {
   return status;
 }
 
+Status TileStoreWriter::Impl::reorderLevel(uint32_t l, uint64_t level_start) {
+  LevelBuild& level = levels[l];
+  const LevelInfo& info = geometry.levels[l];
+  uint64_t side = 1;
+  while (side < info.tiles_x || side < info.tiles_y) side *= 2;
+  // Pages holding payloads, in the curve's order of their first tiles
+  // (16 bytes per page, for this call).
+  std::vector<std::pair<uint64_t, uint32_t>> order;
+  for (uint32_t i = 0; i < level.pages.size(); ++i) {
+    if (level.pages[i].state != PageState::kDone) continue;
+    const uint64_t x0 = uint64_t(i % level.pages_x) * format::kPageTiles;
+    const uint64_t y0 = uint64_t(i / level.pages_x) * format::kPageTiles;
+    order.push_back({hilbertIndex(side, x0, y0), i});
+  }
+  std::sort(order.begin(), order.end());
+  uint64_t position = 0;  // inside the level's region
+  std::vector<uint8_t> page_bytes, payload;
+  std::vector<format::TileEntry> entries;
+  std::vector<std::pair<uint64_t, uint32_t>> slots;  // (curve position, slot) of one page
+  for (const auto& [page_curve, index] : order) {
+    (void)page_curve;
+    PageBuild& page = level.pages[index];
+    const uint32_t px = index % level.pages_x, py = index / level.pages_x;
+    uint32_t w, h;
+    pageSpan(l, px, py, &w, &h);
+    page_bytes.resize(page.bytes);
+    Status status = fileio::preadAll(index_fd, page_bytes.data(), page_bytes.size(),
+                                     page.rel_offset, index_temp);
+    if (!status) return status;
+    if (format::decodeIndexPage(page_bytes, page.checksum, entryBytes(), &entries) !=
+        format::Decoded::kOk) {
+      return Status::error(ErrorCode::kIo, index_temp + ": an index page changed on disk");
+    }
+    slots.clear();
+    for (uint32_t slot = 0; slot < w * h; ++slot) {
+      if (entries[slot].stored_bytes == 0) continue;  // constant: no payload
+      const uint64_t x = uint64_t(px) * format::kPageTiles + slot % w;
+      const uint64_t y = uint64_t(py) * format::kPageTiles + slot / w;
+      slots.push_back({hilbertIndex(side, x, y), slot});
+    }
+    std::sort(slots.begin(), slots.end());
+    for (const auto& [curve, slot] : slots) {
+      (void)curve;
+      format::TileEntry& entry = entries[slot];
+      payload.resize(entry.stored_bytes);
+      status = fileio::preadAll(level.fd, payload.data(), payload.size(), entry.offset_or_value,
+                                level.temp_path);
+      if (!status) return status;
+      status = fileio::pwriteAll(main_fd, payload.data(), payload.size(), level_start + position,
+                                 main_temp);
+      if (!status) return status;
+      entry.offset_or_value = position;
+      position += entry.stored_bytes;
+    }
+    page.checksum = format::encodeIndexPage(entries, entryBytes(), &page_bytes);
+    status = fileio::pwriteAll(index_fd, page_bytes.data(), page_bytes.size(), page.rel_offset,
+                               index_temp);
+    if (!status) return status;
+  }
+  if (position != level.payload_bytes) {
+    return Status::error(ErrorCode::kIo, "level " + std::to_string(l) + ": " +
+                                             std::to_string(position) + " payload bytes laid out, " +
+                                             std::to_string(level.payload_bytes) + " written");
+  }
+  return Status::ok();
+}
+
 Status TileStoreWriter::Impl::finishLocked() {
   // Every tile must be present before anything is laid out.
   for (uint32_t l = 0; l < levels.size(); ++l) {
@@ -529,9 +647,11 @@ Status TileStoreWriter::Impl::finishLocked() {
   uint64_t position = format::kHeaderBytes;
   for (uint32_t l = 0; l < levels.size(); ++l) {
     payload_offset[l] = position;
-    if (l > 0 && levels[l].payload_bytes > 0) {
-      Status status = fileio::copyRange(levels[l].fd, levels[l].temp_path,
-                                        levels[l].payload_bytes, main_fd, position, main_temp);
+    if (levels[l].fd != main_fd && levels[l].payload_bytes > 0) {
+      Status status = curveOrder() ? reorderLevel(l, position)
+                                   : fileio::copyRange(levels[l].fd, levels[l].temp_path,
+                                                       levels[l].payload_bytes, main_fd, position,
+                                                       main_temp);
       if (!status) return status;
       // The spill file is no longer needed; free its disk space early.
       ::close(levels[l].fd);

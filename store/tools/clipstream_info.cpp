@@ -208,6 +208,8 @@ int main(int argc, char** argv) {
   app.add_flag("--json", json, "print JSON on stdout instead of text");
   app.add_option("--threads", threads, "verification threads (0 = all cores)")
       ->transform(cli::wholeInRange(0, 1024));
+  RemoteOptions remote;
+  cli::addRemoteOptions(app, &remote);
   app.footer(
       "Exit codes:\n"
       "  0  success (and, with --verify, every tile verified)\n"
@@ -220,7 +222,7 @@ int main(int argc, char** argv) {
   cli::installSignalHandlers();
 
   std::unique_ptr<TileStoreReader> reader;
-  Status status = TileStoreReader::open(path, &reader);
+  Status status = TileStoreReader::open(path, remote, &reader);
   if (!status) {
     cli::printError(app, "cannot open store: " + status.toString());
     return kExitOpenFailed;

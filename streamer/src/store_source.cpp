@@ -45,6 +45,7 @@ class StoreSource final : public TileSource {
   }
 
   size_t maxBatch() const override { return m_reader->suggestedBatchTiles(); }
+  BatchShape batchShape() const override { return m_reader->suggestedBatchShape(); }
 
   void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
                   std::span<Status> statuses, std::span<FetchInfo> infos) override {
@@ -69,6 +70,7 @@ class StoreSource final : public TileSource {
 
   std::string describe() const override { return "store:" + m_path; }
   unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+  RemoteStats remoteStats() const override { return m_reader->remoteStats(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;
@@ -117,6 +119,7 @@ class ElevationStoreSource final : public TileSource {
 
   std::string describe() const override { return "elevation:" + m_path; }
   unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+  RemoteStats remoteStats() const override { return m_reader->remoteStats(); }
 
  private:
   std::unique_ptr<TileStoreReader> m_reader;

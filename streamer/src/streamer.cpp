@@ -52,6 +52,16 @@ constexpr double kRetryMaxS = 30.0;
 // worth pulling forward).
 constexpr size_t kMaxBatchTiles = 64;
 constexpr size_t kBatchScanRequests = 256;
+
+// Side of the aligned square of tiles one batch is drawn from: the largest
+// power of two whose square holds at most `max_batch` tiles (4 for 16, 8 for
+// 64: one index page). Aligned squares of a power-of-two side lie together
+// in a store whose payloads follow a space-filling curve (docs/tile-store.md).
+uint32_t batchSide(size_t max_batch) {
+  uint32_t side = 1;
+  while (size_t(side) * 2 * side * 2 <= max_batch) side *= 2;
+  return side;
+}
 // Camera history used to estimate velocity for the prefetch.
 constexpr double kHistoryS = 0.5;
 constexpr double kMinHistoryS = 0.05;
@@ -448,20 +458,27 @@ void Streamer::Impl::workerLoop() {
     rereads.push_back(reread);
     Layer& layer = layers[request.key.layer];
     // A source that reads neighbours in one request (a store over HTTP)
-    // gets up to max_batch queued tiles of the popped tile's layer, level
-    // and row: the tiles most likely to lie next to it in the file (the
-    // tiler writes rows in order). Only the front of the queue is searched,
-    // so the batch stays among the best-ranked tiles and the scan is bounded.
+    // gets more queued tiles of the popped tile's layer and level: those of
+    // its row within max_batch columns, or those of its aligned square of
+    // batchSide(max_batch) tiles, as the source's file favours (written row
+    // by row, or along a curve). The source reads what lies together with
+    // one range request and the rest at the same time. Only the front of
+    // the queue is searched, so the batch stays among the best-ranked tiles
+    // and the scan is bounded.
     const size_t max_batch = std::clamp<size_t>(layer.spec.source->maxBatch(), 1, kMaxBatchTiles);
     if (max_batch > 1) {
       taken.clear();
       const TileKey& first = request.key.key;
+      const bool squares = layer.spec.source->batchShape() == BatchShape::kSquare;
+      const uint32_t side = batchSide(max_batch);
       const size_t scan = std::min(queue.size(), kBatchScanRequests);
       for (size_t i = 0; i < scan && tiles.size() < max_batch && !no_room; ++i) {
         const LayerTile& t = queue[i].key;
-        if (t.layer != request.key.layer || t.key.level != first.level || t.key.y != first.y ||
-            std::abs(int64_t(t.key.x) - int64_t(first.x)) >= int64_t(max_batch))
-          continue;
+        if (t.layer != request.key.layer || t.key.level != first.level) continue;
+        const bool near = squares ? t.key.x / side == first.x / side && t.key.y / side == first.y / side
+                                  : t.key.y == first.y &&
+                                        std::abs(int64_t(t.key.x) - int64_t(first.x)) < int64_t(max_batch);
+        if (!near) continue;
         if (admit(queue[i], true, &reread, &no_room)) {
           tiles.push_back(t);
           rereads.push_back(reread);

@@ -19,6 +19,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -382,6 +383,8 @@ TEST_F(HttpStore, ConnectionsAreKeptAlive) {
   }
   EXPECT_GT(remote->remoteStats().requests, 10u);
   EXPECT_EQ(proxy->connections(), 1u) << "every request on one kept-alive connection";
+  EXPECT_EQ(remote->remoteStats().connections, 1u);
+  EXPECT_EQ(remote->remoteStats().http2_requests, 0u) << "http:// is HTTP/1.1";
 }
 
 TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
@@ -412,6 +415,208 @@ TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
   const Status cut = TileStoreReader::open(proxy->url("store.cstore"), options, &once);
   EXPECT_EQ(cut.code, ErrorCode::kUnavailable) << cut.toString();
   EXPECT_NE(cut.message.find(proxy->url("store.cstore")), std::string::npos) << cut.message;
+}
+
+// ---- Disk cache (RemoteOptions::disk_cache_dir) ----
+
+// The files of a disk cache folder: entries only, their total size.
+struct CacheFolder {
+  std::vector<std::string> entries;  // paths of the entry files
+  uint64_t bytes = 0;
+};
+CacheFolder cacheFolder(const std::string& dir) {
+  CacheFolder folder;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir, ec)) {
+    if (!e.is_regular_file()) continue;
+    folder.entries.push_back(e.path().string());
+    folder.bytes += e.file_size();
+  }
+  std::sort(folder.entries.begin(), folder.entries.end());
+  return folder;
+}
+
+// Reads `keys` with `reader` and compares each payload with the local file's.
+void expectSamePayloads(const TileStoreReader& reader, const TileStoreReader& local,
+                        const std::vector<TileKey>& keys) {
+  for (const TileKey& key : keys) {
+    RawTile a, b;
+    ASSERT_TRUE(local.readRaw(key, &a).isOk());
+    const Status s = reader.readRaw(key, &b);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_EQ(a.payload, b.payload) << "level " << key.level << " tile " << key.x << "," << key.y;
+  }
+}
+
+TEST_F(HttpStore, DiskCacheServesASecondOpenEvenWithTheServerStopped) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");  // made by the reader
+  options.retries = 0;
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  const std::vector<TileKey> cached(keys.begin(), keys.begin() + keys.size() / 2);
+  uint64_t first_requests = 0;
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, cached);
+    const RemoteStats stats = remote->remoteStats();
+    EXPECT_EQ(stats.disk_cache_hits, 0u);
+    EXPECT_GT(stats.disk_cache_misses, 5u);
+    first_requests = stats.requests;
+  }
+  EXPECT_FALSE(cacheFolder(options.disk_cache_dir).entries.empty());
+  // A second open (a new cache instance: the folder is scanned again) reads
+  // the same tiles from the folder: no request beyond the open's.
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const uint64_t open_requests = remote->remoteStats().requests;
+  EXPECT_LT(open_requests, first_requests);
+  expectSamePayloads(*remote, *local, cached);
+  RemoteStats stats = remote->remoteStats();
+  EXPECT_EQ(stats.requests, open_requests);
+  EXPECT_GT(stats.disk_cache_hits, 5u);
+  EXPECT_EQ(stats.disk_cache_dropped, 0u);
+  // With the server gone, cached tiles are still served; the others fail
+  // as unavailable (and would be retried by the streamer).
+  m_server->stop();
+  expectSamePayloads(*remote, *local, cached);
+  size_t unavailable = 0;
+  for (size_t i = cached.size(); i < keys.size(); ++i) {
+    RawTile raw;
+    const Status s = remote->readRaw(keys[i], &raw);
+    if (!s) {
+      EXPECT_EQ(s.code, ErrorCode::kUnavailable) << s.toString();
+      ++unavailable;
+    }
+  }
+  EXPECT_GT(unavailable, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheKeepsItsCapByEvictingTheLeastRecentlyUsed) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  options.disk_cache_bytes = 100 << 10;  // a sixth of the store
+  std::unique_ptr<TileStoreReader> local, remote;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  expectSamePayloads(*remote, *local, keys);
+  const CacheFolder folder = cacheFolder(options.disk_cache_dir);
+  EXPECT_LE(folder.bytes, options.disk_cache_bytes);
+  EXPECT_GT(folder.bytes, options.disk_cache_bytes / 2) << "the cap is used, not emptied";
+  // The last tiles read are the ones kept: reading them again is all hits.
+  // The first ones beyond the first 64 KiB (which the open keeps in memory)
+  // were evicted: read again from the server, with the same bytes.
+  std::vector<TileKey> last, first;
+  for (size_t i = keys.size(); i-- > 0 && last.size() < 3;) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant) last.push_back(keys[i]);
+  }
+  for (size_t i = 0; i < keys.size() && first.size() < 2; ++i) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    if (!location.constant && location.offset >= (64 << 10)) first.push_back(keys[i]);
+  }
+  const RemoteStats before = remote->remoteStats();
+  expectSamePayloads(*remote, *local, last);
+  const RemoteStats after = remote->remoteStats();
+  EXPECT_EQ(after.requests, before.requests);
+  EXPECT_EQ(after.disk_cache_hits - before.disk_cache_hits, 3u);
+  expectSamePayloads(*remote, *local, first);
+  EXPECT_EQ(remote->remoteStats().requests, after.requests + 2);
+  EXPECT_EQ(remote->remoteStats().disk_cache_hits, after.disk_cache_hits);
+  EXPECT_LE(cacheFolder(options.disk_cache_dir).bytes, options.disk_cache_bytes);
+}
+
+TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  // Damage two tile entries the way a crash or a bad disk would: one cut
+  // short, one with a flipped byte in its payload. Two tiles of the last
+  // row of level 0, far beyond the first 64 KiB the open keeps in memory.
+  const PyramidGeometry& g = local->geometry();
+  std::vector<std::string> names;
+  for (uint32_t x = g.levels[0].tiles_x; x-- > 0 && names.size() < 2;) {
+    TileLocation location;
+    ASSERT_TRUE(local->locate({0, x, g.levels[0].tiles_y - 1}, &location).isOk());
+    if (!location.constant) {
+      names.push_back("t0-" + std::to_string(x) + "-" + std::to_string(g.levels[0].tiles_y - 1));
+    }
+  }
+  std::vector<std::string> tiles;
+  for (const std::string& name : names) {
+    for (const std::string& path : cacheFolder(options.disk_cache_dir).entries) {
+      if (std::filesystem::path(path).filename() == name) tiles.push_back(path);
+    }
+  }
+  ASSERT_EQ(tiles.size(), 2u);
+  std::vector<uint8_t> bytes = test::readBytes(tiles[0]);
+  const size_t whole_size = bytes.size();
+  bytes.resize(bytes.size() / 2);
+  test::writeBytes(tiles[0], bytes);
+  bytes = test::readBytes(tiles[1]);
+  bytes[bytes.size() - 10] ^= 0x01;
+  test::writeBytes(tiles[1], bytes);
+
+  std::unique_ptr<TileStoreReader> remote;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  const uint64_t open_requests = remote->remoteStats().requests;
+  expectSamePayloads(*remote, *local, keys);
+  const RemoteStats stats = remote->remoteStats();
+  EXPECT_EQ(stats.disk_cache_dropped, 2u);
+  EXPECT_EQ(stats.requests - open_requests, 2u) << "the two tiles were fetched again";
+  // The cut entry is whole again in the folder.
+  EXPECT_EQ(test::readBytes(tiles[0]).size(), whole_size);
+  std::unique_ptr<TileStoreReader> again;
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &again).isOk());
+  expectSamePayloads(*again, *local, keys);
+  EXPECT_EQ(again->remoteStats().disk_cache_dropped, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheNeverServesTheEntriesOfAReplacedStore) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  // Another store of the same shape under the same name: other bytes at
+  // the same offsets.
+  test::SyntheticStoreSpec other = storeSpec();
+  other.constant = test::ConstantTiles::kNone;
+  const std::string other_path = m_dir.file("other.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).isOk());
+  publish(other_path, "store.cstore", 100);
+  std::unique_ptr<TileStoreReader> other_local, remote;
+  ASSERT_TRUE(TileStoreReader::open(other_path, &other_local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  expectSamePayloads(*remote, *other_local, keys);
+  EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u);
+  EXPECT_GT(remote->remoteStats().disk_cache_misses, 0u);
+}
+
+TEST_F(HttpStore, DiskCacheFolderThatCannotBeMadeIsNamed) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("no/such/parent/cache");
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(m_server->url("store.cstore"), options, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kNotFound) << s.toString();
+  EXPECT_NE(s.message.find(options.disk_cache_dir), std::string::npos) << s.message;
 }
 
 TEST_F(HttpStore, AbsurdConnectionCountIsRefused) {
@@ -446,6 +651,18 @@ TEST_F(HttpStore, InfoToolVerifiesAStoreByUrlAndNamesA404) {
   EXPECT_EQ(code, 0) << output;
   EXPECT_NE(output.find(url), std::string::npos) << output;
   EXPECT_NE(output.find("verify: OK"), std::string::npos) << output;
+  // --disk-cache keeps what was read; a second run verifies from it.
+  const std::string cache = m_dir.file("cache");
+  const std::string cached_run = std::string("'") + CLIPSTREAM_INFO_EXE + "' --verify --disk-cache '" +
+                                 cache + "' --disk-cache-mb 64 '" + url + "'";
+  const auto [first_code, first_output] = runProgram(cached_run);
+  EXPECT_EQ(first_code, 0) << first_output;
+  EXPECT_GT(cacheFolder(cache).entries.size(), 10u);
+  m_server->clearLog();
+  const auto [second_code, second_output] = runProgram(cached_run);
+  EXPECT_EQ(second_code, 0) << second_output;
+  EXPECT_NE(second_output.find("verify: OK"), std::string::npos) << second_output;
+  EXPECT_LE(m_server->requests().size(), 3u) << "only the open's requests";
   const std::string missing = m_server->url("missing.cstore");
   const auto [missing_code, missing_output] =
       runProgram(std::string("'") + CLIPSTREAM_INFO_EXE + "' '" + missing + "'");
@@ -508,6 +725,73 @@ TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
     const Status rs = remote->readTile(key, &b);
     ASSERT_TRUE(rs.isOk()) << rs.toString();
     EXPECT_EQ(a, b);
+  }
+}
+
+// HTTP/2 over TLS: nginx offers h2 (ALPN); every request of a batch read
+// with coalescing off is in flight at once, all as streams of the one
+// connection, and the bytes equal the file's. With RemoteOptions::http2
+// off the same server is read over HTTP/1.1.
+TEST(HttpsStore, Http2MultiplexesABatchOnOneConnectionWithTheSameBytes) {
+  test::TempDir dir("http2-store");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string local_path = dir.file("www/store.cstore");
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  std::unique_ptr<NginxServer> server;
+  const Status started =
+      NginxServer::start(dir.path().string(), dir.file("www"), &server, true, true);
+  ASSERT_TRUE(started.isOk()) << started.toString();
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  const PyramidGeometry& g = local->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
+
+  for (const bool http2 : {true, false}) {
+    SCOPED_TRACE(http2 ? "HTTP/2" : "HTTP/1.1");
+    RemoteOptions options;
+    options.ca_file = server->certificateFile();
+    options.http2 = http2;
+    options.coalesce_gap_bytes = 0;  // one request per payload, all at once
+    options.coalesce_max_bytes = 1;
+    options.connections = 8;
+    server->clearLog();
+    std::unique_ptr<TileStoreReader> remote;
+    const Status opened = TileStoreReader::open(server->url("store.cstore"), options, &remote);
+    ASSERT_TRUE(opened.isOk()) << opened.toString();
+    std::vector<RawTile> raws(keys.size());
+    std::vector<Status> statuses(keys.size());
+    remote->readRawBatch(keys, raws, statuses);
+    size_t payloads = 0;
+    for (size_t i = 0; i < keys.size(); ++i) {
+      ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+      RawTile expected;
+      ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+      EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
+      payloads += expected.payload.empty() ? 0 : 1;
+    }
+    const RemoteStats stats = remote->remoteStats();
+    // Open (3 at most), the index pages, then one request per payload
+    // beyond the first 64 KiB.
+    EXPECT_GT(stats.requests, 10u);
+    EXPECT_EQ(stats.failures, 0u);
+    const std::vector<LoggedRequest> log = server->requests(stats.requests);
+    ASSERT_EQ(log.size(), stats.requests);
+    for (const LoggedRequest& r : log) {
+      EXPECT_EQ(r.status, 206);
+      EXPECT_EQ(r.protocol, http2 ? "HTTP/2.0" : "HTTP/1.1");
+    }
+    if (http2) {
+      EXPECT_EQ(stats.http2_requests, stats.requests);
+      EXPECT_EQ(stats.connections, 1u) << "every stream on one connection";
+    } else {
+      EXPECT_EQ(stats.http2_requests, 0u);
+      EXPECT_GE(stats.connections, 1u);
+      EXPECT_LE(stats.connections, options.connections);
+    }
+    EXPECT_GT(payloads, 10u);
   }
 }
 

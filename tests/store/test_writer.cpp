@@ -179,6 +179,115 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
   }
 }
 
+// PayloadOrder::kCurve: the same tiles, the same reader, another layout:
+// every aligned square of 2, 4 and 8 tiles lies in one stretch of the file
+// (its payloads back to back), which the written order (row by row) does
+// not give; every tile reads back as written, from shuffled concurrent
+// writes too; the file is no larger.
+TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) {
+  const TempDir dir("curve_order");
+  PyramidGeometry g;
+  ASSERT_TRUE(makePyramidGeometry(1500, 1100, 16, PixelFormat::kRGB8, &g));  // 94 x 69 tiles
+  std::vector<TileKey> keys;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
+  // Squares of `side` tiles lying back to back, and those that do not.
+  auto squares = [&](const TileStoreReader& reader, uint32_t side, size_t* together, size_t* apart) {
+    *together = *apart = 0;
+    for (uint32_t l = 0; l < g.levelCount(); ++l) {
+      for (uint32_t by = 0; by + side <= g.levels[l].tiles_y; by += side) {
+        for (uint32_t bx = 0; bx + side <= g.levels[l].tiles_x; bx += side) {
+          uint64_t first = UINT64_MAX, end = 0, bytes = 0;
+          for (uint32_t y = by; y < by + side; ++y) {
+            for (uint32_t x = bx; x < bx + side; ++x) {
+              TileLocation location;
+              ASSERT_TRUE(reader.locate({l, x, y}, &location).isOk());
+              if (location.constant) continue;
+              first = std::min(first, location.offset);
+              end = std::max(end, location.offset + location.stored_bytes);
+              bytes += location.stored_bytes;
+            }
+          }
+          if (bytes == 0) continue;
+          (end - first == bytes ? *together : *apart) += 1;
+        }
+      }
+    }
+  };
+  uint64_t written_bytes = 0;
+  for (const PayloadOrder order : {PayloadOrder::kWritten, PayloadOrder::kCurve}) {
+    SCOPED_TRACE(payloadOrderName(order));
+    const std::string path = dir.file(std::string(payloadOrderName(order)) + ".cst");
+    WriterOptions options;
+    options.fsync = false;
+    options.payload_order = order;
+    ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
+    std::unique_ptr<TileStoreReader> reader;
+    ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+    // The reader tells the order from the first index page it loads.
+    EXPECT_EQ(reader->suggestedBatchShape(), BatchShape::kRow) << "nothing loaded yet";
+    std::vector<uint8_t> pixels;
+    for (const TileKey& key : keys) {
+      ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
+      ASSERT_EQ(pixels, syntheticTile(g, key));
+    }
+    EXPECT_EQ(reader->suggestedBatchShape(),
+              order == PayloadOrder::kCurve ? BatchShape::kSquare : BatchShape::kRow);
+    for (const uint32_t side : {2u, 4u, 8u}) {
+      size_t together = 0, apart = 0;
+      squares(*reader, side, &together, &apart);
+      if (order == PayloadOrder::kCurve) {
+        EXPECT_EQ(apart, 0u) << side << " x " << side;
+        EXPECT_GT(together, 0u);
+      } else {
+        EXPECT_GT(apart, together) << side << " x " << side << ": rows lie apart";
+      }
+    }
+    if (order == PayloadOrder::kWritten) {
+      written_bytes = reader->info().file_bytes;
+    } else {
+      EXPECT_EQ(reader->info().file_bytes, written_bytes);
+    }
+  }
+  // Shuffled writes from several threads give the same curve layout.
+  std::shuffle(keys.begin(), keys.end(), std::mt19937(5));
+  const std::string path = dir.file("shuffled.cst");
+  WriterOptions options;
+  options.fsync = false;
+  options.payload_order = PayloadOrder::kCurve;
+  std::unique_ptr<TileStoreWriter> writer;
+  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  std::atomic<size_t> next{0};
+  std::atomic<int> failures{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 3; ++t) {
+    threads.emplace_back([&] {
+      for (size_t i; (i = next.fetch_add(1)) < keys.size();) {
+        EncodedTile encoded;
+        if (!encodeTile(g, options.encoding, keys[i], syntheticTile(g, keys[i]), &encoded) ||
+            !writer->write(std::move(encoded))) {
+          failures.fetch_add(1);
+        }
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  EXPECT_EQ(failures.load(), 0);
+  ASSERT_TRUE(writer->finish().isOk());
+  std::unique_ptr<TileStoreReader> reader;
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  std::vector<uint8_t> pixels;
+  for (const TileKey& key : keys) {
+    ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
+    ASSERT_EQ(pixels, syntheticTile(g, key));
+  }
+  size_t together = 0, apart = 0;
+  squares(*reader, 8, &together, &apart);
+  EXPECT_EQ(apart, 0u);
+  EXPECT_EQ(dir.entries().size(), 3u) << "no temporary left";
+}
+
 TEST(TileStoreWriter, FinishReplacesAnExistingFileAtomically) {
   const TempDir dir("replace");
   const std::string path = dir.file("out.cst");

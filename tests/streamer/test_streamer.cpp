@@ -491,14 +491,16 @@ namespace {
 // each batch it is given.
 class BatchingSource final : public TileSource {
  public:
-  BatchingSource(std::shared_ptr<TileSource> inner, size_t max_batch)
-      : m_inner(std::move(inner)), m_max_batch(max_batch) {}
+  BatchingSource(std::shared_ptr<TileSource> inner, size_t max_batch,
+                 BatchShape shape = BatchShape::kRow)
+      : m_inner(std::move(inner)), m_max_batch(max_batch), m_shape(shape) {}
   const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
     record({key});
     return m_inner->fetch(key, rgba);
   }
   size_t maxBatch() const override { return m_max_batch; }
+  BatchShape batchShape() const override { return m_shape; }
   void fetchBatch(std::span<const TileKey> keys, std::span<std::vector<uint8_t>* const> rgba,
                   std::span<Status> statuses, std::span<FetchInfo> infos) override {
     record(std::vector<TileKey>(keys.begin(), keys.end()));
@@ -520,39 +522,53 @@ class BatchingSource final : public TileSource {
   }
   std::shared_ptr<TileSource> m_inner;
   size_t m_max_batch;
+  BatchShape m_shape;
   mutable std::mutex m_mutex;  // guards m_batches
   std::vector<std::vector<TileKey>> m_batches;
 };
 
-TEST(Streamer, BatchesHoldNeighboursOfOneLevelAndRowAndEveryTileIsReadOnce) {
-  constexpr size_t kMaxBatch = 6;
-  auto source = std::make_shared<BatchingSource>(procedural(8192), kMaxBatch);
-  Streamer s(source, baseConfig(3, 8));
-  const Viewport vp{800, 600};
-  Camera cam = lookingDown(4000.0, 4000.0, 60.0);
-  cam.pitch_rad = -1.0;
-  s.update(cam, vp, 0.0);
-  ASSERT_TRUE(waitIdle(s));
-  const std::vector<TileKey> ranked = rankPlanTiles(s.geometry(), s.plan());
-  KeySet read;
-  size_t multi = 0;
-  for (const std::vector<TileKey>& batch : source->batches()) {
-    ASSERT_FALSE(batch.empty());
-    ASSERT_LE(batch.size(), kMaxBatch);
-    if (batch.size() > 1) ++multi;
-    for (const TileKey& key : batch) {
-      EXPECT_EQ(key.level, batch[0].level);
-      EXPECT_EQ(key.y, batch[0].y);
-      EXPECT_LT(std::abs(int64_t(key.x) - int64_t(batch[0].x)), int64_t(kMaxBatch));
-      EXPECT_TRUE(read.insert(key).second) << "tile read twice";
+// Batches take the shape the source asks for: a row segment (a store
+// written row by row) or an aligned square (a store in curve order).
+TEST(Streamer, BatchesHoldNeighboursOfTheSourcesShapeAndEveryTileIsReadOnce) {
+  constexpr size_t kMaxBatch = 6;  // rows: 6 columns; squares: 2 x 2 (the largest that fits)
+  constexpr uint32_t kSide = 2;
+  for (const BatchShape shape : {BatchShape::kRow, BatchShape::kSquare}) {
+    SCOPED_TRACE(shape == BatchShape::kRow ? "rows" : "squares");
+    auto source = std::make_shared<BatchingSource>(procedural(8192), kMaxBatch, shape);
+    Streamer s(source, baseConfig(3, 8));
+    const Viewport vp{800, 600};
+    Camera cam = lookingDown(4000.0, 4000.0, 60.0);
+    cam.pitch_rad = -1.0;
+    s.update(cam, vp, 0.0);
+    ASSERT_TRUE(waitIdle(s));
+    const std::vector<TileKey> ranked = rankPlanTiles(s.geometry(), s.plan());
+    KeySet read;
+    size_t multi = 0, across_rows = 0;
+    for (const std::vector<TileKey>& batch : source->batches()) {
+      ASSERT_FALSE(batch.empty());
+      ASSERT_LE(batch.size(), shape == BatchShape::kRow ? kMaxBatch : kSide * kSide);
+      if (batch.size() > 1) ++multi;
+      for (const TileKey& key : batch) {
+        EXPECT_EQ(key.level, batch[0].level);
+        if (shape == BatchShape::kRow) {
+          EXPECT_EQ(key.y, batch[0].y);
+          EXPECT_LT(std::abs(int64_t(key.x) - int64_t(batch[0].x)), int64_t(kMaxBatch));
+        } else {
+          EXPECT_EQ(key.x / kSide, batch[0].x / kSide);
+          EXPECT_EQ(key.y / kSide, batch[0].y / kSide);
+          across_rows += key.y != batch[0].y;
+        }
+        EXPECT_TRUE(read.insert(key).second) << "tile read twice";
+      }
     }
+    EXPECT_EQ(read.size(), ranked.size());
+    for (const TileKey& key : ranked) EXPECT_EQ(read.count(key), 1u);
+    EXPECT_GT(multi, 0u) << "no batch of more than one tile";
+    if (shape == BatchShape::kSquare) EXPECT_GT(across_rows, 0u) << "no square spans two rows";
+    const StreamerStats st = s.stats();
+    EXPECT_EQ(st.total.loads, ranked.size());
+    expectCountersAddUp(st);
   }
-  EXPECT_EQ(read.size(), ranked.size());
-  for (const TileKey& key : ranked) EXPECT_EQ(read.count(key), 1u);
-  EXPECT_GT(multi, 0u) << "no batch of more than one tile";
-  const StreamerStats st = s.stats();
-  EXPECT_EQ(st.total.loads, ranked.size());
-  expectCountersAddUp(st);
 }
 
 TEST(Streamer, BatchNeighboursNeverPushTheRamBudget) {

@@ -122,6 +122,16 @@ TEST(TileCli, AbsurdArgumentsAreRejected) {
   expectFailure(runTiler({"--synthetic", "64x64", "--filter", "bicubic", out}), "bicubic", dir);
   expectFailure(runTiler({"--synthetic", "64x64", "--zstd-level", "99", out}), "--zstd-level", dir);
   expectFailure(runTiler({"--synthetic", "64x64", "--memory-mb", "1", out}), "--memory-mb", dir);
+  expectFailure(runTiler({"--synthetic", "64x64", "--payload-order", "zigzag", out}),
+                "--payload-order", dir);
+  // Both orders, in any case, make a store.
+  for (const char* order : {"WRITTEN", "curve"}) {
+    const RunResult r = runTiler({"--synthetic", "300x200", "--payload-order", order, "--quiet",
+                                  "--no-fsync", "--force", out});
+    EXPECT_EQ(r.exit_code, 0) << order << ": " << r.output;
+    std::unique_ptr<TileStoreReader> reader;
+    EXPECT_TRUE(TileStoreReader::open(out, &reader).isOk()) << order;
+  }
 }
 
 TEST(TileCli, RefusesToOverwriteWithoutForce) {

@@ -463,6 +463,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   wopt.encoding.linear_light = o.linear_light;
   wopt.fsync = o.fsync;
   wopt.replace = o.overwrite;
+  wopt.payload_order = o.payload_order;
   wopt.geo = geo;
 
   PyramidGeometry geometry;

@@ -148,6 +148,11 @@ int main(int argc, char** argv) {
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
   app.add_flag("--no-fsync", no_fsync, "skip the final fsync (faster, for scratch outputs)");
+  std::string order_text;
+  app.add_option("--payload-order", order_text,
+                 "where tiles lie in each level: curve (index pages along a Hilbert curve, tiles "
+                 "of a page in Morton order: fewer range requests over HTTP) or written (row by "
+                 "row); default " + std::string(payloadOrderName(TilerOptions{}.payload_order)));
   app.footer(
       "Exit codes: 0 success, 1 failure (nothing left behind), 2 command-line mistake,\n"
       "128+N stopped by signal N (INT, TERM, HUP; temporaries removed). docs/cli.md.");
@@ -237,6 +242,11 @@ int main(int argc, char** argv) {
     };
   }
   options.fsync = !no_fsync;
+  if (!order_text.empty()) {
+    const std::optional<PayloadOrder> order = cli::parsePayloadOrder(order_text);
+    if (!order) return cli::usageError(app, "--payload-order must be curve or written");
+    options.payload_order = *order;
+  }
   options.cancel = &g_cancel;
   if (Status s = validateOptions(options); !s) return cli::usageError(app, s.message);
   // The summary file follows the output rule too (a regular file named by

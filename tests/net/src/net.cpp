@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <fstream>
 #include <sstream>
 
@@ -86,11 +87,12 @@ std::string readFile(const std::string& path) {
 // NginxServer
 
 Status NginxServer::start(const std::string& work_dir, const std::string& root_dir,
-                          std::unique_ptr<NginxServer>* out, bool tls) {
+                          std::unique_ptr<NginxServer>* out, bool tls, bool http2) {
   std::unique_ptr<NginxServer> server(new NginxServer());
   server->m_work_dir = work_dir;
   server->m_root_dir = root_dir;
   server->m_tls = tls;
+  server->m_http2 = tls && http2;
   if (tls) {
     const std::string command = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj "
                                 "/CN=127.0.0.1 -addext subjectAltName=IP:127.0.0.1 -keyout '" +
@@ -137,7 +139,7 @@ Status NginxServer::launch() {
   conf << "events { worker_connections 1024; }\n"
        << "http {\n"
        << "  default_type application/octet-stream;\n"
-       << "  log_format ranges '$status\\t$body_bytes_sent\\t$uri\\t$http_range\\t$http_if_range';\n"
+       << "  log_format ranges '$status\\t$body_bytes_sent\\t$uri\\t$http_range\\t$http_if_range\\t$server_protocol';\n"
        << "  access_log " << w << "/access.log ranges;\n"
        << "  client_body_temp_path " << w << "/tmp;\n"
        << "  proxy_temp_path " << w << "/tmp;\n"
@@ -146,7 +148,8 @@ Status NginxServer::launch() {
        << "  scgi_temp_path " << w << "/tmp;\n"
        << "  keepalive_requests 100000;\n"
        << "  server {\n"
-       << "    listen 127.0.0.1:" << m_port << (m_tls ? " ssl" : "") << ";\n"
+       << "    listen 127.0.0.1:" << m_port << (m_tls ? " ssl" : "") << (m_http2 ? " http2" : "")
+       << ";\n"
        << "    root " << m_root_dir << ";\n"
        << (m_tls ? "    ssl_certificate " + w + "/cert.pem;\n    ssl_certificate_key " + w +
                        "/key.pem;\n"
@@ -232,13 +235,14 @@ std::vector<LoggedRequest> NginxServer::parseLog() const {
       if (tab == std::string::npos) break;
       start = tab + 1;
     }
-    if (fields.size() != 5) continue;
+    if (fields.size() != 6) continue;
     LoggedRequest r;
     r.status = std::atoi(fields[0].c_str());
     r.body_bytes = std::strtoull(fields[1].c_str(), nullptr, 10);
     r.uri = fields[2];
     r.range = fields[3] == "-" ? "" : fields[3];
     r.if_range = fields[4] == "-" ? "" : fields[4];
+    r.protocol = fields[5];
     out.push_back(std::move(r));
   }
   return out;
@@ -318,17 +322,34 @@ void DelayProxy::serve(int client_fd) {
       break;
     }
   }
+  // The client's bytes wait out the delay in this line, each chunk with its
+  // time of release, while reading goes on: requests multiplexed on one
+  // connection (HTTP/2) are each delayed once, not one after another.
+  using Clock = std::chrono::steady_clock;
+  std::deque<std::pair<Clock::time_point, std::vector<char>>> held;
   pollfd fds[2] = {{client_fd, POLLIN, 0}, {upstream_fd, POLLIN, 0}};
-  while (!m_stopping.load()) {
-    if (::poll(fds, 2, 50) <= 0) continue;
-    if (fds[0].revents & (POLLIN | POLLHUP | POLLERR)) {
+  bool open = true;
+  while (open && !m_stopping.load()) {
+    int timeout_ms = 50;
+    if (!held.empty()) {
+      const auto wait = std::chrono::ceil<std::chrono::milliseconds>(held.front().first - Clock::now());
+      timeout_ms = int(std::clamp<int64_t>(wait.count(), 0, 50));
+    }
+    const int ready = ::poll(fds, 2, timeout_ms);
+    if (ready > 0 && (fds[0].revents & (POLLIN | POLLHUP | POLLERR))) {
       const ssize_t got = ::recv(client_fd, buffer.data(), buffer.size(), 0);
       if (got <= 0) break;
-      const uint64_t delay_us = m_delay_us.load();
-      if (delay_us > 0) std::this_thread::sleep_for(std::chrono::microseconds(delay_us));
-      if (!writeAll(upstream_fd, buffer.data(), size_t(got))) break;
+      held.emplace_back(Clock::now() + std::chrono::microseconds(m_delay_us.load()),
+                        std::vector<char>(buffer.data(), buffer.data() + got));
     }
-    if (fds[1].revents & (POLLIN | POLLHUP | POLLERR)) {
+    while (!held.empty() && held.front().first <= Clock::now()) {
+      if (!writeAll(upstream_fd, held.front().second.data(), held.front().second.size())) {
+        open = false;
+        break;
+      }
+      held.pop_front();
+    }
+    if (ready > 0 && (fds[1].revents & (POLLIN | POLLHUP | POLLERR))) {
       const ssize_t got = ::recv(upstream_fd, buffer.data(), buffer.size(), 0);
       if (got <= 0) break;
       const size_t pass = size_t(std::min<uint64_t>(uint64_t(got), answer_budget));

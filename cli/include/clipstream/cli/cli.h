@@ -9,6 +9,8 @@
 // thread; the validators run inside parse().
 #pragma once
 
+#include <clipstream/store/remote.h>
+#include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
 
 #include <CLI/CLI.hpp>
@@ -54,6 +56,13 @@ CLI::Validator wholeInRange(int64_t lo, int64_t hi);
 // Parses a pixel format option value: "R8", "R16", "RGB8", "RGBA8", "I16",
 // "F32", in any case. nullopt for anything else (the caller names the option).
 std::optional<PixelFormat> parsePixelFormat(const std::string& text);
+// "curve" or "written" (payloadOrderName()), in any case; nullopt otherwise.
+std::optional<PayloadOrder> parsePayloadOrder(const std::string& text);
+
+// The options of every program that opens stores, for stores given as
+// URLs: --http-connections N, --disk-cache DIR and --disk-cache-mb N
+// (docs/cli.md). Parsing fills *remote, which must outlive parse().
+void addRemoteOptions(CLI::App& app, RemoteOptions* remote);
 
 // SIGINT, SIGTERM and SIGHUP (unless ignored at start, as under nohup).
 // With `cancel`, the first signal stores its number there (the program polls

@@ -34,7 +34,7 @@ struct FlyOptions {
   uint64_t cache_mb = 256;         // streamer RAM budget
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // GPU uploads per frame
   unsigned io_threads = 0;         // 0 = cores (a URL store: one per HTTP connection)
-  unsigned http_connections = RemoteOptions{}.connections;  // requests in flight to a URL store
+  RemoteOptions remote;            // a URL store: requests in flight, disk cache
   std::string out_dir = "fly-out";
   uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
   Buffering buffering = Buffering::kDoubleUploadTwice;

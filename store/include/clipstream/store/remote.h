@@ -23,11 +23,16 @@ std::string displayStorePath(const std::string& path);
 // Tunables of the URL byte source. The defaults and their reasons are in
 // docs/decisions.md ("Stores over HTTP"); benchmarks in docs/benchmarks.md.
 struct RemoteOptions {
-  // Range requests in flight at once, each on its own kept-alive
-  // connection; a reader thread beyond this waits for a free connection.
-  // The streamer starts this many loader threads for a URL store unless
-  // told otherwise (StreamerConfig::io_threads).
+  // Range requests in flight at once, and the most connections opened to
+  // the server. Over HTTP/1.1 each request in flight holds a kept-alive
+  // connection of its own (requests beyond that wait for one); over HTTP/2
+  // they are streams multiplexed on one connection. The streamer starts
+  // this many loader threads for a URL store unless told otherwise
+  // (StreamerConfig::io_threads).
   unsigned connections = 32;
+  // Offer HTTP/2 to https:// servers (ALPN); the server decides. false:
+  // HTTP/1.1 only. http:// is always HTTP/1.1 (docs/decisions.md, "HTTP/2").
+  bool http2 = true;
   // Connecting (TCP + TLS) may take this long before the attempt fails.
   uint32_t connect_timeout_ms = 5000;
   // A transfer that moves no byte for this long is a stall and fails.
@@ -48,7 +53,26 @@ struct RemoteOptions {
   uint32_t batch_tiles = 16;
   uint32_t coalesce_gap_bytes = 64 << 10;
   uint32_t coalesce_max_bytes = 2 << 20;
+  // A persistent disk cache below the streamer's RAM cache, off when empty:
+  // index pages and tile payloads read from the URL are kept as files in
+  // this folder (made if missing; its parent must exist), keyed by the URL
+  // and the file's version (strong ETag, else Last-Modified, with the
+  // size), so a store replaced on the server never uses the old entries.
+  // Every entry is checked against the checksum the store's index records,
+  // like the server's bytes; a torn or damaged one is removed and fetched
+  // again. Stores without ETag or Last-Modified are not cached. Ignored for
+  // local files. One folder may serve many stores and programs.
+  std::string disk_cache_dir;
+  // The folder's cap: least recently used entries are removed to stay
+  // under it. The first store opened with a folder in a process sets it.
+  uint64_t disk_cache_bytes = uint64_t(1) << 30;
 };
+
+// The shape of a batch of tiles worth reading together: the tiles that lie
+// together in a store's file. kRow for a store written row by row (a row
+// segment of a level is one stretch), kSquare for one in curve order
+// (PayloadOrder::kCurve: an aligned square is one stretch).
+enum class BatchShape { kRow, kSquare };
 
 // Most connections a RemoteOptions may ask for (each holds a socket and,
 // in the streamer, a loader thread).
@@ -60,6 +84,12 @@ struct RemoteStats {
   uint64_t retries = 0;    // of those, repeats after a transient failure
   uint64_t bytes = 0;      // body bytes received (payloads, index, header)
   uint64_t failures = 0;   // reads that returned an error
+  uint64_t http2_requests = 0;  // of the requests, those answered over HTTP/2
+  uint64_t connections = 0;     // connections opened (TCP, and TLS for https)
+  // Disk cache (RemoteOptions::disk_cache_dir) lookups of this store:
+  uint64_t disk_cache_hits = 0;     // served from the folder, checksum verified
+  uint64_t disk_cache_misses = 0;   // not there: read from the server, then kept
+  uint64_t disk_cache_dropped = 0;  // there but torn or damaged: removed, read again
 };
 
 }  // namespace clipstream

@@ -147,6 +147,12 @@ class TileStoreReader {
   // batch_tiles for a URL, 1 for a local file (a local read costs no round
   // trip, so batching gains nothing).
   unsigned suggestedBatchTiles() const;
+  // Which tiles lie together in this file, as its index pages show:
+  // kSquare once a loaded page shows its aligned 2 x 2 squares of tiles
+  // lying in one stretch each (a store in curve order), kRow otherwise and
+  // until a page has told (the file records no order; docs/tile-store.md).
+  // Any thread; a relaxed atomic read.
+  BatchShape suggestedBatchShape() const;
 
   // readRaw + decode. `pixels` is resized to tileBytes().
   Status readTile(const TileKey& key, std::vector<uint8_t>* pixels) const;
@@ -183,6 +189,20 @@ class TileStoreReader {
   std::unique_ptr<Impl> m_impl;
 };
 
+// Where payloads lie inside each level's region of the file. Readers find
+// every payload through the index, so any order is the same format: stores
+// of either order open in every reader (docs/tile-store.md, "Payload
+// order").
+enum class PayloadOrder : uint32_t {
+  kWritten = 0,  // in the order write() was called (the tiler's: row by row)
+  // Along a Hilbert curve over the level's tile grid: every aligned square
+  // of 2, 4, 8, ... tiles lies in one stretch of the file and neighbours
+  // mostly lie close, so a window of tiles is read with few range
+  // requests. Costs one more copy of the payloads in finish().
+  kCurve = 1,
+};
+const char* payloadOrderName(PayloadOrder order);  // "written", "curve"
+
 // Options for writing a store.
 struct WriterOptions {
   StoreEncoding encoding;
@@ -190,6 +210,7 @@ struct WriterOptions {
   ElevationInfo elevation;  // present: write an elevation store (a height format)
   bool fsync = true;     // flush to disk before the final rename
   bool replace = false;  // a regular file at the path may be replaced (OutputFile's rule)
+  PayloadOrder payload_order = PayloadOrder::kWritten;
 };
 
 // Encodes one tile: constant detection, predictor, compression, checksum.
@@ -242,6 +263,9 @@ Status decodeTileHeights(const PyramidGeometry& geometry, const StoreEncoding& e
 // Memory: 64 bytes per index page of the pyramid plus 16 bytes per tile of
 // each index page that has begun but not finished (pages are flushed to a
 // temporary file as soon as their last tile arrives); see docs/tile-store.md.
+// With PayloadOrder::kCurve, finish() also holds 16 bytes per index page of
+// one level and one page's entries at a time, and the disk holds a level's
+// payloads twice while that level is copied into curve order.
 class TileStoreWriter {
  public:
   // Fails (kIo / kNotFound / kInvalidArgument) if the directory of `path`

@@ -69,8 +69,14 @@ class TileSource {
   // source where one read of neighbours costs about what one tile does (a
   // store over HTTP: one range request instead of several round trips).
   // The streamer then hands a loader up to this many queued tiles of one
-  // level and row at once. 1 = fetch tiles one by one.
+  // level at once, shaped as batchShape() says. 1 = fetch tiles one by one.
   virtual size_t maxBatch() const { return 1; }
+  // Which queued tiles go together in a batch: kRow, neighbours in the
+  // popped tile's row (within maxBatch() columns); kSquare, those in its
+  // aligned square (4 x 4 tiles for a batch of 16, 8 x 8 for 64). A store
+  // source answers what its file's payload order favours
+  // (TileStoreReader::suggestedBatchShape()). Any thread, cheap.
+  virtual BatchShape batchShape() const { return BatchShape::kRow; }
 
   // fetchWithInfo() for several tiles: *rgba[i], statuses[i] and infos[i]
   // for keys[i] (spans of equal size). Same thread rule as fetch(). The
@@ -85,6 +91,11 @@ class TileSource {
   // HTTP wants one per connection, since each thread waits out a round trip.
   // 0 = no preference (the streamer runs one per core).
   virtual unsigned suggestedLoaderThreads() const { return 0; }
+
+  // What reading a store by URL cost so far (requests, bytes, connections,
+  // disk cache hits; TileStoreReader::remoteStats()). All zero for other
+  // sources. Any thread.
+  virtual RemoteStats remoteStats() const { return {}; }
 };
 
 // Opens a colour tile store file, or a URL of one (isStoreUrl()), as a

@@ -68,6 +68,10 @@ struct TilerOptions {
   // return quickly (the pipeline waits for it) and not throw. Empty: none.
   std::function<void(uint64_t done_px, uint64_t total_px)> progress;
   bool fsync = true;
+  // Where payloads lie in each level (WriterOptions::payload_order): along
+  // a Hilbert curve by default, so that a store read over HTTP needs fewer
+  // range requests (docs/benchmarks.md, "Payload order").
+  PayloadOrder payload_order = PayloadOrder::kCurve;
   const std::atomic<int>* cancel = nullptr;  // non-zero (e.g. a signal number) stops the run
 };
 

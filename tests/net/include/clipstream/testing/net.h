@@ -30,6 +30,7 @@ struct LoggedRequest {
   std::string range;        // the Range header, "" if none
   std::string if_range;     // the If-Range header, "" if none
   uint64_t body_bytes = 0;  // $body_bytes_sent
+  std::string protocol;     // "HTTP/1.1", "HTTP/2.0"
 };
 
 // nginx serving `root_dir` at http://127.0.0.1:PORT/. Extra locations:
@@ -43,9 +44,10 @@ class NginxServer {
   // kNotFound naming the package when no nginx binary is installed
   // ($CLIPSTREAM_NGINX, else /usr/sbin/nginx).
   // With `tls`, serves https:// with a self-signed certificate for
-  // 127.0.0.1 made by the openssl program (certificateFile() names it).
+  // 127.0.0.1 made by the openssl program (certificateFile() names it);
+  // with `tls` and `http2`, offers HTTP/2 too (ALPN, `listen ... ssl http2`).
   static Status start(const std::string& work_dir, const std::string& root_dir,
-                      std::unique_ptr<NginxServer>* out, bool tls = false);
+                      std::unique_ptr<NginxServer>* out, bool tls = false, bool http2 = false);
   ~NginxServer();  // stop()
   NginxServer(const NginxServer&) = delete;
   NginxServer& operator=(const NginxServer&) = delete;
@@ -73,6 +75,7 @@ class NginxServer {
 
   std::string m_work_dir, m_root_dir, m_binary;
   bool m_tls = false;
+  bool m_http2 = false;
   uint16_t m_port = 0;
   pid_t m_pid = -1;
 };
@@ -80,7 +83,9 @@ class NginxServer {
 // A TCP proxy on 127.0.0.1 in front of `upstream_port`: every chunk the
 // client sends (an HTTP request) is held for the delay before it is passed
 // on, so each request costs one extra round trip of that length; answers
-// pass at once. One thread per connection.
+// pass at once. Chunks are held in a delay line, not one after another, so
+// requests multiplexed on one connection (HTTP/2) each wait the delay once.
+// Bytes pass unchanged (TLS too). One thread per connection.
 class DelayProxy {
  public:
   static Status start(uint16_t upstream_port, double delay_ms, std::unique_ptr<DelayProxy>* out);

@@ -1,0 +1,282 @@
+// DiskCache: entries are files "<store key>/<name>" under the folder, each a
+// 24-byte header (magic, format, a hash of its own path, content size) and
+// the content. Written under "<store key>/tmp.<pid>.<n>" and renamed.
+#include "disk_cache.h"
+
+#include "file_io.h"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <xxhash.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <ctime>
+#include <map>
+
+namespace clipstream {
+namespace {
+
+constexpr uint32_t kEntryMagic = 0x43445343;  // "CSDC" little-endian
+constexpr uint32_t kEntryFormat = 1;
+constexpr size_t kEntryHeaderBytes = 24;
+// Temporaries older than this at open belong to a writer that died (a live
+// one renames its entry within milliseconds).
+constexpr time_t kStaleTemporaryS = 60;
+constexpr const char* kTempPrefix = "tmp.";
+
+uint64_t identity(const std::string& path) { return XXH3_64bits(path.data(), path.size()); }
+
+void encodeHeader(const std::string& path, uint64_t bytes, uint8_t* out) {
+  const uint64_t id = identity(path);
+  std::memcpy(out, &kEntryMagic, 4);
+  std::memcpy(out + 4, &kEntryFormat, 4);
+  std::memcpy(out + 8, &id, 8);
+  std::memcpy(out + 16, &bytes, 8);
+}
+
+bool isStoreKey(const char* name) {
+  size_t n = 0;
+  for (; name[n] != '\0'; ++n) {
+    const char c = name[n];
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  }
+  return n == 32;
+}
+
+// The one DiskCache per folder of this process.
+std::mutex g_registry_mutex;  // guards g_registry
+std::map<std::string, std::weak_ptr<DiskCache>> g_registry;
+
+}  // namespace
+
+Status DiskCache::open(const std::string& dir, uint64_t cap_bytes, std::shared_ptr<DiskCache>* out) {
+  if (dir.empty()) return Status::error(ErrorCode::kInvalidArgument, "empty disk cache folder");
+  if (cap_bytes == 0) {
+    return Status::error(ErrorCode::kInvalidArgument, "disk cache " + dir + ": a cap of 0 bytes");
+  }
+  if (::mkdir(dir.c_str(), 0777) != 0 && errno != EEXIST) {
+    const int err = errno;
+    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                         "cannot make the disk cache folder " + dir + ": " + fileio::errnoText(err));
+  }
+  char resolved[PATH_MAX];
+  if (::realpath(dir.c_str(), resolved) == nullptr) {
+    return Status::error(ErrorCode::kIo, "disk cache folder " + dir + ": " +
+                                             fileio::errnoText(errno));
+  }
+  struct stat st {};
+  if (::stat(resolved, &st) != 0 || !S_ISDIR(st.st_mode) ||
+      ::access(resolved, R_OK | W_OK | X_OK) != 0) {
+    return Status::error(ErrorCode::kIo, "disk cache folder " + dir +
+                                             " is not a folder this program can write");
+  }
+  std::lock_guard<std::mutex> lock(g_registry_mutex);
+  std::weak_ptr<DiskCache>& slot = g_registry[resolved];
+  if (std::shared_ptr<DiskCache> cache = slot.lock()) {
+    *out = std::move(cache);
+    return Status::ok();
+  }
+  auto cache = std::make_shared<DiskCache>(resolved, cap_bytes);
+  if (Status s = cache->scan(); !s) return s;
+  slot = cache;
+  *out = std::move(cache);
+  return Status::ok();
+}
+
+std::string DiskCache::storeKey(const std::string& url, const std::string& version) {
+  const std::string text = url + '\n' + version;
+  const XXH128_hash_t hash = XXH3_128bits(text.data(), text.size());
+  char out[33];
+  std::snprintf(out, sizeof out, "%016llx%016llx", (unsigned long long)hash.high64,
+                (unsigned long long)hash.low64);
+  return out;
+}
+
+Status DiskCache::scan() {
+  // Every entry of every store, oldest use first, then evict to the cap.
+  struct Found {
+    time_t mtime_s = 0;
+    long mtime_ns = 0;
+    std::string path;
+    uint64_t bytes = 0;
+  };
+  std::vector<Found> found;
+  DIR* top = ::opendir(m_dir.c_str());
+  if (top == nullptr) {
+    return Status::error(ErrorCode::kIo, "cannot read the disk cache folder " + m_dir + ": " +
+                                             fileio::errnoText(errno));
+  }
+  const time_t now = ::time(nullptr);
+  while (const dirent* store = ::readdir(top)) {
+    if (!isStoreKey(store->d_name)) continue;  // not ours: left alone
+    const std::string store_dir = m_dir + "/" + store->d_name;
+    DIR* sub = ::opendir(store_dir.c_str());
+    if (sub == nullptr) continue;
+    m_store_dirs[store->d_name] = true;
+    while (const dirent* file = ::readdir(sub)) {
+      if (file->d_name[0] == '.') continue;
+      const std::string full = store_dir + "/" + file->d_name;
+      struct stat st {};
+      if (::lstat(full.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
+      if (std::strncmp(file->d_name, kTempPrefix, std::strlen(kTempPrefix)) == 0) {
+        if (now - st.st_mtime > kStaleTemporaryS) ::unlink(full.c_str());
+        continue;
+      }
+      found.push_back({st.st_mtim.tv_sec, st.st_mtim.tv_nsec,
+                       std::string(store->d_name) + "/" + file->d_name, uint64_t(st.st_size)});
+    }
+    ::closedir(sub);
+  }
+  ::closedir(top);
+  std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) {
+    return a.mtime_s != b.mtime_s ? a.mtime_s > b.mtime_s : a.mtime_ns > b.mtime_ns;
+  });
+  std::vector<std::string> doomed;
+  {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    for (Found& f : found) {
+      m_lru.push_back(f.path);  // newest first
+      m_entries[f.path] = Entry{f.bytes, std::prev(m_lru.end())};
+      m_bytes += f.bytes;
+    }
+    doomed = evict();
+  }
+  for (const std::string& path : doomed) ::unlink((m_dir + "/" + path).c_str());
+  return Status::ok();
+}
+
+void DiskCache::forget(const std::string& path) {
+  auto it = m_entries.find(path);
+  if (it == m_entries.end()) return;
+  m_bytes -= it->second.bytes;
+  m_lru.erase(it->second.lru);
+  m_entries.erase(it);
+}
+
+std::vector<std::string> DiskCache::evict() {
+  std::vector<std::string> doomed;
+  while (m_bytes > m_cap_bytes && !m_lru.empty()) {
+    const std::string path = m_lru.back();
+    forget(path);
+    doomed.push_back(path);
+    ++m_evictions;
+  }
+  return doomed;
+}
+
+DiskCache::Lookup DiskCache::get(const std::string& store_key, const std::string& name,
+                                 size_t bytes, std::vector<uint8_t>* out) {
+  const std::string path = entryPath(store_key, name);
+  {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    if (m_entries.find(path) == m_entries.end()) return Lookup::kMiss;
+  }
+  const std::string full = m_dir + "/" + path;
+  const int fd = ::open(full.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  bool ok = false;
+  if (fd >= 0) {
+    struct stat st {};
+    uint8_t header[kEntryHeaderBytes];
+    uint8_t expected[kEntryHeaderBytes];
+    encodeHeader(path, bytes, expected);
+    out->resize(bytes);
+    ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
+         uint64_t(st.st_size) == kEntryHeaderBytes + bytes &&
+         fileio::preadAll(fd, header, sizeof header, 0, full).isOk() &&
+         std::memcmp(header, expected, sizeof header) == 0 &&
+         fileio::preadAll(fd, out->data(), bytes, kEntryHeaderBytes, full).isOk();
+    if (ok) ::futimens(fd, nullptr);  // recency for the next process's scan
+    ::close(fd);
+  }
+  if (!ok && fd >= 0) {
+    drop(store_key, name);  // torn or foreign: never served, fetched again
+    return Lookup::kBad;
+  }
+  std::lock_guard<std::mutex> lock(m_mutex);
+  if (!ok) {
+    forget(path);  // gone (another process evicted it)
+    return Lookup::kMiss;
+  }
+  auto it = m_entries.find(path);
+  if (it != m_entries.end()) m_lru.splice(m_lru.begin(), m_lru, it->second.lru);
+  return Lookup::kHit;
+}
+
+void DiskCache::put(const std::string& store_key, const std::string& name,
+                    std::span<const uint8_t> bytes) {
+  const uint64_t entry_bytes = kEntryHeaderBytes + bytes.size();
+  if (entry_bytes > m_cap_bytes) return;  // would evict everything for one entry
+  const std::string path = entryPath(store_key, name);
+  const std::string store_dir = m_dir + "/" + store_key;
+  bool have_dir = false;
+  {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    have_dir = m_store_dirs.count(store_key) != 0;
+  }
+  auto failed = [&] {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    ++m_write_failures;
+  };
+  if (!have_dir) {
+    if (::mkdir(store_dir.c_str(), 0777) != 0 && errno != EEXIST) return failed();
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_store_dirs[store_key] = true;
+  }
+  static std::atomic<uint64_t> counter{0};
+  const std::string temp = store_dir + "/" + kTempPrefix + std::to_string(::getpid()) + "." +
+                           std::to_string(counter.fetch_add(1));
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    // The sub-folder may have been removed by hand: make it on the next put.
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_store_dirs.erase(store_key);
+    ++m_write_failures;
+    return;
+  }
+  uint8_t header[kEntryHeaderBytes];
+  encodeHeader(path, bytes.size(), header);
+  const bool written = fileio::pwriteAll(fd, header, sizeof header, 0, temp).isOk() &&
+                       fileio::pwriteAll(fd, bytes.data(), bytes.size(), sizeof header, temp).isOk();
+  // No fsync: a torn entry fails the reader's checksum and is fetched again.
+  const bool closed = ::close(fd) == 0;
+  if (!written || !closed || ::rename(temp.c_str(), (m_dir + "/" + path).c_str()) != 0) {
+    ::unlink(temp.c_str());
+    return failed();
+  }
+  std::vector<std::string> doomed;
+  {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    forget(path);
+    m_lru.push_front(path);
+    m_entries[path] = Entry{entry_bytes, m_lru.begin()};
+    m_bytes += entry_bytes;
+    doomed = evict();
+  }
+  for (const std::string& victim : doomed) ::unlink((m_dir + "/" + victim).c_str());
+}
+
+void DiskCache::drop(const std::string& store_key, const std::string& name) {
+  const std::string path = entryPath(store_key, name);
+  {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    forget(path);
+  }
+  ::unlink((m_dir + "/" + path).c_str());
+}
+
+DiskCache::Stats DiskCache::stats() const {
+  std::lock_guard<std::mutex> lock(m_mutex);
+  Stats s;
+  s.entries = m_entries.size();
+  s.bytes = m_bytes;
+  s.evictions = m_evictions;
+  s.write_failures = m_write_failures;
+  return s;
+}
+
+}  // namespace clipstream
