@@ -86,6 +86,15 @@ class ElevationStoreSource final : public TileSource {
   TileContent content() const override { return TileContent::kHeightF32; }
   ElevationInfo elevationInfo() const override { return m_reader->info().elevation; }
 
+  Status tileHeightBounds(const TileKey& key, float* min_height, float* max_height) const override {
+    *min_height = *max_height = 0.0f;
+    TileLocation location;
+    if (Status s = m_reader->locate(key, &location); !s) return s;
+    *min_height = location.min_height;
+    *max_height = location.max_height;
+    return Status::ok();
+  }
+
   Status fetch(const TileKey& key, std::vector<uint8_t>* heights) override {
     FetchInfo info;
     return fetchWithInfo(key, heights, &info);

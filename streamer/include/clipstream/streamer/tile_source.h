@@ -48,6 +48,21 @@ class TileSource {
   // colour sources (the default).
   virtual ElevationInfo elevationInfo() const { return {}; }
 
+  // For kHeightF32 sources: the lowest and highest level-0 height under
+  // tile `key`'s footprint (every level-0 sample the tile covers, not only
+  // its own decimated samples, so a coarse tile bounds every finer tile
+  // below it), in the store's height unit, without reading the tile's
+  // pixels. An elevation store answers from its index (which may read an
+  // index page: a request over HTTP), so ask when opening, not per frame
+  // (loadTerrainBounds()). Thread-safe like fetch(). kUnsupported: the
+  // source has no bounds (the default); kOutOfRange for a key outside the
+  // pyramid; an index page that fails its checks: its error.
+  virtual Status tileHeightBounds(const TileKey& key, float* min_height, float* max_height) const {
+    (void)key;
+    *min_height = *max_height = 0.0f;
+    return Status::error(ErrorCode::kUnsupported, describe() + " has no per-tile height bounds");
+  }
+
   // Reads, verifies, decodes and converts one tile into *rgba (resized to
   // tile_px * tile_px * 4): RGBA8 texels, or float32 heights for a
   // kHeightF32 source (the buffer keeps its name; it is 4 bytes a texel
