@@ -153,6 +153,9 @@ Status checkLayer(const StreamLayer& l, size_t index) {
   if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
     return Status::error(ErrorCode::kInvalidArgument,
                          what + " is an elevation layer but its source hands out colour");
+  if (!(std::isfinite(l.world_per_height) && l.world_per_height >= 0.0))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " has a height scale that is not finite and >= 0");
   return Status::ok();
 }
 
@@ -189,6 +192,7 @@ struct Streamer::Impl {
     // Render thread only.
     ClipmapPlan plan;
     ClipmapPlan predicted_plan;
+    TerrainView terrain;        // the scene's terrain in this layer's texels (bounds null: flat)
     PathHint hint;              // the streamer's hint seen through layerCamera()
     PathLookahead lookahead;    // windows along that hint
     uint32_t lod = 0;
@@ -207,6 +211,7 @@ struct Streamer::Impl {
     PlannerConfig planner(const PlannerConfig& base) const {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
+      c.terrain = terrain;
       // Relief in world units, scaled like layerCamera() scales heights.
       const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
       c.ground_above *= s;
@@ -285,6 +290,7 @@ struct Streamer::Impl {
   bool scoredWhenOnGpu(const LayerTile& t) const {
     return scoredOnGpu(t.key, layers[t.layer].windows, config.eviction);
   }
+  void loadTerrain();
   void workerLoop();
   bool admit(const Request& request, bool neighbour, bool* reread, bool* no_room);
   bool reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes);
@@ -809,6 +815,7 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     layer.published_lod = layer.lod;
     s.any_active = s.any_active || layer.spec.source != nullptr;
   }
+  s.loadTerrain();
   if (!config.trace_path.empty()) {
     OutputOptions trace_options;
     trace_options.existing = ExistingOutput::kReplaceRegular;
@@ -852,6 +859,42 @@ void Streamer::Impl::flushTrace(bool publish) {
     tracing = false;
     trace_file.reset();
   }
+}
+
+// The first elevation layer with a height scale and bounds is the scene's
+// terrain; each layer sees it through its own map (as layerCamera() maps
+// the camera: x and z by the map, heights by the mean scale).
+void Streamer::Impl::loadTerrain() {
+  if (!config.terrain_bounds) return;
+  for (const Layer& e : layers) {
+    if (!e.active() || e.spec.role != LayerRole::kElevation || e.spec.world_per_height <= 0.0) continue;
+    std::shared_ptr<const TerrainBounds> bounds;
+    const Status st = loadTerrainBounds(*e.spec.source, kTerrainBoundsMaxLevelTiles, &bounds);
+    if (!st) {
+      if (st.code != ErrorCode::kUnsupported)
+        std::fprintf(stderr, "clipstream: %s; planning against the plane\n", st.toString().c_str());
+      continue;
+    }
+    // The elevation's texel under world x is origin + k x, and sample i's
+    // centre is its texel i + 0.5.
+    const glm::dvec2 k = e.spec.texels_per_unit;
+    const glm::dvec2 world_origin = (glm::dvec2(0.5) - e.spec.origin_texel) / k;
+    for (Layer& layer : layers) {
+      if (!layer.active()) continue;
+      const glm::dvec2 kl = layer.spec.texels_per_unit;
+      layer.terrain.bounds = bounds;
+      layer.terrain.sample_origin = layer.spec.origin_texel + kl * world_origin;
+      layer.terrain.units_per_sample = kl / k;
+      layer.terrain.units_per_height = std::sqrt(kl.x * kl.y) * e.spec.world_per_height;
+    }
+    return;
+  }
+}
+
+bool Streamer::plansOnTerrain() const {
+  for (const Impl::Layer& layer : m_impl->layers)
+    if (layer.terrain.bounds) return true;
+  return false;
 }
 
 Status Streamer::traceStatus() const { return m_impl->trace_status; }
