@@ -17,8 +17,8 @@ class FaultySource final : public TileSource {
   TileContent content() const override { return m_inner->content(); }
   ElevationInfo elevationInfo() const override { return m_inner->elevationInfo(); }
   // Bounds come from the index, which the injected faults leave alone.
-  Status tileHeightBounds(const TileKey& key, float* min_height, float* max_height) const override {
-    return m_inner->tileHeightBounds(key, min_height, max_height);
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    return m_inner->tileHeightBounds(key, out);
   }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {

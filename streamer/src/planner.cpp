@@ -127,6 +127,17 @@ TileRect wantedRect(const ClipmapPlan& plan, uint32_t level) {
 
 }  // namespace
 
+uint32_t finestLevelAt(double distance, const Viewport& viewport, const Camera& camera,
+                       const PlannerConfig& config, uint32_t level_count) {
+  if (level_count == 0 || viewport.height_px == 0) return 0;
+  const double pixel_angle = 2.0 * std::tan(camera.vfov_rad * 0.5) / double(viewport.height_px);
+  const double footprint_texels = std::max(distance, 1e-9) * pixel_angle;
+  const double oversample = config.max_oversample > 0.0 ? config.max_oversample : 1.0;
+  const double ratio = footprint_texels / oversample;
+  const uint32_t finest = ratio <= 1.0 ? 0u : uint32_t(std::ceil(std::log2(ratio) - 1e-9));
+  return std::min(finest, level_count - 1);
+}
+
 uint32_t chooseClipTiles(const Viewport& viewport, uint32_t tile_px) {
   if (tile_px == 0) return 4;
   const uint64_t span_px = 2 * uint64_t(std::max(viewport.width_px, viewport.height_px));
@@ -197,14 +208,8 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
   // the view, as anisotropic filtering sees it); level l is worth loading
   // while its texel covers at least 1/max_oversample of that pixel.
   uint32_t finest = plan.pyramid_level;
-  if (fp.any_hit && viewport.height_px > 0) {
-    const double pixel_angle = 2.0 * std::tan(camera.vfov_rad * 0.5) / double(viewport.height_px);
-    const double footprint_texels = std::max(fp.nearest_dist, 1e-9) * pixel_angle;
-    const double oversample = config.max_oversample > 0.0 ? config.max_oversample : 1.0;
-    const double ratio = footprint_texels / oversample;
-    finest = ratio <= 1.0 ? 0u : uint32_t(std::ceil(std::log2(ratio) - 1e-9));
-    finest = std::min(finest, level_count - 1);
-  }
+  if (fp.any_hit && viewport.height_px > 0)
+    finest = finestLevelAt(fp.nearest_dist, viewport, camera, config, level_count);
   plan.finest_level = finest;
 
   uint32_t first_stack = 0;

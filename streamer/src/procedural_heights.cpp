@@ -77,9 +77,10 @@ class ProceduralHeightSource final : public TileSource {
   // rectangle's corners. Each cell the tile touches gives its piece's four
   // corners; octaves whose cells are far smaller than the tile take their
   // full amplitude. Widened by one float step each way, since fetch()
-  // rounds heights to float.
-  Status tileHeightBounds(const TileKey& key, float* min_height, float* max_height) const override {
-    *min_height = *max_height = 0.0f;
+  // rounds heights to float. The error of a coarse tile is not worked out:
+  // the bounds' width stands for it (both surfaces lie between them).
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    *out = {};
     if (!m_geometry.contains(key))
       return Status::error(ErrorCode::kOutOfRange, "procedural heights: tile outside the pyramid");
     const uint64_t span = uint64_t(m_spec.tile_px) << key.level;  // level-0 samples a side
@@ -110,8 +111,9 @@ class ProceduralHeightSource final : public TileSource {
     const uint64_t band0 = x0 >> kCliffBandLog2, band1 = x1 >> kCliffBandLog2;
     if (band0 == band1 && (band0 & 1)) lo += kCliff;
     if (band0 != band1 || (band0 & 1)) hi += kCliff;
-    *min_height = std::nextafter(float(lo), -INFINITY);
-    *max_height = std::nextafter(float(hi), INFINITY);
+    out->min_height = std::nextafter(float(lo), -INFINITY);
+    out->max_height = std::nextafter(float(hi), INFINITY);
+    out->error = key.level == 0 ? 0.0f : out->max_height - out->min_height;
     return Status::ok();
   }
 

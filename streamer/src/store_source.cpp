@@ -86,12 +86,11 @@ class ElevationStoreSource final : public TileSource {
   TileContent content() const override { return TileContent::kHeightF32; }
   ElevationInfo elevationInfo() const override { return m_reader->info().elevation; }
 
-  Status tileHeightBounds(const TileKey& key, float* min_height, float* max_height) const override {
-    *min_height = *max_height = 0.0f;
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    *out = {};
     TileLocation location;
     if (Status s = m_reader->locate(key, &location); !s) return s;
-    *min_height = location.min_height;
-    *max_height = location.max_height;
+    *out = {location.min_height, location.max_height, location.error};
     return Status::ok();
   }
 

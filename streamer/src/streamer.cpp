@@ -26,6 +26,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <deque>
 #include <system_error>
 #include <mutex>
@@ -230,6 +231,13 @@ struct Streamer::Impl {
   std::vector<Layer> layers;
   StreamerConfig config;
   bool any_active = false;
+  int terrain_layer = -1;  // the elevation layer whose bounds plan every layer; -1: none
+
+  // Render thread only: the detail of the terrain layer's tiles read so far
+  // (the most recent kTerrainDetailTiles), and its snapshot for the plans.
+  std::unordered_map<TileKey, std::shared_ptr<const TileDetail>, TileKeyHash> detail;
+  std::deque<TileKey> detail_order;  // insertion order, oldest first
+  void takeDetail();
 
   // Render thread only.
   bool have_plan = false;
@@ -280,6 +288,8 @@ struct Streamer::Impl {
   std::vector<std::pair<uint32_t, LayerTile>> pinned;
   size_t pinned_next = 0;
   bool victims_dirty = true;
+  // Detail of terrain tiles the loaders read since the last update().
+  std::vector<std::pair<TileKey, std::shared_ptr<const TileDetail>>> new_detail;
   double shared_now_s = 0.0;  // copy of now_s for workers (retry times)
   uint64_t shared_frame = 0;  // copy of frame for workers
   bool stopping = false;
@@ -440,6 +450,8 @@ void Streamer::Impl::workerLoop() {
   std::vector<Status> statuses;
   std::vector<FetchInfo> infos;
   std::vector<size_t> taken;
+  std::vector<std::shared_ptr<const TileDetail>> details;
+  std::vector<float> floats;
   std::unique_lock<std::mutex> lock(mutex);
   for (;;) {
     work_cv.wait(lock, [&] { return stopping || !queue.empty(); });
@@ -494,6 +506,20 @@ void Streamer::Impl::workerLoop() {
     } else {
       layer.spec.source->fetchBatch(keys, outs, statuses, infos);
     }
+    // The terrain's tiles also refine the planner's bounds: the ranges of
+    // their cells (their samples, widened by the tile's error from the
+    // index, which the read has just used).
+    details.assign(n, nullptr);
+    if (int(request.key.layer) == terrain_layer) {
+      for (size_t i = 0; i < n; ++i) {
+        if (!statuses[i] || pixels[i]->size() != layer.tile_bytes) continue;
+        TileHeightBounds hb;
+        if (!layer.spec.source->tileHeightBounds(keys[i], &hb)) continue;
+        floats.resize(pixels[i]->size() / sizeof(float));
+        std::memcpy(floats.data(), pixels[i]->data(), pixels[i]->size());
+        details[i] = makeTileDetail(layer.geometry.tile_px, floats.data(), hb.error);
+      }
+    }
 
     lock.lock();
     for (size_t i = 0; i < n; ++i) {
@@ -508,6 +534,7 @@ void Streamer::Impl::workerLoop() {
       if (rereads[i]) level_counters.redundant_reads++;
       auto it = cache.find(key);
       if (good) {
+        if (details[i]) new_detail.emplace_back(key.key, std::move(details[i]));
         level_counters.loads++;
         it->second.state = EntryState::kReady;
         it->second.rgba = std::move(pixels[i]);
@@ -887,8 +914,32 @@ void Streamer::Impl::loadTerrain() {
       layer.terrain.units_per_sample = kl / k;
       layer.terrain.units_per_height = std::sqrt(kl.x * kl.y) * e.spec.world_per_height;
     }
+    terrain_layer = int(&e - layers.data());
     return;
   }
+}
+
+// New detail into the render thread's map (the oldest dropped past
+// kTerrainDetailTiles), and a new snapshot for every layer's plans.
+void Streamer::Impl::takeDetail() {
+  if (terrain_layer < 0) return;
+  std::vector<std::pair<TileKey, std::shared_ptr<const TileDetail>>> incoming;
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    incoming.swap(new_detail);
+  }
+  if (incoming.empty()) return;
+  for (auto& [key, d] : incoming) {
+    if (detail.insert_or_assign(key, std::move(d)).second) detail_order.push_back(key);
+  }
+  while (detail.size() > kTerrainDetailTiles && !detail_order.empty()) {
+    detail.erase(detail_order.front());
+    detail_order.pop_front();
+  }
+  auto snapshot = std::make_shared<TerrainDetail>();
+  snapshot->tiles = detail;
+  for (Layer& layer : layers)
+    if (layer.terrain.bounds) layer.terrain.detail = snapshot;
 }
 
 bool Streamer::plansOnTerrain() const {
@@ -928,6 +979,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   if (!any_levels) return;
   s.frame++;
   s.now_s = time_s;
+  s.takeDetail();
   const size_t n = s.layers.size();
   // Plans every active layer for `cam` (a world camera) into *plans.
   auto planAll = [&](const Camera& cam, std::vector<ClipmapPlan>* plans) {

@@ -1,4 +1,5 @@
-// Loading an elevation layer's per-tile height bounds. See terrain_bounds.h.
+// Loading an elevation layer's per-tile height bounds, and the detail of a
+// height tile. See terrain_bounds.h.
 #include <clipstream/streamer/terrain_bounds.h>
 
 #include <algorithm>
@@ -14,6 +15,8 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
     return Status::error(ErrorCode::kInvalidArgument, source.describe() + ": empty pyramid");
   auto bounds = std::make_shared<TerrainBounds>();
   bounds->tile_px = g.tile_px;
+  bounds->width_samples = g.width_px;
+  bounds->height_samples = g.height_px;
   bounds->levels.resize(g.levelCount());
   const uint32_t coarsest = g.levelCount() - 1;
   bounds->finest_level = coarsest + 1;
@@ -27,11 +30,11 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
     Status status;
     for (uint32_t y = 0; y < info.tiles_y && status; ++y)
       for (uint32_t x = 0; x < info.tiles_x && status; ++x) {
-        float lo = 0.0f, hi = 0.0f;
-        status = source.tileHeightBounds(TileKey{l, x, y}, &lo, &hi);
-        if (status && !(std::isfinite(lo) && std::isfinite(hi) && lo <= hi))
+        TileHeightBounds b;
+        status = source.tileHeightBounds(TileKey{l, x, y}, &b);
+        if (status && !(std::isfinite(b.min_height) && std::isfinite(b.max_height) && b.min_height <= b.max_height))
           status = Status::error(ErrorCode::kCorruptIndex, source.describe() + ": tile bounds not a range");
-        level.range[size_t(y) * info.tiles_x + x] = {lo, hi};
+        level.range[size_t(y) * info.tiles_x + x] = {b.min_height, b.max_height};
       }
     if (!status) {
       if (l == coarsest) return status;
@@ -52,27 +55,42 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
         p = {std::min(p.x, c.x), std::max(p.y, c.y)};
       }
   }
-  // Each tile's range widened by its +x, +z and +x+z neighbours' (see
-  // TerrainBounds): the surface between two tiles is made of both.
-  for (uint32_t l = bounds->finest_level; l <= coarsest; ++l) {
-    TerrainBounds::Level& level = bounds->levels[l];
-    const std::vector<glm::vec2> own = level.range;
-    for (uint32_t y = 0; y < level.tiles_y; ++y)
-      for (uint32_t x = 0; x < level.tiles_x; ++x) {
-        glm::vec2 r = own[size_t(y) * level.tiles_x + x];
-        for (uint32_t dy = 0; dy < 2 && y + dy < level.tiles_y; ++dy)
-          for (uint32_t dx = 0; dx < 2 && x + dx < level.tiles_x; ++dx) {
-            const glm::vec2 n = own[size_t(y + dy) * level.tiles_x + x + dx];
-            r = {std::min(r.x, n.x), std::max(r.y, n.y)};
-          }
-        level.range[size_t(y) * level.tiles_x + x] = r;
-      }
-  }
   const TerrainBounds::Level& top = bounds->levels[coarsest];
   bounds->range = top.range[0];
   for (const glm::vec2& r : top.range) bounds->range = {std::min(bounds->range.x, r.x), std::max(bounds->range.y, r.y)};
   *out = std::move(bounds);
   return Status::ok();
+}
+
+std::shared_ptr<const TileDetail> makeTileDetail(uint32_t tile_px, const float* heights, float error) {
+  auto d = std::make_shared<TileDetail>();
+  uint32_t log2 = 0;
+  while (log2 < kTileDetailLog2 && (2u << log2) <= tile_px) ++log2;
+  d->log2 = log2;
+  const uint32_t n = 1u << log2, cell = tile_px / n;
+  std::vector<glm::vec2>& fine = d->cells[log2];
+  fine.assign(size_t(n) * n, {INFINITY, -INFINITY});
+  for (uint32_t y = 0; y < n * cell; ++y)
+    for (uint32_t x = 0; x < n * cell; ++x) {
+      const float h = heights[size_t(y) * tile_px + x];
+      glm::vec2& r = fine[size_t(y / cell) * n + x / cell];
+      r = {std::min(r.x, h), std::max(r.y, h)};
+    }
+  const float e = std::max(error, 0.0f);
+  for (glm::vec2& r : fine) r = {r.x - e, r.y + e};
+  for (uint32_t k = log2; k-- > 0;) {
+    const uint32_t side = 1u << k;
+    const std::vector<glm::vec2>& finer = d->cells[k + 1];
+    std::vector<glm::vec2>& coarse = d->cells[k];
+    coarse.assign(size_t(side) * side, {INFINITY, -INFINITY});
+    for (uint32_t y = 0; y < 2 * side; ++y)
+      for (uint32_t x = 0; x < 2 * side; ++x) {
+        const glm::vec2 c = finer[size_t(y) * 2 * side + x];
+        glm::vec2& r = coarse[size_t(y / 2) * side + x / 2];
+        r = {std::min(r.x, c.x), std::max(r.y, c.y)};
+      }
+  }
+  return d;
 }
 
 }  // namespace clipstream

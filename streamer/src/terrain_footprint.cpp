@@ -20,16 +20,18 @@
 #include <cmath>
 #include <limits>
 #include <queue>
+#include <unordered_map>
 
 namespace clipstream {
 namespace {
 
 // Rays on a (kRayGrid + 1)^2 grid over the screen, borders and corners
-// included (the flat planner's border samples are among them). 16 keeps a
-// ray every 80 pixels of a 1280-pixel screen: a feature narrower than that
-// can hide between rays, but the footprint is a bounding box that later
-// rays widen anyway.
-constexpr int kRayGrid = 16;
+// included (the flat planner's 8 border samples a side are among them). 8
+// puts a ray every 160 pixels of a 1280-pixel screen: ground seen only
+// between rays is missed by the footprint (a bounding box, which other
+// rays mostly widen over it anyway), not by the nearest distance, which
+// the boxes give. 16 cost about three times as much a plan.
+constexpr int kRayGrid = 8;
 // A box is refined while its side exceeds this fraction of its distance
 // from the camera: the nearest distance is then within about a quarter of
 // the truth (under half a level), and a ray's stop point within a quarter
@@ -44,30 +46,59 @@ struct Box {
 class Terrain {
  public:
   Terrain(const TerrainView& view, glm::dvec3 eye, double far_h)
-      : m_view(view), m_b(*view.bounds), m_eye(eye), m_far_h(far_h) {}
+      : m_view(view), m_b(*view.bounds), m_detail(view.detail.get()), m_eye(eye), m_far_h(far_h) {}
 
-  const TerrainBounds& bounds() const { return m_b; }
-  uint32_t coarsest() const { return uint32_t(m_b.levels.size() - 1); }
+  int coarsest() const { return int(m_b.levels.size()) - 1; }
+
+  // Tiles of `level` a side (x or z). Levels below 0 are a tile's detail
+  // cells: level -k has tiles of tile_px / 2^k samples.
+  int64_t tiles(int level, bool z) const {
+    const uint64_t w = z ? m_b.height_samples : m_b.width_samples;
+    if (level >= 0) return int64_t(((w - 1) >> level) / m_b.tile_px + 1);
+    return int64_t(((w << -level) - 1) / m_b.tile_px + 1);
+  }
 
   // Side of a tile of `level` in planning units (the larger of x and z).
-  double side(uint32_t level) const {
-    const double span = std::ldexp(double(m_b.tile_px), int(level));
+  double side(int level) const {
+    const double span = std::ldexp(double(m_b.tile_px), level);
     return span * std::max(m_view.units_per_sample.x, m_view.units_per_sample.y);
   }
 
-  // The tile's box; edge tiles reach on without end in x and z.
-  Box box(uint32_t level, uint32_t tx, uint32_t ty) const {
-    const TerrainBounds::Level& lv = m_b.levels[level];
-    const double span = std::ldexp(double(m_b.tile_px), int(level));
+  // The tile's box: x/z from its first sample's centre to the first
+  // sample's centre of its +x+z neighbour, heights from its range and its
+  // +x, +z and +x+z neighbours' (the surface between two tiles is made of
+  // both); edge tiles reach on without end in x and z.
+  Box box(int level, int64_t tx, int64_t ty) const {
+    Box b = extent(level, tx, ty);
+    // Rays pass the same boxes near the camera again and again: each
+    // box's heights are worked out once per footprint.
+    const uint64_t key = (uint64_t(level + 64) << 56) ^ (uint64_t(ty) << 28) ^ uint64_t(tx);
+    auto [it, fresh] = m_heights.try_emplace(key);
+    if (fresh) {
+      const int64_t nx = tiles(level, false), ny = tiles(level, true);
+      glm::vec2 r = rangeAt(level, tx, ty);
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+          if ((dx == 0 && dy == 0) || tx + dx >= nx || ty + dy >= ny) continue;
+          const glm::vec2 n = rangeAt(level, tx + dx, ty + dy);
+          r = {std::min(r.x, n.x), std::max(r.y, n.y)};
+        }
+      it->second = r;
+    }
+    b.lo.y = double(it->second.x) * m_view.units_per_height;
+    b.hi.y = double(it->second.y) * m_view.units_per_height;
+    return b;
+  }
+
+  // The box's x/z extent alone (heights 0).
+  Box extent(int level, int64_t tx, int64_t ty) const {
+    const double span = std::ldexp(double(m_b.tile_px), level);
     const glm::dvec2 o = m_view.sample_origin, u = m_view.units_per_sample;
-    const glm::vec2 r = lv.range[size_t(ty) * lv.tiles_x + tx];
-    Box b;
+    Box b{};
     b.lo.x = tx == 0 ? -kInf : o.x + double(tx) * span * u.x;
-    b.hi.x = tx + 1 >= lv.tiles_x ? kInf : o.x + double(tx + 1) * span * u.x;
+    b.hi.x = tx + 1 >= tiles(level, false) ? kInf : o.x + double(tx + 1) * span * u.x;
     b.lo.z = ty == 0 ? -kInf : o.y + double(ty) * span * u.y;
-    b.hi.z = ty + 1 >= lv.tiles_y ? kInf : o.y + double(ty + 1) * span * u.y;
-    b.lo.y = double(r.x) * m_view.units_per_height;
-    b.hi.y = double(r.y) * m_view.units_per_height;
+    b.hi.z = ty + 1 >= tiles(level, true) ? kInf : o.y + double(ty + 1) * span * u.y;
     return b;
   }
 
@@ -81,19 +112,72 @@ class Terrain {
     return b->lo.x <= b->hi.x && b->lo.z <= b->hi.z;
   }
 
-  // Calls f(level, x, y) for each existing child of a tile of `level` > 0.
+  // Whether refining a tile of `level` can tell more: its children have
+  // bounds of their own (index bounds, or some tile's detail).
+  bool refinable(int level, int64_t tx, int64_t ty) const {
+    if (level - 1 >= int(m_b.finest_level)) return true;
+    if (!m_detail) return false;
+    bool any = false;
+    children(level, tx, ty, [&](int l, int64_t x, int64_t y) {
+      glm::vec2 r;
+      any = any || own(l, x, y, &r);
+    });
+    return any;
+  }
+
+  // Calls f(level - 1, x, y) for each child of a tile of `level`.
   template <typename F>
-  void children(uint32_t level, uint32_t tx, uint32_t ty, F&& f) const {
-    const TerrainBounds::Level& c = m_b.levels[level - 1];
-    for (uint32_t y = 2 * ty; y < std::min(2 * ty + 2, c.tiles_y); ++y)
-      for (uint32_t x = 2 * tx; x < std::min(2 * tx + 2, c.tiles_x); ++x) f(level - 1, x, y);
+  void children(int level, int64_t tx, int64_t ty, F&& f) const {
+    const int64_t nx = tiles(level - 1, false), ny = tiles(level - 1, true);
+    for (int64_t y = 2 * ty; y < std::min(2 * ty + 2, ny); ++y)
+      for (int64_t x = 2 * tx; x < std::min(2 * tx + 2, nx); ++x) f(level - 1, x, y);
   }
 
  private:
+  // What is known of tile (level, tx, ty)'s heights, false when nothing
+  // is at this level: on a level with bounds, its index range (the ground's
+  // exact bounds; a coarser tile's cells, its samples widened by its error,
+  // are seldom tighter); below, the cell of the finest read tile whose
+  // detail has this tile as a cell (a finer tile's samples carry less
+  // error).
+  bool own(int level, int64_t tx, int64_t ty, glm::vec2* out) const {
+    if (level >= int(m_b.finest_level)) {
+      const TerrainBounds::Level& lv = m_b.levels[size_t(level)];
+      *out = lv.range[size_t(ty) * lv.tiles_x + size_t(tx)];
+      return true;
+    }
+    if (!m_detail) return false;
+    for (int tl = std::max(level, 0); tl <= std::min(level + int(kTileDetailLog2), coarsest()); ++tl) {
+      const int j = tl - level;  // detail cells 2^j a side
+      const TileKey key{uint32_t(tl), uint32_t(tx >> j), uint32_t(ty >> j)};
+      const auto it = m_detail->tiles.find(key);
+      if (it == m_detail->tiles.end() || uint32_t(j) > it->second->log2) continue;
+      const int64_t cx = tx - (int64_t(key.x) << j), cy = ty - (int64_t(key.y) << j);
+      *out = it->second->cells[j][size_t(cy << j) + size_t(cx)];
+      return true;
+    }
+    return false;
+  }
+
+  // own() of the tile, or of its nearest ancestor that has a range.
+  glm::vec2 rangeAt(int level, int64_t tx, int64_t ty) const {
+    glm::vec2 r;
+    while (!own(level, tx, ty, &r)) {
+      ++level;
+      tx >>= 1;
+      ty >>= 1;
+    }
+    return r;
+  }
+
   const TerrainView& m_view;
   const TerrainBounds& m_b;
+  const TerrainDetail* m_detail;
   glm::dvec3 m_eye;
   double m_far_h;
+  // box() heights by tile (level + 64 in the top byte; x and y below
+  // 2^28 tiles, which a 2^31-sample terrain's detail cells stay under).
+  mutable std::unordered_map<uint64_t, glm::vec2> m_heights;
 };
 
 // The view's four side planes (through the eye, normals inward) and the
@@ -161,23 +245,24 @@ double nearestBox(const Terrain& t, const Frustum& f, Box* nearest) {
   struct Node {
     double d;
     bool leaf;
-    uint32_t level, x, y;
+    int level;
+    int64_t x, y;
     Box box;
     bool operator>(const Node& o) const { return d > o.d; }
   };
   std::priority_queue<Node, std::vector<Node>, std::greater<Node>> open;
-  auto push = [&](uint32_t level, uint32_t x, uint32_t y) {
+  auto push = [&](int level, int64_t x, int64_t y) {
     Box b = t.box(level, x, y);
     if (!t.clipped(&b) || !f.touches(b)) return;
     const double d = f.lowerBound(b);
     if (!std::isfinite(d)) return;
     const double side = std::max(b.hi.x - b.lo.x, b.hi.z - b.lo.z);
-    const bool leaf = level == t.bounds().finest_level || side <= kRefineRatio * d;
+    const bool leaf = side <= kRefineRatio * d || !t.refinable(level, x, y);
     open.push({d, leaf, level, x, y, b});
   };
-  const TerrainBounds::Level& top = t.bounds().levels[t.coarsest()];
-  for (uint32_t y = 0; y < top.tiles_y; ++y)
-    for (uint32_t x = 0; x < top.tiles_x; ++x) push(t.coarsest(), x, y);
+  const int top = t.coarsest();
+  for (int64_t y = 0; y < t.tiles(top, true); ++y)
+    for (int64_t x = 0; x < t.tiles(top, false); ++x) push(top, x, y);
   while (!open.empty()) {
     const Node n = open.top();
     open.pop();
@@ -216,7 +301,7 @@ bool clipToExtent(const RayWalk& r, const Box& b, double* ta, double* tb) {
   return *ta <= *tb;
 }
 
-void walk(const Terrain& t, uint32_t level, uint32_t tx, uint32_t ty, double ta, double tb, RayWalk* r) {
+void walk(const Terrain& t, int level, int64_t tx, int64_t ty, double ta, double tb, RayWalk* r) {
   if (r->hit) return;
   const Box b = t.box(level, tx, ty);
   const double ya = r->o.y + r->d.y * ta, yb = r->o.y + r->d.y * tb;
@@ -233,16 +318,16 @@ void walk(const Terrain& t, uint32_t level, uint32_t tx, uint32_t ty, double ta,
     }
     return;
   }
-  if (level > t.bounds().finest_level && t.side(level) > kRefineRatio * ta * r->len) {
+  if (t.side(level) > kRefineRatio * ta * r->len && t.refinable(level, tx, ty)) {
     struct Part {
       double ta, tb;
-      uint32_t x, y;
+      int64_t x, y;
     };
     Part parts[4];
     int n = 0;
-    t.children(level, tx, ty, [&](uint32_t, uint32_t x, uint32_t y) {
+    t.children(level, tx, ty, [&](int, int64_t x, int64_t y) {
       double a = ta, c = tb;
-      if (clipToExtent(*r, t.box(level - 1, x, y), &a, &c)) parts[n++] = {a, c, x, y};
+      if (clipToExtent(*r, t.extent(level - 1, x, y), &a, &c)) parts[n++] = {a, c, x, y};
     });
     // At most four: insertion sort by entry.
     for (int i = 1; i < n; ++i)
@@ -264,17 +349,16 @@ void walk(const Terrain& t, uint32_t level, uint32_t tx, uint32_t ty, double ta,
 // Walks the ray from the eye to the far limit, through the coarsest
 // level's tiles in the order it meets them.
 void walkRay(const Terrain& t, double t_far, RayWalk* r) {
-  const uint32_t top = t.coarsest();
-  const TerrainBounds::Level& lv = t.bounds().levels[top];
+  const int top = t.coarsest();
   struct Part {
     double ta, tb;
-    uint32_t x, y;
+    int64_t x, y;
   };
   std::vector<Part> parts;
-  for (uint32_t y = 0; y < lv.tiles_y; ++y)
-    for (uint32_t x = 0; x < lv.tiles_x; ++x) {
+  for (int64_t y = 0; y < t.tiles(top, true); ++y)
+    for (int64_t x = 0; x < t.tiles(top, false); ++x) {
       double ta = 0.0, tb = t_far;
-      if (clipToExtent(*r, t.box(top, x, y), &ta, &tb)) parts.push_back({ta, tb, x, y});
+      if (clipToExtent(*r, t.extent(top, x, y), &ta, &tb)) parts.push_back({ta, tb, x, y});
     }
   std::sort(parts.begin(), parts.end(), [](const Part& p, const Part& q) { return p.ta < q.ta; });
   for (size_t i = 0; i < parts.size() && !r->hit; ++i) walk(t, top, parts[i].x, parts[i].y, parts[i].ta, parts[i].tb, r);

@@ -4,6 +4,8 @@
 // plane, a wall in front hides the ground behind it, the finest level
 // follows the distance to the nearest visible slope, and a streamer over a
 // scene plans every layer against the terrain.
+#include "streamer_test_util.h"
+
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/streamer.h>
@@ -56,10 +58,12 @@ class FieldSource final : public TileSource {
   }
   const PyramidGeometry& geometry() const override { return m_g; }
   TileContent content() const override { return TileContent::kHeightF32; }
-  Status tileHeightBounds(const TileKey& key, float* lo, float* hi) const override {
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
     if (!m_g.contains(key)) return Status::error(ErrorCode::kOutOfRange, "outside");
     const glm::vec2 b = m_bounds[key.level][size_t(key.y) * m_g.levels[key.level].tiles_x + key.x];
-    *lo = b.x, *hi = b.y;
+    // The decimated samples' surface lies within the bounds: their width
+    // bounds its distance to the ground.
+    *out = {b.x, b.y, key.level == 0 ? 0.0f : b.y - b.x};
     return Status::ok();
   }
   Status fetch(const TileKey& key, std::vector<uint8_t>* out) override {
@@ -146,7 +150,7 @@ HeightFn wall(double top) {
   };
 }
 
-TEST(TerrainBounds, LoadedFromAnElevationStoreHoldTheIndexAndTheirNeighbours) {
+TEST(TerrainBounds, LoadedFromAnElevationStoreAreItsIndex) {
   TempDir dir;
   // Heights that differ in every tile, so a neighbour's range shows.
   auto height = [](uint64_t x, uint64_t y) { return float(std::sin(x * 0.05) * 40.0 + y * 0.25 + (x > 300 ? 90.0 : 0.0)); };
@@ -168,16 +172,17 @@ TEST(TerrainBounds, LoadedFromAnElevationStoreHoldTheIndexAndTheirNeighbours) {
     ASSERT_EQ(lv.tiles_y, g.levels[l].tiles_y);
     for (uint32_t y = 0; y < lv.tiles_y; ++y)
       for (uint32_t x = 0; x < lv.tiles_x; ++x) {
-        // The union of the index entries of the tile and its +x, +z, +x+z
-        // neighbours, exactly.
-        float lo = INFINITY, hi = -INFINITY;
-        for (uint32_t dy = 0; dy < 2 && y + dy < lv.tiles_y; ++dy)
-          for (uint32_t dx = 0; dx < 2 && x + dx < lv.tiles_x; ++dx) {
-            TileLocation loc;
-            ASSERT_TRUE(reader->locate({l, x + dx, y + dy}, &loc).isOk());
-            lo = std::min(lo, loc.min_height), hi = std::max(hi, loc.max_height);
+        TileLocation loc;
+        ASSERT_TRUE(reader->locate({l, x, y}, &loc).isOk());
+        EXPECT_EQ(lv.range[size_t(y) * lv.tiles_x + x], glm::vec2(loc.min_height, loc.max_height))
+            << l << " " << x << " " << y;
+        // Every level-0 height under the tile lies in its range.
+        const uint64_t span = uint64_t(g.tile_px) << l;
+        for (uint64_t j = y * span; j < std::min<uint64_t>((y + 1) * span, g.height_px); j += 7)
+          for (uint64_t i = x * span; i < std::min<uint64_t>((x + 1) * span, g.width_px); i += 7) {
+            ASSERT_GE(height(i, j), loc.min_height);
+            ASSERT_LE(height(i, j), loc.max_height);
           }
-        EXPECT_EQ(lv.range[size_t(y) * lv.tiles_x + x], glm::vec2(lo, hi)) << l << " " << x << " " << y;
       }
   }
   EXPECT_EQ(b->range, b->levels.back().range[0]);
@@ -208,8 +213,9 @@ TEST(TerrainBounds, ProceduralHeightsLieWithinTheirTilesBounds) {
     const uint64_t span = uint64_t(spec.tile_px) << level;
     for (uint64_t x0 : {uint64_t(0), (uint64_t(1) << 14) - span / 2, uint64_t(300000), (uint64_t(1) << 20) - span}) {
       const TileKey key{level, uint32_t(x0 / span), uint32_t(x0 / span / 2)};
-      float lo = 0, hi = 0;
-      ASSERT_TRUE(source->tileHeightBounds(key, &lo, &hi).isOk());
+      TileHeightBounds b;
+      ASSERT_TRUE(source->tileHeightBounds(key, &b).isOk());
+      const float lo = b.min_height, hi = b.max_height;
       EXPECT_GE(lo, float(info.min_height) - 1.0f);
       EXPECT_LE(hi, float(info.max_height) + 1.0f);
       const uint64_t step = std::max<uint64_t>(1, span / 64);
@@ -228,8 +234,8 @@ TEST(TerrainBounds, ProceduralHeightsLieWithinTheirTilesBounds) {
     }
   }
   EXPECT_GT(checked, 10000u);
-  float lo = 0, hi = 0;
-  EXPECT_EQ(source->tileHeightBounds({0, 1u << 20, 0}, &lo, &hi).code, ErrorCode::kOutOfRange);
+  TileHeightBounds b;
+  EXPECT_EQ(source->tileHeightBounds({0, 1u << 14, 0}, &b).code, ErrorCode::kOutOfRange);
 }
 
 // Flat ground at 0 under cameras that see no horizon (the last one's top
@@ -337,6 +343,93 @@ TEST(TerrainPlanner, FinestLevelFollowsANearerSlopeThanThePlane) {
   EXPECT_LE(plan.finest_level, expected);
   EXPECT_GE(plan.finest_level + 1, expected);
   EXPECT_LT(plan.finest_level, plane.finest_level);
+}
+
+TEST(TerrainBounds, TileDetailHoldsItsCellsSamplesWidenedByTheError) {
+  constexpr uint32_t kTile = 64;
+  std::vector<float> h(kTile * kTile);
+  for (uint32_t y = 0; y < kTile; ++y)
+    for (uint32_t x = 0; x < kTile; ++x) h[y * kTile + x] = float(x * 3 + y * 100 % 37) - 50.0f;
+  const auto d = makeTileDetail(kTile, h.data(), 2.5f);
+  ASSERT_EQ(d->log2, kTileDetailLog2);
+  for (uint32_t k = 0; k <= d->log2; ++k) {
+    const uint32_t n = 1u << k, cell = kTile / n;
+    ASSERT_EQ(d->cells[k].size(), size_t(n) * n);
+    for (uint32_t cy = 0; cy < n; ++cy)
+      for (uint32_t cx = 0; cx < n; ++cx) {
+        float lo = INFINITY, hi = -INFINITY;
+        for (uint32_t y = cy * cell; y < (cy + 1) * cell; ++y)
+          for (uint32_t x = cx * cell; x < (cx + 1) * cell; ++x) lo = std::min(lo, h[y * kTile + x]), hi = std::max(hi, h[y * kTile + x]);
+        EXPECT_EQ(d->cells[k][cy * n + cx], glm::vec2(lo - 2.5f, hi + 2.5f)) << k << " " << cx << " " << cy;
+      }
+  }
+  // A tile smaller than the cells: one sample a cell.
+  EXPECT_EQ(makeTileDetail(4, h.data(), 0.0f)->log2, 2u);
+}
+
+// Tiles of 256 samples (8192 units): the index box under a camera 1500
+// units above the plain also holds the wall's foot next door, so without
+// detail the camera is inside it and every level down to 0 is needed. The
+// detail of the tiles read bounds the plain cell by cell: the plan needs
+// the level of the plain's distance.
+TEST(TerrainPlanner, DetailOfReadTilesRefinesCoarseBounds) {
+  const PyramidGeometry g = colourGeometry(32768);
+  FieldSource dem(1024, 1024, 256, wall(3000.0));
+  const Viewport vp{640, 360};
+  const Camera c = looking({8000.0, 1500.0, 16000.0}, kPi / 2, 0.0);
+  PlannerConfig cfg;
+  cfg.terrain = viewOf(dem, kSpacing);
+  EXPECT_EQ(planClipmap(g, vp, c, cfg).finest_level, 0u);
+  auto detail = std::make_shared<TerrainDetail>();
+  const PyramidGeometry& hg = dem.geometry();
+  for (uint32_t l = 0; l < hg.levelCount(); ++l)
+    for (uint32_t y = 0; y < hg.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < hg.levels[l].tiles_x; ++x) {
+        std::vector<uint8_t> px;
+        ASSERT_TRUE(dem.fetch({l, x, y}, &px).isOk());
+        std::vector<float> f(px.size() / 4);
+        std::memcpy(f.data(), px.data(), px.size());
+        TileHeightBounds b;
+        ASSERT_TRUE(dem.tileHeightBounds({l, x, y}, &b).isOk());
+        detail->tiles[{l, x, y}] = makeTileDetail(hg.tile_px, f.data(), b.error);
+      }
+  cfg.terrain.detail = detail;
+  // The plain below, along the bottom edge's middle (30 degrees down).
+  const uint32_t expected = levelAt(1500.0 / std::sin(c.vfov_rad / 2), vp, c);
+  ASSERT_GE(expected, 2u);
+  const ClipmapPlan plan = planClipmap(g, vp, c, cfg);
+  EXPECT_LE(plan.finest_level, expected);
+  EXPECT_GE(plan.finest_level + 1, expected);
+}
+
+// The streamer keeps the detail of the terrain tiles its loaders read and
+// plans with it: the coarse-tiled scene above, streamed, ends up needing
+// the plain's level instead of level 0.
+TEST(TerrainPlanner, StreamerPlansWithTheDetailOfTheTilesItRead) {
+  auto colour = test::procedural(32768, 128);
+  auto dem = std::make_shared<FieldSource>(1024, 1024, 256, wall(3000.0));
+  StreamerConfig cfg;
+  cfg.io_threads = 2;
+  cfg.prefetch = false;
+  cfg.ram_budget_bytes = uint64_t(128) << 20;
+  StreamLayer heights{dem, LayerRole::kElevation, {1.0 / kSpacing, 1.0 / kSpacing}, {0.0, 0.0}, 4, 1.0};
+  Streamer streamer({StreamLayer{colour}, heights}, cfg);
+  ASSERT_TRUE(streamer.plansOnTerrain());
+  const Viewport vp{640, 360};
+  const Camera c = looking({8000.0, 1500.0, 16000.0}, kPi / 2, 0.0);
+  streamer.update(c, vp, 0.0);
+  EXPECT_EQ(streamer.plan(0).finest_level, 0u);
+  const uint32_t expected = levelAt(1500.0 / std::sin(c.vfov_rad / 2), vp, c);
+  ASSERT_GE(expected, 2u);
+  // Frames until the plan settles with the detail of what it loaded.
+  for (int frame = 1; frame < 20; ++frame) {
+    ASSERT_TRUE(test::waitIdle(streamer));
+    (void)streamer.takeReadyAll(1000);
+    streamer.update(c, vp, frame / 60.0);
+  }
+  EXPECT_LE(streamer.plan(0).finest_level, expected);
+  EXPECT_GE(streamer.plan(0).finest_level + 1, expected);
+  streamer.shutdown();
 }
 
 // Looking at the sky over terrain: nothing in view, nothing needed.

@@ -87,6 +87,14 @@ uint32_t chooseClipTiles(const Viewport& viewport, uint32_t tile_px);
 ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewport,
                         const Camera& camera, const PlannerConfig& config);
 
+// The finest level planClipmap() needs for ground `distance` away (3D,
+// level-0 texels) in this view: the level whose texel covers at least
+// 1/max_oversample of a pixel there, at most level_count - 1. The rule
+// planClipmap() applies to the nearest visible ground; exposed so that an
+// evaluation can apply it to the nearest ground a frame shows.
+uint32_t finestLevelAt(double distance, const Viewport& viewport, const Camera& camera,
+                       const PlannerConfig& config, uint32_t level_count);
+
 // Tiles that entered and left the needed windows (stack levels with
 // needed = true, plus every pyramid tile) between two plans. Order: level by
 // level, row-major; no duplicates.
