@@ -153,6 +153,10 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["cache_mb"] = d.cache_mb;
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
+  acc["plans_on_terrain"] = run.plans_on_terrain;
+  acc["seen_level_frames"] = run.seen_frames;
+  acc["needed_coarser_frames"] = run.needed_coarser_frames;
+  acc["needed_finer_frames"] = run.needed_finer_frames;
   acc["height_texture_bytes"] = run.height_texture_bytes;
   acc["geometry_frames"] = run.geometry_frames;
   acc["geo_error_mean_px"] = run.geometry_mean_px;
@@ -241,6 +245,8 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("geo_error_max_px", run.geometry_frames ? num(run.geometry_max_px) : std::string());
   add("geo_error_rest_mean_px", run.geometry_rest_frames ? num(run.geometry_rest_mean_px) : std::string());
   add("geo_error_rest_p95_px", run.geometry_rest_frames ? num(run.geometry_rest_p95_px) : std::string());
+  add("needed_coarser_frames", run.seen_frames ? std::to_string(run.needed_coarser_frames) : std::string());
+  add("needed_finer_frames", run.seen_frames ? std::to_string(run.needed_finer_frames) : std::string());
   return keys + "\n" + values + "\n";
 }
 
@@ -288,6 +294,11 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     if (run.geometry_rest_frames > 0) {
       row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");
       row("geo_error_rest_p95_px", run.geometry_rest_p95_px, "%.3f");
+    }
+    if (run.seen_frames > 0) {
+      row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+      row("needed_coarser_frames", double(run.needed_coarser_frames), "%.0f");
+      row("needed_finer_frames", double(run.needed_finer_frames), "%.0f");
     }
   }
   if (d.reference) {
