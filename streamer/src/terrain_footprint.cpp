@@ -30,7 +30,7 @@ namespace {
 // puts a ray every 160 pixels of a 1280-pixel screen: ground seen only
 // between rays is missed by the footprint (a bounding box, which other
 // rays mostly widen over it anyway), not by the nearest distance, which
-// the boxes give. 16 cost about three times as much a plan.
+// the boxes give. 16 cost about twice as much a plan.
 constexpr int kRayGrid = 8;
 // A box is refined while its side exceeds this fraction of its distance
 // from the camera: the nearest distance is then within about a quarter of
