@@ -361,7 +361,8 @@ void walkRay(const Terrain& t, double t_far, RayWalk* r) {
       if (clipToExtent(*r, t.extent(top, x, y), &ta, &tb)) parts.push_back({ta, tb, x, y});
     }
   std::sort(parts.begin(), parts.end(), [](const Part& p, const Part& q) { return p.ta < q.ta; });
-  for (size_t i = 0; i < parts.size() && !r->hit; ++i) walk(t, top, parts[i].x, parts[i].y, parts[i].ta, parts[i].tb, r);
+  for (size_t i = 0; i < parts.size() && !r->hit; ++i)
+    walk(t, top, parts[i].x, parts[i].y, parts[i].ta, parts[i].tb, r);
 }
 
 }  // namespace

@@ -359,7 +359,10 @@ TEST(TerrainBounds, TileDetailHoldsItsCellsSamplesWidenedByTheError) {
       for (uint32_t cx = 0; cx < n; ++cx) {
         float lo = INFINITY, hi = -INFINITY;
         for (uint32_t y = cy * cell; y < (cy + 1) * cell; ++y)
-          for (uint32_t x = cx * cell; x < (cx + 1) * cell; ++x) lo = std::min(lo, h[y * kTile + x]), hi = std::max(hi, h[y * kTile + x]);
+          for (uint32_t x = cx * cell; x < (cx + 1) * cell; ++x) {
+            lo = std::min(lo, h[y * kTile + x]);
+            hi = std::max(hi, h[y * kTile + x]);
+          }
         EXPECT_EQ(d->cells[k][cy * n + cx], glm::vec2(lo - 2.5f, hi + 2.5f)) << k << " " << cx << " " << cy;
       }
   }
