@@ -160,6 +160,21 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     return cameraAboveGround(path_camera, ground);
   };
   run->height_texture_bytes = flight->terrain() ? flight->terrain()->textureBytes() : 0;
+  run->plans_on_terrain = flight->streamer().plansOnTerrain();
+  // Over terrain the tiles a frame samples come from the ground points its
+  // pixels show (the flat reference would judge the wrong picture).
+  // Returns the planner's level for the nearest ground the frame shows
+  // (-1: none, or not sampled).
+  std::unordered_set<uint64_t> terrain_sampled;
+  auto sampleTerrainTiles = [&](const Camera& camera) -> int32_t {
+    if (!o.terrain || !o.sample_tiles || !flight->terrain()) return -1;
+    std::vector<float> xyzw;
+    flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw);
+    sampledTilesOfPositions(geometry, xyzw, camera, flight->viewport(), &terrain_sampled);
+    const double nearest = nearestPositionDistance(xyzw);
+    if (!std::isfinite(nearest)) return -1;
+    return int32_t(finestLevelAt(nearest, flight->viewport(), camera, o.streamer.planner, geometry.levelCount()));
+  };
   run->preload_ms = flight->preloadMs();
   // A run that fails from here on publishes no trace.
   struct DiscardTraceUnlessDone {
@@ -201,6 +216,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     // count in the over-fetch ratio (loads and sampled tiles alike).
     const Camera camera = onGround(o.path.sample(0.0));
     flight->step(camera);
+    (void)sampleTerrainTiles(camera);
     AccuracyFrame ignored;
     if (accuracy)
       if (Status s = accuracy->measure(camera, *flight->target(), false, false, &ignored); !s) return s;
@@ -226,6 +242,12 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     f.sample = flight->step(camera);
     if (o.on_frame)
       if (Status s = o.on_frame(f.sample, *flight->target(), &f.readback_ms); !s) return s;
+    f.seen_level = sampleTerrainTiles(camera);
+    if (f.seen_level >= 0) {
+      run->seen_frames += 1;
+      run->needed_coarser_frames += int32_t(f.sample.finest_needed) > f.seen_level;
+      run->needed_finer_frames += int32_t(f.sample.finest_needed) < f.seen_level;
+    }
     if (surface && flight->terrain() &&
         (i % o.reference_every == 0 || i >= o.frames || i + 1 == total)) {
       std::vector<float> xyzw;
@@ -324,7 +346,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   std::vector<FrameRecord> records;
   records.reserve(run->frames.size());
   for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
-  run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : 0, peakRssBytes());
+  run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : terrain_sampled.size(),
+                              peakRssBytes());
   if (run->geometry_frames > 0) {
     run->geometry_mean_px /= run->geometry_frames;
     run->geometry_p95_px /= run->geometry_frames;
@@ -338,9 +361,14 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
     run->terrain_triangles_mean = triangles / double(run->frames.size());
   }
+  // Loads include the streamer's reads of the pyramid, as sampled tiles
+  // include the pyramid tiles seen. Over terrain, the colour layer's loads
+  // only: height tiles are not sampled by the texture.
+  const uint64_t colour_loads = o.terrain && !run->streamer.layers.empty()
+                                    ? run->streamer.layers[0].total.loads
+                                    : run->summary.tiles_loaded + run->warmup_loads;
   if (run->summary.tiles_sampled > 0)
-    run->summary.over_fetch_ratio =
-        double(run->summary.tiles_loaded + run->warmup_loads) / double(run->summary.tiles_sampled);
+    run->summary.over_fetch_ratio = double(colour_loads) / double(run->summary.tiles_sampled);
   return Status::ok();
 }
 

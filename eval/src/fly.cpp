@@ -223,6 +223,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.streamer.throttle = o.throttle;
   r.streamer.prefetch = o.prefetch;
   r.streamer.frustum_priority = o.frustum_priority;
+  r.streamer.terrain_bounds = o.terrain_bounds;
   r.streamer.trace_path = o.trace_path;
   r.upload_tiles = o.upload_tiles;
   r.buffering = o.buffering;

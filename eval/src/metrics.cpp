@@ -157,6 +157,88 @@ void sampledTiles(const PyramidGeometry& geometry, const Camera& camera, const V
   renderReference(geometry, record, camera, viewport, ReferenceOptions{}, &ignored);
 }
 
+void sampledTilesOfPositions(const PyramidGeometry& geometry, const std::vector<float>& xyzw,
+                             const Camera& camera, const Viewport& viewport,
+                             std::unordered_set<uint64_t>* out) {
+  const int64_t W = viewport.width_px, H = viewport.height_px;
+  if (geometry.levelCount() == 0 || W == 0 || H == 0 || xyzw.size() != size_t(W * H) * 4) return;
+  auto on = [&](int64_t px, int64_t py) {
+    return px >= 0 && py >= 0 && px < W && py < H && xyzw[size_t(py * W + px) * 4 + 3] > 0.5f;
+  };
+  auto at = [&](int64_t px, int64_t py) {
+    const float* p = &xyzw[size_t(py * W + px) * 4];
+    return glm::dvec2(p[0], p[2]);
+  };
+  // The difference along one axis: the quad's pair if both are terrain,
+  // else the pixel and its other neighbour; false when neither is.
+  auto derivative = [&](int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t px, int64_t py,
+                        int64_t sx, int64_t sy, glm::dvec2* d) {
+    if (on(ax, ay) && on(bx, by)) {
+      *d = at(bx, by) - at(ax, ay);
+      return true;
+    }
+    for (int s : {-1, 1}) {
+      if (on(px + s * sx, py + s * sy)) {
+        *d = at(px + s * sx, py + s * sy) - at(px, py);
+        return true;
+      }
+    }
+    return false;
+  };
+  const uint32_t tp = geometry.tile_px;
+  const double max_lod = double(geometry.levelCount() - 1);
+  uint64_t last[2] = {~uint64_t(0), ~uint64_t(0)};
+  auto record = [&](uint32_t level, double u0, double v0) {
+    // The bilinear taps of renderReference(), clamped to the level's tiles.
+    const double scale = std::ldexp(1.0, -int(level));
+    const double cx = std::floor(u0 * scale - 0.5), cy = std::floor(v0 * scale - 0.5);
+    const int64_t max_x = int64_t(geometry.levels[level].tiles_x) * tp - 1;
+    const int64_t max_y = int64_t(geometry.levels[level].tiles_y) * tp - 1;
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const int64_t x = std::clamp<int64_t>(int64_t(cx) + i, 0, max_x);
+        const int64_t y = std::clamp<int64_t>(int64_t(cy) + j, 0, max_y);
+        const uint64_t key = packTileKey({level, uint32_t(x / tp), uint32_t(y / tp)});
+        if (key != last[0] && key != last[1]) {
+          out->insert(key);
+          last[1] = last[0];
+          last[0] = key;
+        }
+      }
+  };
+  for (int64_t py = 0; py < H; ++py) {
+    // Quads as the GPU forms them: GL rows count from the bottom.
+    const int64_t gl_row = H - 1 - py;
+    const int64_t top_py = H - 1 - (gl_row & ~int64_t(1));  // the quad's first GL row
+    for (int64_t px = 0; px < W; ++px) {
+      if (!on(px, py)) continue;
+      const int64_t qx = px & ~int64_t(1);
+      glm::dvec2 gx, gy;
+      const bool hx = derivative(qx, py, qx + 1, py, px, py, 1, 0, &gx);
+      const bool hy = derivative(px, top_py, px, top_py - 1, px, py, 0, 1, &gy);
+      if (!hx && !hy) continue;
+      const double rho = std::max(hx ? glm::length(gx) : 0.0, hy ? glm::length(gy) : 0.0);
+      const double lod = std::clamp(std::log2(std::max(rho, 1e-30)), 0.0, max_lod);
+      const uint32_t level = uint32_t(std::floor(lod));
+      const float* p = &xyzw[size_t(py * W + px) * 4];
+      const double u0 = camera.position.x + double(p[0]), v0 = camera.position.z + double(p[2]);
+      if (u0 < 0 || v0 < 0 || u0 >= double(geometry.width_px) || v0 >= double(geometry.height_px)) continue;
+      record(level, u0, v0);
+      if (lod > double(level) && level + 1 < geometry.levelCount()) record(level + 1, u0, v0);
+    }
+  }
+}
+
+double nearestPositionDistance(const std::vector<float>& xyzw) {
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i + 3 < xyzw.size(); i += 4) {
+    if (xyzw[i + 3] <= 0.5f) continue;
+    const glm::dvec3 p{xyzw[i], xyzw[i + 1], xyzw[i + 2]};
+    best = std::min(best, glm::length(p));
+  }
+  return best;
+}
+
 uint32_t countHolePixels(const std::vector<uint8_t>& streamed, const std::vector<uint8_t>& reference) {
   static constexpr uint8_t kBlack[4] = {0, 0, 0, 255};
   auto same = [](const uint8_t* p, const uint8_t* q) { return p[0] == q[0] && p[1] == q[1] && p[2] == q[2]; };

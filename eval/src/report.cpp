@@ -155,6 +155,10 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["cache_mb"] = d.cache_mb;
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
+  acc["plans_on_terrain"] = run.plans_on_terrain;
+  acc["seen_level_frames"] = run.seen_frames;
+  acc["needed_coarser_frames"] = run.needed_coarser_frames;
+  acc["needed_finer_frames"] = run.needed_finer_frames;
   acc["height_texture_bytes"] = run.height_texture_bytes;
   acc["geometry_frames"] = run.geometry_frames;
   acc["geo_error_mean_px"] = run.geometry_mean_px;
@@ -249,6 +253,8 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
       run.geometry_rest_frames ? std::to_string(run.terrain_rest_agree_pixels) : std::string());
   add("texture_agree_mismatched_rest",
       run.geometry_rest_frames ? std::to_string(run.terrain_rest_agree_mismatched) : std::string());
+  add("needed_coarser_frames", run.seen_frames ? std::to_string(run.needed_coarser_frames) : std::string());
+  add("needed_finer_frames", run.seen_frames ? std::to_string(run.needed_finer_frames) : std::string());
   return keys + "\n" + values + "\n";
 }
 
@@ -300,6 +306,11 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
       // the texture must too.
       row("texture_agree_pixels_rest", double(run.terrain_rest_agree_pixels), "%.0f");
       row("texture_agree_mismatched_rest", double(run.terrain_rest_agree_mismatched), "%.0f");
+    }
+    if (run.seen_frames > 0) {
+      row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+      row("needed_coarser_frames", double(run.needed_coarser_frames), "%.0f");
+      row("needed_finer_frames", double(run.needed_finer_frames), "%.0f");
     }
   }
   if (d.reference) {

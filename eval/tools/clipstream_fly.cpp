@@ -44,7 +44,7 @@ int main(int argc, char** argv) {
   app.add_option("--buffering", buffering, "single, double-upload or double-copy");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
   std::string resize;
-  bool no_throttle = false, no_prefetch = false, no_frustum = false;
+  bool no_throttle = false, no_prefetch = false, no_frustum = false, no_terrain_bounds = false;
   app.add_flag("--reference", o.reference,
                "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
@@ -55,6 +55,9 @@ int main(int argc, char** argv) {
   app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
   app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
   app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
+  app.add_flag("--no-terrain-bounds", no_terrain_bounds,
+               "Over terrain, plan against the plane under the camera and the resident heights' relief "
+               "instead of the elevation store's per-tile height bounds");
   app.add_flag("--path-hint", o.path_hint,
                "Tell the streamer the scripted path: eviction keeps what the path comes back to, and "
                "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
@@ -102,6 +105,7 @@ int main(int argc, char** argv) {
   o.throttle = !no_throttle;
   o.prefetch = !no_prefetch;
   o.frustum_priority = !no_frustum;
+  o.terrain_bounds = !no_terrain_bounds;
 
   cli::installSignalHandlers();
   try {

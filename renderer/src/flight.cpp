@@ -101,7 +101,8 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
     StreamLayer heights{config.terrain->source, LayerRole::kElevation,
                         1.0 / a.world_per_sample, 0.5 - a.sample0_world / a.world_per_sample,
                         TerrainRenderer::windowTiles(config.terrain->ring_cells,
-                                                     config.terrain->source->geometry().tile_px)};
+                                                     config.terrain->source->geometry().tile_px),
+                        a.world_per_height};
     std::vector<StreamLayer> layers{colour, heights};
     if (Status s = checkStreamLayers(layers); !s) return s;
     f->m_streamer = std::make_unique<Streamer>(std::move(layers), config.streamer);
@@ -201,10 +202,13 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   ++m_steps;
 
   const auto t0 = Clock::now();
-  // Over terrain the planner sees the ground under the camera as its plane
-  // (the flat planner's assumption, moved to the local ground height).
+  // Over terrain with the elevation store's per-tile bounds the streamer
+  // plans against the terrain itself and takes the real camera. Without
+  // them the planner sees the ground under the camera as its plane (the
+  // flat planner's assumption, moved to the local ground height).
   Camera planning = camera;
-  if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, &f.ground_height)) {
+  if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, &f.ground_height) &&
+      !m_streamer->plansOnTerrain()) {
     planning.position.y = std::max(camera.position.y - f.ground_height, camera.near_dist);
     // ... and sees the relief around it: the footprint also covers the
     // highest and lowest ground in reach (a slope in front loads what the

@@ -16,6 +16,10 @@ class FaultySource final : public TileSource {
   const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
   TileContent content() const override { return m_inner->content(); }
   ElevationInfo elevationInfo() const override { return m_inner->elevationInfo(); }
+  // Bounds come from the index, which the injected faults leave alone.
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    return m_inner->tileHeightBounds(key, out);
+  }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
     FetchInfo info;

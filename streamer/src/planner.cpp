@@ -3,6 +3,8 @@
 // plans exactly (doubles hold integers up to 2^53).
 #include <clipstream/streamer/planner.h>
 
+#include "footprint.h"
+
 #include <algorithm>
 #include <cmath>
 #include <tuple>
@@ -13,12 +15,6 @@ namespace {
 // Screen border samples per edge for the ground footprint polygon. Eight per
 // edge follows the horizon closely enough for tile-sized decisions.
 constexpr int kFootprintSamplesPerEdge = 8;
-
-struct Footprint {
-  std::vector<glm::dvec2> points;  // ground polygon, screen-border order
-  double nearest_dist = 0.0;       // nearest visible ground point (3D distance)
-  bool any_hit = false;
-};
 
 double levelScale(uint32_t level) { return std::ldexp(1.0, int(level)); }
 
@@ -131,6 +127,17 @@ TileRect wantedRect(const ClipmapPlan& plan, uint32_t level) {
 
 }  // namespace
 
+uint32_t finestLevelAt(double distance, const Viewport& viewport, const Camera& camera,
+                       const PlannerConfig& config, uint32_t level_count) {
+  if (level_count == 0 || viewport.height_px == 0) return 0;
+  const double pixel_angle = 2.0 * std::tan(camera.vfov_rad * 0.5) / double(viewport.height_px);
+  const double footprint_texels = std::max(distance, 1e-9) * pixel_angle;
+  const double oversample = config.max_oversample > 0.0 ? config.max_oversample : 1.0;
+  const double ratio = footprint_texels / oversample;
+  const uint32_t finest = ratio <= 1.0 ? 0u : uint32_t(std::ceil(std::log2(ratio) - 1e-9));
+  return std::min(finest, level_count - 1);
+}
+
 uint32_t chooseClipTiles(const Viewport& viewport, uint32_t tile_px) {
   if (tile_px == 0) return 4;
   const uint64_t span_px = 2 * uint64_t(std::max(viewport.width_px, viewport.height_px));
@@ -158,31 +165,41 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
 
   const glm::dvec2 nadir{camera.position.x, camera.position.z};
   plan.focus_texel = nadir;
-  Footprint fp = computeFootprint(geometry, viewport, camera);
-  // Terrain: the union with the footprints on the lowest and highest ground
-  // in view (PlannerConfig::ground_above / ground_below).
-  auto merge = [&](const Footprint& other) {
-    if (!other.any_hit) return;
-    fp.nearest_dist = fp.any_hit ? std::min(fp.nearest_dist, other.nearest_dist) : other.nearest_dist;
-    fp.any_hit = true;
-    fp.points.insert(fp.points.end(), other.points.begin(), other.points.end());
-  };
-  if (config.ground_below > 0.0 && std::isfinite(config.ground_below)) {
-    Camera low = camera;
-    low.position.y += config.ground_below;
-    merge(computeFootprint(geometry, viewport, low));
-  }
-  if (config.ground_above > 0.0 && std::isfinite(config.ground_above)) {
-    Camera high = camera;
-    if (camera.position.y > config.ground_above) {
-      high.position.y -= config.ground_above;
-    } else {
-      // The camera is below the top: the rays that rise meet the upper
-      // plane; mirrored, they are a camera looking down on it.
-      high.position.y = config.ground_above - camera.position.y + 1e-6;
-      high.pitch_rad = -camera.pitch_rad;
+  Footprint fp;
+  if (config.terrain.bounds) {
+    // Over terrain (the bounds hold the relief): the far limit counts from
+    // the lowest ground, as the flat one counts from the plane.
+    const double lowest = double(config.terrain.bounds->range.x) * config.terrain.units_per_height;
+    const double far_h = 2.0 * double(std::max(geometry.width_px, geometry.height_px)) +
+                         std::abs(camera.position.y - lowest);
+    fp = terrainFootprint(config.terrain, viewport, camera, far_h);
+  } else {
+    fp = computeFootprint(geometry, viewport, camera);
+    // Relief planes: the union with the footprints on the lowest and
+    // highest ground in view (PlannerConfig::ground_above / ground_below).
+    auto merge = [&](const Footprint& other) {
+      if (!other.any_hit) return;
+      fp.nearest_dist = fp.any_hit ? std::min(fp.nearest_dist, other.nearest_dist) : other.nearest_dist;
+      fp.any_hit = true;
+      fp.points.insert(fp.points.end(), other.points.begin(), other.points.end());
+    };
+    if (config.ground_below > 0.0 && std::isfinite(config.ground_below)) {
+      Camera low = camera;
+      low.position.y += config.ground_below;
+      merge(computeFootprint(geometry, viewport, low));
     }
-    merge(computeFootprint(geometry, viewport, high));
+    if (config.ground_above > 0.0 && std::isfinite(config.ground_above)) {
+      Camera high = camera;
+      if (camera.position.y > config.ground_above) {
+        high.position.y -= config.ground_above;
+      } else {
+        // The camera is below the top: the rays that rise meet the upper
+        // plane; mirrored, they are a camera looking down on it.
+        high.position.y = config.ground_above - camera.position.y + 1e-6;
+        high.pitch_rad = -camera.pitch_rad;
+      }
+      merge(computeFootprint(geometry, viewport, high));
+    }
   }
   plan.ground_visible = fp.any_hit;
 
@@ -191,14 +208,8 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
   // the view, as anisotropic filtering sees it); level l is worth loading
   // while its texel covers at least 1/max_oversample of that pixel.
   uint32_t finest = plan.pyramid_level;
-  if (fp.any_hit && viewport.height_px > 0) {
-    const double pixel_angle = 2.0 * std::tan(camera.vfov_rad * 0.5) / double(viewport.height_px);
-    const double footprint_texels = std::max(fp.nearest_dist, 1e-9) * pixel_angle;
-    const double oversample = config.max_oversample > 0.0 ? config.max_oversample : 1.0;
-    const double ratio = footprint_texels / oversample;
-    finest = ratio <= 1.0 ? 0u : uint32_t(std::ceil(std::log2(ratio) - 1e-9));
-    finest = std::min(finest, level_count - 1);
-  }
+  if (fp.any_hit && viewport.height_px > 0)
+    finest = finestLevelAt(fp.nearest_dist, viewport, camera, config, level_count);
   plan.finest_level = finest;
 
   uint32_t first_stack = 0;

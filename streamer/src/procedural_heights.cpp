@@ -4,6 +4,7 @@
 // level-0 coordinates (integer cell arithmetic, exact at any size).
 #include <clipstream/streamer/tile_source.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -19,6 +20,10 @@ constexpr Octave kOctaves[] = {{13, 400.0}, {11, 150.0}, {9, 60.0}, {7, 20.0}, {
 constexpr double kBase = 1000.0;      // keeps every height positive
 constexpr double kCliff = 120.0;      // added on every other band of 2^14 samples
 constexpr uint32_t kCliffBandLog2 = 14;
+// tileHeightBounds(): octaves with fewer than this many cells across a tile
+// per side are bounded cell by cell, the rest by their amplitude (at most
+// 1024 octave values per octave and tile).
+constexpr uint64_t kBoundCells = 16;
 
 uint64_t mix(uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
@@ -34,6 +39,19 @@ double corner(uint32_t seed, uint32_t octave, uint64_t cx, uint64_t cy) {
 }
 
 double smooth(double t) { return t * t * (3.0 - 2.0 * t); }
+
+// Octave o's value in [-1, 1] at level-0 sample (x, y): its cell's corner
+// values blended by the smoothstep of the position in the cell.
+double octave(uint32_t seed, uint32_t o, uint64_t x, uint64_t y) {
+  const uint32_t s = kOctaves[o].cell_log2;
+  const uint64_t cx = x >> s, cy = y >> s;
+  const uint64_t mask = (uint64_t(1) << s) - 1;
+  const double fx = smooth(double(x & mask) / double(uint64_t(1) << s));
+  const double fy = smooth(double(y & mask) / double(uint64_t(1) << s));
+  const double a = corner(seed, o, cx, cy), b = corner(seed, o, cx + 1, cy);
+  const double c = corner(seed, o, cx, cy + 1), d = corner(seed, o, cx + 1, cy + 1);
+  return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy;
+}
 
 class ProceduralHeightSource final : public TileSource {
  public:
@@ -51,6 +69,52 @@ class ProceduralHeightSource final : public TileSource {
     e.min_height = kBase - amplitude;
     e.max_height = kBase + amplitude + kCliff;
     return e;
+  }
+
+  // Bounds without sampling every sample: inside one cell an octave is
+  // bilinear in the smoothsteps of x and y, which grow with x and y, so
+  // over a rectangle of samples in the cell it is extreme at the
+  // rectangle's corners. Each cell the tile touches gives its piece's four
+  // corners; octaves whose cells are far smaller than the tile take their
+  // full amplitude. Widened by one float step each way, since fetch()
+  // rounds heights to float. The error of a coarse tile is not worked out:
+  // the bounds' width stands for it (both surfaces lie between them).
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    *out = {};
+    if (!m_geometry.contains(key))
+      return Status::error(ErrorCode::kOutOfRange, "procedural heights: tile outside the pyramid");
+    const uint64_t span = uint64_t(m_spec.tile_px) << key.level;  // level-0 samples a side
+    const uint64_t x0 = uint64_t(key.x) * span, y0 = uint64_t(key.y) * span;
+    const uint64_t x1 = std::min(x0 + span, m_spec.width_px) - 1;
+    const uint64_t y1 = std::min(y0 + span, m_spec.height_px) - 1;
+    double lo = kBase, hi = kBase;
+    for (uint32_t o = 0; o < sizeof(kOctaves) / sizeof(kOctaves[0]); ++o) {
+      const uint32_t s = kOctaves[o].cell_log2;
+      const uint64_t cx0 = x0 >> s, cx1 = x1 >> s, cy0 = y0 >> s, cy1 = y1 >> s;
+      double a = -1.0, b = 1.0;
+      if (cx1 - cx0 < kBoundCells && cy1 - cy0 < kBoundCells) {
+        a = INFINITY, b = -INFINITY;
+        for (uint64_t cy = cy0; cy <= cy1; ++cy)
+          for (uint64_t cx = cx0; cx <= cx1; ++cx) {
+            const uint64_t xa = std::max(x0, cx << s), xb = std::min(x1, ((cx + 1) << s) - 1);
+            const uint64_t ya = std::max(y0, cy << s), yb = std::min(y1, ((cy + 1) << s) - 1);
+            for (const uint64_t x : {xa, xb})
+              for (const uint64_t y : {ya, yb}) {
+                const double v = octave(m_spec.seed, o, x, y);
+                a = std::min(a, v), b = std::max(b, v);
+              }
+          }
+      }
+      lo += kOctaves[o].amplitude * a;
+      hi += kOctaves[o].amplitude * b;
+    }
+    const uint64_t band0 = x0 >> kCliffBandLog2, band1 = x1 >> kCliffBandLog2;
+    if (band0 == band1 && (band0 & 1)) lo += kCliff;
+    if (band0 != band1 || (band0 & 1)) hi += kCliff;
+    out->min_height = std::nextafter(float(lo), -INFINITY);
+    out->max_height = std::nextafter(float(hi), INFINITY);
+    out->error = key.level == 0 ? 0.0f : out->max_height - out->min_height;
+    return Status::ok();
   }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* out) override {
@@ -86,16 +150,8 @@ class ProceduralHeightSource final : public TileSource {
 
 double proceduralHeight(const ProceduralSpec& spec, uint64_t x, uint64_t y) {
   double h = kBase;
-  for (uint32_t o = 0; o < sizeof(kOctaves) / sizeof(kOctaves[0]); ++o) {
-    const uint32_t s = kOctaves[o].cell_log2;
-    const uint64_t cx = x >> s, cy = y >> s;
-    const uint64_t mask = (uint64_t(1) << s) - 1;
-    const double fx = smooth(double(x & mask) / double(uint64_t(1) << s));
-    const double fy = smooth(double(y & mask) / double(uint64_t(1) << s));
-    const double a = corner(spec.seed, o, cx, cy), b = corner(spec.seed, o, cx + 1, cy);
-    const double c = corner(spec.seed, o, cx, cy + 1), d = corner(spec.seed, o, cx + 1, cy + 1);
-    h += kOctaves[o].amplitude * ((a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy);
-  }
+  for (uint32_t o = 0; o < sizeof(kOctaves) / sizeof(kOctaves[0]); ++o)
+    h += kOctaves[o].amplitude * octave(spec.seed, o, x, y);
   if ((x >> kCliffBandLog2) & 1) h += kCliff;
   return h;
 }

@@ -88,6 +88,14 @@ class ElevationStoreSource final : public TileSource {
   TileContent content() const override { return TileContent::kHeightF32; }
   ElevationInfo elevationInfo() const override { return m_reader->info().elevation; }
 
+  Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const override {
+    *out = {};
+    TileLocation location;
+    if (Status s = m_reader->locate(key, &location); !s) return s;
+    *out = {location.min_height, location.max_height, location.error};
+    return Status::ok();
+  }
+
   Status fetch(const TileKey& key, std::vector<uint8_t>* heights) override {
     FetchInfo info;
     return fetchWithInfo(key, heights, &info);

@@ -26,6 +26,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <deque>
 #include <system_error>
 #include <mutex>
@@ -163,6 +164,9 @@ Status checkLayer(const StreamLayer& l, size_t index) {
   if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
     return Status::error(ErrorCode::kInvalidArgument,
                          what + " is an elevation layer but its source hands out colour");
+  if (!(std::isfinite(l.world_per_height) && l.world_per_height >= 0.0))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         what + " has a height scale that is not finite and >= 0");
   return Status::ok();
 }
 
@@ -199,6 +203,7 @@ struct Streamer::Impl {
     // Render thread only.
     ClipmapPlan plan;
     ClipmapPlan predicted_plan;
+    TerrainView terrain;        // the scene's terrain in this layer's texels (bounds null: flat)
     PathHint hint;              // the streamer's hint seen through layerCamera()
     PathLookahead lookahead;    // windows along that hint
     uint32_t lod = 0;
@@ -217,6 +222,7 @@ struct Streamer::Impl {
     PlannerConfig planner(const PlannerConfig& base) const {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
+      c.terrain = terrain;
       // Relief in world units, scaled like layerCamera() scales heights.
       const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
       c.ground_above *= s;
@@ -235,6 +241,13 @@ struct Streamer::Impl {
   std::vector<Layer> layers;
   StreamerConfig config;
   bool any_active = false;
+  int terrain_layer = -1;  // the elevation layer whose bounds plan every layer; -1: none
+
+  // Render thread only: the detail of the terrain layer's tiles read so far
+  // (the most recent kTerrainDetailTiles), and its snapshot for the plans.
+  std::unordered_map<TileKey, std::shared_ptr<const TileDetail>, TileKeyHash> detail;
+  std::deque<TileKey> detail_order;  // insertion order, oldest first
+  void takeDetail();
 
   // Render thread only.
   bool have_plan = false;
@@ -285,6 +298,8 @@ struct Streamer::Impl {
   std::vector<std::pair<uint32_t, LayerTile>> pinned;
   size_t pinned_next = 0;
   bool victims_dirty = true;
+  // Detail of terrain tiles the loaders read since the last update().
+  std::vector<std::pair<TileKey, std::shared_ptr<const TileDetail>>> new_detail;
   double shared_now_s = 0.0;  // copy of now_s for workers (retry times)
   uint64_t shared_frame = 0;  // copy of frame for workers
   bool stopping = false;
@@ -295,6 +310,7 @@ struct Streamer::Impl {
   bool scoredWhenOnGpu(const LayerTile& t) const {
     return scoredOnGpu(t.key, layers[t.layer].windows, config.eviction);
   }
+  void loadTerrain();
   void workerLoop();
   bool admit(const Request& request, bool neighbour, bool* reread, bool* no_room);
   bool reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes);
@@ -444,6 +460,8 @@ void Streamer::Impl::workerLoop() {
   std::vector<Status> statuses;
   std::vector<FetchInfo> infos;
   std::vector<size_t> taken;
+  std::vector<std::shared_ptr<const TileDetail>> details;
+  std::vector<float> floats;
   std::unique_lock<std::mutex> lock(mutex);
   for (;;) {
     work_cv.wait(lock, [&] { return stopping || !queue.empty(); });
@@ -505,6 +523,20 @@ void Streamer::Impl::workerLoop() {
     } else {
       layer.spec.source->fetchBatch(keys, outs, statuses, infos);
     }
+    // The terrain's tiles also refine the planner's bounds: the ranges of
+    // their cells (their samples, widened by the tile's error from the
+    // index, which the read has just used).
+    details.assign(n, nullptr);
+    if (int(request.key.layer) == terrain_layer) {
+      for (size_t i = 0; i < n; ++i) {
+        if (!statuses[i] || pixels[i]->size() != layer.tile_bytes) continue;
+        TileHeightBounds hb;
+        if (!layer.spec.source->tileHeightBounds(keys[i], &hb)) continue;
+        floats.resize(pixels[i]->size() / sizeof(float));
+        std::memcpy(floats.data(), pixels[i]->data(), pixels[i]->size());
+        details[i] = makeTileDetail(layer.geometry.tile_px, floats.data(), hb.error);
+      }
+    }
 
     lock.lock();
     for (size_t i = 0; i < n; ++i) {
@@ -519,6 +551,7 @@ void Streamer::Impl::workerLoop() {
       if (rereads[i]) level_counters.redundant_reads++;
       auto it = cache.find(key);
       if (good) {
+        if (details[i]) new_detail.emplace_back(key.key, std::move(details[i]));
         level_counters.loads++;
         it->second.state = EntryState::kReady;
         it->second.rgba = std::move(pixels[i]);
@@ -826,6 +859,7 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     layer.published_lod = layer.lod;
     s.any_active = s.any_active || layer.spec.source != nullptr;
   }
+  s.loadTerrain();
   if (!config.trace_path.empty()) {
     OutputOptions trace_options;
     trace_options.existing = ExistingOutput::kReplaceRegular;
@@ -871,6 +905,66 @@ void Streamer::Impl::flushTrace(bool publish) {
   }
 }
 
+// The first elevation layer with a height scale and bounds is the scene's
+// terrain; each layer sees it through its own map (as layerCamera() maps
+// the camera: x and z by the map, heights by the mean scale).
+void Streamer::Impl::loadTerrain() {
+  if (!config.terrain_bounds) return;
+  for (const Layer& e : layers) {
+    if (!e.active() || e.spec.role != LayerRole::kElevation || e.spec.world_per_height <= 0.0) continue;
+    std::shared_ptr<const TerrainBounds> bounds;
+    const Status st = loadTerrainBounds(*e.spec.source, kTerrainBoundsMaxLevelTiles, &bounds);
+    if (!st) {
+      if (st.code != ErrorCode::kUnsupported)
+        std::fprintf(stderr, "clipstream: %s; planning against the plane\n", st.toString().c_str());
+      continue;
+    }
+    // The elevation's texel under world x is origin + k x, and sample i's
+    // centre is its texel i + 0.5.
+    const glm::dvec2 k = e.spec.texels_per_unit;
+    const glm::dvec2 world_origin = (glm::dvec2(0.5) - e.spec.origin_texel) / k;
+    for (Layer& layer : layers) {
+      if (!layer.active()) continue;
+      const glm::dvec2 kl = layer.spec.texels_per_unit;
+      layer.terrain.bounds = bounds;
+      layer.terrain.sample_origin = layer.spec.origin_texel + kl * world_origin;
+      layer.terrain.units_per_sample = kl / k;
+      layer.terrain.units_per_height = std::sqrt(kl.x * kl.y) * e.spec.world_per_height;
+    }
+    terrain_layer = int(&e - layers.data());
+    return;
+  }
+}
+
+// New detail into the render thread's map (the oldest dropped past
+// kTerrainDetailTiles), and a new snapshot for every layer's plans.
+void Streamer::Impl::takeDetail() {
+  if (terrain_layer < 0) return;
+  std::vector<std::pair<TileKey, std::shared_ptr<const TileDetail>>> incoming;
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    incoming.swap(new_detail);
+  }
+  if (incoming.empty()) return;
+  for (auto& [key, d] : incoming) {
+    if (detail.insert_or_assign(key, std::move(d)).second) detail_order.push_back(key);
+  }
+  while (detail.size() > kTerrainDetailTiles && !detail_order.empty()) {
+    detail.erase(detail_order.front());
+    detail_order.pop_front();
+  }
+  auto snapshot = std::make_shared<TerrainDetail>();
+  snapshot->tiles = detail;
+  for (Layer& layer : layers)
+    if (layer.terrain.bounds) layer.terrain.detail = snapshot;
+}
+
+bool Streamer::plansOnTerrain() const {
+  for (const Impl::Layer& layer : m_impl->layers)
+    if (layer.terrain.bounds) return true;
+  return false;
+}
+
 Status Streamer::traceStatus() const { return m_impl->trace_status; }
 
 void Streamer::discardTrace() {
@@ -902,6 +996,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   if (!any_levels) return;
   s.frame++;
   s.now_s = time_s;
+  s.takeDetail();
   const size_t n = s.layers.size();
   // Plans every active layer for `cam` (a world camera) into *plans.
   auto planAll = [&](const Camera& cam, std::vector<ClipmapPlan>* plans) {

@@ -564,7 +564,9 @@ TEST(Streamer, BatchesHoldNeighboursOfTheSourcesShapeAndEveryTileIsReadOnce) {
     EXPECT_EQ(read.size(), ranked.size());
     for (const TileKey& key : ranked) EXPECT_EQ(read.count(key), 1u);
     EXPECT_GT(multi, 0u) << "no batch of more than one tile";
-    if (shape == BatchShape::kSquare) EXPECT_GT(across_rows, 0u) << "no square spans two rows";
+    if (shape == BatchShape::kSquare) {
+      EXPECT_GT(across_rows, 0u) << "no square spans two rows";
+    }
     const StreamerStats st = s.stats();
     EXPECT_EQ(st.total.loads, ranked.size());
     expectCountersAddUp(st);

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 namespace clipstream::test {
 namespace {
@@ -129,7 +130,11 @@ Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
   if (Status s = TileStoreWriter::create(path, g, options, &writer); !s) return s;
   float lo = INFINITY, hi = -INFINITY;
   const uint32_t t = g.tile_px;
-  for (uint32_t l = 0; l < g.levelCount(); ++l)
+  // Bounds of the previous (finer) level's tiles, merged into their
+  // parents: a tile's bounds hold all level-0 ground under it.
+  std::vector<std::pair<float, float>> finer;
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    std::vector<std::pair<float, float>> here(size_t(g.levels[l].tiles_x) * g.levels[l].tiles_y);
     for (uint32_t ty = 0; ty < g.levels[l].tiles_y; ++ty)
       for (uint32_t tx = 0; tx < g.levels[l].tiles_x; ++tx) {
         std::vector<uint8_t> pixels(g.tileBytes());
@@ -142,6 +147,13 @@ Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
             std::memcpy(pixels.data() + (size_t(y) * t + x) * 4, &v, 4);
             tmin = std::min(tmin, v), tmax = std::max(tmax, v);
           }
+        if (l > 0)
+          for (uint32_t cy = 2 * ty; cy < std::min(2 * ty + 2, g.levels[l - 1].tiles_y); ++cy)
+            for (uint32_t cx = 2 * tx; cx < std::min(2 * tx + 2, g.levels[l - 1].tiles_x); ++cx) {
+              const auto& c = finer[size_t(cy) * g.levels[l - 1].tiles_x + cx];
+              tmin = std::min(tmin, c.first), tmax = std::max(tmax, c.second);
+            }
+        here[size_t(ty) * g.levels[l].tiles_x + tx] = {tmin, tmax};
         lo = std::min(lo, tmin), hi = std::max(hi, tmax);
         EncodedTile encoded;
         if (Status s = encodeTile(g, options.encoding, {l, tx, ty}, pixels, &encoded); !s) return s;
@@ -149,6 +161,8 @@ Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
         encoded.location.max_height = tmax;
         if (Status s = writer->write(std::move(encoded)); !s) return s;
       }
+    finer = std::move(here);
+  }
   if (Status s = writer->setElevationFigures(0, 0.0, lo, hi); !s) return s;
   return writer->finish();
 }

@@ -64,7 +64,8 @@ struct FlightRunOptions {
   // Measurement.
   uint32_t reference_every = 1;     // compare every Nth frame (and every rest frame); 0 = never
   uint32_t ground_truth_every = 0;  // also the reference against the CPU ground truth; 0 = never
-  bool sample_tiles = true;         // collect sampledTiles() (warm-up too) for the over-fetch ratio
+  bool sample_tiles = true;         // collect sampledTiles() (warm-up too) for the over-fetch ratio;
+                                    // over terrain sampledTilesOfPositions(), a position pass a frame
   // Frames checked with countGarbagePixels(): the lowest-PSNR measured
   // frames below kSharpPsnrDb, at most this many (CPU-heavy).
   uint32_t garbage_checks = 0;
@@ -101,6 +102,11 @@ struct FlightRunFrame {
   // Over terrain, when judged: pixels showing the reference's world
   // position to the bit, and of them those whose colour differs.
   uint32_t terrain_agree_pixels = 0, terrain_agree_mismatched = 0;
+  // Over terrain with sample_tiles: the finest level the planner's rule
+  // gives for the nearest ground this frame shows (finestLevelAt() of the
+  // nearest of its positions), to set against sample.finest_needed; -1:
+  // not measured (no terrain in view, or not sampled).
+  int32_t seen_level = -1;
 };
 
 struct FlightRun {
@@ -134,6 +140,12 @@ struct FlightRun {
   // triangles drawn per recorded frame.
   uint64_t height_texture_bytes = 0;
   double terrain_triangles_mean = 0.0;
+  bool plans_on_terrain = false;  // the streamer planned against the height bounds (Streamer::plansOnTerrain())
+  // Recorded frames with a seen_level, and those whose plan needed a level
+  // coarser than it (pixels nearer than planned for: blurrier than the
+  // view asks, a hole in the plan) or finer (a level loaded that no pixel
+  // needs).
+  uint32_t seen_frames = 0, needed_coarser_frames = 0, needed_finer_frames = 0;
   // Geometric error over the judged frames (terrain with reference_every):
   // means of the per-frame mean and p95, and the largest; the same over
   // the rest frames alone (the camera still). 0 when not measured.

@@ -47,6 +47,7 @@ struct FlyOptions {
   bool throttle = true;              // StreamerConfig::throttle
   bool prefetch = true;              // StreamerConfig::prefetch
   bool frustum_priority = true;      // StreamerConfig::frustum_priority
+  bool terrain_bounds = true;        // StreamerConfig::terrain_bounds
   bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt

@@ -106,6 +106,27 @@ inline uint64_t packTileKey(const TileKey& key) {
 void sampledTiles(const PyramidGeometry& geometry, const Camera& camera, const Viewport& viewport,
                   std::unordered_set<uint64_t>* out);
 
+// Over terrain: adds to *out every (level, tile) of the colour pyramid
+// `geometry` whose texels a frame samples with every tile resident, from
+// the ground point each pixel shows: `xyzw` as TerrainRenderer::
+// readPositions() gives it (camera-relative world x, y, z and w = 1 on
+// terrain, top row first; world x and z are the colour layer's level-0
+// texels). The level is the terrain shader's: log2 of the longer screen
+// derivative of (x, z), formed from the pixel's 2x2 quad as the CPU
+// reference forms it; trilinear, so the next coarser level's taps count
+// too. A quad partner off the terrain is replaced by the pixel's other
+// neighbour on that axis (the GPU would extrapolate the triangle's plane);
+// a pixel with neither on both axes is left out. The denominator of the
+// over-fetch ratio over terrain.
+void sampledTilesOfPositions(const PyramidGeometry& geometry, const std::vector<float>& xyzw,
+                             const Camera& camera, const Viewport& viewport,
+                             std::unordered_set<uint64_t>* out);
+
+// The distance from the camera to the nearest ground point of positions
+// `xyzw` (as for sampledTilesOfPositions(): camera-relative, w = 1 on
+// terrain); infinity when no pixel shows terrain.
+double nearestPositionDistance(const std::vector<float>& xyzw);
+
 // Counts pixels where `reference` shows ground (not kSkyRgba) but `streamed`
 // shows sky, or black where the reference is not black: holes.
 uint32_t countHolePixels(const std::vector<uint8_t>& streamed, const std::vector<uint8_t>& reference);

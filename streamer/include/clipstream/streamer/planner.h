@@ -11,6 +11,7 @@
 
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/terrain_bounds.h>
 
 #include <cstdint>
 #include <vector>
@@ -31,14 +32,22 @@ struct PlannerConfig {
   uint32_t clip_tiles = 0;       // clip size in tiles; 0 = choose from the viewport
   double max_oversample = 2.0;   // finest level: texel footprint >= 1/this screen pixel
   uint32_t max_stack_levels = 0; // 0 = no limit beyond the pyramid
-  // Terrain: how far the ground within view rises above (and falls below)
-  // the plane y = 0 under the camera, in level-0 texels. The footprint is
-  // then the union of the footprints on the planes y = -ground_below, 0 and
-  // ground_above (a slope in front, seen from below its top, hits the
-  // upper plane), and the finest level follows the nearest of them. 0 and
-  // 0: the flat plane, exactly as without terrain.
+  // Terrain without per-tile bounds: how far the ground within view rises
+  // above (and falls below) the plane y = 0 under the camera, in level-0
+  // texels. The footprint is then the union of the footprints on the
+  // planes y = -ground_below, 0 and ground_above (a slope in front, seen
+  // from below its top, hits the upper plane), and the finest level follows
+  // the nearest of them. 0 and 0: the flat plane, exactly as without
+  // terrain. Ignored when `terrain` has bounds.
   double ground_above = 0.0;
   double ground_below = 0.0;
+  // Terrain with per-tile height bounds, placed in this plan's texels
+  // (bounds null: the flat plane). The camera's y is then its real height
+  // in the same units, and the footprint, the nearest visible ground and
+  // the visible tiles come from the terrain (terrainFootprint(),
+  // docs/terrain.md "Planning against the terrain"); windows are placed
+  // by the same rule as on the plane.
+  TerrainView terrain;
 };
 
 // One level of the clip stack.
@@ -77,6 +86,14 @@ uint32_t chooseClipTiles(const Viewport& viewport, uint32_t tile_px);
 // level. `needed` comes from the nearest visible ground distance.
 ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewport,
                         const Camera& camera, const PlannerConfig& config);
+
+// The finest level planClipmap() needs for ground `distance` away (3D,
+// level-0 texels) in this view: the level whose texel covers at least
+// 1/max_oversample of a pixel there, at most level_count - 1. The rule
+// planClipmap() applies to the nearest visible ground; exposed so that an
+// evaluation can apply it to the nearest ground a frame shows.
+uint32_t finestLevelAt(double distance, const Viewport& viewport, const Camera& camera,
+                       const PlannerConfig& config, uint32_t level_count);
 
 // Tiles that entered and left the needed windows (stack levels with
 // needed = true, plus every pyramid tile) between two plans. Order: level by

@@ -54,6 +54,11 @@ struct StreamerConfig {
   bool prefetch = true;          // velocity-predictive prefetch
   bool frustum_priority = true;  // visible tiles before hidden ones
   bool throttle = true;          // compute MaxTextureLOD from residency
+  // Plan against an elevation layer's per-tile height bounds when it has
+  // them (StreamLayer::world_per_height, plansOnTerrain()). false: against
+  // the plane, with the relief planes a caller sets (setGroundRelief()),
+  // the older method, kept for comparison (docs/benchmarks.md, terrain).
+  bool terrain_bounds = true;
   uint32_t lod_hysteresis_frames = 8;  // frames a finer LOD must be ready before use
   // A stack level is ready for MaxTextureLOD when at least this fraction of
   // its visible tiles is on the GPU (or failed for good); the rest are drawn
@@ -149,6 +154,13 @@ struct StreamLayer {
   // viewport's worth of a layer (the terrain's rings read about n samples
   // per level) asks for less, and the layer costs that much less memory.
   uint32_t clip_tiles = 0;
+  // Elevation layers: world units per height unit, the vertical scale
+  // included (LayerAlignment::world_per_height). When > 0 and the source
+  // has per-tile height bounds (TileSource::tileHeightBounds()), the
+  // streamer loads them when it is made and plans every layer against the
+  // terrain (plansOnTerrain()); 0: layers are planned against the plane
+  // y = 0. Finite and >= 0 (checkStreamLayers()).
+  double world_per_height = 0.0;
 };
 
 // Ok when every layer can be streamed: a source; a finite, positive map;
@@ -204,11 +216,19 @@ class Streamer {
   // Render thread. Sets (or, with an empty camera_at, clears) the path hint.
   void setPathHint(PathHint hint);
 
-  // Render thread. Terrain: how far the ground within view rises above
-  // and falls below the plane of the camera's ground (world units), for
-  // the next update()s' plans (PlannerConfig::ground_above / ground_below,
-  // scaled into each layer's texels). 0 and 0 (the default): flat.
+  // Render thread. Terrain without per-tile bounds: how far the ground
+  // within view rises above and falls below the plane of the camera's
+  // ground (world units), for the next update()s' plans
+  // (PlannerConfig::ground_above / ground_below, scaled into each layer's
+  // texels). 0 and 0 (the default): flat. Ignored while plansOnTerrain().
   void setGroundRelief(double above, double below);
+
+  // True when the constructor loaded an elevation layer's per-tile height
+  // bounds (StreamLayer::world_per_height > 0 and a source that has them):
+  // every layer is then planned against the terrain, and update()'s camera
+  // must be the real one (its y the height in world units, not the height
+  // above the ground). Fixed at construction; any thread.
+  bool plansOnTerrain() const;
 
   // Render thread. Layer 0's hand-off: up to max_tiles tiles and max_bytes
   // bytes (0 = no byte limit) of layer 0 that are decoded and needed, in

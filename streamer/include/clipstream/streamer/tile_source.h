@@ -30,6 +30,17 @@ enum class TileContent : uint8_t {
                // unit (offset and scale applied; elevationInfo())
 };
 
+// What an elevation source knows of one tile's heights without reading its
+// pixels, in its height unit (TileSource::tileHeightBounds()).
+struct TileHeightBounds {
+  float min_height = 0.0f;  // lowest and highest level-0 height under the tile's footprint
+  float max_height = 0.0f;
+  // An upper bound of |level-0 surface - the bilinear surface of the
+  // tile's own samples| over its footprint (0 at level 0): a coarse tile's
+  // samples, widened by it, bound the ground between them.
+  float error = 0.0f;
+};
+
 // Thread-safe: fetch() may be called from any number of threads at once and
 // must not hold a lock across I/O or decompression.
 class TileSource {
@@ -47,6 +58,22 @@ class TileSource {
   // heights (unit, no-data fill, quantisation, range). present = false for
   // colour sources (the default).
   virtual ElevationInfo elevationInfo() const { return {}; }
+
+  // For kHeightF32 sources: the lowest and highest level-0 height under
+  // tile `key`'s footprint (every level-0 sample the tile covers, not only
+  // its own decimated samples, so a coarse tile bounds every finer tile
+  // below it) and its geometric error, in the store's height unit, without
+  // reading the tile's pixels. An elevation store answers from its index
+  // (which may read an index page: a request over HTTP), so ask when
+  // opening or on a loader thread, never per frame on the render thread
+  // (loadTerrainBounds()). Thread-safe like fetch(). kUnsupported: the
+  // source has no bounds (the default); kOutOfRange for a key outside the
+  // pyramid; an index page that fails its checks: its error.
+  virtual Status tileHeightBounds(const TileKey& key, TileHeightBounds* out) const {
+    (void)key;
+    *out = {};
+    return Status::error(ErrorCode::kUnsupported, describe() + " has no per-tile height bounds");
+  }
 
   // Reads, verifies, decodes and converts one tile into *rgba (resized to
   // tile_px * tile_px * 4): RGBA8 texels, or float32 heights for a

@@ -69,7 +69,9 @@ Status writeStore(const std::string& path, const PyramidGeometry& geometry,
 
 // An F32 elevation store of w x h samples whose level-0 sample (x, y) is
 // height(x, y); levels are decimated (level L's (i, j) is level 0's
-// (i 2^L, j 2^L)) and each tile's bounds are its own samples' min and max.
+// (i 2^L, j 2^L)) and each tile's bounds are those of every level-0 sample
+// under it (its own samples and its children's bounds), as the tiler
+// records them.
 Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
                            const std::function<float(uint64_t x, uint64_t y)>& height);
 
