@@ -81,16 +81,15 @@ struct TileStoreReader::Impl {
     source->readMany(ranges, statuses);
   }
 
-  // The disk cache's copy of a payload, checked against its checksum like
-  // the server's bytes; false (and a torn or wrong copy removed) otherwise.
-  bool cachedPayload(const TileKey& key, const TileLocation& location,
-                     std::vector<uint8_t>* payload) const {
-    if (!disk_cache) return false;
-    const std::string name = "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
-                             std::to_string(key.y);
-    switch (disk_cache->get(cache_key, name, location.stored_bytes, payload)) {
+  // Looks `name` up in the disk cache: true when an entry of `bytes` is
+  // there and `valid` accepts it; an entry it rejects is removed. Counts
+  // the hit, the miss or the dropped entry.
+  template <typename Valid>
+  bool fromDiskCache(const std::string& name, uint64_t bytes, std::vector<uint8_t>* out,
+                     const Valid& valid) const {
+    switch (disk_cache->get(cache_key, name, bytes, out)) {
       case DiskCache::Lookup::kHit:
-        if (format::tileChecksum(payload->data(), payload->size()) == location.checksum) {
+        if (valid(*out)) {
           disk_hits.fetch_add(1, std::memory_order_relaxed);
           return true;
         }
@@ -103,14 +102,26 @@ struct TileStoreReader::Impl {
         break;
     }
     disk_misses.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  static std::string tileName(const TileKey& key) {
+    return "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" + std::to_string(key.y);
+  }
+  // The disk cache's copy of a payload, checked against its checksum like
+  // the server's bytes; false (and a torn or wrong copy removed) otherwise.
+  bool cachedPayload(const TileKey& key, const TileLocation& location,
+                     std::vector<uint8_t>* payload) const {
+    if (!disk_cache) return false;
+    if (fromDiskCache(tileName(key), location.stored_bytes, payload, [&](const std::vector<uint8_t>& b) {
+          return format::tileChecksum(b.data(), b.size()) == location.checksum;
+        }))
+      return true;
     payload->clear();
     return false;
   }
   void keepPayload(const TileKey& key, std::span<const uint8_t> payload) const {
     if (!disk_cache) return;
-    disk_cache->put(cache_key, "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" +
-                                   std::to_string(key.y),
-                    payload);
+    disk_cache->put(cache_key, tileName(key), payload);
   }
   static std::string pageName(uint32_t level_index, uint32_t px, uint32_t py) {
     return "p" + std::to_string(level_index) + "-" + std::to_string(px) + "-" + std::to_string(py);
@@ -121,24 +132,9 @@ struct TileStoreReader::Impl {
     if (!disk_cache) return false;
     const LevelRead& level = levels[level_index];
     const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
-    const std::string name = pageName(level_index, px, py);
     std::vector<uint8_t> bytes;
-    switch (disk_cache->get(cache_key, name, dir.bytes, &bytes)) {
-      case DiskCache::Lookup::kHit:
-        if (decodePage(level_index, px, py, bytes, out)) {
-          disk_hits.fetch_add(1, std::memory_order_relaxed);
-          return true;
-        }
-        disk_cache->drop(cache_key, name);
-        [[fallthrough]];
-      case DiskCache::Lookup::kBad:
-        disk_dropped.fetch_add(1, std::memory_order_relaxed);
-        break;
-      case DiskCache::Lookup::kMiss:
-        break;
-    }
-    disk_misses.fetch_add(1, std::memory_order_relaxed);
-    return false;
+    return fromDiskCache(pageName(level_index, px, py), dir.bytes, &bytes,
+                         [&](const std::vector<uint8_t>& b) { return decodePage(level_index, px, py, b, out); });
   }
   void keepPage(uint32_t level_index, uint32_t px, uint32_t py,
                 std::span<const uint8_t> bytes) const {
