@@ -303,17 +303,24 @@ TEST(TerrainAccuracy, GeometricErrorIsZeroOnTheSurfaceAndGrowsOffIt) {
   EXPECT_GE(lifted.p95_px, lifted.mean_px);
 }
 
+// The synthetic DEM at `path` as a terrain layer: 4 world units a sample
+// (2048 over the 512 samples), heights 1:1, default ring size.
+void openTestDem(const std::string& path, TerrainLayerConfig* terrain) {
+  Status s;
+  terrain->source = openElevationSource(path, &s);
+  ASSERT_TRUE(terrain->source) << s.toString();
+  terrain->alignment.world_per_sample = {4.0, 4.0};
+  terrain->alignment.sample0_world = {2.0, 2.0};
+  terrain->alignment.world_per_height = 1.0;
+}
+
 TEST(TerrainAccuracy, AtRestTheGeometricErrorMeetsTheTarget) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
   ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
   Status s;
   TerrainLayerConfig terrain;
-  terrain.source = openElevationSource(dir.file("dem.cst"), &s);
-  ASSERT_TRUE(terrain.source) << s.toString();
-  terrain.alignment.world_per_sample = {4.0, 4.0};
-  terrain.alignment.sample0_world = {2.0, 2.0};
-  terrain.alignment.world_per_height = 1.0;
+  ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
   FlightRunOptions o;
   o.source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
   ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
@@ -390,11 +397,7 @@ TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
   ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
   Status s;
   TerrainLayerConfig terrain;
-  terrain.source = openElevationSource(dir.file("dem.cst"), &s);
-  ASSERT_TRUE(terrain.source) << s.toString();
-  terrain.alignment.world_per_sample = {4.0, 4.0};
-  terrain.alignment.sample0_world = {2.0, 2.0};
-  terrain.alignment.world_per_height = 1.0;
+  ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
   // A texture with detail at every level (a flat colour would agree anyway).
   std::vector<uint8_t> image(size_t(2048) * 2048 * 4);
   for (size_t y = 0; y < 2048; ++y)
