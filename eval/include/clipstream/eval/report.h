@@ -28,6 +28,7 @@ struct RunDescription {
   uint64_t cache_mb = 0;
   uint32_t warmup_frames = 0;
   bool reference = false;
+  TileContent reference_tile_format = TileContent::kRgba8;  // the ideal reference's tiles
   bool throttle = true, prefetch = true, frustum_priority = true, path_hint = false;
   uint64_t pngs_written = 0, pngs_dropped = 0;
 };
