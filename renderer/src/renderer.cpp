@@ -162,12 +162,12 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   for (uint32_t set = 0; set < r->usableSets(); ++set) {
     const uint8_t zero[4] = {0, 0, 0, 0};
     glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_usable_tex[set]);
-    glTextureStorage3D(r->m_usable_tex[set], 1, GL_R8UI, GLsizei(c), GLsizei(c), usable_layers);
+    glTextureStorage3D(r->m_usable_tex[set], 1, GL_R16UI, GLsizei(c), GLsizei(c), usable_layers);
     // Integer textures are incomplete (read as 0) with a mipmap filter.
     glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_BYTE, zero);
-    r->m_texture_bytes.usable += uint64_t(c) * c * uint64_t(usable_layers);
+    glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, zero);
+    r->m_texture_bytes.usable += uint64_t(c) * c * uint64_t(usable_layers) * 2;
   }
   if (r->staged()) {
     r->m_staging_region_bytes = size_t(std::max(config.staging_tiles, 1u)) * r->tileBytes();
@@ -574,23 +574,24 @@ void ClipmapRenderer::endUploads() {
   const uint32_t c = m_slots;
   const bool same = map.windows == m_front_map.windows && map.finest == m_front_map.finest;
   if (!same || usableSets() == 2) {
-    // Per slot: usableCode() of the window tile in bits 0-3 and how many
-    // levels coarser its finest usable ancestor is in bits 4-7 (15 = the
-    // pyramid or further). Written for every window tile, usable or not.
-    std::vector<uint8_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
+    // Per slot: usableCode() of the window tile in the low byte and how
+    // many levels coarser its finest usable ancestor is in the high byte
+    // (up to the pyramid level). Written for every window tile, usable or
+    // not; 0 elsewhere (no code matches it).
+    std::vector<uint16_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
     for (size_t l = 0; l < map.usable.size(); ++l) {
       const TileRect& w = map.windows[l];
       for (int64_t y = w.y0; y < w.y1; ++y)
         for (int64_t x = w.x0; x < w.x1; ++x) {
           const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
-          const uint32_t up = std::min<uint32_t>(map.finest[l][i] - uint32_t(l), 15);
-          flat[l * c * c + i] = uint8_t(usableCode(x, y, c) | (up << 4));
+          const uint32_t up = map.finest[l][i] - uint32_t(l);
+          flat[l * c * c + i] = uint16_t(usableCode(x, y, c) | (up << 8));
         }
     }
     if (!map.usable.empty()) {
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 2);
       glTextureSubImage3D(m_usable_tex[usable_target], 0, 0, 0, 0, GLsizei(c), GLsizei(c),
-                          GLsizei(map.usable.size()), GL_RED_INTEGER, GL_UNSIGNED_BYTE, flat.data());
+                          GLsizei(map.usable.size()), GL_RED_INTEGER, GL_UNSIGNED_SHORT, flat.data());
       glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
     }
   }

@@ -273,6 +273,36 @@ TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
   EXPECT_GE(psnrLogged("2^26 far corner vs reference", gpu, ref), kMatchDb);
 }
 
+// Every slot period: over tiles whose period index (tile / slots) is 3 mod 4
+// on both axes, whose usable-map code (1 + 3 + 4 * 3 = 16) is the largest.
+TEST(ClipmapRender, DrawsTilesOfEverySlotPeriodAtTheirLevel) {
+  CLIPSTREAM_REQUIRE_GL();
+  ProceduralSpec spec;
+  spec.width_px = spec.height_px = 8192;
+  auto source = makeProceduralSource(spec);
+  ASSERT_TRUE(source);
+  const ClipmapPlan probe = planClipmap(source->geometry(), kViewport, test::obliqueCamera(), {});
+  const uint32_t slots = (probe.clip_tiles / 2) * 2 + 2;
+  for (int64_t period : {0, 1, 2, 3}) {
+    Camera cam = test::obliqueCamera();
+    const double centre = (double(period * slots) + slots / 2.0) * spec.tile_px + 0.3;
+    cam.position = {centre, 30.0, centre + 60.0};
+    cam.heading_rad = 0.0;  // north, over the tiles of this period
+    Scene s = makeScene(source, cam);
+    ASSERT_TRUE(s.renderer);
+    test::loadPlan(*s.renderer, *s.source, s.plan);
+    const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+    const auto ref = reference(*s.source, s.source, cam);
+    glm::dvec2 hit;
+    ASSERT_TRUE(groundHit(cam, kViewport, kViewport.width_px / 2.0, kViewport.height_px - 1.0, &hit));
+    EXPECT_EQ(int64_t(hit.x / spec.tile_px) / slots, period) << "the view must be over this period";
+    EXPECT_EQ(int64_t(hit.y / spec.tile_px) / slots, period);
+    char what[64];
+    std::snprintf(what, sizeof what, "slot period %lld vs reference", (long long)period);
+    EXPECT_GE(psnrLogged(what, gpu, ref), kMatchDb);
+  }
+}
+
 // Real imagery: a 2048 x 2048 crop of the Autzen orthophoto the repository
 // ships in data/.
 TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
