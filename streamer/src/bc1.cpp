@@ -39,7 +39,8 @@ void expand565(uint16_t c, uint8_t out[3]) {
 
 }  // namespace
 
-Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vector<uint8_t>* blocks) {
+Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vector<uint8_t>* blocks,
+                     bool high_quality) {
   if (Status s = checkTilePx(tile_px); !s) return s;
   if (rgba.size() != size_t(tile_px) * tile_px * 4)
     return Status::error(ErrorCode::kInvalidArgument,
@@ -53,7 +54,7 @@ Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vecto
       for (uint32_t j = 0; j < 4; ++j)
         std::memcpy(texels + j * 16, rgba.data() + (size_t(by * 4 + j) * tile_px + bx * 4) * 4, 16);
       stb_compress_dxt_block(blocks->data() + (size_t(by) * n + bx) * kBc1BlockBytes, texels, 0,
-                             kBc1HighQuality ? STB_DXT_HIGHQUAL : STB_DXT_NORMAL);
+                             high_quality ? STB_DXT_HIGHQUAL : STB_DXT_NORMAL);
     }
   return Status::ok();
 }

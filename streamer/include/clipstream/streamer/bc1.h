@@ -26,8 +26,8 @@ inline constexpr uint32_t kBc1BlockPx = 4;     // texels a block side
 inline constexpr uint32_t kBc1BlockBytes = 8;  // bytes a block
 
 // stb_dxt's refinement: its "high quality" mode (two refinement passes
-// instead of one) measured no slower than the normal mode on 128-px tiles
-// here (1.7 vs 2.2 ms, docs/benchmarks.md) and is closer to the source.
+// instead of one) costs about a tenth more CPU than the normal mode and is
+// closer to the source (bench_streamer_bc1, docs/benchmarks.md, "BC1 tiles").
 inline constexpr bool kBc1HighQuality = true;
 
 // Bytes of one BC1 tile: (tile_px / 4)^2 * 8. tile_px must be a multiple of 4.
@@ -38,9 +38,11 @@ inline size_t bc1TileBytes(uint32_t tile_px) {
 
 // Encodes an RGBA8 tile (tile_px^2 * 4 bytes, top row first; alpha is
 // ignored: BC1 here is opaque RGB) into *blocks (resized to
-// bc1TileBytes()). kInvalidArgument if tile_px is 0 or not a multiple of 4,
-// or `rgba` has the wrong size.
-Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vector<uint8_t>* blocks);
+// bc1TileBytes()), with stb_dxt's high-quality mode or its normal one.
+// kInvalidArgument if tile_px is 0 or not a multiple of 4, or `rgba` has
+// the wrong size.
+Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vector<uint8_t>* blocks,
+                     bool high_quality = kBc1HighQuality);
 
 // Decodes one 8-byte block into 16 RGBA8 texels (row-major, alpha 255), as
 // the S3TC extension specifies for COMPRESSED_RGB_S3TC_DXT1_EXT: end points
