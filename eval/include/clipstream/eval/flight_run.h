@@ -55,7 +55,7 @@ struct FlightRunOptions {
   Viewport resize_to{0, 0};
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   Overlay overlay = Overlay::kOff;
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
   // Terrain under the colour layer (FlightConfig::terrain). Path heights

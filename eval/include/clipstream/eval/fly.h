@@ -39,7 +39,7 @@ struct FlyOptions {
   unsigned http_connections = RemoteOptions{}.connections;  // requests in flight to a URL store
   std::string out_dir = "fly-out";
   uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   // Colour tiles on the GPU: kRgba8 as the source gives them, or kBc1
   // transcoded by the loader threads (makeBc1Source()).
   TileContent tile_format = TileContent::kRgba8;

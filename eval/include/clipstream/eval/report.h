@@ -23,7 +23,7 @@ struct RunDescription {
   std::string path;               // built-in name or file
   double speed = 1.0;
   Viewport viewport{0, 0};        // the first viewport
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   uint32_t upload_tiles = 0;
   uint64_t cache_mb = 0;
   uint32_t warmup_frames = 0;

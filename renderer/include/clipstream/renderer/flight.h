@@ -88,7 +88,7 @@ struct FlightConfig {
   Viewport viewport{1280, 720};
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // tiles handed to the GPU per frame
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   Overlay overlay = Overlay::kOff;
   uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
   // true: draw into the flight's own OffscreenTarget (headless); false: into

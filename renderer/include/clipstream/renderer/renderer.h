@@ -33,6 +33,11 @@ enum class Buffering {
   // tiles). Two usable maps, alternating. The memory of `single`.
   kStaged,
 };
+// The default everywhere (renderer, Flight, clipstream-fly): staged keeps
+// what double buffering is for (no write to memory a queued frame reads, no
+// CPU wait) at the memory of one set, and measured at least as fast as
+// double-upload on llvmpipe (docs/decisions.md, "GPU memory").
+inline constexpr Buffering kDefaultBuffering = Buffering::kStaged;
 const char* bufferingName(Buffering buffering);
 // The inverse of bufferingName(): "single", "double-upload", "double-copy"
 // or "staged". kInvalidArgument naming the choices otherwise.
@@ -43,7 +48,7 @@ enum class Overlay { kOff = 0, kLevels = 1 };
 struct RendererConfig {
   uint32_t clip_tiles = 0;     // from the plan (ClipmapPlan::clip_tiles)
   uint32_t pyramid_level = 0;  // from the plan (ClipmapPlan::pyramid_level)
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   // What uploadTile() is given and the stack array holds: kRgba8 (GL_RGBA8)
   // or kBc1 (COMPRESSED_RGB_S3TC_DXT1_EXT, an eighth of the bytes, sampled
   // by the same shader). The source's content(): see createClipmapRenderer().
