@@ -234,6 +234,14 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("peak_rss_mib", num(mib(s.peak_rss_bytes)));
   add("gpu_texture_mib", num(mib(run.texture_bytes.total())));
   add("tile_format", tileContentName(run.tile_content));
+  // Per tile: the renderer's texture work over the tiles it uploaded, and
+  // the loaders' decode (and transcode) time over the tiles they loaded.
+  const Means m = meansOf(run);
+  add("upload_ms_per_tile",
+      num(s.tiles_uploaded ? m.upload * double(run.frames.size()) / double(s.tiles_uploaded) : 0.0));
+  add("decode_ms_per_tile", num(run.streamer.total.loads
+                                    ? run.streamer.decode_ms_total / double(run.streamer.total.loads)
+                                    : 0.0));
   add("ram_peak_mib", num(mib(run.streamer.ram_peak_bytes)));
   add("ram_budget_mib", num(mib(run.streamer.ram_budget_bytes)));
   add("frames_with_holes", std::to_string(run.frames_with_holes));
