@@ -146,6 +146,29 @@ TEST(Bc1Source, HandsOutTheInnerTilesEncoded) {
   EXPECT_EQ(failing->fetch(key, &blocks).code, ErrorCode::kCorruptTile);
 }
 
+TEST(Bc1Source, BatchesEncodeEachTileWhereItLanded) {
+  Status s;
+  auto bc1 = makeBc1Source(makeFaultySource(test::procedural(8192), FaultSpec{0.0, 0.3, ErrorCode::kCorruptTile, 7}), &s);
+  ASSERT_TRUE(bc1) << s.toString();
+  const std::vector<TileKey> keys = {{1, 0, 0}, {1, 1, 0}, {1, 2, 0}, {1, 3, 0}, {1, 4, 0}, {1, 5, 0}};
+  std::vector<std::vector<uint8_t>> out(keys.size());
+  std::vector<std::vector<uint8_t>*> outs;
+  for (auto& o : out) outs.push_back(&o);
+  std::vector<Status> statuses(keys.size());
+  std::vector<FetchInfo> infos(keys.size());
+  bc1->fetchBatch(keys, outs, statuses, infos);
+  size_t failed = 0;
+  for (size_t i = 0; i < keys.size(); ++i) {
+    std::vector<uint8_t> one;
+    const Status alone = bc1->fetch(keys[i], &one);
+    EXPECT_EQ(statuses[i].code, alone.code) << i;
+    if (alone.isOk()) EXPECT_EQ(out[i], one) << i;
+    failed += !alone.isOk();
+  }
+  EXPECT_GT(failed, 0u) << "the batch must mix failures and tiles";
+  EXPECT_LT(failed, keys.size());
+}
+
 TEST(Bc1Source, RefusesHeightsAndTilesThatAreNotWholeBlocks) {
   Status s;
   ProceduralSpec heights;
