@@ -23,3 +23,8 @@ target_link_libraries(bench_renderer_frame PRIVATE clipstream::renderer clipstre
 add_executable(bench_renderer_buffering ${CMAKE_CURRENT_LIST_DIR}/renderer_buffering.cpp)
 target_link_libraries(bench_renderer_buffering PRIVATE clipstream::renderer clipstream::cli clipstream_warnings
   OpenGL::OpenGL)
+
+# Whether a smaller clip changes the picture at rest (the ideal reference).
+add_executable(bench_renderer_clip_size ${CMAKE_CURRENT_LIST_DIR}/renderer_clip_size.cpp)
+target_link_libraries(bench_renderer_clip_size PRIVATE clipstream::renderer clipstream::eval clipstream::cli
+  clipstream_warnings)

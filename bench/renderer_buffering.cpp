@@ -183,7 +183,8 @@ int main(int argc, char** argv) {
               ctx->describe().c_str(), vp.width_px, vp.height_px, frames, upload_tiles, runs);
   std::printf("buffering\tframe_mean_ms\tframe_p50_ms\tframe_p99_ms\tframe_max_ms\tframe_sd_ms\t"
               "upload_mean_ms\tupload_cpu_mean_ms\tupload_p99_ms\tupload_max_ms\ttiles\tsecond_copies\n");
-  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy}) {
+  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
+                      Buffering::kStaged}) {
     Result best;
     best.frame_p99 = 1e30;
     for (uint32_t run = 0; run < runs; ++run) {

@@ -1,6 +1,7 @@
 // Frame cost of the clipmap ground against a plain mipmapped 2D texture
-// drawing the same view (same ray setup, hardware trilinear). Everything the
-// clipmap needs is resident; the time is the render thread's CPU time for
+// drawing the same view (same ray setup, hardware trilinear), and of BC1
+// tiles against RGBA8 ones (the same shader sampling a compressed stack).
+// Everything the clipmap needs is resident; the time is the render thread's CPU time for
 // draw + glFinish, best of N. Run with LP_NUM_THREADS=0 so llvmpipe shades on
 // that thread (then the CPU time is the whole frame's work).
 //
@@ -86,6 +87,12 @@ int main(int argc, char** argv) {
   std::unique_ptr<PlainTextureRenderer> plain;
   if (Status s = PlainTextureRenderer::create(image.data(), side, side, &plain); !s) return 1;
   auto source = makeImageSource(std::move(image), side, side, tile);
+  Status bc1_status;
+  auto bc1_source = makeBc1Source(source, &bc1_status);
+  if (!bc1_source) {
+    std::fprintf(stderr, "%s\n", bc1_status.toString().c_str());
+    return 1;
+  }
   std::unique_ptr<OffscreenTarget> target;
   if (Status s = OffscreenTarget::create(vp, &target); !s) return 1;
 
@@ -97,18 +104,22 @@ int main(int argc, char** argv) {
                         {"high-down", 900.0, -1.45}, {"horizon", 15.0, -0.05}};
   std::printf("# %s, %ux%u, texture %ux%u, tile %u, best of %d\n", ctx->describe().c_str(),
               vp.width_px, vp.height_px, side, side, tile, repeats);
-  std::printf("view\tplain_ms\tclipmap_single_ms\tclipmap_double_ms\tratio_double\tstack_levels\n");
+  std::printf("view\tplain_ms\tclipmap_single_ms\tclipmap_double_ms\tratio_double\tclipmap_bc1_ms\t"
+              "bc1_vs_rgba8\tstack_levels\n");
   for (const View& v : views) {
     Camera cam;
     cam.position = {side * 0.5 + 0.3, v.height, side * 0.6 + 0.7};
     cam.heading_rad = 0.35;
     cam.pitch_rad = v.pitch;
     const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, planner);
-    std::unique_ptr<ClipmapRenderer> renderers[2];
-    for (int mode = 0; mode < 2; ++mode) {
+    // RGBA8 single-buffered, RGBA8 double-buffered, BC1 single-buffered.
+    constexpr int kModes = 3;
+    std::unique_ptr<ClipmapRenderer> renderers[kModes];
+    for (int mode = 0; mode < kModes; ++mode) {
       std::unique_ptr<ClipmapRenderer>& r = renderers[mode];
+      TileSource& tiles = mode == 2 ? *bc1_source : *source;
       RendererConfig rc{plan.clip_tiles, plan.pyramid_level,
-                        mode == 0 ? Buffering::kSingle : Buffering::kDoubleUploadTwice};
+                        mode == 1 ? Buffering::kDoubleUploadTwice : Buffering::kSingle, tiles.content()};
       if (Status s = ClipmapRenderer::create(source->geometry(), rc, &r); !s) {
         std::fprintf(stderr, "%s\n", s.toString().c_str());
         return 1;
@@ -117,7 +128,7 @@ int main(int argc, char** argv) {
       const PyramidGeometry& g = source->geometry();
       auto upload = [&](uint32_t l, int64_t x, int64_t y) {
         auto px = std::make_shared<std::vector<uint8_t>>();
-        if (source->fetch({l, uint32_t(x), uint32_t(y)}, px.get()).isOk())
+        if (tiles.fetch({l, uint32_t(x), uint32_t(y)}, px.get()).isOk())
           r->uploadTile({l, uint32_t(x), uint32_t(y)}, px);
       };
       for (uint32_t l = plan.pyramid_level; l < g.levelCount(); ++l)
@@ -136,14 +147,14 @@ int main(int argc, char** argv) {
       r->endUploads();
     }
     // Interleaved rounds, so load from other processes hits all three alike.
-    double ms[2] = {1e30, 1e30}, plain_ms = 1e30;
+    double ms[kModes] = {1e30, 1e30, 1e30}, plain_ms = 1e30;
     for (int round = 0; round < repeats; ++round) {
       plain_ms = std::min(plain_ms, bestMs(1, *target, [&] { plain->draw(cam, vp); }));
-      for (int mode = 0; mode < 2; ++mode)
+      for (int mode = 0; mode < kModes; ++mode)
         ms[mode] = std::min(ms[mode], bestMs(1, *target, [&] { renderers[mode]->draw(cam, vp); }));
     }
-    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0], ms[1],
-                ms[1] / plain_ms, plan.pyramid_level);
+    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0], ms[1],
+                ms[1] / plain_ms, ms[2], ms[2] / ms[0], plan.pyramid_level);
   }
   return 0;
 }

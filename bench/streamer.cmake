@@ -5,3 +5,6 @@ target_link_libraries(bench_streamer_throughput PRIVATE clipstream::streamer cli
 
 add_executable(bench_streamer_hitrate ${CMAKE_CURRENT_LIST_DIR}/streamer_hitrate.cpp)
 target_link_libraries(bench_streamer_hitrate PRIVATE clipstream::streamer clipstream_warnings)
+
+add_executable(bench_streamer_bc1 ${CMAKE_CURRENT_LIST_DIR}/streamer_bc1.cpp)
+target_link_libraries(bench_streamer_bc1 PRIVATE clipstream::streamer clipstream_warnings)

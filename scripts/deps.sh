@@ -12,6 +12,7 @@ packages=(
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   openssl               # ... and make a certificate for its https:// test
   libcli11-dev nlohmann-json3-dev libglm-dev
+  libstb-dev            # stb_dxt: the BC1 encoder of --tile-format bc1 (streamer/src/bc1.cpp)
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox xvfb xauth

@@ -87,6 +87,11 @@ done
 for u in 1 2 4 8 16 32 64; do
   add "upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u"
 done
+# BC1 tiles (transcoded by the loaders), judged against the RGBA8 reference:
+# compression and streaming error together, beside speed_S's streaming error.
+for s in 1 10 100; do
+  add "bc1_speed_$s" 12 "$COMMON --frames $FRAMES --speed $s --tile-format bc1 --reference-tile-format rgba8"
+done
 add "buffering_single" 12 "$COMMON --frames $LONG --speed 20 --buffering single"
 add "buffering_double" 12 "$COMMON --frames $LONG --speed 20 --buffering double-upload"
 add "throttle_on" 12 "$COMMON --frames $LONG --speed 50 --upload-tiles 4"
@@ -199,6 +204,19 @@ publish "$DATA/psnr_vs_speed.csv"
 } >"$DATA/upload_budget.csv.tmp.$$"
 publish "$DATA/upload_budget.csv"
 {
+  echo "speed,psnr_mean_rgba8,psnr_mean_bc1,psnr_min_bc1,frame_ms_p50_rgba8,frame_ms_p50_bc1,upload_ms_per_tile_rgba8,upload_ms_per_tile_bc1,decode_ms_per_tile_rgba8,decode_ms_per_tile_bc1,gpu_texture_mib_rgba8,gpu_texture_mib_bc1"
+  for s in 1 10 100; do
+    line="$s"
+    for k in psnr_mean_db; do line="$line,$(S speed_$s $k),$(S bc1_speed_$s $k)"; done
+    line="$line,$(S bc1_speed_$s psnr_min_db)"
+    for k in frame_ms_p50 upload_ms_per_tile decode_ms_per_tile gpu_texture_mib; do
+      line="$line,$(S speed_$s $k),$(S bc1_speed_$s $k)"
+    done
+    echo "$line"
+  done
+} >"$DATA/bc1.csv.tmp.$$"
+publish "$DATA/bc1.csv"
+{
   echo "budget_mib,opt_pct,lru_pct,ours_pct"
   for b in 1 2 4 8 16 32 64 128; do
     "$TRACE_TOOL" "$WORK/orbit.trace" --budget-mb "$b" >"$WORK/trace_$b.txt"
@@ -302,7 +320,8 @@ plot psnr_vs_speed "
 set title 'PSNR against the ideal reference vs camera speed (straight line over 2^{26} texels, default budgets)'
 set logscale x; set xlabel 'camera speed (x path speed)'; set ylabel 'PSNR, dB (99 = identical)'
 set yrange [0:100]
-plot '$DATA/psnr_vs_speed.csv' u 1:2 skip 1 w lp lw 2 t 'mean PSNR', '' u 1:3 skip 1 w lp lw 2 t 'min PSNR', 30 w l dt 2 t '30 dB'"
+plot '$DATA/psnr_vs_speed.csv' u 1:2 skip 1 w lp lw 2 t 'mean PSNR', '' u 1:3 skip 1 w lp lw 2 t 'min PSNR', \\
+     '$DATA/bc1.csv' u 1:3 skip 1 w lp lw 2 t 'BC1 mean PSNR (against RGBA8)', 30 w l dt 2 t '30 dB'"
 plot upload_budget "
 set title 'PSNR and p99 frame time vs per-frame upload budget (straight line, speed x20)'
 set logscale x 2; set xlabel 'tiles uploaded per frame'; set ylabel 'PSNR, dB'; set y2label 'p99 frame time, ms'
@@ -349,6 +368,11 @@ GEN="$WORK/benchmarks_sweep.md"
   echo; echo "![PSNR vs speed](charts/psnr_vs_speed.png)"; echo
   echo "\`$(cat "$WORK/speed_10.cmd" | sed "s/--speed 10/--speed S/; s#$WORK/speed_10#DIR#")\` for S in 1 2 5 10 20 50 100"; echo
   csv2md "$DATA/psnr_vs_speed.csv"; echo
+  echo "### BC1 tiles against RGBA8"
+  echo
+  echo "\`$(sed "s/--speed 10/--speed S/; s#$WORK/bc1_speed_10#DIR#" "$WORK/bc1_speed_10.cmd")\` for S in 1 10 100, beside the RGBA8 runs above"
+  echo "(PSNR of BC1 frames against the RGBA8 ideal reference; per tile: the renderer's upload work, the loaders' decode + transcode)"; echo
+  csv2md "$DATA/bc1.csv"; echo
   echo "### PSNR and p99 frame time vs upload budget"
   echo; echo "![upload budget](charts/upload_budget.png)"; echo
   echo "\`$(sed "s/--upload-tiles 16/--upload-tiles T/; s#$WORK/upload_16#DIR#" "$WORK/upload_16.cmd")\` for T in 1 … 64"; echo

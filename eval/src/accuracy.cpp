@@ -27,7 +27,7 @@ Status IdealReference::resize(const Viewport& viewport) {
   m_target.reset();
   // The clip size depends on the viewport only, not the camera.
   const ClipmapPlan plan = planClipmap(m_geometry, viewport, Camera{}, m_planner);
-  RendererConfig rc{plan.clip_tiles, plan.pyramid_level, Buffering::kSingle};
+  RendererConfig rc{plan.clip_tiles, plan.pyramid_level, Buffering::kSingle, m_source->content()};
   if (Status s = ClipmapRenderer::create(m_geometry, rc, &m_renderer); !s) return s;
   if (Status s = OffscreenTarget::create(viewport, &m_target); !s) return s;
   m_loaded.assign(plan.pyramid_level, TileRect{});

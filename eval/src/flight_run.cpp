@@ -34,6 +34,7 @@ class ThreadWatchSource final : public TileSource {
   explicit ThreadWatchSource(std::shared_ptr<TileSource> inner)
       : m_inner(std::move(inner)), m_render_thread(std::this_thread::get_id()) {}
   const PyramidGeometry& geometry() const override { return m_inner->geometry(); }
+  TileContent content() const override { return m_inner->content(); }
   Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
     note();
     return m_inner->fetch(key, rgba);
@@ -127,7 +128,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     ao.ground_truth = o.ground_truth_every > 0;
     ao.sample_tiles = o.sample_tiles;
     ao.reference = o.reference_every > 0;
-    if (Status s = FlyAccuracy::create(o.source, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
+    const std::shared_ptr<TileSource>& reference = o.reference_source ? o.reference_source : o.source;
+    if (Status s = FlyAccuracy::create(reference, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
   }
   // Before the flight exists no height is known: the first camera is put
   // above the highest ground, then every frame above the ground under it.
@@ -329,6 +331,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   run->clip_tiles = flight->firstPlan().clip_tiles;
   run->pyramid_level = flight->firstPlan().pyramid_level;
   run->texture_bytes = flight->renderer().textureBytes();
+  run->tile_content = flight->renderer().tileContent();
   run->resizes = flight->resizes();
   run->preload_failures = flight->preloadFailures();
   // The run's statistics end with its last frame: reads that land while the

@@ -178,9 +178,21 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     source = makeFaultySource(source, fault);
   }
   const PyramidGeometry geometry = source->geometry();
+  std::shared_ptr<TileSource> rgba8_source = source;
+  if (o.tile_format == TileContent::kBc1) {
+    Status s;
+    source = makeBc1Source(source, &s);
+    if (!source) return s;
+  }
 
   FlightRunOptions r;
   r.source = source;
+  if (o.reference_tile_format && *o.reference_tile_format != o.tile_format) {
+    Status s;
+    r.reference_source = *o.reference_tile_format == TileContent::kBc1 ? makeBc1Source(rgba8_source, &s)
+                                                                       : rgba8_source;
+    if (!r.reference_source) return s;
+  }
   if (!o.elevation_path.empty()) {
     TerrainLayerConfig terrain;
     const RemoteOptions& remote = o.remote;
@@ -278,6 +290,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.cache_mb = o.cache_mb;
   d.warmup_frames = o.warmup_frames;
   d.reference = o.reference;
+  d.reference_tile_format = o.reference_tile_format.value_or(o.tile_format);
   d.throttle = o.throttle;
   d.prefetch = o.prefetch;
   d.frustum_priority = o.frustum_priority;

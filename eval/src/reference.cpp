@@ -2,6 +2,7 @@
 #include <clipstream/eval/reference.h>
 
 #include <clipstream/renderer/config.h>
+#include <clipstream/streamer/bc1.h>
 
 #include <algorithm>
 #include <cmath>
@@ -118,6 +119,11 @@ TexelFunction texelsFromSource(std::shared_ptr<TileSource> source) {
     if (it == cache->tiles.end()) {
       std::vector<uint8_t> px;
       if (!source->fetch(key, &px)) px.clear();
+      // BC1 tiles are decoded here: the texels are what the GPU samples.
+      if (!px.empty() && source->content() == TileContent::kBc1) {
+        std::vector<uint8_t> blocks = std::move(px);
+        if (!decodeBc1Tile(blocks, tp, &px)) px.clear();
+      }
       it = cache->tiles.emplace(std::make_tuple(key.level, key.x, key.y), std::move(px)).first;
     }
     if (it->second.empty()) {

@@ -135,6 +135,7 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   const RunSummary& s = run.summary;
   nlohmann::json acc = nlohmann::json::parse(s.toJson(), nullptr, false);
   acc["reference"] = d.reference;
+  acc["reference_tile_format"] = tileContentName(d.reference_tile_format);
   acc["frames_with_holes"] = run.frames_with_holes;
   acc["ground_truth_frames"] = run.ground_truth_frames;
   acc["ground_truth_psnr_mean_db"] = run.ground_truth_psnr_mean_db;
@@ -181,7 +182,10 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       {"clip_tiles", run.clip_tiles},
       {"pyramid_level", run.pyramid_level},
       {"gl", run.gl},
-      {"texture_bytes", run.texture_bytes},
+      {"tile_format", tileContentName(run.tile_content)},
+      {"gpu_texture_bytes", run.texture_bytes.total()},
+      {"gpu_stack_bytes", run.texture_bytes.stack},
+      {"gpu_usable_bytes", run.texture_bytes.usable},
       {"preload_ms", run.preload_ms},
       {"preload_failures", run.preload_failures},
       {"run_ms", run.run_ms},
@@ -236,6 +240,16 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("ram_hit_rate", num(s.ram_hit_rate));
   add("gpu_hit_rate", num(s.gpu_hit_rate));
   add("peak_rss_mib", num(mib(s.peak_rss_bytes)));
+  add("gpu_texture_mib", num(mib(run.texture_bytes.total())));
+  add("tile_format", tileContentName(run.tile_content));
+  // Per tile: the renderer's texture work over the tiles it uploaded, and
+  // the loaders' decode (and transcode) time over the tiles they loaded.
+  const Means m = meansOf(run);
+  add("upload_ms_per_tile",
+      num(s.tiles_uploaded ? m.upload * double(run.frames.size()) / double(s.tiles_uploaded) : 0.0));
+  add("decode_ms_per_tile", num(run.streamer.total.loads
+                                    ? run.streamer.decode_ms_total / double(run.streamer.total.loads)
+                                    : 0.0));
   add("ram_peak_mib", num(mib(run.streamer.ram_peak_bytes)));
   add("ram_budget_mib", num(mib(run.streamer.ram_budget_bytes)));
   add("frames_with_holes", std::to_string(run.frames_with_holes));
@@ -290,6 +304,9 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   row("ram_peak_mib", mib(run.streamer.ram_peak_bytes), "%.1f");
   row("pngs_written", double(d.pngs_written), "%.0f");
   row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
+  out << "tile_format\t" << tileContentName(run.tile_content) << "\n";
+  row("gpu_texture_bytes", double(run.texture_bytes.total()), "%.0f");
+  row("gpu_texture_mib", mib(run.texture_bytes.total()), "%.1f");
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
   if (run.height_texture_bytes > 0) {
     row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");

@@ -41,7 +41,13 @@ int main(int argc, char** argv) {
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
-  app.add_option("--buffering", buffering, "single, double-upload or double-copy");
+  app.add_option("--buffering", buffering, "single, double-upload, double-copy or staged");
+  std::string tile_format = tileContentName(o.tile_format), reference_tile_format;
+  app.add_option("--tile-format", tile_format,
+                 "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads, an eighth of "
+                 "the video memory)");
+  app.add_option("--reference-tile-format", reference_tile_format,
+                 "Tiles of the ideal reference (with --reference): rgba8 or bc1; default: --tile-format");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
   std::string resize;
   bool no_throttle = false, no_prefetch = false, no_frustum = false, no_terrain_bounds = false;
@@ -98,6 +104,12 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
+  if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
+  if (s && !reference_tile_format.empty()) {
+    TileContent reference = TileContent::kRgba8;
+    s = colourTileContentFromName(reference_tile_format, &reference);
+    o.reference_tile_format = reference;
+  }
   if (s && !resize.empty())
     s = cli::parseResize(resize, kMaxFlyFrames, &o.resize_at_frame, &o.resize_to.width_px,
                          &o.resize_to.height_px);

@@ -10,7 +10,7 @@
 layout(location = 0) out vec4 outColor;
 
 uniform sampler2DArray uStack;    // layer l: level l (mip 0), l + 1 (mip 1); pyramid layer: chain
-uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 4
+uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 8
 uniform int uPyramidLevel;
 uniform float uMinLod;            // MaxTextureLOD from the streamer
 uniform float uMaxLod;            // coarsest level
@@ -29,9 +29,9 @@ vec3 levelTint(int level) {
 }
 
 // Position of the ground point in level `level`'s slots (tiles, [0, slots)),
-// its slot, and the code the usable map holds for it: 1 + the tile's slot
-// period (tile / slots) mod 4 per axis, so a tile outside the window never
-// passes for the one sharing its slot. Slot = tile mod slots is
+// its slot, and the code the usable map holds for it: 1 + px + 4 py with
+// px, py the tile's slot period (tile / slots) mod 4 per axis (1..16), so a
+// tile outside the window never passes for the one sharing its slot. Slot = tile mod slots is
 // toroidalSlot() of clipmap.h; usableCode() there writes the code.
 vec2 slotPosition(int level, vec2 rel, out ivec2 slot, out uint code) {
   vec4 cam = uCamCell[level];
@@ -57,7 +57,7 @@ void main() {
   float lod = clamp(lambda, uMinLod, uMaxLod);
   int wanted = int(lod);
   // One lookup at the wanted level gives the finest usable level for this
-  // spot (usable map, bits 4-7); a tile outside the wanted level's window
+  // spot (usable map, high byte); a tile outside the wanted level's window
   // (code mismatch) falls back to the always complete pyramid level.
   int level = uPyramidLevel;
   {
@@ -66,7 +66,7 @@ void main() {
     int probe = min(wanted, max(uPyramidLevel - 1, 0));
     slotPosition(probe, rel, slot, code);
     uint v = texelFetch(uUsable, ivec3(slot, probe), 0).r;
-    if (wanted < uPyramidLevel && (v & 15u) == code) level = min(wanted + int(v >> 4), uPyramidLevel);
+    if (wanted < uPyramidLevel && (v & 255u) == code) level = min(wanted + int(v >> 8), uPyramidLevel);
   }
   float used = max(lod, float(level));
   // Levels past the pyramid level are mips of the pyramid layer.

@@ -30,11 +30,11 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
-                             ClipmapPlan* plan) {
+                             ClipmapPlan* plan, uint32_t upload_tiles) {
   out->reset();
   const ClipmapPlan first = planClipmap(source.geometry(), viewport, camera, planner);
   std::unique_ptr<ClipmapRenderer> renderer;
-  RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering};
+  RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering, source.content(), upload_tiles};
   if (Status s = ClipmapRenderer::create(source.geometry(), rc, &renderer); !s) return s;
   renderer->beginFrame();
   const uint32_t missing = renderer->loadPyramid(
@@ -130,7 +130,8 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
   ClipmapPlan plan;
   const auto start = Clock::now();
   if (Status s = createClipmapRenderer(*m_source, viewport, camera, m_config.streamer.planner,
-                                       m_config.buffering, &renderer, &m_preload_failures, &plan);
+                                       m_config.buffering, &renderer, &m_preload_failures, &plan,
+                                       m_config.upload_tiles);
       !s)
     return s;
   *preload_ms = msBetween(start, Clock::now());

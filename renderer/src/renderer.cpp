@@ -7,10 +7,12 @@
 #include "shaders.h"
 
 #include <clipstream/renderer/config.h>
+#include <clipstream/streamer/bc1.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <utility>
 
 namespace clipstream {
@@ -24,6 +26,27 @@ double msSince(Clock::time_point start) {
 
 GLint loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
 
+constexpr GLenum kBc1Format = GL_COMPRESSED_RGB_S3TC_DXT1_EXT;
+
+// Bytes of one size_px^2 image of `content` (BC1: whole 4x4 blocks).
+uint64_t imageBytes(uint64_t size_px, TileContent content) {
+  if (content == TileContent::kBc1) {
+    const uint64_t blocks = (size_px + kBc1BlockPx - 1) / kBc1BlockPx;
+    return blocks * blocks * kBc1BlockBytes;
+  }
+  return size_px * size_px * 4;
+}
+
+bool hasExtension(const char* name) {
+  GLint n = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+  for (GLint i = 0; i < n; ++i) {
+    const char* e = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, GLuint(i)));
+    if (e != nullptr && std::strcmp(e, name) == 0) return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 const char* bufferingName(Buffering buffering) {
@@ -31,18 +54,20 @@ const char* bufferingName(Buffering buffering) {
     case Buffering::kSingle: return "single";
     case Buffering::kDoubleUploadTwice: return "double-upload";
     case Buffering::kDoubleCopy: return "double-copy";
+    case Buffering::kStaged: return "staged";
   }
   return "?";
 }
 
 Status bufferingFromName(const std::string& name, Buffering* out) {
-  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy})
+  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
+                      Buffering::kStaged})
     if (name == bufferingName(b)) {
       *out = b;
       return Status::ok();
     }
   return Status::error(ErrorCode::kInvalidArgument,
-                       "buffering \"" + printableText(name, 40) + "\" is not single, double-upload or double-copy");
+                       "buffering \"" + printableText(name, 40) + "\" is not single, double-upload, double-copy or staged");
 }
 
 Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererConfig& config,
@@ -60,6 +85,18 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   if (top.tiles_x > config.clip_tiles || top.tiles_y > config.clip_tiles)
     return Status::error(ErrorCode::kInvalidArgument,
                          "renderer: pyramid level does not fit in one clip");
+  if (config.tile_content != TileContent::kRgba8 && config.tile_content != TileContent::kBc1)
+    return Status::error(ErrorCode::kInvalidArgument, "renderer: the colour stack holds rgba8 or bc1 tiles, not " +
+                                                          std::string(tileContentName(config.tile_content)));
+  if (config.tile_content == TileContent::kBc1) {
+    if (geometry.tile_px % kBc1BlockPx != 0)
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "renderer: BC1 needs a tile size that is a multiple of 4, not " +
+                               std::to_string(geometry.tile_px));
+    if (!hasExtension("GL_EXT_texture_compression_s3tc"))
+      return Status::error(ErrorCode::kUnavailable,
+                           "renderer: BC1 tiles need GL_EXT_texture_compression_s3tc, which this GL lacks");
+  }
   std::unique_ptr<ClipmapRenderer> r(new ClipmapRenderer());
   r->m_geometry = geometry;
   r->m_config = config;
@@ -91,10 +128,11 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   const GLsizei layers = GLsizei(config.pyramid_level + 1);
   const GLsizei usable_layers = GLsizei(std::max(config.pyramid_level, 1u));
   const uint32_t c = r->m_slots;
-  for (uint32_t set = 0; set < r->setCount(); ++set) {
+  const bool bc1 = config.tile_content == TileContent::kBc1;
+  for (uint32_t set = 0; set < r->stackSets(); ++set) {
     glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_stack[set]);
-    glTextureStorage3D(r->m_stack[set], GLsizei(r->m_mips), GL_RGBA8, GLsizei(slots_px),
-                       GLsizei(slots_px), layers);
+    glTextureStorage3D(r->m_stack[set], GLsizei(r->m_mips), bc1 ? kBc1Format : GL_RGBA8,
+                       GLsizei(slots_px), GLsizei(slots_px), layers);
     glTextureParameteri(r->m_stack[set], GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
     glTextureParameteri(r->m_stack[set], GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     // REPEAT is the toroidal wrap: a bilinear footprint crossing the slot
@@ -102,19 +140,45 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
     glTextureParameteri(r->m_stack[set], GL_TEXTURE_WRAP_S, GL_REPEAT);
     glTextureParameteri(r->m_stack[set], GL_TEXTURE_WRAP_T, GL_REPEAT);
     const uint8_t zero[4] = {0, 0, 0, 0};
-    for (uint32_t m = 0; m < r->m_mips; ++m)
-      glClearTexImage(r->m_stack[set], GLint(m), GL_RGBA, GL_UNSIGNED_BYTE, zero);
-    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_usable_tex[set]);
-    glTextureStorage3D(r->m_usable_tex[set], 1, GL_R8UI, GLsizei(c), GLsizei(c), usable_layers);
-    // Integer textures are incomplete (read as 0) with a mipmap filter.
-    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_BYTE, zero);
-    r->m_texture_bytes += slots_px * slots_px * 4 * uint64_t(layers) * 4 / 3 +
-                          uint64_t(c) * c * uint64_t(usable_layers);
+    for (uint32_t m = 0; m < r->m_mips; ++m) {
+      const uint64_t size = slots_px >> m;
+      if (bc1) {
+        // Compressed images cannot be cleared: zero blocks (black) are
+        // uploaded, a layer at a time.
+        const std::vector<uint8_t> zeros(imageBytes(size, TileContent::kBc1), 0);
+        for (GLsizei layer = 0; layer < layers; ++layer)
+          glCompressedTextureSubImage3D(r->m_stack[set], GLint(m), 0, 0, layer, GLsizei(size), GLsizei(size), 1,
+                                        kBc1Format, GLsizei(zeros.size()), zeros.data());
+      } else {
+        glClearTexImage(r->m_stack[set], GLint(m), GL_RGBA, GL_UNSIGNED_BYTE, zero);
+      }
+      r->m_texture_bytes.stack += imageBytes(size, config.tile_content) * uint64_t(layers);
+    }
     r->m_mip0_tile[set].assign(config.pyramid_level, std::vector<uint64_t>(size_t(c) * c, kNoTile));
     r->m_mip1_tile[set].assign(config.pyramid_level,
                                std::vector<uint64_t>(size_t(c / 2) * (c / 2), kNoTile));
+  }
+
+  for (uint32_t set = 0; set < r->usableSets(); ++set) {
+    const uint8_t zero[4] = {0, 0, 0, 0};
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_usable_tex[set]);
+    glTextureStorage3D(r->m_usable_tex[set], 1, GL_R16UI, GLsizei(c), GLsizei(c), usable_layers);
+    // Integer textures are incomplete (read as 0) with a mipmap filter.
+    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, zero);
+    r->m_texture_bytes.usable += uint64_t(c) * c * uint64_t(usable_layers) * 2;
+  }
+  if (r->staged()) {
+    r->m_staging_region_bytes = size_t(std::max(config.staging_tiles, 1u)) * r->tileBytes();
+    const size_t bytes = r->m_staging_region_bytes * renderer_config::kStagingFrames;
+    const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+    glCreateBuffers(1, &r->m_staging);
+    glNamedBufferStorage(r->m_staging, GLsizeiptr(bytes), nullptr, flags);
+    r->m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(r->m_staging, 0, GLsizeiptr(bytes), flags));
+    if (r->m_staging_map == nullptr)
+      return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
+    r->m_texture_bytes.staging = bytes;
   }
 
   for (uint32_t l = config.pyramid_level; l < geometry.levelCount(); ++l) {
@@ -134,6 +198,12 @@ ClipmapRenderer::~ClipmapRenderer() {
   glDeleteVertexArrays(1, &m_vao);
   glDeleteTextures(2, m_stack);
   glDeleteTextures(2, m_usable_tex);
+  for (void* fence : m_staging_fence)
+    if (fence != nullptr) glDeleteSync(static_cast<GLsync>(fence));
+  if (m_staging != 0) {
+    glUnmapNamedBuffer(m_staging);
+    glDeleteBuffers(1, &m_staging);
+  }
 }
 
 namespace {
@@ -143,7 +213,18 @@ uint64_t packTile(int64_t x, int64_t y) { return uint64_t(uint32_t(x)) | (uint64
 void ClipmapRenderer::beginFrame() {
   m_stats = {};
   m_issue_ms = 0.0;
-  if (setCount() == 1 || m_pending.empty()) return;
+  if (staged()) {
+    // The next region; the frame that wrote it kStagingFrames frames ago
+    // must have had its copies run (normally long done: no wait).
+    m_staging_region = (m_staging_region + 1) % renderer_config::kStagingFrames;
+    m_staging_used = 0;
+    if (void*& fence = m_staging_fence[m_staging_region]; fence != nullptr) {
+      glClientWaitSync(static_cast<GLsync>(fence), GL_SYNC_FLUSH_COMMANDS_BIT, uint64_t(10) * 1000000000);
+      glDeleteSync(static_cast<GLsync>(fence));
+      fence = nullptr;
+    }
+  }
+  if (stackSets() == 1 || m_pending.empty()) return;
   const auto start = Clock::now();
   const uint32_t back = 1 - m_front;
   const GLsizei tp = GLsizei(m_geometry.tile_px);
@@ -164,18 +245,46 @@ void ClipmapRenderer::beginFrame() {
   m_issue_ms += msSince(start);
 }
 
-void ClipmapRenderer::uploadStack(uint32_t set, const TileKey& key, const uint8_t* rgba) {
+size_t ClipmapRenderer::tileBytes() const {
+  return size_t(tileContentBytes(m_config.tile_content, m_geometry.tile_px));
+}
+
+int64_t ClipmapRenderer::stage(const uint8_t* pixels, size_t bytes) {
+  if (m_staging_used + bytes > m_staging_region_bytes) return -1;
+  const size_t offset = size_t(m_staging_region) * m_staging_region_bytes + m_staging_used;
+  std::memcpy(m_staging_map + offset, pixels, bytes);
+  m_staging_used += bytes;
+  return int64_t(offset);
+}
+
+void ClipmapRenderer::uploadStack(uint32_t set, const TileKey& key, const uint8_t* pixels) {
   const GLsizei tp = GLsizei(m_geometry.tile_px);
   const uint32_t sx = slot(key.x, m_slots), sy = slot(key.y, m_slots);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-  glTextureSubImage3D(m_stack[set], 0, GLint(sx) * tp, GLint(sy) * tp, GLint(key.level), tp, tp, 1,
-                      GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+  if (staged()) {
+    // From the frame's staging region: `pixels` becomes an offset into the
+    // bound pixel-unpack buffer.
+    const int64_t offset = stage(pixels, tileBytes());
+    if (offset >= 0) {
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, m_staging);
+      pixels = reinterpret_cast<const uint8_t*>(uintptr_t(offset));
+    } else {
+      ++m_stats.unstaged;
+    }
+  }
+  if (compressed())
+    glCompressedTextureSubImage3D(m_stack[set], 0, GLint(sx) * tp, GLint(sy) * tp, GLint(key.level), tp, tp,
+                                  1, kBc1Format, GLsizei(tileBytes()), pixels);
+  else
+    glTextureSubImage3D(m_stack[set], 0, GLint(sx) * tp, GLint(sy) * tp, GLint(key.level), tp, tp, 1,
+                        GL_RGBA, GL_UNSIGNED_BYTE, pixels);
+  if (staged()) glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
   if (key.level < m_config.pyramid_level)
     m_mip0_tile[set][key.level][size_t(sy) * m_slots + sx] = packTile(key.x, key.y);
 }
 
-void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* rgba) {
+void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* pixels) {
   // Level pyramid_level + k is mip k of the pyramid layer. It has fewer
   // tiles than the slot period, so slot == tile position (unless a test
   // bias shifts it), and its tiles may overhang the smaller mips: only the
@@ -188,11 +297,31 @@ void ClipmapRenderer::uploadPyramid(const TileKey& key, const uint8_t* rgba) {
   if (x >= size || y >= size) return;
   const uint32_t w = uint32_t(std::min<uint64_t>(tp, size - x));
   const uint32_t h = uint32_t(std::min<uint64_t>(tp, size - y));
+  if (compressed()) {
+    // The blocks covering w x h (a partial width or height reaches the
+    // mip's edge, where GL takes a partial block), packed row by row.
+    const uint32_t row_blocks = tp / kBc1BlockPx;
+    const uint32_t bw = (w + kBc1BlockPx - 1) / kBc1BlockPx, bh = (h + kBc1BlockPx - 1) / kBc1BlockPx;
+    std::vector<uint8_t> packed;
+    const uint8_t* data = pixels;
+    if (bw != row_blocks || bh != row_blocks) {
+      packed.resize(size_t(bw) * bh * kBc1BlockBytes);
+      for (uint32_t by = 0; by < bh; ++by)
+        std::memcpy(packed.data() + size_t(by) * bw * kBc1BlockBytes,
+                    pixels + size_t(by) * row_blocks * kBc1BlockBytes, size_t(bw) * kBc1BlockBytes);
+      data = packed.data();
+    }
+    for (uint32_t set = 0; set < stackSets(); ++set)
+      glCompressedTextureSubImage3D(m_stack[set], GLint(mip), GLint(x), GLint(y), GLint(m_config.pyramid_level),
+                                    GLsizei(w), GLsizei(h), 1, kBc1Format,
+                                    GLsizei(size_t(bw) * bh * kBc1BlockBytes), data);
+    return;
+  }
   glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
   glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(tp));
-  for (uint32_t set = 0; set < setCount(); ++set)
+  for (uint32_t set = 0; set < stackSets(); ++set)
     glTextureSubImage3D(m_stack[set], GLint(mip), GLint(x), GLint(y), GLint(m_config.pyramid_level),
-                        GLsizei(w), GLsizei(h), 1, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+                        GLsizei(w), GLsizei(h), 1, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 }
 
@@ -225,7 +354,7 @@ uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
   glNamedFramebufferReadBuffer(fbo[0], GL_COLOR_ATTACHMENT0);
   const GLint layer = GLint(pyramid);
   auto blit = [&](uint32_t src_mip, const GLint src[4], uint32_t dst_mip, const GLint dst[4]) {
-    for (uint32_t set = 0; set < setCount(); ++set) {
+    for (uint32_t set = 0; set < stackSets(); ++set) {
       glNamedFramebufferTextureLayer(fbo[0], GL_COLOR_ATTACHMENT0, m_stack[set], GLint(src_mip),
                                      layer);
       glNamedFramebufferTextureLayer(fbo[1], GL_COLOR_ATTACHMENT0, m_stack[set], GLint(dst_mip),
@@ -256,7 +385,12 @@ uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
             const uint8_t* c = have(mip - 1, 2 * int64_t(x) + i, 2 * int64_t(y) + j);
             children = c == nullptr || *c != 0;
           }
-        if (parent != nullptr && *parent) {
+        if (compressed()) {
+          const Fill fill = parent != nullptr && *parent ? Fill::kFromParent
+                            : children                   ? Fill::kFromChildren
+                                                         : Fill::kGrey;
+          fillPyramidTileBc1({pyramid + mip, x, y}, fill);
+        } else if (parent != nullptr && *parent) {
           const GLint src[4] = {dst[0] / 2, dst[1] / 2, dst[2] / 2, dst[3] / 2};
           blit(mip + 1, src, mip, dst);
         } else if (children) {
@@ -268,7 +402,7 @@ uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
           blit(mip - 1, src, mip, dst);
         } else {
           const uint8_t grey[4] = {128, 128, 128, 255};
-          for (uint32_t set = 0; set < setCount(); ++set)
+          for (uint32_t set = 0; set < stackSets(); ++set)
             glClearTexSubImage(m_stack[set], GLint(mip), dst[0], dst[1], layer, dst[2] - dst[0],
                                dst[3] - dst[1], 1, GL_RGBA, GL_UNSIGNED_BYTE, grey);
         }
@@ -278,6 +412,79 @@ uint32_t ClipmapRenderer::fillMissingPyramidTiles() {
   glDeleteFramebuffers(2, fbo);
   m_changed = true;
   return filled;
+}
+
+std::vector<uint8_t> ClipmapRenderer::readPyramidRegion(uint32_t mip, uint32_t x, uint32_t y, uint32_t w,
+                                                         uint32_t h) const {
+  const uint32_t bw = (w + kBc1BlockPx - 1) / kBc1BlockPx, bh = (h + kBc1BlockPx - 1) / kBc1BlockPx;
+  std::vector<uint8_t> blocks(size_t(bw) * bh * kBc1BlockBytes);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glGetCompressedTextureSubImage(m_stack[0], GLint(mip), GLint(x), GLint(y), GLint(m_config.pyramid_level),
+                                 GLsizei(w), GLsizei(h), 1, GLsizei(blocks.size()), blocks.data());
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  std::vector<uint8_t> rgba(size_t(w) * h * 4);
+  uint8_t texels[16 * 4];
+  for (uint32_t by = 0; by < bh; ++by)
+    for (uint32_t bx = 0; bx < bw; ++bx) {
+      decodeBc1Block(blocks.data() + (size_t(by) * bw + bx) * kBc1BlockBytes, texels);
+      for (uint32_t j = 0; j < kBc1BlockPx && by * 4 + j < h; ++j)
+        for (uint32_t i = 0; i < kBc1BlockPx && bx * 4 + i < w; ++i)
+          std::memcpy(&rgba[(size_t(by * 4 + j) * w + bx * 4 + i) * 4], &texels[(j * 4 + i) * 4], 4);
+    }
+  return rgba;
+}
+
+void ClipmapRenderer::fillPyramidTileBc1(const TileKey& key, Fill fill) {
+  // The RGBA8 fallbacks of fillMissingPyramidTiles() (a linear blit of the
+  // parent's quarter, a blit of the children's 2x2 average, mid grey) done
+  // on the CPU over decoded blocks, then encoded and uploaded as a tile.
+  const uint32_t tp = m_geometry.tile_px;
+  const uint32_t mip = key.level - m_config.pyramid_level;
+  const uint64_t size = (uint64_t(m_slots) * tp) >> mip;
+  const uint64_t x0 = uint64_t(slot(key.x, m_slots)) * tp, y0 = uint64_t(slot(key.y, m_slots)) * tp;
+  std::vector<uint8_t> tile(size_t(tp) * tp * 4, 128);
+  for (size_t i = 3; i < tile.size(); i += 4) tile[i] = 255;
+  if (fill == Fill::kFromParent) {
+    // The parent's quarter over this tile, clamped to the parent mip.
+    const uint64_t psize = size / 2;
+    const uint32_t px = uint32_t(x0 / 2), py = uint32_t(y0 / 2);
+    const uint32_t pw = uint32_t(std::min<uint64_t>(tp / 2, psize - px));
+    const uint32_t ph = uint32_t(std::min<uint64_t>(tp / 2, psize - py));
+    const std::vector<uint8_t> src = readPyramidRegion(mip + 1, px, py, pw, ph);
+    for (uint32_t j = 0; j < tp; ++j)
+      for (uint32_t i = 0; i < tp; ++i) {
+        // Texel centres of the magnified tile in the quarter's texels.
+        const double sx = std::clamp((i + 0.5) * 0.5 - 0.5, 0.0, double(pw - 1));
+        const double sy = std::clamp((j + 0.5) * 0.5 - 0.5, 0.0, double(ph - 1));
+        const uint32_t ix = uint32_t(sx), iy = uint32_t(sy);
+        const uint32_t ix1 = std::min(ix + 1, pw - 1), iy1 = std::min(iy + 1, ph - 1);
+        const double fx = sx - ix, fy = sy - iy;
+        for (int c = 0; c < 3; ++c) {
+          auto at = [&](uint32_t u, uint32_t v) { return double(src[(size_t(v) * pw + u) * 4 + size_t(c)]); };
+          const double v = (at(ix, iy) * (1 - fx) + at(ix1, iy) * fx) * (1 - fy) +
+                           (at(ix, iy1) * (1 - fx) + at(ix1, iy1) * fx) * fy;
+          tile[(size_t(j) * tp + i) * 4 + size_t(c)] = uint8_t(std::lround(v));
+        }
+      }
+  } else if (fill == Fill::kFromChildren) {
+    // The four children's texels, 2x2 averaged, clamped to the finer mip.
+    const uint64_t csize = size * 2;
+    const uint32_t cx = uint32_t(std::min(x0 * 2, csize)), cy = uint32_t(std::min(y0 * 2, csize));
+    const uint32_t cw = uint32_t(std::min<uint64_t>(2 * uint64_t(tp), csize - cx));
+    const uint32_t ch = uint32_t(std::min<uint64_t>(2 * uint64_t(tp), csize - cy));
+    if (cw >= 2 && ch >= 2) {
+      const std::vector<uint8_t> src = readPyramidRegion(mip - 1, cx, cy, cw, ch);
+      for (uint32_t j = 0; j < tp && 2 * j + 1 < ch; ++j)
+        for (uint32_t i = 0; i < tp && 2 * i + 1 < cw; ++i)
+          for (int c = 0; c < 3; ++c) {
+            auto at = [&](uint32_t u, uint32_t v) { return uint32_t(src[(size_t(v) * cw + u) * 4 + size_t(c)]); };
+            tile[(size_t(j) * tp + i) * 4 + size_t(c)] =
+                uint8_t((at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) + at(2 * i + 1, 2 * j + 1) + 2) / 4);
+          }
+    }
+  }
+  std::vector<uint8_t> blocks;
+  if (encodeBc1Tile(tile, tp, &blocks)) uploadPyramid(key, blocks.data());
 }
 
 void ClipmapRenderer::fillCoarserMips(uint32_t set) {
@@ -319,8 +526,7 @@ void ClipmapRenderer::fillCoarserMips(uint32_t set) {
 
 void ClipmapRenderer::uploadTile(const TileKey& key,
                                  std::shared_ptr<const std::vector<uint8_t>> rgba) {
-  const size_t bytes = size_t(m_geometry.tile_px) * m_geometry.tile_px * 4;
-  if (!rgba || rgba->size() != bytes || !m_geometry.contains(key)) return;
+  if (!rgba || rgba->size() != tileBytes() || !m_geometry.contains(key)) return;
   const auto start = Clock::now();
   if (key.level >= m_config.pyramid_level) {
     const size_t index = m_pyramid_first[key.level - m_config.pyramid_level] +
@@ -333,7 +539,7 @@ void ClipmapRenderer::uploadTile(const TileKey& key,
     ++m_stats.tiles;
     m_changed = true;
     uploadPyramid(key, rgba->data());
-  } else if (setCount() == 1) {
+  } else if (stackSets() == 1) {
     ++m_stats.tiles;
     m_changed = true;
     uploadStack(0, key, rgba->data());
@@ -357,37 +563,41 @@ void ClipmapRenderer::endUploads() {
     return;
   }
   const auto start = Clock::now();
-  const uint32_t target = setCount() == 1 ? 0 : 1 - m_front;
+  if (staged() && m_staging_used > 0 && m_staging_fence[m_staging_region] == nullptr)
+    m_staging_fence[m_staging_region] = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+  const uint32_t target = stackSets() == 1 ? 0 : 1 - m_front;
+  const uint32_t usable_target = usableSets() == 1 ? 0 : 1 - m_front;
   fillCoarserMips(target);
   const auto mips_done = Clock::now();
   m_stats.coarser_mips_ms = std::chrono::duration<double, std::milli>(mips_done - start).count();
   UsableMap map = computeUsableMap(m_geometry, m_slots, m_config.pyramid_level, m_residency);
   const uint32_t c = m_slots;
   const bool same = map.windows == m_front_map.windows && map.finest == m_front_map.finest;
-  if (!same || setCount() == 2) {
-    // Per slot: usableCode() of the window tile in bits 0-3 and how many
-    // levels coarser its finest usable ancestor is in bits 4-7 (15 = the
-    // pyramid or further). Written for every window tile, usable or not.
-    std::vector<uint8_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
+  if (!same || usableSets() == 2) {
+    // Per slot: usableCode() of the window tile in the low byte and how
+    // many levels coarser its finest usable ancestor is in the high byte
+    // (up to the pyramid level). Written for every window tile, usable or
+    // not; 0 elsewhere (no code matches it).
+    std::vector<uint16_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
     for (size_t l = 0; l < map.usable.size(); ++l) {
       const TileRect& w = map.windows[l];
       for (int64_t y = w.y0; y < w.y1; ++y)
         for (int64_t x = w.x0; x < w.x1; ++x) {
           const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
-          const uint32_t up = std::min<uint32_t>(map.finest[l][i] - uint32_t(l), 15);
-          flat[l * c * c + i] = uint8_t(usableCode(x, y, c) | (up << 4));
+          const uint32_t up = map.finest[l][i] - uint32_t(l);
+          flat[l * c * c + i] = uint16_t(usableCode(x, y, c) | (up << 8));
         }
     }
     if (!map.usable.empty()) {
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-      glTextureSubImage3D(m_usable_tex[target], 0, 0, 0, 0, GLsizei(c), GLsizei(c),
-                          GLsizei(map.usable.size()), GL_RED_INTEGER, GL_UNSIGNED_BYTE, flat.data());
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 2);
+      glTextureSubImage3D(m_usable_tex[usable_target], 0, 0, 0, 0, GLsizei(c), GLsizei(c),
+                          GLsizei(map.usable.size()), GL_RED_INTEGER, GL_UNSIGNED_SHORT, flat.data());
       glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
     }
   }
   m_front_map = std::move(map);
   m_stats.usable_ms = msSince(mips_done);
-  if (setCount() == 2) m_front = 1 - m_front;
+  if (usableSets() == 2) m_front = 1 - m_front;
   m_changed = false;
   m_issue_ms += msSince(start);
   m_stats.upload_ms = m_issue_ms;
@@ -450,8 +660,8 @@ void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewpor
   glProgramUniform1f(p, loc(p, "uTilePx"), float(tp));
   glProgramUniform1i(p, loc(p, "uStack"), 0);
   glProgramUniform1i(p, loc(p, "uUsable"), 1);
-  glBindTextureUnit(0, m_stack[setCount() == 1 ? 0 : m_front]);
-  glBindTextureUnit(1, m_usable_tex[setCount() == 1 ? 0 : m_front]);
+  glBindTextureUnit(0, m_stack[stackSets() == 1 ? 0 : m_front]);
+  glBindTextureUnit(1, m_usable_tex[usableSets() == 1 ? 0 : m_front]);
 }
 
 // ---------------------------------------------------------------------------

@@ -57,6 +57,9 @@ int main(int argc, char** argv) {
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame")
       ->transform(cli::wholeInRange(1, 1000000));
+  std::string tile_format = "rgba8";
+  app.add_option("--tile-format", tile_format,
+                 "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
   app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
       ->transform(cli::wholeInRange(0, UINT32_MAX));
@@ -70,6 +73,9 @@ int main(int argc, char** argv) {
 
   Viewport vp;
   if (Status s = cli::parseSize(size, &vp.width_px, &vp.height_px); !s) return cli::usageError(app, s.message);
+  TileContent tile_content = TileContent::kRgba8;
+  if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
+    return cli::usageError(app, s.message);
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {
@@ -101,6 +107,14 @@ int main(int argc, char** argv) {
   }
   if (!source) {
     return cli::usageError(app, "give a STORE or --procedural SIDE");
+  }
+  if (tile_content == TileContent::kBc1) {
+    Status s;
+    source = makeBc1Source(source, &s);
+    if (!source) {
+      cli::printError(app, s.toString());
+      return 1;
+    }
   }
   const PyramidGeometry& g = source->geometry();
   std::optional<TerrainLayerConfig> terrain;

@@ -158,7 +158,7 @@ Status checkLayer(const StreamLayer& l, size_t index) {
   if (!std::isfinite(l.origin_texel.x) || !std::isfinite(l.origin_texel.y))
     return Status::error(ErrorCode::kInvalidArgument, what + ": the origin texel is not finite");
   const TileContent content = l.source->content();
-  if (l.role == LayerRole::kColour && content != TileContent::kRgba8)
+  if (l.role == LayerRole::kColour && content != TileContent::kRgba8 && content != TileContent::kBc1)
     return Status::error(ErrorCode::kInvalidArgument,
                          what + " is a colour layer but its source hands out heights");
   if (l.role == LayerRole::kElevation && content != TileContent::kHeightF32)
@@ -195,7 +195,7 @@ struct Streamer::Impl {
     // Immutable after construction.
     StreamLayer spec;           // source null: an empty layer (plans and loads nothing)
     PyramidGeometry geometry;
-    uint64_t tile_bytes = 0;    // payload handed out: tile_px^2 * 4
+    uint64_t tile_bytes = 0;    // payload handed out: tileContentBytes()
     uint64_t entry_bytes = 0;   // payload + overhead charged per cache entry
     double log2_units_per_texel = 0.0;  // world units a level-0 texel spans, log2
     int role_order = 1;         // roleOrder(spec.role)
@@ -849,7 +849,9 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
       }
     }
     if (layer.spec.source) layer.geometry = layer.spec.source->geometry();
-    layer.tile_bytes = uint64_t(layer.geometry.tile_px) * layer.geometry.tile_px * 4;
+    layer.tile_bytes =
+        tileContentBytes(layer.spec.source ? layer.spec.source->content() : TileContent::kRgba8,
+                         layer.geometry.tile_px);
     layer.entry_bytes = layer.tile_bytes + kCacheEntryOverheadBytes;
     const glm::dvec2 k = layer.spec.texels_per_unit;
     layer.log2_units_per_texel = layer.spec.source ? -0.5 * std::log2(k.x * k.y) : 0.0;

@@ -7,6 +7,7 @@
 #include <clipstream/renderer/flight.h>
 #include <clipstream/eval/metrics.h>
 #include <clipstream/eval/reference.h>
+#include <clipstream/streamer/tile_source.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -190,6 +191,48 @@ TEST(FlightRun, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
   EXPECT_GT(r.summary.over_fetch_ratio, 0.0);
 }
 
+// A flight over BC1 tiles (transcoded by the loaders): at rest bit-identical
+// to the ideal reference made of the same blocks, and against the RGBA8
+// reference as close as the compression allows.
+TEST(FlightRun, Bc1FlightRestsOnItsReferenceAndNearTheRgba8One) {
+  CLIPSTREAM_REQUIRE_GL();
+  const std::shared_ptr<TileSource> rgba8 = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+  Status st;
+  const std::shared_ptr<TileSource> bc1 = makeBc1Source(rgba8, &st);
+  ASSERT_TRUE(bc1) << st.toString();
+  for (bool against_rgba8 : {false, true}) {
+    FlightRunOptions o;
+    o.source = bc1;
+    if (against_rgba8) o.reference_source = rgba8;
+    ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
+    o.frames = 20;
+    o.rest_frames = 40;
+    o.viewport = {192, 108};
+    o.speed = 4.0;
+    o.streamer.io_threads = 2;
+    o.reference_every = 5;
+    FlightRun r;
+    const Status s = runFlight(o, &r);
+    ASSERT_TRUE(s.isOk()) << s.toString();
+    EXPECT_EQ(r.tile_content, TileContent::kBc1);
+    EXPECT_GT(r.summary.tiles_uploaded, 0u);
+    EXPECT_EQ(r.render_thread_fetches, 0u);
+    EXPECT_EQ(r.frames_with_holes, 0u);
+    const FrameError last = r.frames.back().accuracy.error;
+    std::printf("  bc1 flight at rest against the %s reference: %.2f dB, max abs error %d\n",
+                against_rgba8 ? "rgba8" : "bc1", last.psnr_db, last.max_abs_error);
+    if (against_rgba8) {
+      EXPECT_GT(last.max_abs_error, 0) << "the compression must show against RGBA8";
+      // 26 dB here: this pattern's one-texel blue checker at the coarse
+      // levels a 192x108 view samples is hard on BC1; misplaced blocks
+      // score about 10 dB (test_gpu.cpp).
+      EXPECT_GE(last.psnr_db, 22.0);
+    } else {
+      EXPECT_EQ(r.final_max_abs_error, 0);
+    }
+  }
+}
+
 // clipstream-fly --reference: per-frame PSNR in the outputs, and the last
 // rest frame bit-identical to the reference.
 TEST(FlyReference, WritesPsnrAndIsIdenticalAfterResting) {
@@ -218,6 +261,40 @@ TEST(FlyReference, WritesPsnrAndIsIdenticalAfterResting) {
   EXPECT_GT(acc["tiles_sampled"].get<int>(), 0);
   EXPECT_GE(acc["ground_truth_psnr_mean_db"].get<double>(), 35.0);
   EXPECT_TRUE(fs::exists(dir / "summary.tsv"));
+  fs::remove_all(dir);
+}
+
+// clipstream-fly reports the tile format and the video memory it computed
+// from the textures: a BC1 stack is an eighth of an RGBA8 one, two sets
+// twice one.
+TEST(ClipstreamFlyMemory, ReportsTheTileFormatAndTheStacksBytes) {
+  CLIPSTREAM_REQUIRE_GL();
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("clipstream_fly_mem_" + std::to_string(::getpid()));
+  auto run = [&](const std::string& args) {
+    fs::remove_all(dir);
+    const std::string cmd = std::string(CLIPSTREAM_FLY_EXE) + " --procedural 1048576 --path orbit --frames 3"
+                            " --size 192x108 --io-threads 2 " + args + " --out " + dir.string() + " > /dev/null 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    std::ifstream in(dir / "frames.json");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    const nlohmann::json doc = nlohmann::json::parse(ss.str(), nullptr, false);
+    EXPECT_FALSE(doc.is_discarded()) << cmd;
+    return doc.is_discarded() ? nlohmann::json::object() : doc["summary"];
+  };
+  const nlohmann::json rgba8 = run("--buffering single");
+  const nlohmann::json bc1 = run("--buffering single --tile-format bc1");
+  const nlohmann::json bc1_double = run("--buffering double-upload --tile-format bc1");
+  ASSERT_TRUE(rgba8.contains("gpu_stack_bytes") && bc1.contains("gpu_stack_bytes") &&
+              bc1_double.contains("gpu_stack_bytes"));
+  EXPECT_EQ(rgba8["tile_format"], "rgba8");
+  EXPECT_EQ(bc1["tile_format"], "bc1");
+  const double a = rgba8["gpu_stack_bytes"].get<double>(), b = bc1["gpu_stack_bytes"].get<double>();
+  EXPECT_NEAR(a / b, 8.0, 0.1);
+  EXPECT_EQ(bc1_double["gpu_stack_bytes"].get<uint64_t>(), 2 * bc1["gpu_stack_bytes"].get<uint64_t>());
+  EXPECT_EQ(bc1["gpu_texture_bytes"].get<uint64_t>(),
+            bc1["gpu_stack_bytes"].get<uint64_t>() + bc1["gpu_usable_bytes"].get<uint64_t>());
   fs::remove_all(dir);
 }
 

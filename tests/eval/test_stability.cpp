@@ -400,7 +400,7 @@ TEST(Stability, SoakKeepsRssFlatAndTheBudget) {
     o.speed = 3.0;
     o.streamer = StreamerConfig{};
     o.upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;
-    o.buffering = Buffering::kDoubleUploadTwice;
+    o.buffering = kDefaultBuffering;
   } else {
     o.frames = 600;
     o.viewport = kViewport;

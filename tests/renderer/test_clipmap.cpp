@@ -100,6 +100,19 @@ TEST(UsableMap, CodeTellsTilesSharingASlotApart) {
   }
 }
 
+TEST(UsableMap, CodesOfTheSixteenPeriodsDifferAndNoneIsZero) {
+  const uint32_t slots = 22;
+  std::set<uint8_t> codes;
+  for (int64_t py = 0; py < 4; ++py)
+    for (int64_t px = 0; px < 4; ++px) {
+      const uint8_t code = usableCode(px * slots + 5, py * slots + 7, slots);
+      EXPECT_NE(code, 0);
+      EXPECT_LE(code, kUsableCodeMax);
+      codes.insert(code);
+    }
+  EXPECT_EQ(codes.size(), 16u);
+}
+
 TEST(UsableMap, RejectsAResidencyArrayOfTheWrongSize) {
   const PyramidGeometry g = geometry1024();
   LevelResidency bad = full(0, {0, 0, 4, 4});

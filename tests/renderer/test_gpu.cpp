@@ -6,6 +6,7 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/eval/frame_writer.h>
 #include <clipstream/eval/metrics.h>
+#include <clipstream/streamer/bc1.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <gtest/gtest.h>
@@ -33,7 +34,7 @@ Scene makeScene(std::shared_ptr<TileSource> source, const Camera& camera,
   Scene s;
   s.source = std::move(source);
   s.plan = planClipmap(s.source->geometry(), kViewport, camera, {});
-  RendererConfig config{s.plan.clip_tiles, s.plan.pyramid_level, buffering};
+  RendererConfig config{s.plan.clip_tiles, s.plan.pyramid_level, buffering, s.source->content()};
   Status st = ClipmapRenderer::create(s.source->geometry(), config, &s.renderer);
   EXPECT_TRUE(st.isOk()) << st.toString();
   st = OffscreenTarget::create(kViewport, &s.target);
@@ -164,13 +165,52 @@ TEST_P(ToroidalUpdate, EqualsAFreshRenderAfterTheCameraMoves) {
 
 INSTANTIATE_TEST_SUITE_P(AllBufferings, ToroidalUpdate,
                          ::testing::Values(Buffering::kSingle, Buffering::kDoubleUploadTwice,
-                                           Buffering::kDoubleCopy),
+                                           Buffering::kDoubleCopy, Buffering::kStaged),
                          [](const auto& param_info) {
                            std::string n = bufferingName(param_info.param);
                            for (char& c : n)
                              if (c == '-') c = '_';
                            return n;
                          });
+
+TEST(ClipmapRender, StagedUploadsGoThroughTheRingAndDrawAsSingleBuffered) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera cam = test::obliqueCamera();
+  Scene staged = makeScene(patternSource(), cam, Buffering::kStaged);
+  Scene single = makeScene(staged.source, cam, Buffering::kSingle);
+  ASSERT_TRUE(staged.renderer && single.renderer);
+  // The stack of `single`, plus the ring: kStagingFrames regions of the
+  // default upload budget.
+  EXPECT_EQ(staged.renderer->textureBytes().stack, single.renderer->textureBytes().stack);
+  EXPECT_EQ(staged.renderer->textureBytes().staging,
+            uint64_t(renderer_config::kStagingFrames) * renderer_config::kDefaultUploadTilesPerFrame * 128 * 128 * 4);
+  EXPECT_EQ(single.renderer->textureBytes().staging, 0u);
+  // The pyramid at once (past the ring: sent directly), then the windows a
+  // budget's worth of tiles a frame, as a flight uploads them.
+  std::vector<TileKey> stack;
+  for (const ClipLevelPlan& l : staged.plan.stack)
+    for (int64_t y = l.window.y0; y < l.window.y1; ++y)
+      for (int64_t x = l.window.x0; x < l.window.x1; ++x) stack.push_back({l.level, uint32_t(x), uint32_t(y)});
+  for (Scene* s : {&staged, &single}) {
+    test::loadPlan(*s->renderer, *s->source, s->plan, /*finest_loaded=*/s->plan.pyramid_level);
+    for (size_t first = 0; first < stack.size(); first += renderer_config::kDefaultUploadTilesPerFrame) {
+      s->renderer->beginFrame();
+      for (size_t i = first; i < std::min(stack.size(), first + renderer_config::kDefaultUploadTilesPerFrame); ++i) {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        ASSERT_TRUE(s->source->fetch(stack[i], px.get()).isOk());
+        s->renderer->uploadTile(stack[i], px);
+      }
+      s->renderer->setResidency(test::fullResidency(s->plan));
+      s->renderer->endUploads();
+      EXPECT_EQ(s->renderer->lastUploads().unstaged, 0u);
+      (void)test::renderFrame(*s->renderer, *s->target, cam);  // the frame that reads the previous tiles
+    }
+  }
+  const auto a = test::renderFrame(*staged.renderer, *staged.target, cam);
+  const auto b = test::renderFrame(*single.renderer, *single.target, cam);
+  EXPECT_EQ(compareFrames(a, b).max_abs_error, 0);
+  EXPECT_GE(psnrLogged("staged vs reference", a, reference(*staged.source, staged.source, cam)), kMatchDb);
+}
 
 // Pixels whose ground point lies within `texels` of a tile border of level
 // 0 or 1, or of the level-0 window edge: where a seam would show.
@@ -233,6 +273,36 @@ TEST(ClipmapRender, KeepsTexelPrecisionNearTheFarCornerOfA2To26Texture) {
   EXPECT_GE(psnrLogged("2^26 far corner vs reference", gpu, ref), kMatchDb);
 }
 
+// Every slot period: over tiles whose period index (tile / slots) is 3 mod 4
+// on both axes, whose usable-map code (1 + 3 + 4 * 3 = 16) is the largest.
+TEST(ClipmapRender, DrawsTilesOfEverySlotPeriodAtTheirLevel) {
+  CLIPSTREAM_REQUIRE_GL();
+  ProceduralSpec spec;
+  spec.width_px = spec.height_px = 8192;
+  auto source = makeProceduralSource(spec);
+  ASSERT_TRUE(source);
+  const ClipmapPlan probe = planClipmap(source->geometry(), kViewport, test::obliqueCamera(), {});
+  const uint32_t slots = (probe.clip_tiles / 2) * 2 + 2;
+  for (int64_t period : {0, 1, 2, 3}) {
+    Camera cam = test::obliqueCamera();
+    const double centre = (double(period * slots) + slots / 2.0) * spec.tile_px + 0.3;
+    cam.position = {centre, 30.0, centre + 60.0};
+    cam.heading_rad = 0.0;  // north, over the tiles of this period
+    Scene s = makeScene(source, cam);
+    ASSERT_TRUE(s.renderer);
+    test::loadPlan(*s.renderer, *s.source, s.plan);
+    const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+    const auto ref = reference(*s.source, s.source, cam);
+    glm::dvec2 hit;
+    ASSERT_TRUE(groundHit(cam, kViewport, kViewport.width_px / 2.0, kViewport.height_px - 1.0, &hit));
+    EXPECT_EQ(int64_t(hit.x / spec.tile_px) / slots, period) << "the view must be over this period";
+    EXPECT_EQ(int64_t(hit.y / spec.tile_px) / slots, period);
+    char what[64];
+    std::snprintf(what, sizeof what, "slot period %lld vs reference", (long long)period);
+    EXPECT_GE(psnrLogged(what, gpu, ref), kMatchDb);
+  }
+}
+
 // Real imagery: a 2048 x 2048 crop of the Autzen orthophoto the repository
 // ships in data/.
 TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
@@ -266,6 +336,142 @@ TEST(ClipmapRender, OverlayTintsByLevelWithoutHoles) {
   test::dumpPpm("overlay", tinted, kViewport);
   EXPECT_EQ(groundPixels(plain), groundPixels(tinted));
   EXPECT_LT(psnrLogged("overlay vs plain", plain, tinted), 25.0);
+}
+
+// BC1 tiles as another source hands them out, rewritten on the way: decoded
+// to RGBA8 (the texels a GPU samples from those blocks), or with the blocks
+// of every row mirrored (a misplaced-block bug on purpose).
+class Bc1Rewrite final : public TileSource {
+ public:
+  enum class Mode { kDecode, kMirrorBlocks };
+  Bc1Rewrite(std::shared_ptr<TileSource> bc1, Mode mode) : m_bc1(std::move(bc1)), m_mode(mode) {}
+  const PyramidGeometry& geometry() const override { return m_bc1->geometry(); }
+  TileContent content() const override {
+    return m_mode == Mode::kDecode ? TileContent::kRgba8 : TileContent::kBc1;
+  }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* out) override {
+    std::vector<uint8_t> blocks;
+    if (Status s = m_bc1->fetch(key, &blocks); !s) return s;
+    const uint32_t tp = geometry().tile_px, n = tp / kBc1BlockPx;
+    if (m_mode == Mode::kDecode) return decodeBc1Tile(blocks, tp, out);
+    *out = blocks;
+    for (uint32_t by = 0; by < n; ++by)
+      for (uint32_t bx = 0; bx < n; ++bx)
+        std::copy_n(blocks.data() + (size_t(by) * n + bx) * kBc1BlockBytes, kBc1BlockBytes,
+                    out->data() + (size_t(by) * n + (n - 1 - bx)) * kBc1BlockBytes);
+    return Status::ok();
+  }
+  std::string describe() const override { return "bc1-rewrite"; }
+
+ private:
+  std::shared_ptr<TileSource> m_bc1;
+  Mode m_mode;
+};
+
+std::shared_ptr<TileSource> bc1Of(std::shared_ptr<TileSource> rgba8) {
+  Status s;
+  auto bc1 = makeBc1Source(std::move(rgba8), &s);
+  EXPECT_TRUE(bc1) << s.toString();
+  return bc1;
+}
+
+// Filtering tolerance between the two GPU paths: llvmpipe samples a BC1
+// texture through its own decode and filter code, so a texel blend may
+// round differently from the RGBA8 path by a step or two.
+constexpr int kBc1FilterTolerance = 3;
+
+TEST(ClipmapRender, Bc1FrameMatchesItsBlocksDecodedOnTheCpu) {
+  CLIPSTREAM_REQUIRE_GL();
+  for (const Camera& cam : {test::obliqueCamera(), test::lookingDown(1024.0, 1024.0, 900.0)}) {
+    const auto bc1 = bc1Of(patternSource());
+    Scene s = makeScene(bc1, cam);
+    ASSERT_TRUE(s.renderer);
+    ASSERT_EQ(s.renderer->tileContent(), TileContent::kBc1);
+    test::loadPlan(*s.renderer, *s.source, s.plan);
+    const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+    // The same blocks decoded on the CPU, drawn by the CPU reference and by
+    // the RGBA8 renderer.
+    const auto cpu = reference(*bc1, bc1, cam);
+    Scene d = makeScene(std::make_shared<Bc1Rewrite>(bc1, Bc1Rewrite::Mode::kDecode), cam);
+    ASSERT_TRUE(d.renderer);
+    test::loadPlan(*d.renderer, *d.source, d.plan);
+    const auto decoded = test::renderFrame(*d.renderer, *d.target, cam);
+    test::dumpPpm("bc1_gpu", gpu, kViewport);
+    test::dumpPpm("bc1_decoded", decoded, kViewport);
+    EXPECT_GT(groundPixels(gpu), gpu.size() / 16) << "a quarter of the view must be ground";
+    EXPECT_EQ(groundPixels(gpu), groundPixels(decoded));
+    const double db_blocks = psnrLogged("bc1 gpu vs cpu reference of its blocks", gpu, cpu);
+    EXPECT_GE(db_blocks, kMatchDb);
+    const FrameError e = compareFrames(gpu, decoded);
+    std::printf("  bc1 gpu vs the decoded blocks on the rgba8 path: %.2f dB, max abs error %d\n",
+                e.psnr_db, e.max_abs_error);
+    EXPECT_LE(e.max_abs_error, kBc1FilterTolerance);
+    EXPECT_GE(e.psnr_db, kSameDb);
+    // Against the original RGBA8 tiles the compression shows: the frame is
+    // nearer its blocks than the original, yet no garbage (the pattern's
+    // one-texel blue checker at the coarser levels is hard on BC1: 26-30
+    // dB here, against 10 dB for misplaced blocks).
+    const auto original = reference(*s.source, patternSource(), cam);
+    const double db_original = psnrLogged("bc1 gpu vs the rgba8 cpu reference", gpu, original);
+    EXPECT_LT(db_original, db_blocks);
+    EXPECT_GE(db_original, 24.0);
+  }
+}
+
+TEST(ClipmapRender, Bc1WithMisplacedBlocksFailsTheReference) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera cam = test::obliqueCamera();
+  const auto bc1 = bc1Of(patternSource());
+  Scene s = makeScene(std::make_shared<Bc1Rewrite>(bc1, Bc1Rewrite::Mode::kMirrorBlocks), cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  Scene d = makeScene(std::make_shared<Bc1Rewrite>(bc1, Bc1Rewrite::Mode::kDecode), cam);
+  ASSERT_TRUE(d.renderer);
+  test::loadPlan(*d.renderer, *d.source, d.plan);
+  const auto decoded = test::renderFrame(*d.renderer, *d.target, cam);
+  const FrameError e = compareFrames(gpu, decoded);
+  std::printf("  misplaced blocks vs the decoded blocks: %.2f dB, max abs error %d\n", e.psnr_db,
+              e.max_abs_error);
+  EXPECT_GT(e.max_abs_error, kBc1FilterTolerance);
+  EXPECT_LT(psnrLogged("misplaced blocks vs cpu reference", gpu, reference(*bc1, bc1, cam)), kMatchDb);
+}
+
+TEST(ClipmapRender, Bc1PyramidTileThatCannotBeReadIsFilledFromItsParent) {
+  CLIPSTREAM_REQUIRE_GL();
+  // High above the middle: the whole view is drawn from the pyramid.
+  const Camera cam = test::lookingDown(1024.0, 1024.0, 600.0);
+  const auto bc1 = bc1Of(patternSource());
+  auto draw = [&](std::shared_ptr<TileSource> source, const TileKey& missing) {
+    Scene s = makeScene(source, cam);
+    EXPECT_TRUE(s.renderer);
+    if (!s.renderer) return std::vector<uint8_t>{};
+    s.renderer->beginFrame();
+    s.renderer->loadPyramid([&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+      if (key == missing) return nullptr;
+      auto px = std::make_shared<std::vector<uint8_t>>();
+      if (!source->fetch(key, px.get())) return nullptr;
+      return px;
+    });
+    s.renderer->setResidency(test::fullResidency(s.plan, s.plan.pyramid_level));
+    s.renderer->endUploads();
+    s.renderer->beginFrame();
+    s.renderer->endUploads();
+    return test::renderFrame(*s.renderer, *s.target, cam);
+  };
+  const ClipmapPlan plan = planClipmap(bc1->geometry(), kViewport, cam, {});
+  const TileKey missing{plan.pyramid_level, 1, 1};
+  const TileKey none{~0u, 0, 0};
+  const auto decoded_source = std::make_shared<Bc1Rewrite>(bc1, Bc1Rewrite::Mode::kDecode);
+  const auto whole = draw(bc1, none);
+  const auto filled = draw(bc1, missing);
+  const auto filled_rgba8 = draw(decoded_source, missing);
+  ASSERT_FALSE(filled.empty());
+  EXPECT_GT(compareFrames(filled, whole).max_abs_error, 20) << "the missing tile must be in view";
+  EXPECT_EQ(countHolePixels(filled, whole), 0u);
+  // The RGBA8 renderer fills the same hole with a GPU blit of the parent;
+  // the BC1 one filters on the CPU and encodes again.
+  EXPECT_GE(psnrLogged("bc1 fill vs rgba8 fill", filled, filled_rgba8), kMatchDb);
 }
 
 }  // namespace

@@ -38,6 +38,9 @@ namespace clipstream {
 
 struct FlightRunOptions {
   std::shared_ptr<TileSource> source;
+  // The ideal reference's and the ground truth's tiles; null: `source`.
+  // Same geometry as `source` (e.g. its RGBA8 tiles under a BC1 flight).
+  std::shared_ptr<TileSource> reference_source;
   FlightPath path;
   uint32_t frames = 60;         // moving frames (at least 1)
   uint32_t warmup_frames = 0;   // first: the first camera held, not recorded
@@ -52,7 +55,7 @@ struct FlightRunOptions {
   Viewport resize_to{0, 0};
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   Overlay overlay = Overlay::kOff;
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
   // Terrain under the colour layer (FlightConfig::terrain). Path heights
@@ -116,7 +119,8 @@ struct FlightRun {
   std::string gl;                      // GL_RENDERER / GL_VERSION
   std::string source;                  // TileSource::describe()
   uint32_t clip_tiles = 0, pyramid_level = 0;  // the renderer's at the end (after a resize, the new one)
-  uint64_t texture_bytes = 0;
+  TextureBytes texture_bytes;          // the colour clip stack's video memory (the renderer at the end)
+  TileContent tile_content = TileContent::kRgba8;  // what the stack holds
   double preload_ms = 0.0;             // the first synchronous pyramid load
   uint32_t preload_failures = 0;       // pyramid tiles that could not be read, every load
   uint32_t resizes = 0;

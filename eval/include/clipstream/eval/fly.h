@@ -11,9 +11,11 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <string>
 
 namespace clipstream {
@@ -37,13 +39,20 @@ struct FlyOptions {
   RemoteOptions remote;            // a URL store: requests in flight, disk cache
   std::string out_dir = "fly-out";
   uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
+  // Colour tiles on the GPU: kRgba8 as the source gives them, or kBc1
+  // transcoded by the loader threads (makeBc1Source()).
+  TileContent tile_format = TileContent::kRgba8;
   bool overlay = false;
   bool quiet = false;              // no summary table
   // Speed against accuracy (docs/accuracy.md).
   bool reference = false;            // compare frames with the ideal reference
   uint32_t reference_every = 1;      // ... every Nth frame (and every rest frame)
   uint32_t ground_truth_every = 0;   // reference vs CPU ground truth every Nth frame; 0 = never
+  // The ideal reference's tiles; unset: tile_format (frames at rest are then
+  // bit-identical to it). kRgba8 under a BC1 flight measures the
+  // compression error too.
+  std::optional<TileContent> reference_tile_format;
   bool throttle = true;              // StreamerConfig::throttle
   bool prefetch = true;              // StreamerConfig::prefetch
   bool frustum_priority = true;      // StreamerConfig::frustum_priority

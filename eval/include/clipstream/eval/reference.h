@@ -33,7 +33,8 @@ void renderReference(const PyramidGeometry& geometry, const TexelFunction& texel
                      const ReferenceOptions& options, std::vector<uint8_t>* rgba);
 
 // A TexelFunction over a TileSource, caching whole tiles it fetched (for
-// tests; fetch failures give magenta texels).
+// tests; fetch failures give magenta texels). A BC1 source's blocks are
+// decoded (decodeBc1Tile()): the texels a GPU samples from them.
 TexelFunction texelsFromSource(std::shared_ptr<TileSource> source);
 
 }  // namespace clipstream

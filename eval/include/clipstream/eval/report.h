@@ -23,11 +23,12 @@ struct RunDescription {
   std::string path;               // built-in name or file
   double speed = 1.0;
   Viewport viewport{0, 0};        // the first viewport
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   uint32_t upload_tiles = 0;
   uint64_t cache_mb = 0;
   uint32_t warmup_frames = 0;
   bool reference = false;
+  TileContent reference_tile_format = TileContent::kRgba8;  // the ideal reference's tiles
   bool throttle = true, prefetch = true, frustum_priority = true, path_hint = false;
   uint64_t pngs_written = 0, pngs_dropped = 0;
 };

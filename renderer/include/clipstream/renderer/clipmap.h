@@ -25,10 +25,12 @@ inline uint32_t toroidalSlot(int64_t tile, uint32_t clip_tiles) {
   return uint32_t(r < 0 ? r + c : r);
 }
 
-// What the GPU's usable map holds for a usable tile: 1 + (tile / slots) mod 4
-// per axis (x in bits 0-1, y in bits 2-3). The shader recomputes it from
-// the fragment's tile, so a tile outside the window that shares the slot of
-// a usable one (1 to 3 slot periods away) does not match. 0 = not usable.
+// What the GPU's usable map holds for a window tile: 1 + px + 4 py, where
+// px and py are (tile / slots) mod 4 on each axis, so 1..kUsableCodeMax.
+// The shader recomputes it from the fragment's tile, so a tile outside the
+// window that shares the slot of a usable one (1 to 3 slot periods away)
+// does not match. 0 = no window tile there.
+inline constexpr uint8_t kUsableCodeMax = 16;
 inline uint8_t usableCode(int64_t tile_x, int64_t tile_y, uint32_t slots) {
   const int64_t s = int64_t(slots);
   const int64_t px = (tile_x >= 0 ? tile_x / s : (tile_x - s + 1) / s) & 3;

@@ -17,6 +17,13 @@ inline constexpr uint32_t kMaxLevels = 32;
 // RGBA8 are 1 MiB, about 1.5 ms of glTexSubImage3D on llvmpipe.
 inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
 
+// Buffering::kStaged: regions in the staging ring. A frame's region is
+// written again kStagingFrames frames later: by then the frame that
+// uploaded from it was drawn and, with one frame queued behind the one
+// being filled, its copies ran (the wait before reuse is a fence, never a
+// guess).
+inline constexpr uint32_t kStagingFrames = 3;
+
 // The simulated clock of a Flight (flight.h): every step advances the
 // streamer's clock, and a scripted path's time, by this much whatever the
 // real render time, so runs are deterministic.

@@ -55,11 +55,14 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 // coarse pyramid from `source` on this thread before any frame, so every
 // frame has something correct to draw (a tile that fails is filled from its
 // ancestor and added to *failures, which may be null). The first frame's
-// plan goes to *plan when given. GL thread only.
+// plan goes to *plan when given. The stack holds the source's content()
+// (RGBA8 or BC1); `upload_tiles` sizes kStaged's staging regions. GL
+// thread only.
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
-                             ClipmapPlan* plan = nullptr);
+                             ClipmapPlan* plan = nullptr,
+                             uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame);
 
 // Terrain under the colour layer: an elevation source (TileContent
 // kHeightF32, e.g. openElevationSource()) and where it lies (alignElevation()).
@@ -85,7 +88,7 @@ struct FlightConfig {
   Viewport viewport{1280, 720};
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // tiles handed to the GPU per frame
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
   Overlay overlay = Overlay::kOff;
   uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
   // true: draw into the flight's own OffscreenTarget (headless); false: into

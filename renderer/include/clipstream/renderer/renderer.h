@@ -7,9 +7,11 @@
 #pragma once
 
 #include <clipstream/renderer/clipmap.h>
+#include <clipstream/renderer/config.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/streamer.h>
+#include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
 #include <functional>
@@ -24,10 +26,21 @@ enum class Buffering {
   kSingle,             // one set of layers: upload straight into what is sampled
   kDoubleUploadTwice,  // two sets; a tile goes to the back set, and again a frame later
   kDoubleCopy,         // two sets; the second copy is glCopyImageSubData on the GPU
+  // One set of layers; only the bytes being replaced are double-buffered:
+  // each frame's tiles are written into its own region of a ring of
+  // kStagingFrames pixel-unpack regions, and the texture takes them by a
+  // copy the GPU runs after the frames already queued (which read the old
+  // tiles). Two usable maps, alternating. The memory of `single`.
+  kStaged,
 };
+// The default everywhere (renderer, Flight, clipstream-fly): staged keeps
+// what double buffering is for (no write to memory a queued frame reads, no
+// CPU wait) at the memory of one set, and measured at least as fast as
+// double-upload on llvmpipe (docs/decisions.md, "GPU memory").
+inline constexpr Buffering kDefaultBuffering = Buffering::kStaged;
 const char* bufferingName(Buffering buffering);
-// The inverse of bufferingName(): "single", "double-upload" or
-// "double-copy". kInvalidArgument naming the choices otherwise.
+// The inverse of bufferingName(): "single", "double-upload", "double-copy"
+// or "staged". kInvalidArgument naming the choices otherwise.
 Status bufferingFromName(const std::string& name, Buffering* out);
 
 enum class Overlay { kOff = 0, kLevels = 1 };
@@ -35,12 +48,30 @@ enum class Overlay { kOff = 0, kLevels = 1 };
 struct RendererConfig {
   uint32_t clip_tiles = 0;     // from the plan (ClipmapPlan::clip_tiles)
   uint32_t pyramid_level = 0;  // from the plan (ClipmapPlan::pyramid_level)
-  Buffering buffering = Buffering::kDoubleUploadTwice;
+  Buffering buffering = kDefaultBuffering;
+  // What uploadTile() is given and the stack array holds: kRgba8 (GL_RGBA8)
+  // or kBc1 (COMPRESSED_RGB_S3TC_DXT1_EXT, an eighth of the bytes, sampled
+  // by the same shader). The source's content(): see createClipmapRenderer().
+  TileContent tile_content = TileContent::kRgba8;
+  // kStaged: tiles a frame can stage (its region of the ring); more go
+  // straight from client memory. The flight's upload budget.
+  uint32_t staging_tiles = renderer_config::kDefaultUploadTilesPerFrame;
+};
+
+// Video memory the renderer allocated, computed from its textures' sizes,
+// formats and mip chains (every set counted). The colour clip stack is
+// stack + usable.
+struct TextureBytes {
+  uint64_t stack = 0;    // the stack array(s): every layer, every mip
+  uint64_t usable = 0;   // the usable map(s)
+  uint64_t staging = 0;  // kStaged: the pixel-unpack ring
+  uint64_t total() const { return stack + usable + staging; }
 };
 
 struct UploadStats {
   uint32_t tiles = 0;          // new tiles this frame (stack and pyramid)
   uint32_t second_copies = 0;  // tiles re-uploaded / copied into the other set
+  uint32_t unstaged = 0;       // kStaged: stack tiles past the frame's region, sent directly
   double upload_ms = 0.0;      // wall time of all of the frame's texture work below
   double coarser_mips_ms = 0.0;  // mip-1 copies (level L + 1 under level L's window)
   double usable_ms = 0.0;      // usable map: compute and upload
@@ -50,12 +81,13 @@ class ClipmapRenderer {
  public:
   // Compiles the shaders and allocates the textures: the stack array (one
   // or two sets of pyramid_level + 1 layers of slots^2 tiles, where slots is
-  // clip_tiles rounded up to even plus 2; layer L < pyramid_level holds
+  // clip_tiles rounded down to even plus 2; layer L < pyramid_level holds
   // level L in mip 0 and level L + 1 over the same ground in mip 1; layer
   // pyramid_level holds the whole coarse pyramid as its mip chain) and the
-  // usable map. kInvalidArgument for a zero clip or a
-  // pyramid level outside the geometry; kUnavailable if GL fails (with the
-  // shader log).
+  // usable map. kInvalidArgument for a zero clip, a pyramid level outside
+  // the geometry, a tile content that is not colour, or BC1 with a tile size
+  // that is not a multiple of 4; kUnavailable if GL fails (with the shader
+  // log) or lacks EXT_texture_compression_s3tc for BC1.
   static Status create(const PyramidGeometry& geometry, const RendererConfig& config,
                        std::unique_ptr<ClipmapRenderer>* out);
   ~ClipmapRenderer();
@@ -67,8 +99,9 @@ class ClipmapRenderer {
   // brings the back set up to date with the front (double-buffered modes).
   void beginFrame();
 
-  // Uploads one RGBA8 tile (tile_px^2 * 4 bytes; other sizes, and keys outside
-  // the pyramid, are ignored). Stack levels go to the slot toroidalSlot() names; levels at or
+  // Uploads one tile of the configured content: RGBA8 (tile_px^2 * 4
+  // bytes) or BC1 blocks (bc1TileBytes(tile_px)); other sizes, and keys
+  // outside the pyramid, are ignored. Stack levels go to the slot toroidalSlot() names; levels at or
   // above pyramid_level go to the pyramid layer's mip chain, in every set,
   // once (a pyramid tile already loaded is skipped).
   void uploadTile(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba);
@@ -117,7 +150,8 @@ class ClipmapRenderer {
   const UsableMap& usableMap() const { return m_front_map; }
   const UploadStats& lastUploads() const { return m_stats; }
   const PyramidGeometry& geometry() const { return m_geometry; }
-  uint64_t textureBytes() const { return m_texture_bytes; }
+  const TextureBytes& textureBytes() const { return m_texture_bytes; }
+  TileContent tileContent() const { return m_config.tile_content; }
 
  private:
   // Fills every pyramid tile that was never uploaded: the tile is
@@ -132,10 +166,32 @@ class ClipmapRenderer {
     TileKey key;
     std::shared_ptr<const std::vector<uint8_t>> rgba;
   };
-  void uploadStack(uint32_t set, const TileKey& key, const uint8_t* rgba);
-  void uploadPyramid(const TileKey& key, const uint8_t* rgba);
+  void uploadStack(uint32_t set, const TileKey& key, const uint8_t* pixels);
+  void uploadPyramid(const TileKey& key, const uint8_t* pixels);
+  // BC1: one pyramid tile made on the CPU (read back, decoded, filtered,
+  // encoded): magnified from its parent, averaged from its children, or
+  // mid grey. Compressed textures cannot be blit or cleared into.
+  enum class Fill { kFromParent, kFromChildren, kGrey };
+  void fillPyramidTileBc1(const TileKey& key, Fill fill);
+  // Decoded RGBA8 of the pyramid layer's region [x, x + w) x [y, y + h)
+  // of `mip` (block-aligned, inside the mip), set 0.
+  std::vector<uint8_t> readPyramidRegion(uint32_t mip, uint32_t x, uint32_t y, uint32_t w,
+                                         uint32_t h) const;
+  bool compressed() const { return m_config.tile_content == TileContent::kBc1; }
+  size_t tileBytes() const;
   void fillCoarserMips(uint32_t set);
-  uint32_t setCount() const { return m_config.buffering == Buffering::kSingle ? 1 : 2; }
+  // Stack arrays and usable maps: two of each when double-buffered; staged
+  // keeps one stack and two usable maps.
+  uint32_t stackSets() const {
+    return m_config.buffering == Buffering::kDoubleUploadTwice || m_config.buffering == Buffering::kDoubleCopy
+               ? 2
+               : 1;
+  }
+  uint32_t usableSets() const { return m_config.buffering == Buffering::kSingle ? 1 : 2; }
+  bool staged() const { return m_config.buffering == Buffering::kStaged; }
+  // kStaged: copies `pixels` into this frame's staging region and returns
+  // its offset in the buffer, or -1 when the region is full.
+  int64_t stage(const uint8_t* pixels, size_t bytes);
   uint32_t slot(int64_t tile, uint32_t period) const {
     return toroidalSlot(tile + m_test_slot_bias, period);
   }
@@ -168,7 +224,16 @@ class ClipmapRenderer {
   std::vector<uint8_t> m_pyramid_have;  // per pyramid tile, 1 = uploaded
   std::vector<size_t> m_pyramid_first;  // index of each pyramid level's first tile
   uint32_t m_pyramid_missing = 0;
-  uint64_t m_texture_bytes = 0;
+  TextureBytes m_texture_bytes;
+  // kStaged: the ring (kStagingFrames regions of staging_tiles tiles),
+  // persistently mapped, and per region the fence of the last frame that
+  // wrote it.
+  uint32_t m_staging = 0;
+  uint8_t* m_staging_map = nullptr;
+  size_t m_staging_region_bytes = 0;
+  uint32_t m_staging_region = 0;
+  size_t m_staging_used = 0;
+  void* m_staging_fence[renderer_config::kStagingFrames] = {};
   UploadStats m_stats;
   double m_issue_ms = 0.0;
 };

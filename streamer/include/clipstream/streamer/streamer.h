@@ -108,8 +108,9 @@ struct PathHint {
 // node, key, shared_ptr control block and vector header, rounded up.
 constexpr uint64_t kCacheEntryOverheadBytes = 256;
 
-// A decoded tile ready for upload, tile_px * tile_px * 4 bytes: RGBA8 for a
-// colour layer, float32 heights for an elevation layer (TileContent).
+// A decoded tile ready for upload, tileContentBytes() of its layer's
+// source: RGBA8 or BC1 blocks for a colour layer, float32 heights for an
+// elevation layer (TileContent).
 struct ReadyTile {
   TileKey key;
   std::shared_ptr<const std::vector<uint8_t>> rgba;
@@ -164,7 +165,7 @@ struct StreamLayer {
 };
 
 // Ok when every layer can be streamed: a source; a finite, positive map;
-// a colour layer's source hands out RGBA8 and an elevation layer's heights
+// a colour layer's source hands out RGBA8 or BC1 and an elevation layer's heights
 // (TileContent). Otherwise kInvalidArgument naming the layer and the
 // problem. The Streamer constructor runs it and leaves a failing layer
 // empty (it plans and loads nothing, and the reason goes to stderr), so an

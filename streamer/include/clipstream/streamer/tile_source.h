@@ -1,7 +1,7 @@
 // Where tiles come from: a store file, a procedural generator, or a test
 // wrapper that injects latency and failures. Sources hand out tiles already
-// converted to the GPU layout: colour as RGBA8, heights as float32, both
-// tile_px * tile_px * 4 bytes (TileContent).
+// converted to the GPU layout: colour as RGBA8 (or BC1 blocks through
+// makeBc1Source()), heights as float32 (TileContent).
 #pragma once
 
 #include <clipstream/store/remote.h>
@@ -22,12 +22,12 @@ struct FetchInfo {
   double decode_ms = 0.0;   // decompression + conversion time
 };
 
-// What the bytes of a fetched tile are. Both are 4 bytes per texel, so a
-// tile costs the same in the streamer's RAM cache whatever it holds.
+// What the bytes of a fetched tile are (tileContentBytes() says how many).
 enum class TileContent : uint8_t {
   kRgba8,      // colour: R, G, B, A bytes per texel
   kHeightF32,  // heights: one native float per texel, in the store's height
                // unit (offset and scale applied; elevationInfo())
+  kBc1,        // colour as BC1 blocks (bc1.h): half a byte per texel, opaque
 };
 
 // What an elevation source knows of one tile's heights without reading its
@@ -40,6 +40,16 @@ struct TileHeightBounds {
   // samples, widened by it, bound the ground between them.
   float error = 0.0f;
 };
+
+// Bytes of one fetched tile: tile_px^2 * 4 for kRgba8 and kHeightF32,
+// bc1TileBytes(tile_px) for kBc1. The streamer's RAM cache counts these.
+uint64_t tileContentBytes(TileContent content, uint32_t tile_px);
+
+// Colour tile contents by name, for command lines: "rgba8" and "bc1".
+// The inverse returns kInvalidArgument naming the choices for anything else
+// (heights are not a colour tile format).
+const char* tileContentName(TileContent content);
+Status colourTileContentFromName(const std::string& name, TileContent* out);
 
 // Thread-safe: fetch() may be called from any number of threads at once and
 // must not hold a lock across I/O or decompression.
@@ -76,9 +86,9 @@ class TileSource {
   }
 
   // Reads, verifies, decodes and converts one tile into *rgba (resized to
-  // tile_px * tile_px * 4): RGBA8 texels, or float32 heights for a
-  // kHeightF32 source (the buffer keeps its name; it is 4 bytes a texel
-  // either way). A failure leaves *rgba unspecified and returns
+  // tileContentBytes(content(), tile_px)): RGBA8 texels, float32 heights
+  // for a kHeightF32 source, BC1 blocks for a kBc1 one (the buffer keeps
+  // its name). A failure leaves *rgba unspecified and returns
   // kCorruptTile, kIo, kUnavailable, kOutOfRange, ...
   virtual Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) = 0;
 
@@ -195,6 +205,14 @@ void proceduralTexel(const ProceduralSpec& spec, uint32_t level, uint64_t tx, ui
 // for an empty or too large size.
 std::shared_ptr<TileSource> makeProceduralHeightSource(const ProceduralSpec& spec);
 double proceduralHeight(const ProceduralSpec& spec, uint64_t x, uint64_t y);
+
+// Transcoding wrapper: hands out `rgba8`'s colour tiles as BC1 blocks
+// (kBc1), encoded by encodeBc1Tile() inside fetch(), so the streamer's
+// loader threads do the work and its RAM cache holds the compressed tiles
+// (an eighth of the bytes). Null with *status = kInvalidArgument when the
+// inner source is missing, is not an RGBA8 colour source, or its tile size
+// is not a multiple of 4.
+std::shared_ptr<TileSource> makeBc1Source(std::shared_ptr<TileSource> rgba8, Status* status);
 
 // Test/benchmark wrapper: adds latency to every fetch and fails a chosen
 // fraction of tiles (deterministically by key) or all of them.
