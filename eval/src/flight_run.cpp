@@ -121,6 +121,9 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   // frames 7 frames earlier in 5 of 6 runs (docs/benchmarks.md), a change of
   // results this loop must not make.
   std::unique_ptr<FlyAccuracy> accuracy;
+  // Both references draw the tiles of `reference_source` when the flight
+  // names one (a BC1 flight judged against RGBA8 tiles), else the flight's.
+  const std::shared_ptr<TileSource>& reference = o.reference_source ? o.reference_source : o.source;
   // This reference draws the flat plane; over terrain the TerrainReference
   // below judges the frames instead (docs/terrain.md, "Accuracy").
   if (!o.terrain && (o.reference_every > 0 || o.sample_tiles)) {
@@ -128,7 +131,6 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     ao.ground_truth = o.ground_truth_every > 0;
     ao.sample_tiles = o.sample_tiles;
     ao.reference = o.reference_every > 0;
-    const std::shared_ptr<TileSource>& reference = o.reference_source ? o.reference_source : o.source;
     if (Status s = FlyAccuracy::create(reference, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
   }
   // Before the flight exists no height is known: the first camera is put
@@ -148,7 +150,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     TerrainConfig tc;
     tc.ring_cells = o.terrain->ring_cells;
     tc.mapping = o.terrain->alignment;
-    if (Status s = TerrainReference::create(o.source, *o.terrain->source, tc, o.viewport, o.streamer.planner,
+    if (Status s = TerrainReference::create(reference, *o.terrain->source, tc, o.viewport, o.streamer.planner,
                                             &terrain_reference);
         !s)
       return s;

@@ -6,6 +6,7 @@
 
 #include <clipstream/eval/flight_run.h>
 #include <clipstream/renderer/config.h>
+#include <clipstream/streamer/bc1.h>
 #include <clipstream/streamer/flight_path.h>
 #include <clipstream/testing/synthetic_store.h>
 #include <clipstream/testing/test_data.h>
@@ -391,14 +392,8 @@ TEST(TerrainStability, NoDataHolesFlownTwoUnitsAboveTheGround) {
 // with the ideal texture: where the finest ring lies, the geometry agrees
 // with the reference to the bit, and there the texture must agree to the
 // bit too; PSNR over the whole frame is reported.
-TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
-  CLIPSTREAM_REQUIRE_GL();
-  test::TempDir dir;
-  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
-  Status s;
-  TerrainLayerConfig terrain;
-  ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
-  // A texture with detail at every level (a flat colour would agree anyway).
+// A texture with detail at every level (a flat colour would agree anyway).
+std::shared_ptr<TileSource> detailedTexture() {
   std::vector<uint8_t> image(size_t(2048) * 2048 * 4);
   for (size_t y = 0; y < 2048; ++y)
     for (size_t x = 0; x < 2048; ++x) {
@@ -409,8 +404,20 @@ TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
       p[2] = uint8_t(((x / 16) + (y / 16)) % 2 ? 200 : 40);
       p[3] = 255;
     }
+  return makeImageSource(std::move(image), 2048, 2048, 128);
+}
+
+// Flies the orbit over the test DEM and rests, judging every 5th frame
+// against the terrain reference drawn from `reference` (else `source`).
+void flyOverTestDem(const std::shared_ptr<TileSource>& source, const std::shared_ptr<TileSource>& reference,
+                    FlightRun* run) {
+  test::TempDir dir;
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  TerrainLayerConfig terrain;
+  ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
   FlightRunOptions o;
-  o.source = makeImageSource(std::move(image), 2048, 2048, 128);
+  o.source = source;
+  o.reference_source = reference;
   ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
   o.frames = 10;
   o.rest_frames = 20;
@@ -418,18 +425,23 @@ TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
   o.reference_every = 5;
   o.sample_tiles = false;
   o.terrain = terrain;  // default ring size
-  FlightRun run;
-  s = runFlight(o, &run);
+  const Status s = runFlight(o, run);
   ASSERT_TRUE(s.isOk()) << s.toString();
-  ASSERT_GT(run.geometry_rest_frames, 0u);
+  ASSERT_GT(run->geometry_rest_frames, 0u);
+}
+
+double lastFramePsnr(const FlightRun& run) {
+  return run.frames.back().accuracy.measured ? run.frames.back().accuracy.error.psnr_db : 0.0;
+}
+
+TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
+  CLIPSTREAM_REQUIRE_GL();
+  FlightRun run;
+  ASSERT_NO_FATAL_FAILURE(flyOverTestDem(detailedTexture(), nullptr, &run));
   // Judged frames carry a PSNR (in the CSV, JSON and summary).
   uint32_t judged = 0;
-  double rest_psnr = 0.0;
-  for (const FlightRunFrame& f : run.frames) {
-    if (!f.accuracy.measured) continue;
-    ++judged;
-    if (f.sample.frame + 1 == o.frames + o.rest_frames) rest_psnr = f.accuracy.error.psnr_db;
-  }
+  for (const FlightRunFrame& f : run.frames) judged += f.accuracy.measured;
+  const double rest_psnr = lastFramePsnr(run);
   EXPECT_GE(judged, 4u);
   EXPECT_GT(run.summary.psnr_mean_db, 0.0);
   // Enough agreeing pixels to mean something: the finest ring fills much
@@ -441,6 +453,28 @@ TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
   std::printf("  at rest: %llu of %llu pixels agree in geometry, %llu of them differ in colour; last frame %.2f dB\n",
               (unsigned long long)run.terrain_rest_agree_pixels, (unsigned long long)rest_pixels,
               (unsigned long long)run.terrain_rest_agree_mismatched, rest_psnr);
+}
+
+// BC1 tiles over terrain: bit-identical at rest to the terrain reference
+// made of the same blocks; against the RGBA8 one the compression shows.
+TEST(TerrainAccuracy, Bc1TilesRestOnTheirReferenceAndShowAgainstRgba8) {
+  CLIPSTREAM_REQUIRE_GL();
+  const std::shared_ptr<TileSource> rgba8 = detailedTexture();
+  Status st;
+  const std::shared_ptr<TileSource> bc1 = makeBc1Source(rgba8, &st);
+  ASSERT_TRUE(bc1) << st.toString();
+  FlightRun same, against_rgba8;
+  ASSERT_NO_FATAL_FAILURE(flyOverTestDem(bc1, nullptr, &same));
+  ASSERT_NO_FATAL_FAILURE(flyOverTestDem(bc1, rgba8, &against_rgba8));
+  EXPECT_EQ(same.tile_content, TileContent::kBc1);
+  EXPECT_GT(same.terrain_rest_agree_pixels, 0u);
+  EXPECT_EQ(same.terrain_rest_agree_mismatched, 0u);
+  EXPECT_GT(against_rgba8.terrain_rest_agree_mismatched, 0u);
+  EXPECT_GT(lastFramePsnr(against_rgba8), 20.0);
+  EXPECT_LT(lastFramePsnr(against_rgba8), lastFramePsnr(same));
+  std::printf("  bc1 at rest: %.2f dB on its own reference, %.2f dB on the RGBA8 one (%llu differing pixels)\n",
+              lastFramePsnr(same), lastFramePsnr(against_rgba8),
+              (unsigned long long)against_rgba8.terrain_rest_agree_mismatched);
 }
 
 TEST(TerrainAccuracy, ComparisonCountsColourDifferencesWhereGeometryAgrees) {
