@@ -25,6 +25,12 @@ uniform vec2 uWorldPerSample;     // world units (level-0 colour texels) per lev
 uniform float uWorldPerHeight;    // world units per height unit (vertical scale included)
 uniform float uCamY;              // camera height in world units
 uniform mat4 uViewProj;           // camera-relative view-projection
+uniform vec4 uImageRel;           // colour image relative to the camera: x0, z0, x1, z1
+
+// Ground outside the colour image is clipped here rather than discarded
+// per fragment: a shader that may discard loses the early depth test, and
+// hidden slopes would be shaded in full (llvmpipe pays for every one).
+out float gl_ClipDistance[4];
 
 out vec2 vRel;      // camera-relative ground position, world units (x, z)
 out vec3 vNormal;   // world-space normal
@@ -89,4 +95,8 @@ void main() {
   float y = h * uWorldPerHeight - uCamY;
   vRelY = y;
   gl_Position = uViewProj * vec4(vRel.x, y, vRel.y, 1.0);
+  gl_ClipDistance[0] = vRel.x - uImageRel.x;
+  gl_ClipDistance[1] = vRel.y - uImageRel.y;
+  gl_ClipDistance[2] = uImageRel.z - vRel.x;
+  gl_ClipDistance[3] = uImageRel.w - vRel.y;
 }

@@ -5,12 +5,12 @@ in vec2 vRel;
 in vec3 vNormal;
 in float vMorph;
 
-uniform vec4 uImageRel;  // texture rectangle relative to the camera: x0, z0, x1, z1
 uniform vec3 uSunDir;    // unit vector towards the sun (world space)
 
+// Every fragment is on the ground: terrain.vert clips what lies outside the
+// colour image, so the shader never discards (early depth test kept).
 vec2 groundRel(out bool onGround) {
-  onGround = vRel.x >= uImageRel.x && vRel.y >= uImageRel.y && vRel.x < uImageRel.z &&
-             vRel.y < uImageRel.w;
+  onGround = true;
   return vRel;
 }
 

@@ -4,6 +4,7 @@
 #include "gl.h"
 
 #include <clipstream/renderer/config.h>
+#include <clipstream/renderer/gl_context.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/alignment.h>
 
@@ -87,6 +88,7 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   if (!source) return Status::error(ErrorCode::kInvalidArgument, "flight: no tile source");
   if (config.upload_tiles == 0)
     return Status::error(ErrorCode::kInvalidArgument, "flight: uploads per frame must be at least 1");
+  keepHeapForSoftwareGl();
   std::unique_ptr<Flight> f(new Flight());
   f->m_source = std::move(source);
   f->m_config = config;

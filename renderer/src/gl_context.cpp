@@ -7,7 +7,10 @@
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
 
+#include <malloc.h>
+
 #include <cstring>
+#include <mutex>
 #include <vector>
 
 namespace clipstream {
@@ -67,6 +70,23 @@ EGLContext makeCoreContext(EGLDisplay display, std::string* why) {
 }
 
 }  // namespace
+
+namespace {
+// Freed heap kept for the software rasterizer's per-frame bins: a 1280x720
+// terrain frame bins a few MiB; 256 MiB covers 4K frames with room, and is
+// memory the process already had.
+constexpr size_t kSoftwareGlHeapKeepBytes = size_t(256) << 20;
+}  // namespace
+
+bool keepHeapForSoftwareGl() {
+  const char* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  if (renderer == nullptr || (std::strstr(renderer, "llvmpipe") == nullptr && std::strstr(renderer, "softpipe") == nullptr))
+    return false;
+  static std::once_flag once;
+  static bool applied = false;
+  std::call_once(once, [] { applied = mallopt(M_TRIM_THRESHOLD, int(kSoftwareGlHeapKeepBytes)) == 1; });
+  return applied;
+}
 
 std::string currentGlDescription() {
   const char* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));

@@ -126,10 +126,24 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
       blocks[by * kBlocks + bx].insert(blocks[by * kBlocks + bx].end(), ring.begin() + long(t),
                                        ring.begin() + long(t) + 3);
     }
+    // Each block draws from its own copy of the vertices it uses, stored
+    // together after the plain grid (which ringVertices() reads): a
+    // driver that shades the whole index range of a draw (llvmpipe does)
+    // then shades each vertex of the block once instead of every grid row
+    // the block spans, and its per-draw vertex buffers stay small.
     for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
+      std::vector<uint32_t> used(blocks[b]);
+      std::sort(used.begin(), used.end());
+      used.erase(std::unique(used.begin(), used.end()), used.end());
+      const uint32_t base = uint32_t(grid.size() / 2);
+      for (uint32_t v : used) {
+        grid.push_back(int32_t(v % (n + 1)));
+        grid.push_back(int32_t(v / (n + 1)));
+      }
       r->m_first_index[c][b] = uint32_t(indices.size());
       r->m_index_count[c][b] = uint32_t(blocks[b].size());
-      indices.insert(indices.end(), blocks[b].begin(), blocks[b].end());
+      for (uint32_t v : blocks[b])
+        indices.push_back(base + uint32_t(std::lower_bound(used.begin(), used.end(), v) - used.begin()));
     }
   }
   glCreateBuffers(1, &r->m_vertices);
@@ -497,10 +511,16 @@ TerrainRenderer::Frustum TerrainRenderer::frustum(const Camera& camera, const Vi
 }
 
 void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport& viewport) {
-  if (m_config.full_resolution) {
+  // terrain.vert's four clip distances bound the ground to the colour image.
+  for (GLenum c = GL_CLIP_DISTANCE0; c < GL_CLIP_DISTANCE0 + 4; ++c) glEnable(c);
+  if (m_config.full_resolution)
     drawPatches(p, camera, viewport);
-    return;
-  }
+  else
+    drawClipmapRings(p, camera, viewport);
+  for (GLenum c = GL_CLIP_DISTANCE0; c < GL_CLIP_DISTANCE0 + 4; ++c) glDisable(c);
+}
+
+void TerrainRenderer::drawClipmapRings(uint32_t p, const Camera& camera, const Viewport& viewport) {
   m_frame = TerrainFrame{};
   const uint32_t n = m_config.ring_cells;
   const uint32_t coarsest = m_coarsest;
@@ -584,8 +604,8 @@ void TerrainRenderer::drawGrid(uint32_t p, const Camera& camera, const Frustum& 
     const glm::dvec2 x1 = (glm::dvec2(c1) * spacing - cam) * m.world_per_sample;
     const double y0 = double(h.x) * m.world_per_height - camera.position.y;
     const double y1 = double(h.y) * m.world_per_height - camera.position.y;
-    // Ground outside the colour image is not drawn (the fragment shader
-    // discards it): a block wholly outside costs vertices for nothing. Its
+    // Ground outside the colour image is not drawn (terrain.vert clips
+    // it): a block wholly outside costs vertices for nothing. Its
     // triangles reach two cells beyond its cells (they are filed by centroid).
     const glm::dvec2 reach = 2.0 * spacing * m.world_per_sample;
     bool outside = x1.x + reach.x <= -camera.position.x || x1.y + reach.y <= -camera.position.z ||

@@ -37,4 +37,16 @@ class HeadlessContext {
 // Returns the GL_RENDERER / GL_VERSION pair of the current context.
 std::string currentGlDescription();
 
+// When the current context is Mesa's software rasterizer (llvmpipe,
+// softpipe), keeps up to kSoftwareGlHeapKeepBytes of freed heap in the
+// process instead of returning it to the kernel (glibc's M_TRIM_THRESHOLD,
+// process-wide, set once); otherwise does nothing. llvmpipe bins each
+// frame's triangles into 64 KiB blocks it frees after the frame: with
+// glibc's default trim threshold the heap shrinks after every frame and the
+// next frame faults every page back in, 40 % of a terrain frame at
+// 1280x720 (docs/terrain.md, "Frame cost"). Flight::create calls it; a
+// program drawing without a Flight may call it after making its context
+// current. Returns whether it applied the setting.
+bool keepHeapForSoftwareGl();
+
 }  // namespace clipstream

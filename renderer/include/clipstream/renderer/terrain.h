@@ -159,6 +159,8 @@ class TerrainRenderer {
   // Draws the resident rings with `program` (its uniforms set by the caller
   // for the frame), culling blocks; fills m_frame.
   void drawRings(uint32_t program, const Camera& camera, const Viewport& viewport);
+  // The nested rings of the geometry clipmap, finest (nearest) first.
+  void drawClipmapRings(uint32_t program, const Camera& camera, const Viewport& viewport);
   // The full_resolution mesh: every patch over the height field and the
   // colour image (m_image_px), culled by blocks.
   void drawPatches(uint32_t program, const Camera& camera, const Viewport& viewport);
