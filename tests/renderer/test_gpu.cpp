@@ -11,9 +11,12 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 
 namespace clipstream {
 namespace {
@@ -472,6 +475,31 @@ TEST(ClipmapRender, Bc1PyramidTileThatCannotBeReadIsFilledFromItsParent) {
   // The RGBA8 renderer fills the same hole with a GPU blit of the parent;
   // the BC1 one filters on the CPU and encodes again.
   EXPECT_GE(psnrLogged("bc1 fill vs rgba8 fill", filled, filled_rgba8), kMatchDb);
+}
+
+}  // namespace
+}  // namespace clipstream
+
+namespace clipstream {
+namespace {
+
+// On Mesa's software rasterizer the heap keeps what a frame freed: 8 MiB
+// of 64 KiB blocks (llvmpipe's bin size) freed at the top of the heap do
+// not shrink it. On any other renderer the call must leave glibc alone.
+TEST(SoftwareGlHeap, FreedFrameMemoryStaysInTheHeap) {
+  CLIPSTREAM_REQUIRE_GL();
+  const std::string renderer = currentGlDescription();
+  const bool software = renderer.find("llvmpipe") != std::string::npos || renderer.find("softpipe") != std::string::npos;
+  EXPECT_EQ(keepHeapForSoftwareGl(), software) << renderer;
+  if (!software) GTEST_SKIP() << "not a software rasterizer: " << renderer;
+  std::vector<void*> blocks;
+  for (int i = 0; i < 128; ++i) {
+    blocks.push_back(std::malloc(65536));
+    std::memset(blocks.back(), 1, 65536);  // touched, as bins are
+  }
+  const char* top = static_cast<const char*>(sbrk(0));
+  for (auto it = blocks.rbegin(); it != blocks.rend(); ++it) std::free(*it);
+  EXPECT_EQ(static_cast<const char*>(sbrk(0)), top) << "the heap shrank after the blocks were freed";
 }
 
 }  // namespace
