@@ -19,7 +19,13 @@ plot csv using "frame":"frame_ms" with lines lw 1.5 title "frame ms", \
      csv using "frame":"streamer_ms" with lines title "streamer ms"
 set ylabel "tiles"
 set y2label "level"
-set y2tics
+set y2tics 1
+# From 0 up; a run that uploads nothing after its warm-up, or stays at
+# level 0, still gets readable axes.
+stats csv using "tiles_uploaded" name "UP" nooutput
+stats csv using "max_texture_lod" name "LOD" nooutput
+set yrange [0:(UP_max > 0 ? UP_max * 1.1 : 1)]
+set y2range [0:LOD_max + 1]
 set boxwidth 0.9 relative
 set ytics nomirror
 plot csv using "frame":"tiles_uploaded" with boxes fs solid 0.4 noborder title "tiles uploaded", \
