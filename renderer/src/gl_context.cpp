@@ -80,8 +80,9 @@ constexpr size_t kSoftwareGlHeapKeepBytes = size_t(256) << 20;
 
 bool keepHeapForSoftwareGl() {
   const char* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
-  if (renderer == nullptr || (std::strstr(renderer, "llvmpipe") == nullptr && std::strstr(renderer, "softpipe") == nullptr))
-    return false;
+  const bool software =
+      renderer != nullptr && (std::strstr(renderer, "llvmpipe") != nullptr || std::strstr(renderer, "softpipe") != nullptr);
+  if (!software) return false;
   static std::once_flag once;
   static bool applied = false;
   std::call_once(once, [] { applied = mallopt(M_TRIM_THRESHOLD, int(kSoftwareGlHeapKeepBytes)) == 1; });

@@ -43,8 +43,8 @@ std::string currentGlDescription();
 // process-wide, set once); otherwise does nothing. llvmpipe bins each
 // frame's triangles into 64 KiB blocks it frees after the frame: with
 // glibc's default trim threshold the heap shrinks after every frame and the
-// next frame faults every page back in, 40 % of a terrain frame at
-// 1280x720 (docs/terrain.md, "Frame cost"). Flight::create calls it; a
+// next frame faults every page back in: a third of a terrain frame's time
+// at 1280x720 (docs/terrain.md, "Frame cost"). Flight::create calls it; a
 // program drawing without a Flight may call it after making its context
 // current. Returns whether it applied the setting.
 bool keepHeapForSoftwareGl();
