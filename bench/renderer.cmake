@@ -28,3 +28,11 @@ target_link_libraries(bench_renderer_buffering PRIVATE clipstream::renderer clip
 add_executable(bench_renderer_clip_size ${CMAKE_CURRENT_LIST_DIR}/renderer_clip_size.cpp)
 target_link_libraries(bench_renderer_clip_size PRIVATE clipstream::renderer clipstream::eval clipstream::cli
   clipstream_warnings)
+
+# Sampling cost of RGBA8, BC1 and BC7 stacks on this GL (docs/benchmarks.md,
+# "Sampling cost of block formats on llvmpipe"); its own pass, built with the
+# renderer's private program helper.
+add_executable(bench_renderer_sampling ${CMAKE_CURRENT_LIST_DIR}/renderer_sampling.cpp)
+target_include_directories(bench_renderer_sampling PRIVATE ${PROJECT_SOURCE_DIR}/renderer/src)
+target_link_libraries(bench_renderer_sampling PRIVATE clipstream::renderer clipstream::streamer clipstream::cli
+  clipstream_warnings OpenGL::OpenGL)
