@@ -170,17 +170,23 @@ TEST(IdealReference, MatchesTheCpuGroundTruth) {
   EXPECT_GE(e.psnr_db, 35.0);
 }
 
+// 20 frames of the built-in orbit at x4 over `source`, then 40 at rest, a
+// small view judged every 5th frame.
+void restingOrbit(std::shared_ptr<TileSource> source, FlightRunOptions* o) {
+  o->source = std::move(source);
+  ASSERT_TRUE(FlightPath::builtin("orbit", o->source->geometry(), &o->path).isOk());
+  o->frames = 20;
+  o->rest_frames = 40;
+  o->viewport = {192, 108};
+  o->speed = 4.0;
+  o->streamer.io_threads = 2;
+  o->reference_every = 5;
+}
+
 TEST(FlightRun, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
   CLIPSTREAM_REQUIRE_GL();
   FlightRunOptions o;
-  o.source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
-  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
-  o.frames = 20;
-  o.rest_frames = 40;
-  o.viewport = {192, 108};
-  o.speed = 4.0;
-  o.streamer.io_threads = 2;
-  o.reference_every = 5;
+  ASSERT_NO_FATAL_FAILURE(restingOrbit(makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128), &o));
   FlightRun r;
   const Status s = runFlight(o, &r);
   ASSERT_TRUE(s.isOk()) << s.toString();
@@ -202,15 +208,8 @@ TEST(FlightRun, Bc1FlightRestsOnItsReferenceAndNearTheRgba8One) {
   ASSERT_TRUE(bc1) << st.toString();
   for (bool against_rgba8 : {false, true}) {
     FlightRunOptions o;
-    o.source = bc1;
+    ASSERT_NO_FATAL_FAILURE(restingOrbit(bc1, &o));
     if (against_rgba8) o.reference_source = rgba8;
-    ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
-    o.frames = 20;
-    o.rest_frames = 40;
-    o.viewport = {192, 108};
-    o.speed = 4.0;
-    o.streamer.io_threads = 2;
-    o.reference_every = 5;
     FlightRun r;
     const Status s = runFlight(o, &r);
     ASSERT_TRUE(s.isOk()) << s.toString();
