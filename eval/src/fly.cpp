@@ -149,6 +149,9 @@ Status checkFlyOptions(const FlyOptions& o) {
     return bad("vertical scale must be a number above 0 and at most " + std::to_string(int(kMaxVerticalScale)));
   if (o.terrain_ring < 16 || o.terrain_ring > 1024 || (o.terrain_ring & (o.terrain_ring - 1)) != 0)
     return bad("terrain ring must be a power of two from 16 to 1024");
+  if (!std::isfinite(o.terrain_error_px) || o.terrain_error_px < kMinTerrainErrorPx ||
+      o.terrain_error_px > kMaxTerrainErrorPx)
+    return bad("terrain error must be from 0.01 to 1000 pixels");
   return Status::ok();
 }
 
@@ -203,6 +206,8 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
         !s)
       return s;
     for (const std::string& w : notes) (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
+    terrain.method = o.terrain_method;
+    terrain.error_px = o.terrain_error_px;
     r.terrain = std::move(terrain);
   }
   {

@@ -92,11 +92,22 @@ int main(int argc, char** argv) {
                "Stretch the elevation store over the colour image instead of placing it by georeference");
   app.add_option("--terrain-ring", o.terrain_ring, "Cells per geometry clipmap ring side (power of two, 16..1024)")
       ->transform(cli::wholeInRange(16, 1024));
+  std::string terrain_method = terrainMethodName(o.terrain_method);
+  app.add_option("--terrain", terrain_method,
+                 "Terrain geometry with --elevation: clipmap (default), quadtree, or flat (the plane, "
+                 "for comparison)");
+  app.add_option("--terrain-error", o.terrain_error_px,
+                 "Quadtree: split a node while its projected error bound exceeds this many pixels")
+      ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
   app.footer(
       "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written;\n"
       "nothing half-written is left), 2 command-line mistake, killed by INT/TERM/HUP after\n"
       "removing its temporaries (shell status 128+N). docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  if (Status s = terrainMethodFromName(terrain_method, &o.terrain_method); !s)
+    return cli::usageError(app, "--terrain: " + s.message);
+  if ((app.count("--terrain") || app.count("--terrain-error")) && o.elevation_path.empty())
+    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
 
   if (o.store_path.empty() && o.procedural_px == 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE");

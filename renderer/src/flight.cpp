@@ -153,8 +153,16 @@ Status Flight::makeTerrain() {
   tc.ring_cells = t.ring_cells;
   tc.clip_tiles = TerrainRenderer::windowTiles(t.ring_cells, t.source->geometry().tile_px);
   tc.mapping = t.alignment;
+  tc.method = t.method;
+  tc.error_px = t.error_px;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
+  if (t.method == TerrainMethod::kQuadtree) {
+    // The per-tile errors the quadtree refines by (index pages, read once).
+    std::shared_ptr<const TerrainBounds> bounds;
+    if (loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &bounds).isOk())
+      terrain->setBounds(std::move(bounds));
+  }
   TileSource& source = *t.source;
   m_preload_failures += terrain->preloadCoarseLevels(
       [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {

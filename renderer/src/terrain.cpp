@@ -34,6 +34,26 @@ int holeConfig(const glm::i64vec2& fine_origin, const glm::i64vec2& origin, uint
 
 }  // namespace
 
+const char* terrainMethodName(TerrainMethod method) {
+  switch (method) {
+    case TerrainMethod::kClipmap: return "clipmap";
+    case TerrainMethod::kQuadtree: return "quadtree";
+    case TerrainMethod::kFlat: return "flat";
+  }
+  return "?";
+}
+
+Status terrainMethodFromName(const std::string& name, TerrainMethod* out) {
+  for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat}) {
+    if (name == terrainMethodName(m)) {
+      *out = m;
+      return Status::ok();
+    }
+  }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "terrain method '" + name + "': must be clipmap, quadtree or flat");
+}
+
 glm::i64vec2 TerrainRenderer::ringOrigin(const TerrainConfig& config, const Camera& camera,
                                          uint32_t level) {
   const glm::dvec2 cam = cameraSamples(config.mapping, camera) / std::ldexp(1.0, int(level));
@@ -56,6 +76,14 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
       !std::isfinite(m.world_per_height) || !(m.world_per_height > 0.0) ||
       !std::isfinite(m.sample0_world.x) || !std::isfinite(m.sample0_world.y)) {
     return Status::error(ErrorCode::kInvalidArgument, "terrain mapping must be finite and positive");
+  }
+  const uint32_t p = config.patch_cells;
+  if (config.method != TerrainMethod::kClipmap && (p % 2 != 0 || p < 4 || p > 256)) {
+    return Status::error(ErrorCode::kInvalidArgument, "terrain patch of " + std::to_string(p) +
+                                                          " cells: must be even, from 4 to 256");
+  }
+  if (!(config.error_px >= kMinTerrainErrorPx && config.error_px <= kMaxTerrainErrorPx)) {
+    return Status::error(ErrorCode::kInvalidArgument, "terrain error bound must be from 0.01 to 1000 pixels");
   }
   if (heights.levelCount() == 0 || heights.levelCount() > renderer_config::kMaxLevels) {
     return Status::error(ErrorCode::kInvalidArgument, "terrain: height pyramid has no level or too many");
@@ -150,12 +178,35 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   glNamedBufferStorage(r->m_vertices, GLsizeiptr(grid.size() * sizeof(int32_t)), grid.data(), 0);
   glCreateBuffers(1, &r->m_indices);
   glNamedBufferStorage(r->m_indices, GLsizeiptr(indices.size() * sizeof(uint32_t)), indices.data(), 0);
-  glCreateVertexArrays(1, &r->m_vao);
-  glVertexArrayVertexBuffer(r->m_vao, 0, r->m_vertices, 0, 2 * sizeof(int32_t));
-  glVertexArrayElementBuffer(r->m_vao, r->m_indices);
-  glEnableVertexArrayAttrib(r->m_vao, 0);
-  glVertexArrayAttribIFormat(r->m_vao, 0, 2, GL_INT, 0);
-  glVertexArrayAttribBinding(r->m_vao, 0, 0);
+  auto makeVao = [](uint32_t vertices, uint32_t index_buffer, uint32_t* vao) {
+    glCreateVertexArrays(1, vao);
+    glVertexArrayVertexBuffer(*vao, 0, vertices, 0, 2 * sizeof(int32_t));
+    glVertexArrayElementBuffer(*vao, index_buffer);
+    glEnableVertexArrayAttrib(*vao, 0);
+    glVertexArrayAttribIFormat(*vao, 0, 2, GL_INT, 0);
+    glVertexArrayAttribBinding(*vao, 0, 0);
+  };
+  makeVao(r->m_vertices, r->m_indices, &r->m_vao);
+  if (config.method != TerrainMethod::kClipmap) {
+    // The quadtree's patch: one (P + 1)^2 grid, its 16 edge patterns.
+    std::vector<int32_t> patch_grid;
+    for (uint32_t j = 0; j <= p; ++j)
+      for (uint32_t i = 0; i <= p; ++i) patch_grid.insert(patch_grid.end(), {int32_t(i), int32_t(j)});
+    std::vector<uint32_t> patch_indices;
+    for (uint32_t mask = 0; mask < 16; ++mask) {
+      const std::vector<uint32_t> t = terrain_mesh::patchTriangles(p, mask);
+      r->m_patch_first[mask] = uint32_t(patch_indices.size());
+      r->m_patch_count[mask] = uint32_t(t.size());
+      patch_indices.insert(patch_indices.end(), t.begin(), t.end());
+    }
+    glCreateBuffers(1, &r->m_patch_vertices);
+    glNamedBufferStorage(r->m_patch_vertices, GLsizeiptr(patch_grid.size() * sizeof(int32_t)),
+                         patch_grid.data(), 0);
+    glCreateBuffers(1, &r->m_patch_indices);
+    glNamedBufferStorage(r->m_patch_indices, GLsizeiptr(patch_indices.size() * sizeof(uint32_t)),
+                         patch_indices.data(), 0);
+    makeVao(r->m_patch_vertices, r->m_patch_indices, &r->m_patch_vao);
+  }
 
   const uint32_t period = r->m_slots * tile;
   GLint max_size = 0;
@@ -177,6 +228,8 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                         std::vector<uint64_t>(size_t(r->m_slots) * r->m_slots, kNoTile));
   r->m_slot_heights.assign(heights.levelCount(),
                            std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
+  r->m_slot_twist.assign(heights.levelCount(),
+                         std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
   r->m_slot_bounds.assign(heights.levelCount(),
                           std::vector<glm::vec2>(size_t(r->m_slots) * r->m_slots, glm::vec2(0.0f)));
   if (glGetError() != GL_NO_ERROR) {
@@ -196,6 +249,9 @@ TerrainRenderer::~TerrainRenderer() {
   glDeleteVertexArrays(1, &m_vao);
   glDeleteBuffers(1, &m_vertices);
   glDeleteBuffers(1, &m_indices);
+  glDeleteVertexArrays(1, &m_patch_vao);
+  glDeleteBuffers(1, &m_patch_vertices);
+  glDeleteBuffers(1, &m_patch_indices);
   glDeleteTextures(1, &m_heights);
 }
 
@@ -238,6 +294,37 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   m_slot_heights[key.level][slot].assign(heights, heights + size_t(tile) * tile);
   const auto [lo, hi] = std::minmax_element(heights, heights + size_t(tile) * tile);
   m_slot_bounds[key.level][slot] = {*lo, *hi};
+  if (m_config.method == TerrainMethod::kQuadtree) {
+    // Node errors that read this tile: its level's nodes over it and every
+    // coarser node over them (their bounds take their children's).
+    const LevelInfo& info = m_geometry.levels[key.level];
+    if (key.x == 0 || key.y == 0 || key.x + 1 == info.tiles_x || key.y + 1 == info.tiles_y) {
+      m_error_cache.clear();  // nodes beyond the field read its edge samples
+    } else if (!m_error_cache.empty()) {
+      const int64_t p = m_config.patch_cells;
+      int64_t x0 = int64_t(key.x) * tile / p, x1 = (int64_t(key.x + 1) * tile - 1) / p + 1;
+      int64_t y0 = int64_t(key.y) * tile / p, y1 = (int64_t(key.y + 1) * tile - 1) / p + 1;
+      for (uint32_t l = key.level; l < renderer_config::kMaxLevels && !m_error_cache.empty(); ++l) {
+        for (int64_t y = y0 - 1; y <= y1; ++y)
+          for (int64_t x = x0 - 1; x <= x1; ++x) m_error_cache.erase(NodeId{l, x, y});
+        x0 = x0 >= 0 ? x0 / 2 : -((-x0 + 1) / 2);
+        y0 = y0 >= 0 ? y0 / 2 : -((-y0 + 1) / 2);
+        x1 = x1 / 2 + 1;
+        y1 = y1 / 2 + 1;
+      }
+    }
+    // Each node-sized block's largest cell twist (cells inside the tile).
+    const uint32_t block = std::min(m_config.patch_cells, tile), blocks = tile / block;
+    std::vector<float>& twist = m_slot_twist[key.level][slot];
+    twist.assign(size_t(blocks) * blocks, 0.0f);
+    for (uint32_t j = 0; j + 1 < tile; ++j)
+      for (uint32_t i = 0; i + 1 < tile; ++i) {
+        const float* a = heights + size_t(j) * tile + i;
+        const float t = std::abs(a[0] - a[1] - a[tile] + a[tile + 1]) * 0.25f;
+        float& b = twist[size_t(j / block) * blocks + i / block];
+        b = std::max(b, t);
+      }
+  }
 }
 
 glm::vec2 TerrainRenderer::heightBounds(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const {
@@ -301,13 +388,35 @@ uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
 bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
                                    uint32_t* level_used) const {
   const TerrainMapping& m = m_config.mapping;
+  if (m_config.method == TerrainMethod::kFlat && !m_config.full_resolution) {
+    *height = 0.0;
+    if (level_used != nullptr) *level_used = 0;
+    return true;
+  }
   const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
   const int64_t tile = m_geometry.tile_px;
+  // The coarsest level the next frame may draw here: the innermost ring's
+  // (a coarser ring lies farther out), or, for the quadtree, one level
+  // coarser than the leaf drawn here last (a leaf coarsens by one level at
+  // a time as the camera moves; where no leaf was drawn, any level).
+  uint32_t top = m_frame.finest_level;
+  if (m_config.method == TerrainMethod::kQuadtree && !m_config.full_resolution) {
+    top = m_geometry.levelCount();
+    const int64_t p = m_config.patch_cells;
+    for (const TerrainNode& node : m_nodes) {
+      const double span = std::ldexp(double(p), int(node.level));
+      if (s0.x >= double(node.x) * span && s0.x <= double(node.x + 1) * span &&
+          s0.y >= double(node.y) * span && s0.y <= double(node.y + 1) * span) {
+        top = node.level + 1;
+        break;
+      }
+    }
+  }
   bool found = false;
   uint32_t first = 0;
   double highest = -INFINITY;
   for (uint32_t level = 0; level < m_geometry.levelCount(); ++level) {
-    if (found && level > std::max(first, m_frame.finest_level)) break;
+    if (found && level > std::max(first, top)) break;
     const LevelInfo& info = m_geometry.levels[level];
     const glm::dvec2 s = s0 / std::ldexp(1.0, int(level));
     const double fx = std::clamp(s.x, 0.0, double(info.width_px - 1));
@@ -388,14 +497,18 @@ void TerrainRenderer::setFrameUniforms(uint32_t p, const Camera& camera,
       glm::mat4(cameraProjection(camera, viewport, far_dist) * cameraRelativeView(camera));
   glProgramUniformMatrix4fv(p, loc(p, "uViewProj"), 1, GL_FALSE, &view_proj[0][0]);
   glProgramUniform1i(p, loc(p, "uN"), GLint(n));
-  glProgramUniform1i(p, loc(p, "uCoarsest"), GLint(m_config.full_resolution ? 0 : m_coarsest));
+  // No transition band for the full-resolution mesh and the quadtree
+  // (uCoarsest 0: every level counts as the coarsest).
+  const bool rings = m_config.method == TerrainMethod::kClipmap && !m_config.full_resolution;
+  glProgramUniform1i(p, loc(p, "uCoarsest"), GLint(rings ? m_coarsest : 0));
   glProgramUniform1i(p, loc(p, "uTransition"),
                      GLint(std::max(1u, n / renderer_config::kTerrainTransitionDivisor)));
   glProgramUniform1i(p, loc(p, "uHeightPeriod"), GLint(m_slots * m_geometry.tile_px));
   glProgramUniform2f(p, loc(p, "uCamFrac"), float(cam.x - cam_int.x), float(cam.y - cam_int.y));
   glProgramUniform2f(p, loc(p, "uWorldPerSample"), float(m.world_per_sample.x),
                      float(m.world_per_sample.y));
-  glProgramUniform1f(p, loc(p, "uWorldPerHeight"), float(m.world_per_height));
+  glProgramUniform1f(p, loc(p, "uWorldPerHeight"),
+                     m_config.method == TerrainMethod::kFlat ? 0.0f : float(m.world_per_height));
   glProgramUniform1f(p, loc(p, "uCamY"), float(camera.position.y));
   std::array<GLint, 2 * renderer_config::kMaxLevels> sizes{};
   for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
@@ -515,6 +628,8 @@ void TerrainRenderer::drawRings(uint32_t p, const Camera& camera, const Viewport
   for (GLenum c = GL_CLIP_DISTANCE0; c < GL_CLIP_DISTANCE0 + 4; ++c) glEnable(c);
   if (m_config.full_resolution)
     drawPatches(p, camera, viewport);
+  else if (m_config.method != TerrainMethod::kClipmap)
+    drawQuadtree(p, camera, viewport);
   else
     drawClipmapRings(p, camera, viewport);
   for (GLenum c = GL_CLIP_DISTANCE0; c < GL_CLIP_DISTANCE0 + 4; ++c) glDisable(c);

@@ -25,4 +25,17 @@ std::vector<uint32_t> ringTriangles(uint32_t n, int hole_x, int hole_y);
 // (TerrainConfig::full_resolution), which meet each other vertex for vertex.
 std::vector<uint32_t> gridTriangles(uint32_t n);
 
+// Sides of a quadtree node's patch, for patchTriangles()'s mask: the side
+// at j = 0, at i = n, at j = n and at i = 0.
+enum PatchSide : uint32_t { kSideTop = 1, kSideRight = 2, kSideBottom = 4, kSideLeft = 8 };
+
+// Triangles of a quadtree node's patch of n x n cells (n even, >= 4) whose
+// sides in `coarse_sides` (PatchSide bits) border a node one level coarser:
+// along such a side the 2 x 2 blocks are fans around their centre that skip
+// the side's midpoint, so the side has only every other vertex, which are
+// the coarser node's (seed 003's edge patterns: 16 masks, no T-junction,
+// no crack). Elsewhere cells are cut along the diagonal (i, j)-(i+1, j+1),
+// as a ring's and the full-resolution mesh's are.
+std::vector<uint32_t> patchTriangles(uint32_t n, uint32_t coarse_sides);
+
 }  // namespace clipstream::terrain_mesh

@@ -68,8 +68,20 @@ int main(int argc, char** argv) {
       ->transform(cli::inRange(0.001, 1000.0));
   app.add_flag("--stretch-elevation", stretch_elevation,
                "Stretch the elevation store over the texture instead of placing it by georeference");
+  std::string terrain_method = "clipmap";
+  double terrain_error_px = renderer_config::kTerrainErrorPx;
+  app.add_option("--terrain", terrain_method,
+                 "Terrain geometry with --elevation: clipmap (default), quadtree, or flat");
+  app.add_option("--terrain-error", terrain_error_px,
+                 "Quadtree: split a node while its projected error bound exceeds this many pixels")
+      ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
   app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  TerrainMethod method = TerrainMethod::kClipmap;
+  if (Status s = terrainMethodFromName(terrain_method, &method); !s)
+    return cli::usageError(app, "--terrain: " + s.message);
+  if ((app.count("--terrain") || app.count("--terrain-error")) && elevation_path.empty())
+    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
 
   Viewport vp;
   if (Status s = cli::parseSize(size, &vp.width_px, &vp.height_px); !s) return cli::usageError(app, s.message);
@@ -129,6 +141,8 @@ int main(int argc, char** argv) {
       return 1;
     }
     for (const std::string& w : notes) cli::printError(app, "warning: " + w);
+    layer.method = method;
+    layer.error_px = terrain_error_px;
     terrain = std::move(layer);
   }
 

@@ -27,6 +27,7 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
     level.tiles_x = info.tiles_x;
     level.tiles_y = info.tiles_y;
     level.range.resize(size_t(info.tiles_x) * info.tiles_y);
+    level.error.resize(size_t(info.tiles_x) * info.tiles_y);
     Status status;
     for (uint32_t y = 0; y < info.tiles_y && status; ++y)
       for (uint32_t x = 0; x < info.tiles_x && status; ++x) {
@@ -35,6 +36,7 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
         if (status && !(std::isfinite(b.min_height) && std::isfinite(b.max_height) && b.min_height <= b.max_height))
           status = Status::error(ErrorCode::kCorruptIndex, source.describe() + ": tile bounds not a range");
         level.range[size_t(y) * info.tiles_x + x] = {b.min_height, b.max_height};
+        level.error[size_t(y) * info.tiles_x + x] = std::isnan(b.error) ? INFINITY : std::max(b.error, 0.0f);
       }
     if (!status) {
       if (l == coarsest) return status;

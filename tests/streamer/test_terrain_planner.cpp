@@ -176,6 +176,7 @@ TEST(TerrainBounds, LoadedFromAnElevationStoreAreItsIndex) {
         ASSERT_TRUE(reader->locate({l, x, y}, &loc).isOk());
         EXPECT_EQ(lv.range[size_t(y) * lv.tiles_x + x], glm::vec2(loc.min_height, loc.max_height))
             << l << " " << x << " " << y;
+        EXPECT_EQ(lv.error[size_t(y) * lv.tiles_x + x], loc.error) << l << " " << x << " " << y;
         // Every level-0 height under the tile lies in its range.
         const uint64_t span = uint64_t(g.tile_px) << l;
         for (uint64_t j = y * span; j < std::min<uint64_t>((y + 1) * span, g.height_px); j += 7)

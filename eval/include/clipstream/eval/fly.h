@@ -8,6 +8,7 @@
 #pragma once
 
 #include <clipstream/renderer/config.h>
+#include <clipstream/renderer/terrain.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
@@ -73,6 +74,8 @@ struct FlyOptions {
   double vertical_scale = 1.0;       // height exaggeration
   bool stretch_elevation = false;    // place by extent, not by georeference
   uint32_t terrain_ring = renderer_config::kTerrainRingCells;  // cells per ring side
+  TerrainMethod terrain_method = TerrainMethod::kClipmap;     // --terrain
+  double terrain_error_px = renderer_config::kTerrainErrorPx; // quadtree: --terrain-error
 };
 
 // Largest --vertical-scale: beyond it every slope is a wall.

@@ -70,6 +70,8 @@ struct TerrainLayerConfig {
   std::shared_ptr<TileSource> source;
   LayerAlignment alignment;
   uint32_t ring_cells = renderer_config::kTerrainRingCells;
+  TerrainMethod method = TerrainMethod::kClipmap;       // --terrain
+  double error_px = renderer_config::kTerrainErrorPx;   // quadtree: --terrain-error
 };
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a

@@ -1,11 +1,18 @@
-// Terrain geometry: a GPU geometry clipmap (Losasso & Hoppe 2004; GPU Gems 2
-// ch. 2) over a height clip stack, textured by the colour clipmap. Rings of
+// Terrain geometry over a height clip stack, textured by the colour
+// clipmap, by one of two methods (TerrainMethod): a GPU geometry clipmap
+// (Losasso & Hoppe 2004; GPU Gems 2 ch. 2), or a restricted quadtree of
+// patches refined by their projected geometric error. Clipmap: rings of
 // n x n cells, each level twice the spacing of the one inside it, centred
 // on the viewer; every vertex's height is fetched in the vertex shader from
 // the height stack (R32F, one array layer per height level, tiles placed
 // toroidally as in the colour stack); the outer band of each ring blends
 // towards the coarser ring's surface so rings meet without cracks,
-// T-junctions or popping. docs/terrain.md explains the method.
+// T-junctions or popping. Quadtree: nodes of kTerrainPatchCells cells over
+// the same height levels, split while the store's per-tile error bound,
+// projected at the node's nearest point, exceeds TerrainConfig::error_px;
+// neighbours differ by at most one level, and a node's side towards a
+// coarser one skips its odd vertices (no crack). docs/terrain.md explains
+// both methods and when to choose which.
 //
 // Owned by the GL thread: every method must be called on the thread whose
 // context was current at create().
@@ -16,6 +23,7 @@
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/terrain_bounds.h>
 
 #include <glm/glm.hpp>
 
@@ -23,6 +31,8 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
+#include <unordered_map>
 #include <vector>
 
 namespace clipstream {
@@ -32,7 +42,25 @@ namespace clipstream {
 // renderer reads world_per_sample, sample0_world and world_per_height.
 using TerrainMapping = LayerAlignment;
 
+// How the terrain's geometry is modelled (--terrain): the geometry clipmap,
+// the restricted quadtree, or the flat plane y = 0 drawn through the same
+// pipeline (an end point of the accuracy charts: what no geometry costs).
+enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat };
+const char* terrainMethodName(TerrainMethod method);
+// "clipmap", "quadtree", "flat"; kInvalidArgument naming the choices otherwise.
+Status terrainMethodFromName(const std::string& name, TerrainMethod* out);
+
+// Range of TerrainConfig::error_px (--terrain-error): below a hundredth of
+// a pixel every node in view splits to level 0; above 1000 none does.
+inline constexpr double kMinTerrainErrorPx = 0.01;
+inline constexpr double kMaxTerrainErrorPx = 1000.0;
+
 struct TerrainConfig {
+  TerrainMethod method = TerrainMethod::kClipmap;
+  // Quadtree: the screen-space error bound (pixels) a node is split above.
+  double error_px = renderer_config::kTerrainErrorPx;
+  // Quadtree: cells per node side (even, 4..256).
+  uint32_t patch_cells = renderer_config::kTerrainPatchCells;
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
   TerrainMapping mapping;
   // The streamer's clip size for the height layer (tiles a side), so that
@@ -57,6 +85,23 @@ struct TerrainFrame {
   uint64_t triangles = 0;
   uint32_t blocks = 0;         // ring blocks drawn
   uint32_t culled_blocks = 0;  // ring blocks outside the frustum (not drawn)
+  // Quadtree: leaves drawn, leaves that wanted to split but whose children's
+  // height tiles were not resident (drawn coarser), and splits made only to
+  // keep neighbours within one level.
+  uint32_t nodes = 0;
+  uint32_t fallback_nodes = 0;
+  uint32_t forced_splits = 0;
+};
+
+// A leaf of the quadtree drawn last (TerrainRenderer::lastNodes()): level-L
+// node (x, y) covers level-L samples [x P, (x + 1) P] (P = patch_cells);
+// coarse_sides: terrain_mesh's PatchSide bits of the sides that border a
+// node one level coarser (drawn with their odd vertices left out).
+struct TerrainNode {
+  uint32_t level = 0;
+  int64_t x = 0, y = 0;
+  uint32_t coarse_sides = 0;
+  bool drawn = false;  // false: outside the frustum or the image (culled)
 };
 
 class TerrainRenderer {
@@ -122,7 +167,15 @@ class TerrainRenderer {
   static constexpr uint32_t kReliefRings = 3;
   bool groundRange(const Camera& camera, double* lowest, double* highest) const;
 
+  // The per-tile geometric errors the quadtree refines by (the elevation
+  // store's index, loadTerrainBounds()). Without them a node's error is
+  // the height range of its resident tiles (a looser bound).
+  void setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_bounds = std::move(bounds); }
+
   const TerrainFrame& lastFrame() const { return m_frame; }
+  // Quadtree: every leaf of the last draw (culled ones included); empty
+  // for the other methods.
+  const std::vector<TerrainNode>& lastNodes() const { return m_nodes; }
   // Bytes of the height stack texture (video memory).
   uint64_t textureBytes() const { return m_texture_bytes; }
   const PyramidGeometry& geometry() const { return m_geometry; }
@@ -164,6 +217,27 @@ class TerrainRenderer {
   // The full_resolution mesh: every patch over the height field and the
   // colour image (m_image_px), culled by blocks.
   void drawPatches(uint32_t program, const Camera& camera, const Viewport& viewport);
+  // The quadtree (and the flat plane, its roots at height 0): selects the
+  // leaves for this camera (selectNodes(), into m_nodes) and draws them.
+  void drawQuadtree(uint32_t program, const Camera& camera, const Viewport& viewport);
+  void selectNodes(const Camera& camera, const Viewport& viewport);
+  // Quadtree helpers (terrain_quadtree.cpp).
+  struct NodeBox {
+    glm::dvec3 lo, hi;  // camera-relative world box
+  };
+  NodeBox nodeBox(const Camera& camera, uint32_t level, int64_t x, int64_t y) const;
+  bool nodeVisible(const Camera& camera, const NodeBox& box) const;
+  // The node's error bound (height units): the smaller of the index's bound
+  // for its tiles (plus their twist) and, where the next finer level is
+  // resident, the exact distance of that level's samples from the node's
+  // surface plus the children's bounds. Cached until a tile under it changes.
+  double nodeError(uint32_t level, int64_t x, int64_t y);
+  double tileErrorBound(uint32_t level, int64_t x, int64_t y) const;
+  // Height of level sample (i, j) from the resident tiles (clamped to the
+  // level; levels past the pyramid decimate its last, as the shader does).
+  bool cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const;
+  bool samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const;
+  uint32_t rootLevel() const;
   using Frustum = std::array<glm::dvec4, 6>;
   Frustum frustum(const Camera& camera, const Viewport& viewport) const;
   // Draws the blocks of index pattern `config` of the grid whose vertex
@@ -206,6 +280,27 @@ class TerrainRenderer {
   std::vector<std::vector<uint64_t>> m_slot_tile;
   // CPU copies of the same tiles, for groundHeight() (per level, per slot).
   std::vector<std::vector<std::vector<float>>> m_slot_heights;
+  // Quadtree: the patch mesh (one (P + 1)^2 grid, 16 edge patterns), the
+  // largest twist |a - b - c + d| / 4 of the cells of each resident tile's
+  // node-sized blocks (the triangulated surface's distance from the
+  // bilinear one the index's error bounds), per level and slot.
+  uint32_t m_patch_vao = 0, m_patch_vertices = 0, m_patch_indices = 0;
+  uint32_t m_patch_first[16] = {}, m_patch_count[16] = {};
+  std::vector<std::vector<std::vector<float>>> m_slot_twist;
+  std::shared_ptr<const TerrainBounds> m_bounds;
+  std::vector<TerrainNode> m_nodes;
+  struct NodeId {
+    uint32_t level;
+    int64_t x, y;
+    bool operator==(const NodeId& o) const { return level == o.level && x == o.x && y == o.y; }
+  };
+  struct NodeIdHash {
+    size_t operator()(const NodeId& k) const {
+      return size_t((uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^ k.level);
+    }
+  };
+  std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
+  Frustum m_frustum_cache{};
   uint64_t m_texture_bytes = 0;
   TerrainFrame m_frame;
 };

@@ -39,6 +39,9 @@ struct TerrainBounds {
   struct Level {
     uint32_t tiles_x = 0, tiles_y = 0;
     std::vector<glm::vec2> range;  // (min, max) per tile, row-major; empty: no bounds
+    // Geometric error per tile (TileHeightBounds::error), row-major, as
+    // `range`: what the quadtree terrain refines by.
+    std::vector<float> error;
   };
   uint32_t tile_px = 0;
   uint64_t width_samples = 0, height_samples = 0;  // level 0

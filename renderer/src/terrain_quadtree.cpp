@@ -1,0 +1,400 @@
+// The quadtree terrain method of TerrainRenderer (terrain.h,
+// TerrainMethod::kQuadtree) and the flat plane drawn the same way: node
+// selection by projected geometric error, the restriction to neighbours
+// within one level, and the draws with the edge patterns that stitch a
+// node to a coarser neighbour. docs/terrain.md, "Quadtree", explains it.
+#include <clipstream/renderer/terrain.h>
+
+#include "gl.h"
+#include "terrain_mesh.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace clipstream {
+namespace {
+
+int64_t floorDiv(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+// A node of the quadtree: level-L node (x, y).
+struct NodeKey {
+  uint32_t level;
+  int64_t x, y;
+  bool operator==(const NodeKey& o) const { return level == o.level && x == o.x && y == o.y; }
+};
+struct NodeKeyHash {
+  size_t operator()(const NodeKey& k) const {
+    uint64_t h = uint64_t(k.level) * 0x9E3779B97F4A7C15ull;
+    h ^= uint64_t(k.x) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+    h ^= uint64_t(k.y) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+    return size_t(h);
+  }
+};
+
+NodeKey parentOf(const NodeKey& k) { return {k.level + 1, floorDiv(k.x, 2), floorDiv(k.y, 2)}; }
+
+// Whether `a` is `k` or one of its ancestors.
+bool isAncestorOrSelf(const NodeKey& a, NodeKey k) {
+  while (k.level < a.level) k = parentOf(k);
+  return k == a;
+}
+
+}  // namespace
+
+uint32_t TerrainRenderer::rootLevel() const {
+  // Roots cover the height field and the colour image beyond it (as the
+  // full-resolution mesh does), no coarser than the pyramid's last level
+  // (preloaded, so every root is resident from the first frame).
+  const int64_t p = m_config.patch_cells;
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 img0 = (-m.sample0_world) / m.world_per_sample;
+  const glm::dvec2 img1 = (m_image_px - m.sample0_world) / m.world_per_sample;
+  const LevelInfo& l0 = m_geometry.levels[0];
+  const double ex = std::max(double(l0.width_px), img1.x) - std::min(0.0, img0.x) + 2.0;
+  const double ey = std::max(double(l0.height_px), img1.y) - std::min(0.0, img0.y) + 2.0;
+  uint32_t r = m_geometry.levelCount() - 1;
+  while (std::ldexp(double(p), int(r)) < std::max(ex, ey) && r + 3 < renderer_config::kMaxLevels) ++r;
+  return r;
+}
+
+bool TerrainRenderer::samplesResident(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const {
+  const uint32_t level = std::min(ring_level, m_geometry.levelCount() - 1);
+  const int shift = int(ring_level - level);
+  s0 *= int64_t(1) << shift;
+  s1 *= int64_t(1) << shift;
+  const LevelInfo& info = m_geometry.levels[level];
+  const int64_t tile = m_geometry.tile_px;
+  const int64_t tx0 = std::clamp<int64_t>(s0.x, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t tx1 = std::clamp<int64_t>(s1.x, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t ty0 = std::clamp<int64_t>(s0.y, 0, int64_t(info.height_px) - 1) / tile;
+  const int64_t ty1 = std::clamp<int64_t>(s1.y, 0, int64_t(info.height_px) - 1) / tile;
+  for (int64_t ty = ty0; ty <= ty1; ++ty)
+    for (int64_t tx = tx0; tx <= tx1; ++tx)
+      if (m_slot_tile[level][size_t(slotOf(ty)) * m_slots + slotOf(tx)] != (uint64_t(tx) | (uint64_t(ty) << 32)))
+        return false;
+  return true;
+}
+
+TerrainRenderer::NodeBox TerrainRenderer::nodeBox(const Camera& camera, uint32_t level, int64_t x,
+                                                  int64_t y) const {
+  const int64_t p = m_config.patch_cells;
+  const TerrainMapping& m = m_config.mapping;
+  const glm::dvec2 cam = glm::dvec2((camera.position.x - m.sample0_world.x) / m.world_per_sample.x,
+                                    (camera.position.z - m.sample0_world.y) / m.world_per_sample.y);
+  const double spacing = std::ldexp(1.0, int(level));
+  const glm::i64vec2 s0(x * p, y * p), s1 = s0 + glm::i64vec2(p, p);
+  // Heights the node's vertices and normals read (one sample beyond).
+  glm::vec2 h = heightBounds(level, s0 - int64_t(1), s1 + int64_t(1));
+  if (m_config.method == TerrainMethod::kFlat) h = glm::vec2(0.0f);
+  NodeBox b;
+  const glm::dvec2 x0 = (glm::dvec2(s0) * spacing - cam) * m.world_per_sample;
+  const glm::dvec2 x1 = (glm::dvec2(s1) * spacing - cam) * m.world_per_sample;
+  b.lo = {x0.x, double(h.x) * m.world_per_height - camera.position.y, x0.y};
+  b.hi = {x1.x, double(h.y) * m.world_per_height - camera.position.y, x1.y};
+  return b;
+}
+
+bool TerrainRenderer::nodeVisible(const Camera& camera, const NodeBox& b) const {
+  // Wholly outside the colour image: clipped by terrain.vert anyway.
+  if (b.hi.x <= -camera.position.x || b.hi.z <= -camera.position.z ||
+      b.lo.x >= m_image_px.x - camera.position.x || b.lo.z >= m_image_px.y - camera.position.z)
+    return false;
+  for (const glm::dvec4& pl : m_frustum_cache) {
+    const glm::dvec3 far_corner(pl.x >= 0 ? b.hi.x : b.lo.x, pl.y >= 0 ? b.hi.y : b.lo.y,
+                                pl.z >= 0 ? b.hi.z : b.lo.z);
+    if (glm::dot(glm::dvec3(pl), far_corner) + pl.w < 0.0) return false;
+  }
+  return true;
+}
+
+bool TerrainRenderer::cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const {
+  const uint32_t last = m_geometry.levelCount() - 1;
+  if (level > last) {
+    i *= int64_t(1) << (level - last);
+    j *= int64_t(1) << (level - last);
+    level = last;
+  }
+  const LevelInfo& info = m_geometry.levels[level];
+  i = std::clamp<int64_t>(i, 0, int64_t(info.width_px) - 1);
+  j = std::clamp<int64_t>(j, 0, int64_t(info.height_px) - 1);
+  const int64_t tile = m_geometry.tile_px, tx = i / tile, ty = j / tile;
+  const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+  if (m_slot_tile[level][slot] != (uint64_t(tx) | (uint64_t(ty) << 32))) return false;
+  *h = m_slot_heights[level][slot][size_t(j - ty * tile) * size_t(tile) + size_t(i - tx * tile)];
+  return true;
+}
+
+double TerrainRenderer::nodeError(uint32_t level, int64_t x, int64_t y) {
+  if (level == 0) return 0.0;
+  const auto cached = m_error_cache.find(NodeId{level, x, y});
+  if (cached != m_error_cache.end()) return double(cached->second);
+  double error = tileErrorBound(level, x, y);
+  // Where the next finer level is resident under the node: the exact
+  // largest distance of its samples from this node's surface (the two
+  // surfaces are piecewise linear on the finer grid, whose triangles lie
+  // inside the coarser ones, so the largest distance is at a finer
+  // sample), plus the children's own bounds.
+  const int64_t p = m_config.patch_cells;
+  const glm::i64vec2 f0(2 * x * p, 2 * y * p);
+  if (samplesResident(level - 1, f0, f0 + glm::i64vec2(2 * p, 2 * p))) {
+    double local = 0.0;
+    bool ok = true;
+    for (int64_t j = f0.y; j <= f0.y + 2 * p && ok; ++j)
+      for (int64_t i = f0.x; i <= f0.x + 2 * p && ok; ++i) {
+        // The coarser surface at finer sample (i, j): the coarse cell's
+        // diagonal cut (terrain.vert's coarseAt()).
+        float fine = 0, c0 = 0, c1 = 0;
+        ok = cpuHeight(level - 1, i, j, &fine) && cpuHeight(level, i >> 1, j >> 1, &c0) &&
+             cpuHeight(level, (i + 1) >> 1, (j + 1) >> 1, &c1);
+        local = std::max(local, std::abs(double(fine) - 0.5 * (double(c0) + double(c1))));
+      }
+    if (ok) {
+      double children = 0.0;
+      for (int c = 0; c < 4; ++c)
+        children = std::max(children, nodeError(level - 1, 2 * x + (c & 1), 2 * y + (c >> 1)));
+      error = std::min(error, local + children);
+    }
+  }
+  m_error_cache[NodeId{level, x, y}] = float(error);
+  return error;
+}
+
+double TerrainRenderer::tileErrorBound(uint32_t level, int64_t x, int64_t y) const {
+  const int64_t p = m_config.patch_cells, tile = m_geometry.tile_px;
+  const uint32_t levels = m_geometry.levelCount();
+  if (level >= levels) {
+    // Coarser than the pyramid: no stored bound; the whole height range.
+    if (m_bounds) return double(m_bounds->range.y - m_bounds->range.x);
+    return INFINITY;
+  }
+  const LevelInfo& info = m_geometry.levels[level];
+  // The tiles under the node (clamped to the level: beyond the field the
+  // surface is the edge's).
+  const int64_t tx0 = std::clamp<int64_t>(x * p, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t tx1 = std::clamp<int64_t>((x + 1) * p - 1, 0, int64_t(info.width_px) - 1) / tile;
+  const int64_t ty0 = std::clamp<int64_t>(y * p, 0, int64_t(info.height_px) - 1) / tile;
+  const int64_t ty1 = std::clamp<int64_t>((y + 1) * p - 1, 0, int64_t(info.height_px) - 1) / tile;
+  double error = 0.0;
+  for (int64_t ty = ty0; ty <= ty1; ++ty)
+    for (int64_t tx = tx0; tx <= tx1; ++tx) {
+      // The index's bound of |level-0 ground - bilinear surface of the
+      // tile's samples|; for a level finer than the bounds hold, the
+      // bound of its ancestor at the finest level held (looser: an
+      // ancestor's surface is coarser).
+      double e = INFINITY;
+      if (m_bounds && !m_bounds->levels.empty()) {
+        const uint32_t bl = std::max(level, m_bounds->finest_level);
+        const TerrainBounds::Level& lv = m_bounds->levels[bl];
+        if (!lv.error.empty()) {
+          const int64_t bx = std::min<int64_t>(tx >> (bl - level), lv.tiles_x - 1);
+          const int64_t by = std::min<int64_t>(ty >> (bl - level), lv.tiles_y - 1);
+          e = lv.error[size_t(by) * lv.tiles_x + size_t(bx)];
+        }
+      }
+      const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
+      const bool resident = m_slot_tile[level][slot] == (uint64_t(tx) | (uint64_t(ty) << 32));
+      if (!std::isfinite(e) && resident) {
+        // No index bound: the tile's own height range (bounds the distance
+        // of any ground between its lowest and highest sample... loosely).
+        e = double(m_slot_bounds[level][slot].y - m_slot_bounds[level][slot].x);
+      }
+      // The mesh cuts cells along a diagonal: add the distance between
+      // that surface and the bilinear one (a quarter of the cell's twist).
+      if (resident && !m_slot_twist[level][slot].empty()) {
+        const std::vector<float>& twist = m_slot_twist[level][slot];
+        const int64_t block = std::min<int64_t>(p, tile), blocks = tile / block;
+        const int64_t i0 = std::max<int64_t>(x * p - tx * tile, 0) / block;
+        const int64_t i1 = std::min<int64_t>((x + 1) * p - 1 - tx * tile, tile - 1) / block;
+        const int64_t j0 = std::max<int64_t>(y * p - ty * tile, 0) / block;
+        const int64_t j1 = std::min<int64_t>((y + 1) * p - 1 - ty * tile, tile - 1) / block;
+        float t = 0.0f;
+        for (int64_t j = j0; j <= j1; ++j)
+          for (int64_t i = i0; i <= i1; ++i) t = std::max(t, twist[size_t(j * blocks + i)]);
+        e += double(t);
+      }
+      error = std::max(error, e);
+    }
+  return error;
+}
+
+void TerrainRenderer::selectNodes(const Camera& camera, const Viewport& viewport) {
+  m_nodes.clear();
+  m_frustum_cache = frustum(camera, viewport);
+  const int64_t p = m_config.patch_cells;
+  const uint32_t root = rootLevel();
+  const TerrainMapping& m = m_config.mapping;
+  // Pixels per world unit at unit distance.
+  const double pixels = double(viewport.height_px) / (2.0 * std::tan(camera.vfov_rad / 2.0));
+  const bool flat = m_config.method == TerrainMethod::kFlat;
+
+  // Roots: the grid of level-`root` nodes over the field and the image.
+  const glm::dvec2 img0 = (-m.sample0_world) / m.world_per_sample;
+  const glm::dvec2 img1 = (m_image_px - m.sample0_world) / m.world_per_sample;
+  const LevelInfo& l0 = m_geometry.levels[0];
+  const int64_t span = p << root;
+  const int64_t rx0 = floorDiv(std::min<int64_t>(0, int64_t(std::floor(img0.x)) - 1), span);
+  const int64_t ry0 = floorDiv(std::min<int64_t>(0, int64_t(std::floor(img0.y)) - 1), span);
+  const int64_t rx1 = floorDiv(std::max<int64_t>(int64_t(l0.width_px), int64_t(std::ceil(img1.x)) + 1), span);
+  const int64_t ry1 = floorDiv(std::max<int64_t>(int64_t(l0.height_px), int64_t(std::ceil(img1.y)) + 1), span);
+
+  // A node may split when its four children can be drawn: their samples
+  // (one beyond, for normals) are resident.
+  auto childrenResident = [&](const NodeKey& k) {
+    const glm::i64vec2 s0(2 * k.x * p - 1, 2 * k.y * p - 1);
+    return samplesResident(k.level - 1, s0, s0 + glm::i64vec2(2 * p + 2, 2 * p + 2));
+  };
+  auto wantsSplit = [&](const NodeKey& k, const NodeBox& b) {
+    if (k.level == 0 || flat) return false;
+    const double e = nodeError(k.level, k.x, k.y) * m.world_per_height;
+    if (!(e > 0.0)) return false;
+    // Distance from the camera (the origin) to the box.
+    const glm::dvec3 d = glm::max(glm::max(b.lo, -b.hi), glm::dvec3(0.0));
+    const double dist = glm::length(d);
+    return dist <= 0.0 || e * pixels / dist > m_config.error_px;
+  };
+
+  // 1. Top-down: split while the error asks and the children are resident.
+  std::unordered_set<NodeKey, NodeKeyHash> split;
+  std::vector<NodeKey> stack;
+  for (int64_t y = ry0; y <= ry1; ++y)
+    for (int64_t x = rx0; x <= rx1; ++x) stack.push_back({root, x, y});
+  const std::vector<NodeKey> roots = stack;
+  uint32_t fallbacks = 0;
+  while (!stack.empty()) {
+    const NodeKey k = stack.back();
+    stack.pop_back();
+    const NodeBox b = nodeBox(camera, k.level, k.x, k.y);
+    if (!nodeVisible(camera, b) || !wantsSplit(k, b)) continue;
+    if (!childrenResident(k)) {
+      ++fallbacks;
+      continue;
+    }
+    split.insert(k);
+    for (int c = 0; c < 4; ++c) stack.push_back({k.level - 1, 2 * k.x + (c & 1), 2 * k.y + (c >> 1)});
+  }
+
+  // The leaf holding the level-`level` square (x, y): its deepest ancestor
+  // (or itself) that is not split, if a root holds it.
+  auto leafAt = [&](uint32_t level, int64_t x, int64_t y, NodeKey* leaf) {
+    NodeKey k{level, x, y};
+    std::vector<NodeKey> chain;
+    while (k.level < root) {
+      chain.push_back(k);
+      k = parentOf(k);
+    }
+    if (k.x < rx0 || k.x > rx1 || k.y < ry0 || k.y > ry1) return false;
+    // Walk down from the root while split.
+    while (split.count(k) && !chain.empty()) {
+      k = chain.back();
+      chain.pop_back();
+    }
+    if (split.count(k)) return false;  // finer than `level` there
+    *leaf = k;
+    return true;
+  };
+  auto collectLeaves = [&](std::vector<NodeKey>* out) {
+    out->clear();
+    std::vector<NodeKey> s = roots;
+    while (!s.empty()) {
+      const NodeKey k = s.back();
+      s.pop_back();
+      if (!split.count(k)) {
+        out->push_back(k);
+        continue;
+      }
+      for (int c = 0; c < 4; ++c) s.push_back({k.level - 1, 2 * k.x + (c & 1), 2 * k.y + (c >> 1)});
+    }
+  };
+  static constexpr int kSideDx[4] = {0, 1, 0, -1}, kSideDy[4] = {-1, 0, 1, 0};  // top right bottom left
+
+  // 2. Restriction: a visible leaf's neighbours are at most one level
+  // coarser. A coarser neighbour is split; one that cannot be (its
+  // children not resident) instead coarsens the finer side (the leaf's
+  // ancestor one level finer than the neighbour becomes a leaf, and is
+  // never split again this frame, so this ends).
+  std::unordered_set<NodeKey, NodeKeyHash> frozen;
+  uint32_t forced = 0;
+  std::vector<NodeKey> leaves;
+  for (bool changed = true; changed;) {
+    changed = false;
+    collectLeaves(&leaves);
+    for (const NodeKey& l : leaves) {
+      if (!nodeVisible(camera, nodeBox(camera, l.level, l.x, l.y))) continue;
+      for (int s = 0; s < 4 && !changed; ++s) {
+        NodeKey nb;
+        if (!leafAt(l.level, l.x + kSideDx[s], l.y + kSideDy[s], &nb) || nb.level <= l.level + 1) continue;
+        if (!nodeVisible(camera, nodeBox(camera, nb.level, nb.x, nb.y))) continue;
+        if (!frozen.count(nb) && childrenResident(nb)) {
+          split.insert(nb);
+          ++forced;
+        } else {
+          NodeKey a = l;
+          while (a.level + 1 < nb.level) a = parentOf(a);
+          for (auto it = split.begin(); it != split.end();)
+            it = isAncestorOrSelf(a, *it) ? split.erase(it) : std::next(it);
+          frozen.insert(a);
+        }
+        changed = true;
+      }
+      if (changed) break;
+    }
+  }
+
+  // 3. The leaves with their coarse sides.
+  for (const NodeKey& l : leaves) {
+    TerrainNode node;
+    node.level = l.level;
+    node.x = l.x;
+    node.y = l.y;
+    // A root whose heights are not resident yet is not drawn (children
+    // are only made where they are).
+    const glm::i64vec2 s0(l.x * p - 1, l.y * p - 1);
+    node.drawn = nodeVisible(camera, nodeBox(camera, l.level, l.x, l.y)) &&
+                 samplesResident(l.level, s0, s0 + glm::i64vec2(p + 2, p + 2));
+    for (int s = 0; s < 4; ++s) {
+      NodeKey nb;
+      if (leafAt(l.level, l.x + kSideDx[s], l.y + kSideDy[s], &nb) && nb.level > l.level)
+        node.coarse_sides |= 1u << s;
+    }
+    m_nodes.push_back(node);
+  }
+  m_frame.fallback_nodes = fallbacks;
+  m_frame.forced_splits = forced;
+}
+
+void TerrainRenderer::drawQuadtree(uint32_t p, const Camera& camera, const Viewport& viewport) {
+  m_frame = TerrainFrame{};
+  selectNodes(camera, viewport);
+  glUseProgram(p);
+  glBindVertexArray(m_patch_vao);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  const int64_t cells = m_config.patch_cells;
+  uint32_t finest = std::numeric_limits<uint32_t>::max(), coarsest = 0;
+  std::unordered_set<uint32_t> levels;
+  for (const TerrainNode& node : m_nodes) {
+    if (!node.drawn) continue;
+    setRingUniforms(p, camera, node.level, {node.x * cells, node.y * cells});
+    const uint32_t mask = node.coarse_sides;
+    glDrawElements(GL_TRIANGLES, GLsizei(m_patch_count[mask]), GL_UNSIGNED_INT,
+                   reinterpret_cast<const void*>(uintptr_t(m_patch_first[mask]) * sizeof(uint32_t)));
+    m_frame.triangles += m_patch_count[mask] / 3;
+    ++m_frame.nodes;
+    ++m_frame.blocks;
+    levels.insert(node.level);
+    finest = std::min(finest, node.level);
+    coarsest = std::max(coarsest, node.level);
+  }
+  m_frame.culled_blocks = uint32_t(m_nodes.size()) - m_frame.nodes;
+  m_frame.rings = uint32_t(levels.size());
+  m_frame.finest_level = m_frame.nodes ? finest : 0;
+  m_frame.coarsest_level = coarsest;
+  glDisable(GL_DEPTH_TEST);
+  glBindVertexArray(0);
+  glUseProgram(0);
+}
+
+}  // namespace clipstream
