@@ -144,9 +144,11 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   // surface (geometric error) and the full-resolution mesh with the ideal
   // texture (PSNR).
   std::unique_ptr<ReferenceSurface> surface;
+  std::unique_ptr<FewestTriangles> fewest;
   std::unique_ptr<TerrainReference> terrain_reference;
   if (o.terrain && o.terrain->source && o.reference_every > 0) {
     if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, &surface); !s) return s;
+    if (Status s = FewestTriangles::create(*surface, *o.terrain->source, &fewest); !s) return s;
     TerrainConfig tc;
     tc.ring_cells = o.terrain->ring_cells;
     tc.mapping = o.terrain->alignment;
@@ -209,6 +211,15 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   };
   std::vector<Candidate> candidates;
   std::vector<uint8_t> streamed_rgba, reference_rgba;  // terrain frames judged
+  std::vector<uint8_t> previous_streamed, previous_reference;  // the last judged frame's
+  uint32_t previous_judged = UINT32_MAX;
+  // Mean absolute grey change per pixel between two RGBA8 frames.
+  auto change = [](const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+    double sum = 0.0;
+    for (size_t k = 0; k + 3 < a.size() && k + 3 < b.size(); k += 4)
+      sum += std::abs((int(a[k]) + a[k + 1] + a[k + 2]) - (int(b[k]) + b[k + 1] + b[k + 2])) / 3.0;
+    return a.empty() ? 0.0 : sum / double(a.size() / 4);
+  };
   std::vector<float> reference_xyzw;
   run->frames.reserve(std::min<uint32_t>(total, 100000));  // grows past that as frames come
   const auto run_start = Clock::now();
@@ -264,6 +275,15 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       f.accuracy.error = te.error;
       f.terrain_agree_pixels = te.agree_pixels;
       f.terrain_agree_mismatched = te.agree_mismatched;
+      f.fewest_triangles = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx);
+      if (previous_judged + 1 == i && !f.sample.cut) {
+        run->change_pairs += 1;
+        run->change_mean += change(streamed_rgba, previous_streamed);
+        run->reference_change_mean += change(reference_rgba, previous_reference);
+      }
+      previous_judged = i;
+      previous_streamed = streamed_rgba;
+      previous_reference = reference_rgba;
       if (i + 1 == total) run->final_max_abs_error = te.error.max_abs_error;
       if (i >= o.frames) {
         run->terrain_rest_agree_pixels += te.agree_pixels;
@@ -275,6 +295,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
         run->geometry_mean_px += f.geometry.mean_px;
         run->geometry_p95_px += f.geometry.p95_px;
         run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
+        run->judged_triangles_mean += double(f.sample.terrain_triangles);
+        run->fewest_triangles_mean += double(f.fewest_triangles);
         if (rest) {
           run->geometry_rest_frames += 1;
           run->geometry_rest_mean_px += f.geometry.mean_px;
@@ -356,6 +378,12 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   if (run->geometry_frames > 0) {
     run->geometry_mean_px /= run->geometry_frames;
     run->geometry_p95_px /= run->geometry_frames;
+    run->judged_triangles_mean /= run->geometry_frames;
+    run->fewest_triangles_mean /= run->geometry_frames;
+  }
+  if (run->change_pairs > 0) {
+    run->change_mean /= run->change_pairs;
+    run->reference_change_mean /= run->change_pairs;
   }
   if (run->geometry_rest_frames > 0) {
     run->geometry_rest_mean_px /= run->geometry_rest_frames;
@@ -365,6 +393,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     double triangles = 0.0;
     for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
     run->terrain_triangles_mean = triangles / double(run->frames.size());
+    run->terrain_method = terrainMethodName(o.terrain->method);
   }
   // Loads include the streamer's reads of the pyramid, as sampled tiles
   // include the pyramid tiles seen. Over terrain, the colour layer's loads

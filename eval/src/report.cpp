@@ -156,6 +156,12 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["cache_mb"] = d.cache_mb;
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
+  acc["terrain_method"] = run.terrain_method;
+  acc["judged_triangles_mean"] = run.judged_triangles_mean;
+  acc["fewest_triangles_mean"] = run.fewest_triangles_mean;
+  acc["change_pairs"] = run.change_pairs;
+  acc["change_mean"] = run.change_mean;
+  acc["reference_change_mean"] = run.reference_change_mean;
   acc["plans_on_terrain"] = run.plans_on_terrain;
   acc["seen_level_frames"] = run.seen_frames;
   acc["needed_coarser_frames"] = run.needed_coarser_frames;
@@ -258,6 +264,11 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("tile_failures", std::to_string(run.tile_failures));
   add("terrain_triangles_mean", num(run.terrain_triangles_mean));
   add("height_texture_mib", num(mib(run.height_texture_bytes)));
+  add("terrain_method", run.terrain_method);
+  add("judged_triangles_mean", run.geometry_frames ? num(run.judged_triangles_mean) : std::string());
+  add("fewest_triangles_mean", run.geometry_frames ? num(run.fewest_triangles_mean) : std::string());
+  add("change_mean", run.change_pairs ? num(run.change_mean) : std::string());
+  add("reference_change_mean", run.change_pairs ? num(run.reference_change_mean) : std::string());
   add("geo_error_mean_px", run.geometry_frames ? num(run.geometry_mean_px) : std::string());
   add("geo_error_p95_px", run.geometry_frames ? num(run.geometry_p95_px) : std::string());
   add("geo_error_max_px", run.geometry_frames ? num(run.geometry_max_px) : std::string());
@@ -315,6 +326,14 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
       row("geo_error_mean_px", run.geometry_mean_px, "%.3f");
       row("geo_error_p95_px", run.geometry_p95_px, "%.3f");
       row("geo_error_max_px", run.geometry_max_px, "%.2f");
+      // Triangles of the judged frames against the fewest that model them
+      // within kFewestErrorPx (FewestTriangles).
+      row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");
+      row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
+    }
+    if (run.change_pairs > 0) {
+      row("change_mean", run.change_mean, "%.3f");
+      row("reference_change_mean", run.reference_change_mean, "%.3f");
     }
     if (run.geometry_rest_frames > 0) {
       row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");

@@ -3,6 +3,7 @@
 #include <clipstream/eval/metrics.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -189,6 +190,114 @@ TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba
     }
   }
   return e;
+}
+
+}  // namespace clipstream
+
+namespace clipstream {
+
+Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heights,
+                               std::unique_ptr<FewestTriangles>* out) {
+  out->reset();
+  std::unique_ptr<FewestTriangles> f(new FewestTriangles());
+  const int64_t w = int64_t(surface.width()), h = int64_t(surface.height()), p = kFewestPatchCells;
+  const std::vector<float>& s = surface.samples();
+  auto at = [&](int64_t i, int64_t j) { return s[size_t(std::min(j, h - 1) * w + std::min(i, w - 1))]; };
+  // Levels until one node covers the whole surface.
+  for (uint32_t l = 0; l < renderer_config::kMaxLevels; ++l) {
+    const int64_t span = p << l, step = int64_t(1) << l;
+    Level lv;
+    lv.nodes_x = std::max<int64_t>((w - 1 + span - 1) / span, 1);
+    lv.nodes_y = std::max<int64_t>((h - 1 + span - 1) / span, 1);
+    lv.error.assign(size_t(lv.nodes_x * lv.nodes_y), 0.0f);
+    // Every level-0 sample against the level-l surface (cells cut along
+    // the diagonal, as the renderer's), into every node whose cells hold
+    // it (a sample on a border counts for both sides).
+    for (int64_t j = 0; j < h && l > 0; ++j)
+      for (int64_t i = 0; i < w; ++i) {
+        const int64_t ci = i / step, cj = j / step;
+        const double u = double(i - ci * step) / double(step), v = double(j - cj * step) / double(step);
+        const double h00 = at(ci * step, cj * step), h10 = at((ci + 1) * step, cj * step);
+        const double h01 = at(ci * step, (cj + 1) * step), h11 = at((ci + 1) * step, (cj + 1) * step);
+        const double coarse = u >= v ? h00 + u * (h10 - h00) + v * (h11 - h10) : h00 + v * (h01 - h00) + u * (h11 - h01);
+        const float e = float(std::abs(double(s[size_t(j * w + i)]) - coarse));
+        const int64_t nx0 = i == 0 ? 0 : (i - 1) / span, nx1 = std::min(i / span, lv.nodes_x - 1);
+        const int64_t ny0 = j == 0 ? 0 : (j - 1) / span, ny1 = std::min(j / span, lv.nodes_y - 1);
+        for (int64_t ny = ny0; ny <= ny1; ++ny)
+          for (int64_t nx = nx0; nx <= nx1; ++nx) {
+            float& n = lv.error[size_t(ny * lv.nodes_x + nx)];
+            n = std::max(n, e);
+          }
+      }
+    f->m_levels.push_back(std::move(lv));
+    if (f->m_levels.back().error.size() == 1) break;
+  }
+  TerrainConfig tc;
+  tc.method = TerrainMethod::kQuadtree;
+  tc.patch_cells = p;
+  tc.mapping = surface.alignment();
+  const PyramidGeometry& g = heights.geometry();
+  tc.clip_tiles = std::max(g.levels[0].tiles_x, g.levels[0].tiles_y);  // every tile its own slot
+  const FewestTriangles* self = f.get();
+  tc.exact_node_error = [self](uint32_t level, int64_t x, int64_t y) -> double {
+    if (level >= self->m_levels.size()) return INFINITY;
+    const Level& lv = self->m_levels[level];
+    // Nodes beyond the surface show its edge heights: the nearest node's.
+    x = std::clamp<int64_t>(x, 0, lv.nodes_x - 1);
+    y = std::clamp<int64_t>(y, 0, lv.nodes_y - 1);
+    return double(lv.error[size_t(y * lv.nodes_x + x)]);
+  };
+  if (Status st = TerrainRenderer::create(g, tc, &f->m_quadtree); !st) return st;
+  Status fetch_status;
+  const uint32_t missing = f->m_quadtree->preloadCoarseLevels(
+      [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
+        auto px = std::make_shared<std::vector<uint8_t>>();
+        if (Status st = heights.fetch(key, px.get()); !st) {
+          fetch_status = st;
+          return nullptr;
+        }
+        return px;
+      });
+  if (missing > 0) return fetch_status.isOk() ? Status::error(ErrorCode::kIo, "fewest triangles: a height tile missing") : fetch_status;
+  *out = std::move(f);
+  return Status::ok();
+}
+
+uint64_t FewestTriangles::count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
+                                const ReferenceSurface& surface, double p95_px) {
+  if (m_last_camera && m_last_camera->position == camera.position &&
+      m_last_camera->heading_rad == camera.heading_rad && m_last_camera->pitch_rad == camera.pitch_rad &&
+      m_last_camera->vfov_rad == camera.vfov_rad && m_last_viewport.width_px == viewport.width_px &&
+      m_last_viewport.height_px == viewport.height_px && m_last_p95 == p95_px)
+    return m_last_count;
+  m_last_camera = camera;
+  m_last_viewport = viewport;
+  m_last_p95 = p95_px;
+  // The p95 error grows with the bound (coarser nodes); bisect the bound
+  // on a log scale for the largest whose frame is within p95_px.
+  std::vector<float> xyzw;
+  auto measure = [&](double bound_px, uint64_t* triangles) {
+    m_quadtree->setErrorBound(bound_px);
+    m_quadtree->readPositions(camera, viewport, colour, &xyzw);
+    *triangles = m_quadtree->lastFrame().triangles;
+    const GeometryError e = geometricError(xyzw, camera, viewport, surface);
+    return e.pixels == 0 ? 0.0 : e.p95_px;
+  };
+  double lo = std::log(kMinTerrainErrorPx), hi = std::log(kMaxTerrainErrorPx);
+  uint64_t& best = m_last_count;
+  if (measure(std::exp(hi), &best) <= p95_px) return best;
+  if (measure(std::exp(lo), &best) > p95_px) return best;  // even the finest misses: count it
+  for (int k = 0; k < 10; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    uint64_t t = 0;
+    if (measure(std::exp(mid), &t) <= p95_px) {
+      lo = mid;
+      best = t;
+    } else {
+      hi = mid;
+    }
+  }
+  return best;
 }
 
 }  // namespace clipstream

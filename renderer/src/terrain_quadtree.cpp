@@ -129,6 +129,7 @@ bool TerrainRenderer::cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) 
 
 double TerrainRenderer::nodeError(uint32_t level, int64_t x, int64_t y) {
   if (level == 0) return 0.0;
+  if (m_config.exact_node_error) return m_config.exact_node_error(level, x, y);
   const auto cached = m_error_cache.find(NodeId{level, x, y});
   if (cached != m_error_cache.end()) return double(cached->second);
   double error = tileErrorBound(level, x, y);
@@ -318,7 +319,7 @@ void TerrainRenderer::selectNodes(const Camera& camera, const Viewport& viewport
   std::unordered_set<NodeKey, NodeKeyHash> frozen;
   uint32_t forced = 0;
   std::vector<NodeKey> leaves;
-  for (bool changed = true; changed;) {
+  for (bool changed = bool(!m_config.exact_node_error); changed;) {
     changed = false;
     collectLeaves(&leaves);
     for (const NodeKey& l : leaves) {
@@ -342,6 +343,8 @@ void TerrainRenderer::selectNodes(const Camera& camera, const Viewport& viewport
       if (changed) break;
     }
   }
+
+  if (m_config.exact_node_error) collectLeaves(&leaves);  // unrestricted: as split
 
   // 3. The leaves with their coarse sides.
   for (const NodeKey& l : leaves) {

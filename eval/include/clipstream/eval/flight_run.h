@@ -105,6 +105,7 @@ struct FlightRunFrame {
   // Over terrain, when judged: pixels showing the reference's world
   // position to the bit, and of them those whose colour differs.
   uint32_t terrain_agree_pixels = 0, terrain_agree_mismatched = 0;
+  uint64_t fewest_triangles = 0;  // over terrain, when judged (FlightRun::fewest_triangles_mean)
   // Over terrain with sample_tiles: the finest level the planner's rule
   // gives for the nearest ground this frame shows (finestLevelAt() of the
   // nearest of its positions), to set against sample.finest_needed; -1:
@@ -144,6 +145,7 @@ struct FlightRun {
   // triangles drawn per recorded frame.
   uint64_t height_texture_bytes = 0;
   double terrain_triangles_mean = 0.0;
+  std::string terrain_method;     // terrainMethodName(), empty without terrain
   bool plans_on_terrain = false;  // the streamer planned against the height bounds (Streamer::plansOnTerrain())
   // Recorded frames with a seen_level, and those whose plan needed a level
   // coarser than it (pixels nearer than planned for: blurrier than the
@@ -160,7 +162,21 @@ struct FlightRun {
   // reference to the bit, and of them those whose colour differs (0 when
   // the texture is bit-identical wherever the geometry agrees).
   uint64_t terrain_rest_agree_pixels = 0, terrain_rest_agree_mismatched = 0;
+  // Over the judged frames with terrain in view: the triangles drawn and
+  // the fewest that model the frame within kFewestErrorPx (FewestTriangles),
+  // means. 0 when not measured.
+  double judged_triangles_mean = 0.0, fewest_triangles_mean = 0.0;
+  // Temporal stability, over pairs of consecutive judged frames (every
+  // frame with reference_every 1): the mean absolute change of a pixel's
+  // grey level from one frame to the next, streamed and reference. Popping
+  // shows as the streamed change above the reference's. 0 pairs: not measured.
+  uint32_t change_pairs = 0;
+  double change_mean = 0.0, reference_change_mean = 0.0;
 };
+
+// The bound FlightRun::fewest_triangles_mean is counted for: the geometric
+// error target (pixels).
+inline constexpr double kFewestErrorPx = 1.0;
 
 // The camera of a terrain flight: `path_camera` with its height taken as
 // height above `ground` (world units), at least

@@ -20,6 +20,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 namespace clipstream {
@@ -42,6 +43,12 @@ class ReferenceSurface {
   // to the DEM's extent.
   double heightAt(double x, double z) const;
 
+  uint64_t width() const { return m_width; }
+  uint64_t height() const { return m_height; }
+  // Level-0 heights in the store's units, row-major.
+  const std::vector<float>& samples() const { return m_samples; }
+  const LayerAlignment& alignment() const { return m_alignment; }
+
  private:
   ReferenceSurface() = default;
   uint64_t m_width = 0, m_height = 0;
@@ -62,6 +69,44 @@ struct GeometryError {
 // behind the camera counts as the viewport's width.
 GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera,
                              const Viewport& viewport, const ReferenceSurface& surface);
+
+// The fewest triangles that model a frame's terrain within a geometric
+// error target: a quadtree of small patches (kFewestPatchCells cells) whose
+// nodes carry their exact error (the largest distance of the level-0
+// samples under a node from its surface; both meshes are piecewise linear
+// on the level-0 grid, so that is the largest distance anywhere), with no
+// restriction between neighbours, every height tile resident; its error
+// bound is bisected until the frame's measured p95 geometric error
+// (geometricError()) is just within the target. What a method draws at
+// the same p95 against this count is what it models beyond the scene's
+// need (docs/terrain.md, "The fewest triangles"). Fetches synchronously:
+// for measuring only. GL thread, like TerrainRenderer.
+inline constexpr uint32_t kFewestPatchCells = 4;
+class FewestTriangles {
+ public:
+  // Reads every height tile of `heights` and works out the exact node
+  // errors from `surface` (its level 0).
+  static Status create(const ReferenceSurface& surface, TileSource& heights,
+                       std::unique_ptr<FewestTriangles>* out);
+  // Triangles of the coarsest such quadtree whose frame from `camera` has
+  // a p95 geometric error <= p95_px (`colour` gives the image's extent).
+  uint64_t count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
+                 const ReferenceSurface& surface, double p95_px);
+
+ private:
+  FewestTriangles() = default;
+  struct Level {
+    int64_t nodes_x = 0, nodes_y = 0;
+    std::vector<float> error;
+  };
+  std::vector<Level> m_levels;  // index = level; the last is one node
+  std::unique_ptr<TerrainRenderer> m_quadtree;
+  // The last count (a camera at rest is counted once).
+  std::optional<Camera> m_last_camera;
+  Viewport m_last_viewport{0, 0};
+  double m_last_p95 = 0.0;
+  uint64_t m_last_count = 0;
+};
 
 // The reference a terrain frame is judged against: the full-resolution
 // mesh (one vertex per DEM sample, TerrainConfig::full_resolution) drawn

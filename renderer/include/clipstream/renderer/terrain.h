@@ -61,6 +61,11 @@ struct TerrainConfig {
   double error_px = renderer_config::kTerrainErrorPx;
   // Quadtree: cells per node side (even, 4..256).
   uint32_t patch_cells = renderer_config::kTerrainPatchCells;
+  // Quadtree, for measuring only (eval's FewestTriangles): each node's
+  // error from this function (height units; level, node x, node y) instead
+  // of the bounds, and no restriction between neighbours (no stitching:
+  // cracks may open). Null for display.
+  std::function<double(uint32_t, int64_t, int64_t)> exact_node_error;
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
   TerrainMapping mapping;
   // The streamer's clip size for the height layer (tiles a side), so that
@@ -171,6 +176,8 @@ class TerrainRenderer {
   // store's index, loadTerrainBounds()). Without them a node's error is
   // the height range of its resident tiles (a looser bound).
   void setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_bounds = std::move(bounds); }
+  // Quadtree: a new TerrainConfig::error_px (within its range) for the next draws.
+  void setErrorBound(double error_px) { m_config.error_px = error_px; }
 
   const TerrainFrame& lastFrame() const { return m_frame; }
   // Quadtree: every leaf of the last draw (culled ones included); empty
