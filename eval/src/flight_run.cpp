@@ -148,7 +148,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   std::unique_ptr<TerrainReference> terrain_reference;
   if (o.terrain && o.terrain->source && o.reference_every > 0) {
     if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, &surface); !s) return s;
-    if (Status s = FewestTriangles::create(*surface, *o.terrain->source, &fewest); !s) return s;
+    if (o.fewest_triangles)
+      if (Status s = FewestTriangles::create(*surface, *o.terrain->source, &fewest); !s) return s;
     TerrainConfig tc;
     tc.ring_cells = o.terrain->ring_cells;
     tc.mapping = o.terrain->alignment;
@@ -275,7 +276,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       f.accuracy.error = te.error;
       f.terrain_agree_pixels = te.agree_pixels;
       f.terrain_agree_mismatched = te.agree_mismatched;
-      f.fewest_triangles = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx);
+      if (fewest)
+        f.fewest_triangles = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx);
       if (previous_judged + 1 == i && !f.sample.cut) {
         run->change_pairs += 1;
         run->change_mean += change(streamed_rgba, previous_streamed);

@@ -266,7 +266,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("height_texture_mib", num(mib(run.height_texture_bytes)));
   add("terrain_method", run.terrain_method);
   add("judged_triangles_mean", run.geometry_frames ? num(run.judged_triangles_mean) : std::string());
-  add("fewest_triangles_mean", run.geometry_frames ? num(run.fewest_triangles_mean) : std::string());
+  add("fewest_triangles_mean", run.fewest_triangles_mean > 0 ? num(run.fewest_triangles_mean) : std::string());
   add("change_mean", run.change_pairs ? num(run.change_mean) : std::string());
   add("reference_change_mean", run.change_pairs ? num(run.reference_change_mean) : std::string());
   add("geo_error_mean_px", run.geometry_frames ? num(run.geometry_mean_px) : std::string());
@@ -329,7 +329,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
       // Triangles of the judged frames against the fewest that model them
       // within kFewestErrorPx (FewestTriangles).
       row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");
-      row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
+      if (run.fewest_triangles_mean > 0) row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
     }
     if (run.change_pairs > 0) {
       row("change_mean", run.change_mean, "%.3f");

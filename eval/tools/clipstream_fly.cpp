@@ -53,6 +53,9 @@ int main(int argc, char** argv) {
   bool no_throttle = false, no_prefetch = false, no_frustum = false, no_terrain_bounds = false;
   app.add_flag("--reference", o.reference,
                "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
+  app.add_flag("--fewest-triangles", o.fewest_triangles,
+               "Over terrain, with --reference: also count the fewest triangles that model each judged "
+               "frame within 1 px p95 (docs/terrain.md; a dozen position passes a judged frame)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
       ->transform(frames);
   app.add_option("--ground-truth-every", o.ground_truth_every,

@@ -295,23 +295,20 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
   const auto [lo, hi] = std::minmax_element(heights, heights + size_t(tile) * tile);
   m_slot_bounds[key.level][slot] = {*lo, *hi};
   if (m_config.method == TerrainMethod::kQuadtree) {
-    // Node errors that read this tile: its level's nodes over it and every
-    // coarser node over them (their bounds take their children's).
-    const LevelInfo& info = m_geometry.levels[key.level];
-    if (key.x == 0 || key.y == 0 || key.x + 1 == info.tiles_x || key.y + 1 == info.tiles_y) {
-      m_error_cache.clear();  // nodes beyond the field read its edge samples
-    } else if (!m_error_cache.empty()) {
-      const int64_t p = m_config.patch_cells;
-      int64_t x0 = int64_t(key.x) * tile / p, x1 = (int64_t(key.x + 1) * tile - 1) / p + 1;
-      int64_t y0 = int64_t(key.y) * tile / p, y1 = (int64_t(key.y + 1) * tile - 1) / p + 1;
-      for (uint32_t l = key.level; l < renderer_config::kMaxLevels && !m_error_cache.empty(); ++l) {
-        for (int64_t y = y0 - 1; y <= y1; ++y)
-          for (int64_t x = x0 - 1; x <= x1; ++x) m_error_cache.erase(NodeId{l, x, y});
-        x0 = x0 >= 0 ? x0 / 2 : -((-x0 + 1) / 2);
-        y0 = y0 >= 0 ? y0 / 2 : -((-y0 + 1) / 2);
-        x1 = x1 / 2 + 1;
-        y1 = y1 / 2 + 1;
-      }
+    // Node errors that read this tile: nodes at its level or coarser whose
+    // ground (clamped to the field: nodes beyond it read its edge) meets
+    // the tile's, one sample around (their bounds take their children's).
+    const int64_t p = m_config.patch_cells, w = int64_t(m_geometry.width_px), h = int64_t(m_geometry.height_px);
+    const int64_t span0 = int64_t(tile) << key.level, margin = int64_t(1) << key.level;
+    const int64_t tx0 = int64_t(key.x) * span0 - margin, tx1 = (int64_t(key.x) + 1) * span0 + margin;
+    const int64_t ty0 = int64_t(key.y) * span0 - margin, ty1 = (int64_t(key.y) + 1) * span0 + margin;
+    for (auto it = m_error_cache.begin(); it != m_error_cache.end();) {
+      const NodeId& n = it->first;
+      const int64_t span = p << n.level;
+      const int64_t nx0 = std::clamp<int64_t>(n.x * span, 0, w - 1), nx1 = std::clamp<int64_t>((n.x + 1) * span, 0, w - 1);
+      const int64_t ny0 = std::clamp<int64_t>(n.y * span, 0, h - 1), ny1 = std::clamp<int64_t>((n.y + 1) * span, 0, h - 1);
+      const bool meets = n.level >= key.level && nx1 >= tx0 && nx0 <= tx1 && ny1 >= ty0 && ny0 <= ty1;
+      it = meets ? m_error_cache.erase(it) : std::next(it);
     }
     // Each node-sized block's largest cell twist (cells inside the tile).
     const uint32_t block = std::min(m_config.patch_cells, tile), blocks = tile / block;

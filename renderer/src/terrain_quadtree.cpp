@@ -140,7 +140,14 @@ double TerrainRenderer::nodeError(uint32_t level, int64_t x, int64_t y) {
   // sample), plus the children's own bounds.
   const int64_t p = m_config.patch_cells;
   const glm::i64vec2 f0(2 * x * p, 2 * y * p);
-  if (samplesResident(level - 1, f0, f0 + glm::i64vec2(2 * p, 2 * p))) {
+  // Only nodes over the field (beyond it the resident edge tiles would
+  // make a whole unbounded margin look resident).
+  const uint32_t stored = std::min(level - 1, m_geometry.levelCount() - 1);
+  const int64_t scale = int64_t(1) << (level - 1 - stored);
+  const LevelInfo& fine_level = m_geometry.levels[stored];
+  const bool inside = f0.x >= 0 && f0.y >= 0 && f0.x * scale < int64_t(fine_level.width_px) - 1 &&
+                      f0.y * scale < int64_t(fine_level.height_px) - 1;
+  if (error > 0.0 && inside && samplesResident(level - 1, f0, f0 + glm::i64vec2(2 * p, 2 * p))) {
     double local = 0.0;
     bool ok = true;
     for (int64_t j = f0.y; j <= f0.y + 2 * p && ok; ++j)
@@ -172,6 +179,11 @@ double TerrainRenderer::tileErrorBound(uint32_t level, int64_t x, int64_t y) con
     return INFINITY;
   }
   const LevelInfo& info = m_geometry.levels[level];
+  // Beyond a corner of the field the surface is the corner's height, flat:
+  // no error (beyond one side it is the edge's profile, the edge tiles').
+  const bool beyond_x = (x + 1) * p <= 0 || x * p >= int64_t(info.width_px) - 1;
+  const bool beyond_y = (y + 1) * p <= 0 || y * p >= int64_t(info.height_px) - 1;
+  if (beyond_x && beyond_y) return 0.0;
   // The tiles under the node (clamped to the level: beyond the field the
   // surface is the edge's).
   const int64_t tx0 = std::clamp<int64_t>(x * p, 0, int64_t(info.width_px) - 1) / tile;

@@ -155,10 +155,27 @@ Status writeElevationStore(const std::string& path, uint64_t w, uint64_t h,
             }
         here[size_t(ty) * g.levels[l].tiles_x + tx] = {tmin, tmax};
         lo = std::min(lo, tmin), hi = std::max(hi, tmax);
+        // The tile's geometric error, as the tiler records it: the largest
+        // distance of the level-0 heights under it from the bilinear
+        // surface of its level's samples (here exactly, by brute force).
+        float error = 0.0f;
+        const uint64_t span = uint64_t(t) << l;
+        auto sample = [&](uint64_t i, uint64_t j) {
+          return double(height(std::min<uint64_t>(i << l, w - 1), std::min<uint64_t>(j << l, h - 1)));
+        };
+        for (uint64_t y = uint64_t(ty) * span; l > 0 && y < std::min<uint64_t>((uint64_t(ty) + 1) * span, h); ++y)
+          for (uint64_t x = uint64_t(tx) * span; x < std::min<uint64_t>((uint64_t(tx) + 1) * span, w); ++x) {
+            const uint64_t i = x >> l, j = y >> l;
+            const double u = double(x - (i << l)) / double(1u << l), v = double(y - (j << l)) / double(1u << l);
+            const double b = (1 - u) * (1 - v) * sample(i, j) + u * (1 - v) * sample(i + 1, j) +
+                             (1 - u) * v * sample(i, j + 1) + u * v * sample(i + 1, j + 1);
+            error = std::max(error, float(std::abs(double(height(x, y)) - b)));
+          }
         EncodedTile encoded;
         if (Status s = encodeTile(g, options.encoding, {l, tx, ty}, pixels, &encoded); !s) return s;
         encoded.location.min_height = tmin;
         encoded.location.max_height = tmax;
+        encoded.location.error = error;
         if (Status s = writer->write(std::move(encoded)); !s) return s;
       }
     finer = std::move(here);

@@ -69,6 +69,9 @@ struct FlightRunOptions {
   uint32_t ground_truth_every = 0;  // also the reference against the CPU ground truth; 0 = never
   bool sample_tiles = true;         // collect sampledTiles() (warm-up too) for the over-fetch ratio;
                                     // over terrain sampledTilesOfPositions(), a position pass a frame
+  // Over terrain, judged frames also count the fewest triangles within
+  // kFewestErrorPx (FewestTriangles: a dozen position passes a frame).
+  bool fewest_triangles = false;
   // Frames checked with countGarbagePixels(): the lowest-PSNR measured
   // frames below kSharpPsnrDb, at most this many (CPU-heavy).
   uint32_t garbage_checks = 0;

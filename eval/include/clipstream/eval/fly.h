@@ -48,6 +48,7 @@ struct FlyOptions {
   bool quiet = false;              // no summary table
   // Speed against accuracy (docs/accuracy.md).
   bool reference = false;            // compare frames with the ideal reference
+  bool fewest_triangles = false;     // over terrain, judged frames count the fewest triangles too
   uint32_t reference_every = 1;      // ... every Nth frame (and every rest frame)
   uint32_t ground_truth_every = 0;   // reference vs CPU ground truth every Nth frame; 0 = never
   // The ideal reference's tiles; unset: tile_format (frames at rest are then
