@@ -391,6 +391,10 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     run->geometry_rest_mean_px /= run->geometry_rest_frames;
     run->geometry_rest_p95_px /= run->geometry_rest_frames;
   }
+  if (!run->frames.empty()) {
+    for (const FlightRunFrame& f : run->frames) run->render_cpu_ms_mean += f.sample.cpu_ms;
+    run->render_cpu_ms_mean /= double(run->frames.size());
+  }
   if (o.terrain && !run->frames.empty()) {
     double triangles = 0.0;
     for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);

@@ -157,6 +157,7 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
   acc["terrain_method"] = run.terrain_method;
+  acc["render_cpu_ms_mean"] = run.render_cpu_ms_mean;
   acc["judged_triangles_mean"] = run.judged_triangles_mean;
   acc["fewest_triangles_mean"] = run.fewest_triangles_mean;
   acc["change_pairs"] = run.change_pairs;
@@ -265,6 +266,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("terrain_triangles_mean", num(run.terrain_triangles_mean));
   add("height_texture_mib", num(mib(run.height_texture_bytes)));
   add("terrain_method", run.terrain_method);
+  add("render_cpu_ms_mean", num(run.render_cpu_ms_mean));
   add("judged_triangles_mean", run.geometry_frames ? num(run.judged_triangles_mean) : std::string());
   add("fewest_triangles_mean", run.fewest_triangles_mean > 0 ? num(run.fewest_triangles_mean) : std::string());
   add("change_mean", run.change_pairs ? num(run.change_mean) : std::string());
@@ -321,6 +323,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
   if (run.height_texture_bytes > 0) {
     row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
+    row("render_cpu_ms_mean", run.render_cpu_ms_mean, "%.2f");
     row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
     if (run.geometry_frames > 0) {
       row("geo_error_mean_px", run.geometry_mean_px, "%.3f");

@@ -97,8 +97,8 @@ int main(int argc, char** argv) {
       ->transform(cli::wholeInRange(16, 1024));
   std::string terrain_method = terrainMethodName(o.terrain_method);
   app.add_option("--terrain", terrain_method,
-                 "Terrain geometry with --elevation: clipmap (default), quadtree, or flat (the plane, "
-                 "for comparison)");
+                 "Terrain geometry with --elevation: clipmap (default), quadtree; for comparison flat "
+                 "(the plane) or full (the full-resolution mesh)");
   app.add_option("--terrain-error", o.terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));

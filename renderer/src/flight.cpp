@@ -213,6 +213,8 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   ++m_steps;
 
   const auto t0 = Clock::now();
+  timespec cpu0{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu0);
   // Over terrain with the elevation store's per-tile bounds the streamer
   // plans against the terrain itself and takes the real camera. Without
   // them the planner sees the ground under the camera as its plane (the
@@ -265,6 +267,9 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   glFinish();  // frame time includes the GPU's (llvmpipe's) work
   const auto t1 = Clock::now();
   f.frame_ms = msBetween(t0, t1);
+  timespec cpu1{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu1);
+  f.cpu_ms = double(cpu1.tv_sec - cpu0.tv_sec) * 1e3 + double(cpu1.tv_nsec - cpu0.tv_nsec) * 1e-6;
   f.streamer_ms = msBetween(t0, t_streamer);
   f.draw_ms = msBetween(t_upload, t1);
   const UploadStats& uploads = m_renderer->lastUploads();

@@ -39,19 +39,21 @@ const char* terrainMethodName(TerrainMethod method) {
     case TerrainMethod::kClipmap: return "clipmap";
     case TerrainMethod::kQuadtree: return "quadtree";
     case TerrainMethod::kFlat: return "flat";
+    case TerrainMethod::kFull: return "full";
   }
   return "?";
 }
 
 Status terrainMethodFromName(const std::string& name, TerrainMethod* out) {
-  for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat}) {
+  for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat,
+                          TerrainMethod::kFull}) {
     if (name == terrainMethodName(m)) {
       *out = m;
       return Status::ok();
     }
   }
   return Status::error(ErrorCode::kInvalidArgument,
-                       "terrain method '" + name + "': must be clipmap, quadtree or flat");
+                       "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
 }
 
 glm::i64vec2 TerrainRenderer::ringOrigin(const TerrainConfig& config, const Camera& camera,
@@ -78,7 +80,8 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     return Status::error(ErrorCode::kInvalidArgument, "terrain mapping must be finite and positive");
   }
   const uint32_t p = config.patch_cells;
-  if (config.method != TerrainMethod::kClipmap && (p % 2 != 0 || p < 4 || p > 256)) {
+  const bool patches = config.method == TerrainMethod::kQuadtree || config.method == TerrainMethod::kFlat;
+  if (patches && (p % 2 != 0 || p < 4 || p > 256)) {
     return Status::error(ErrorCode::kInvalidArgument, "terrain patch of " + std::to_string(p) +
                                                           " cells: must be even, from 4 to 256");
   }
@@ -91,6 +94,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   std::unique_ptr<TerrainRenderer> r(new TerrainRenderer());
   r->m_geometry = heights;
   r->m_config = config;
+  if (config.method == TerrainMethod::kFull) r->m_config.full_resolution = true;
   // Slots: a ring spans n + 1 samples plus one on each side for normals,
   // which touches at most ceil((n + 3) / tile) + 1 tiles a side; one more
   // slot keeps a tile that just left from sharing a slot with one needed.
@@ -104,7 +108,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   // decimated further in the shader). Until the first frame: the field
   // seen from its centre.
   r->m_coarsest = r->coarsestFor(glm::dvec2(heights.width_px, heights.height_px) * 0.5);
-  if (config.full_resolution) {
+  if (r->m_config.full_resolution) {
     // Level 0 whole, one slot per tile (the toroidal period never wraps),
     // and no transition band anywhere (uCoarsest 0).
     r->m_slots = std::max(heights.levels[0].tiles_x, heights.levels[0].tiles_y);
@@ -136,12 +140,13 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   std::vector<uint32_t> indices;
   const uint32_t block_cells = n / kBlocks;
   // The full-resolution mesh has one pattern, a plain grid.
-  const int patterns = config.full_resolution ? 1 : 5;
+  const bool full = r->m_config.full_resolution;
+  const int patterns = full ? 1 : 5;
   for (int c = 0; c < patterns; ++c) {
     const int hx = c == 0 ? -1 : int(n / 4) + (c - 1) % 2;
     const int hy = c == 0 ? -1 : int(n / 4) + (c - 1) / 2;
     const std::vector<uint32_t> ring =
-        config.full_resolution ? terrain_mesh::gridTriangles(n) : terrain_mesh::ringTriangles(n, hx, hy);
+        full ? terrain_mesh::gridTriangles(n) : terrain_mesh::ringTriangles(n, hx, hy);
     std::vector<std::vector<uint32_t>> blocks(kBlocks * kBlocks);
     for (size_t t = 0; t < ring.size(); t += 3) {
       uint32_t sx = 0, sy = 0;
@@ -187,7 +192,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     glVertexArrayAttribBinding(*vao, 0, 0);
   };
   makeVao(r->m_vertices, r->m_indices, &r->m_vao);
-  if (config.method != TerrainMethod::kClipmap) {
+  if (patches) {
     // The quadtree's patch: one (P + 1)^2 grid, its 16 edge patterns.
     std::vector<int32_t> patch_grid;
     for (uint32_t j = 0; j <= p; ++j)
@@ -216,7 +221,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                                                       std::to_string(period) +
                                                       " texels exceeds GL_MAX_TEXTURE_SIZE");
   }
-  const GLsizei layers = config.full_resolution ? 1 : GLsizei(heights.levelCount());
+  const GLsizei layers = full ? 1 : GLsizei(heights.levelCount());
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_heights);
   glTextureStorage3D(r->m_heights, 1, GL_R32F, GLsizei(period), GLsizei(period), layers);
   glTextureParameteri(r->m_heights, GL_TEXTURE_MIN_FILTER, GL_NEAREST);

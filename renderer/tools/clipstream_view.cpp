@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   std::string terrain_method = "clipmap";
   double terrain_error_px = renderer_config::kTerrainErrorPx;
   app.add_option("--terrain", terrain_method,
-                 "Terrain geometry with --elevation: clipmap (default), quadtree, or flat");
+                 "Terrain geometry with --elevation: clipmap (default), quadtree, flat or full");
   app.add_option("--terrain-error", terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));

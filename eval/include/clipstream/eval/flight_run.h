@@ -149,6 +149,7 @@ struct FlightRun {
   uint64_t height_texture_bytes = 0;
   double terrain_triangles_mean = 0.0;
   std::string terrain_method;     // terrainMethodName(), empty without terrain
+  double render_cpu_ms_mean = 0.0;  // FrameSample::cpu_ms over the recorded frames
   bool plans_on_terrain = false;  // the streamer planned against the height bounds (Streamer::plansOnTerrain())
   // Recorded frames with a seen_level, and those whose plan needed a level
   // coarser than it (pixels nearer than planned for: blurrier than the

@@ -116,6 +116,7 @@ struct FrameSample {
   bool cut = false;
   double clock_s = 0.0;       // the streamer's clock for this frame
   double frame_ms = 0.0;      // update .. draw finished on the GPU (glFinish)
+  double cpu_ms = 0.0;        // the calling (render) thread's CPU time in the same span
   double streamer_ms = 0.0;   // update + takeReady
   double upload_ms = 0.0;     // the renderer's texture work
   double draw_ms = 0.0;       // draw until the GPU finished

@@ -45,9 +45,11 @@ using TerrainMapping = LayerAlignment;
 // How the terrain's geometry is modelled (--terrain): the geometry clipmap,
 // the restricted quadtree, or the flat plane y = 0 drawn through the same
 // pipeline (an end point of the accuracy charts: what no geometry costs).
-enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat };
+// kFull: the full-resolution mesh (TerrainConfig::full_resolution), the
+// other end point; it needs level 0 whole in the stack.
+enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat, kFull };
 const char* terrainMethodName(TerrainMethod method);
-// "clipmap", "quadtree", "flat"; kInvalidArgument naming the choices otherwise.
+// "clipmap", "quadtree", "flat", "full"; kInvalidArgument naming the choices otherwise.
 Status terrainMethodFromName(const std::string& name, TerrainMethod* out);
 
 // Range of TerrainConfig::error_px (--terrain-error): below a hundredth of

@@ -1,0 +1,202 @@
+#!/usr/bin/env bash
+# Terrain methods side by side: the geometry clipmap and the quadtree over the
+# same flights, as the ring size (clipmap) and the error bound (quadtree) vary,
+# with the flat plane and the full-resolution mesh as the two end points.
+#
+#   bash scripts/sweep_terrain.sh            # about 25 minutes on 2 cores
+#   bash scripts/sweep_terrain.sh --quick    # fewer settings and frames (smoke run)
+#
+# Scenes (each flown at 1280x720 with clipstream-fly --reference --fewest-triangles):
+#  - helens:  the bundled orthophoto over the bundled St Helens DEM (stretched),
+#             the demo's orbit (data/helens_orbit.json) at x12;
+#  - rainier: Mount Rainier (../shared/data/mt_rainier_90m.tif, SRTM; skipped when
+#             absent) under a 65536^2 procedural texture, 600 units above its slopes;
+#  - rough:   a procedural rough DEM (scripts/make_rough_dem.py: ridged noise, a
+#             300 m cliff, spikes) under a 16384^2 procedural texture, built-in orbit.
+# Per run: triangles a frame, frame time and render-thread CPU time, geometric
+# error (mean, p95) and PSNR against the full-resolution mesh with the ideal
+# texture, the fewest triangles within 1 px p95 (FewestTriangles); then the same
+# setting on a slow stretch of the flight judged every frame: the mean per-pixel
+# change between consecutive frames against the reference's own change.
+# Writes docs/data/terrain_methods.csv, docs/charts/terrain_*.png and the part of
+# docs/terrain.md between <!-- terrain-sweep:begin --> and <!-- terrain-sweep:end -->.
+# Needs gnuplot and, for the rough DEM, python3-gdal (scripts/deps.sh --bench).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+QUICK=0
+case "${1:-}" in
+  "") ;;
+  --quick) QUICK=1 ;;
+  *) echo "usage: scripts/sweep_terrain.sh [--quick]" >&2; exit 2 ;;
+esac
+BUILD=${BUILD_DIR:-build}
+WORK=${SWEEP_WORK:-out/sweep}/terrain
+DOCS=${SWEEP_DOCS:-docs}
+SIZE=${SWEEP_TERRAIN_SIZE:-1280x720}
+FRAMES=90; EVERY=15; SLOW=24
+RINGS="32 64 128 256"; ERRORS="3 6 10 16 32"
+if (( QUICK )); then FRAMES=20; EVERY=10; SLOW=4; RINGS="128"; ERRORS="10"; fi
+mkdir -p "$WORK" "$DOCS/data" "$DOCS/charts"
+start=$(date +%s)
+
+scripts/deps.sh --bench
+cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+cmake --build "$BUILD" -j "$(nproc)" --target clipstream-tile clipstream-fly >/dev/null
+
+# ---- scenes -----------------------------------------------------------------
+tile() { [ -f "$2" ] || "$BUILD/tiler/clipstream-tile" "$1" "$2" --quiet --no-fsync; }
+tile data/autzen.jpg "$WORK/autzen.cstore"
+tile data/mount_st_helens_30m.tif "$WORK/helens.cstore"
+[ -f "$WORK/rough.tif" ] || /usr/bin/python3 scripts/make_rough_dem.py "$WORK/rough.tif" 1024
+tile "$WORK/rough.tif" "$WORK/rough.cstore"
+rainier=../shared/data/mt_rainier_90m.tif
+[ -f "$rainier" ] && tile "$rainier" "$WORK/rainier.cstore"
+cat >"$WORK/mountainside.json" <<'EOF'
+{"keyframes": [
+ {"t": 0,  "x": 15750, "y": 600, "z": 42000, "heading_deg": 0,   "pitch_deg": -8},
+ {"t": 10, "x": 15750, "y": 600, "z": 24000, "heading_deg": 0,   "pitch_deg": -6},
+ {"t": 16, "x": 9000,  "y": 600, "z": 17000, "heading_deg": 60,  "pitch_deg": -8},
+ {"t": 24, "x": 22000, "y": 600, "z": 16000, "heading_deg": 0,   "pitch_deg": -6},
+ {"t": 30, "x": 26000, "y": 900, "z": 9000,  "heading_deg": -90, "pitch_deg": -10}
+]}
+EOF
+declare -A SCENE SPEED
+SCENE[helens]="$WORK/autzen.cstore --elevation $WORK/helens.cstore --stretch-elevation --path data/helens_orbit.json"
+SPEED[helens]=12
+SCENE[rough]="--procedural 16384 --elevation $WORK/rough.cstore --stretch-elevation --path orbit"
+SPEED[rough]=1
+SCENES="helens rough"
+if [ -f "$WORK/rainier.cstore" ]; then
+  SCENE[rainier]="--procedural 65536 --elevation $WORK/rainier.cstore --stretch-elevation --path $WORK/mountainside.json"
+  SPEED[rainier]=10
+  SCENES="helens rainier rough"
+fi
+
+value() { awk -F'\t' -v k="$2" 'NR==1{for(i=1;i<=NF;i++) c[$i]=i} NR==2{print $(c[k])}' "$1/summary.tsv"; }
+
+# ---- runs -------------------------------------------------------------------
+CSV=$DOCS/data/terrain_methods.csv
+tmp_csv=$CSV.tmp.$$
+trap 'rm -f "$tmp_csv" "$WORK"/*.png.tmp' EXIT
+echo "scene,method,setting,triangles,fewest_triangles,frame_ms,render_cpu_ms,geo_mean_px,geo_p95_px,psnr_db,change,reference_change" >"$tmp_csv"
+run() {  # scene method setting, then clipstream-fly arguments
+  local scene=$1 method=$2 setting=$3
+  shift 3
+  local out="$WORK/run_${scene}_${method}_${setting}"
+  # shellcheck disable=SC2086  # the scene's words
+  "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "${SPEED[$scene]}" --frames "$FRAMES" --rest-frames 2 \
+    --size "$SIZE" --reference --reference-every "$EVERY" --fewest-triangles --terrain "$method" "$@" \
+    --out "$out" >/dev/null 2>&1
+  # The slow stretch: the same path at a fifth of the speed, every frame judged.
+  local slow_speed
+  slow_speed=$(awk -v s="${SPEED[$scene]}" 'BEGIN{printf "%g", s / 5}')
+  # shellcheck disable=SC2086
+  "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "$slow_speed" --frames "$SLOW" --warmup-frames 10 \
+    --size "$SIZE" --reference --reference-every 1 --terrain "$method" "$@" --out "$out/slow" >/dev/null 2>&1
+  printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$scene" "$method" "$setting" \
+    "$(value "$out" judged_triangles_mean)" "$(value "$out" fewest_triangles_mean)" \
+    "$(value "$out" frame_ms_mean)" "$(value "$out" render_cpu_ms_mean)" \
+    "$(value "$out" geo_error_mean_px)" "$(value "$out" geo_error_p95_px)" "$(value "$out" psnr_mean_db)" \
+    "$(value "$out/slow" change_mean)" "$(value "$out/slow" reference_change_mean)" >>"$tmp_csv"
+  echo "  $scene $method $setting: $(tail -n 1 "$tmp_csv")"
+}
+for scene in $SCENES; do
+  echo "== $scene"
+  run "$scene" flat 0
+  for n in $RINGS; do run "$scene" clipmap "$n" --terrain-ring "$n"; done
+  for e in $ERRORS; do run "$scene" quadtree "$e" --terrain-error "$e"; done
+  run "$scene" full 0
+done
+mv "$tmp_csv" "$CSV"
+
+# ---- charts -----------------------------------------------------------------
+if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then term="pngcairo size 1100,800 font 'sans,10'"
+else term="png size 1100,800"; fi
+for scene in $SCENES; do
+  png="$DOCS/charts/terrain_$scene.png"
+  gnuplot <<EOF
+set terminal $term
+set output "$png.tmp"
+set datafile separator ","
+set multiplot layout 2,2 title "Terrain methods, $scene ($SIZE, llvmpipe): each point a setting; flat and full mesh are the end points"
+set key top right
+set grid
+set logscale x
+set xlabel "geometric error p95 (px, log; full mesh plotted at 0.01)"
+sel(m) = (strcol(1) eq "$scene" && strcol(2) eq m) ? 1 : 0
+err(v) = v > 0.01 ? v : 0.01
+set logscale y
+set ylabel "triangles / frame (log)"
+plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):4 with linespoints pt 7 title "clipmap (ring 32..256)", \
+     "" using (sel("quadtree") ? err(\$9) : 1/0):4 with linespoints pt 5 title "quadtree (error 32..3 px)", \
+     "" using (sel("quadtree") ? err(\$9) : 1/0):5 with points pt 2 title "fewest within 1 px p95", \
+     "" using (sel("flat") ? err(\$9) : 1/0):(\$4 > 0 ? \$4 : 1) with points pt 9 ps 2 title "flat", \
+     "" using (sel("full") ? err(\$9) : 1/0):4 with points pt 11 ps 2 title "full mesh"
+unset logscale y
+set ylabel "frame ms (mean)"
+plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):6 with linespoints pt 7 title "clipmap", \
+     "" using (sel("quadtree") ? err(\$9) : 1/0):6 with linespoints pt 5 title "quadtree", \
+     "" using (sel("flat") ? err(\$9) : 1/0):6 with points pt 9 ps 2 title "flat", \
+     "" using (sel("full") ? err(\$9) : 1/0):6 with points pt 11 ps 2 title "full mesh"
+set ylabel "render-thread CPU ms / frame"
+plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):7 with linespoints pt 7 title "clipmap", \
+     "" using (sel("quadtree") ? err(\$9) : 1/0):7 with linespoints pt 5 title "quadtree", \
+     "" using (sel("flat") ? err(\$9) : 1/0):7 with points pt 9 ps 2 title "flat", \
+     "" using (sel("full") ? err(\$9) : 1/0):7 with points pt 11 ps 2 title "full mesh"
+unset logscale x
+set logscale x
+set xlabel "triangles / frame (log)"
+set ylabel "PSNR against the full mesh with the ideal texture (dB)"
+plot "$CSV" using (sel("clipmap") ? \$4 : 1/0):10 with linespoints pt 7 title "clipmap", \
+     "" using (sel("quadtree") ? \$4 : 1/0):10 with linespoints pt 5 title "quadtree", \
+     "" using (sel("flat") ? (\$4 > 0 ? \$4 : 1) : 1/0):10 with points pt 9 ps 2 title "flat", \
+     "" using (sel("full") ? \$4 : 1/0):(\$10 < 99 ? \$10 : 99) with points pt 11 ps 2 title "full mesh"
+unset multiplot
+EOF
+  mv "$png.tmp" "$png"
+done
+png="$DOCS/charts/terrain_stability.png"
+gnuplot <<EOF
+set terminal $term
+set output "$png.tmp"
+set datafile separator ","
+set title "Temporal stability on a slow flight: mean grey change between consecutive frames, streamed minus the reference's (popping shows above 0)"
+set style data histograms
+set style histogram clustered gap 1
+set style fill solid 0.7 border -1
+set ylabel "excess change per pixel (grey levels)"
+set xtics rotate by -45
+set grid y
+plot "$CSV" every ::1 using (\$11 - \$12):xtic(strcol(1)."/".strcol(2)."/".strcol(3)) title "streamed - reference"
+EOF
+mv "$png.tmp" "$png"
+
+# ---- docs -------------------------------------------------------------------
+GEN=$WORK/terrain_section.md
+{
+  echo "<!-- terrain-sweep:begin -->"
+  echo "Generated by \`bash scripts/sweep_terrain.sh\` ($(date -u +%Y-%m-%d), $SIZE, $FRAMES frames judged every"
+  echo "$EVERY, slow stretch $SLOW frames at a fifth of the speed judged every frame; this machine, llvmpipe)."
+  echo "Triangles are the judged frames' mean; fewest: the fewest triangles within 1 px p95 on the same frames."
+  echo
+  echo "| scene | method | setting | triangles | fewest (1 px p95) | ratio | frame ms | render CPU ms | geo mean px | geo p95 px | PSNR dB | change − reference's |"
+  echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+  awk -F, 'NR>1{ratio = ($5 > 0) ? sprintf("%.2f", $4 / $5) : "";
+                set = ($2=="clipmap") ? "ring " $3 : ($2=="quadtree") ? $3 " px" : "";
+                printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %.1f | %.3f | %.3f | %.2f | %+.3f |\n",
+                $1, $2, set, $4, $5, ratio, $6, $7, $8, $9, $10, $11 - $12}' "$CSV"
+  echo
+  for scene in $SCENES; do echo "![terrain methods, $scene](charts/terrain_$scene.png)"; echo; done
+  echo "![temporal stability](charts/terrain_stability.png)"
+  echo "<!-- terrain-sweep:end -->"
+} >"$GEN"
+TM=$DOCS/terrain.md
+if grep -q '<!-- terrain-sweep:begin -->' "$TM"; then
+  awk -v gen="$GEN" '/<!-- terrain-sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
+                     /<!-- terrain-sweep:end -->/{skip=0; next} !skip' "$TM" >"$TM.tmp.$$"
+  mv "$TM.tmp.$$" "$TM"
+else
+  { echo; cat "$GEN"; } >>"$TM"
+fi
+echo "sweep_terrain: wrote $CSV, $DOCS/charts/terrain_*.png and the terrain-sweep section of $TM in $(( $(date +%s) - start ))s"
