@@ -50,13 +50,16 @@ enum class EvictionMode : uint8_t {
 inline constexpr unsigned kMaxIoThreads = 256;
 
 // Deterministic I/O (DeterministicIo): the simulated device's defaults.
-// 8 reads a frame is 480 tiles/s at 60 frames/s (30 MiB/s of 128-px RGBA8
-// tiles): about what two loaders on 2 busy cores delivered in real time in
-// the sweep's flights, which kept up at x50 (6-8 loads a frame) and not at
-// x100 (docs/benchmarks.md, "Repeatable sweeps"). 2 frames of latency: a
-// tile asked for in frame f is drawn from frame f + 2 at the earliest, one
-// frame later than a real read that lands while frame f draws.
-inline constexpr uint32_t kDefaultIoReadsPerFrame = 8;
+// 16 reads a frame is 960 tiles/s at 60 frames/s (60 MiB/s of 128-px RGBA8
+// tiles): what two loaders on 2 busy cores delivered in real time on the
+// sweep's line at x100 (3756 loads in 240 frames, 15.6 a frame), so the
+// deterministic speed curve falls where the real-time one does (99 dB to
+// x20, 98 at x50, 42 at x100 against 51-57 in real time; 8 reads a frame
+// already lost x20: 92.6 dB; docs/benchmarks.md, "Repeatable sweeps").
+// 2 frames of latency: a tile asked for in frame f is drawn from frame
+// f + 2 at the earliest, one frame later than a real read that lands
+// while frame f draws.
+inline constexpr uint32_t kDefaultIoReadsPerFrame = 16;
 inline constexpr uint32_t kDefaultIoLatencyFrames = 2;
 
 // A benchmark mode in which a run gives the same frames every time, on any
