@@ -11,6 +11,7 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
@@ -25,6 +26,10 @@ namespace clipstream {
 inline constexpr double kMaxFlySpeed = 10000.0;     // path seconds per simulated second
 inline constexpr double kMaxFlyDelayMs = 10000.0;   // fault latency per read, rest-frame time
 inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up frames
+// Deterministic I/O (DeterministicIo): more reads a frame than any flight
+// wants, and a latency past any flight's length, mean nothing.
+inline constexpr uint32_t kMaxFlyIoReadsPerFrame = 100000;
+inline constexpr uint32_t kMaxFlyIoLatencyFrames = 100000;
 
 struct FlyOptions {
   std::string store_path;          // tile store file or http(s) URL; empty when procedural_px > 0
@@ -58,6 +63,11 @@ struct FlyOptions {
   bool frustum_priority = true;      // StreamerConfig::frustum_priority
   bool terrain_bounds = true;        // StreamerConfig::terrain_bounds
   bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
+  // Repeatable runs (StreamerConfig::deterministic_io): reads land on a
+  // simulated I/O clock, so the frames do not depend on thread timing.
+  bool deterministic = false;
+  uint32_t io_reads_per_frame = kDefaultIoReadsPerFrame;   // with `deterministic`, at least 1
+  uint32_t io_latency_frames = kDefaultIoLatencyFrames;    // with `deterministic`, at least 1
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
   uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
