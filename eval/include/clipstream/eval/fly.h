@@ -89,7 +89,8 @@ struct FlyOptions {
 inline constexpr double kMaxVerticalScale = 1000.0;
 
 // Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
-// the real render time (simulated pacing: results are deterministic).
+// the real render time (simulated pacing: the same cameras every run; the
+// same frames too with `deterministic`).
 // Writes OUT/frames.csv, OUT/frames.json, OUT/summary.tsv and
 // OUT/frame_NNNNN.png, each under OutputFile's rule, after removing what an
 // earlier run wrote in OUT (once the GL context and the first frame's
