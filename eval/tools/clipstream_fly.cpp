@@ -68,10 +68,11 @@ int main(int argc, char** argv) {
                "Tell the streamer the scripted path: eviction keeps what the path comes back to, and "
                "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
                "an interactive flight");
-  CLI::Option* deterministic = app.add_flag("--deterministic", o.deterministic,
-               "Repeatable run for benchmarks: tile reads land on a simulated I/O clock (--io-reads-per-frame, "
-               "--io-latency-frames), so the frames never depend on thread timing; frames wait for the reads "
-               "due. Off: reads land as fast as the loaders go (an application's behaviour)");
+  CLI::Option* deterministic = app.add_flag(
+      "--deterministic", o.deterministic,
+      "Repeatable run for benchmarks: tile reads land on a simulated I/O clock (--io-reads-per-frame, "
+      "--io-latency-frames), so the frames never depend on thread timing; frames wait for the reads "
+      "due. Off: reads land as fast as the loaders go (an application's behaviour)");
   app.add_option("--io-reads-per-frame", o.io_reads_per_frame,
                  "With --deterministic: tile reads issued per frame (default " +
                      std::to_string(kDefaultIoReadsPerFrame) + ")")
