@@ -147,6 +147,10 @@ Status checkFlyOptions(const FlyOptions& o) {
     return bad("fault corrupt fraction must be from 0 to 1");
   if (!std::isfinite(o.vertical_scale) || o.vertical_scale <= 0.0 || o.vertical_scale > kMaxVerticalScale)
     return bad("vertical scale must be a number above 0 and at most " + std::to_string(int(kMaxVerticalScale)));
+  if (o.io_reads_per_frame == 0 || o.io_reads_per_frame > kMaxFlyIoReadsPerFrame)
+    return bad("reads per frame must be from 1 to " + std::to_string(kMaxFlyIoReadsPerFrame));
+  if (o.io_latency_frames == 0 || o.io_latency_frames > kMaxFlyIoLatencyFrames)
+    return bad("I/O latency must be from 1 to " + std::to_string(kMaxFlyIoLatencyFrames) + " frames");
   if (o.terrain_ring < 16 || o.terrain_ring > 1024 || (o.terrain_ring & (o.terrain_ring - 1)) != 0)
     return bad("terrain ring must be a power of two from 16 to 1024");
   if (!std::isfinite(o.terrain_error_px) || o.terrain_error_px < kMinTerrainErrorPx ||
@@ -242,6 +246,9 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.streamer.frustum_priority = o.frustum_priority;
   r.streamer.terrain_bounds = o.terrain_bounds;
   r.streamer.trace_path = o.trace_path;
+  r.streamer.deterministic_io.enabled = o.deterministic;
+  r.streamer.deterministic_io.reads_per_frame = o.io_reads_per_frame;
+  r.streamer.deterministic_io.latency_frames = o.io_latency_frames;
   r.upload_tiles = o.upload_tiles;
   r.buffering = o.buffering;
   r.overlay = o.overlay ? Overlay::kLevels : Overlay::kOff;
@@ -301,6 +308,9 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.prefetch = o.prefetch;
   d.frustum_priority = o.frustum_priority;
   d.path_hint = o.path_hint;
+  d.deterministic = o.deterministic;
+  d.io_reads_per_frame = o.io_reads_per_frame;
+  d.io_latency_frames = o.io_latency_frames;
   d.pngs_written = writer.written();
   d.pngs_dropped = writer.dropped();
   if (Status s = writeRunFiles({{o.out_dir + "/frames.csv", framesCsv(run, geometry.levelCount())},

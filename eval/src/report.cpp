@@ -150,6 +150,9 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["prefetch"] = d.prefetch;
   acc["frustum_priority"] = d.frustum_priority;
   acc["path_hint"] = d.path_hint;
+  acc["io_mode"] = d.deterministic ? "deterministic" : "real-time";
+  acc["io_reads_per_frame"] = d.deterministic ? d.io_reads_per_frame : 0;
+  acc["io_latency_frames"] = d.deterministic ? d.io_latency_frames : 0;
   acc["path_hint_frames"] = run.streamer.path_hint_frames;
   acc["path_hint_ignored_frames"] = run.streamer.path_hint_ignored_frames;
   acc["upload_tiles"] = d.upload_tiles;
@@ -282,6 +285,10 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
       run.geometry_rest_frames ? std::to_string(run.terrain_rest_agree_mismatched) : std::string());
   add("needed_coarser_frames", run.seen_frames ? std::to_string(run.needed_coarser_frames) : std::string());
   add("needed_finer_frames", run.seen_frames ? std::to_string(run.needed_finer_frames) : std::string());
+  // Last, so scripts reading columns by position before it see no change.
+  add("io_mode", d.deterministic ? "deterministic" : "real-time");
+  add("io_reads_per_frame", d.deterministic ? std::to_string(d.io_reads_per_frame) : "0");
+  add("io_latency_frames", d.deterministic ? std::to_string(d.io_latency_frames) : "0");
   return keys + "\n" + values + "\n";
 }
 
@@ -318,6 +325,11 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   row("pngs_written", double(d.pngs_written), "%.0f");
   row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
   out << "tile_format\t" << tileContentName(run.tile_content) << "\n";
+  out << "io_mode\t"
+      << (d.deterministic ? "deterministic, " + std::to_string(d.io_reads_per_frame) + " reads/frame, " +
+                                std::to_string(d.io_latency_frames) + " frames latency"
+                          : std::string("real-time"))
+      << "\n";
   row("gpu_texture_bytes", double(run.texture_bytes.total()), "%.0f");
   row("gpu_texture_mib", mib(run.texture_bytes.total()), "%.1f");
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");

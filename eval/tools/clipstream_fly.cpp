@@ -71,6 +71,21 @@ int main(int argc, char** argv) {
                "Tell the streamer the scripted path: eviction keeps what the path comes back to, and "
                "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
                "an interactive flight");
+  CLI::Option* deterministic = app.add_flag(
+      "--deterministic", o.deterministic,
+      "Repeatable run for benchmarks: tile reads land on a simulated I/O clock (--io-reads-per-frame, "
+      "--io-latency-frames), so the frames never depend on thread timing; frames wait for the reads "
+      "due. Off: reads land as fast as the loaders go (an application's behaviour)");
+  app.add_option("--io-reads-per-frame", o.io_reads_per_frame,
+                 "With --deterministic: tile reads issued per frame (default " +
+                     std::to_string(kDefaultIoReadsPerFrame) + ")")
+      ->transform(cli::wholeInRange(1, kMaxFlyIoReadsPerFrame))
+      ->needs(deterministic);
+  app.add_option("--io-latency-frames", o.io_latency_frames,
+                 "With --deterministic: frames from a read's request to its tile in RAM (default " +
+                     std::to_string(kDefaultIoLatencyFrames) + ")")
+      ->transform(cli::wholeInRange(1, kMaxFlyIoLatencyFrames))
+      ->needs(deterministic);
   app.add_option("--fault-latency-ms", o.fault_latency_ms, "Added latency per tile read (ms)")
       ->transform(delay_ms);
   app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")

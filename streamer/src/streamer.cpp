@@ -9,6 +9,15 @@
 // takes it briefly in update(), takeReady() and stats(); it never waits on
 // I/O because no one holds the lock across I/O.
 //
+// Deterministic I/O (StreamerConfig::deterministic_io): the render thread
+// pops and admits the requests itself, at most reads_per_frame an update(),
+// and hands them to the workers as tickets (io_work); a worker reads and
+// decodes a ticket without touching the cache or the counters, and the
+// render thread publishes it in the update() of its due frame, in issue
+// order, waiting for it if need be. Every change to the cache, the queue
+// and the counters then happens on the render thread at a point fixed by
+// the frame count, so the run does not depend on thread timing.
+//
 // Layers: every key in the shared maps is a LayerTile (layer, level, x, y).
 // Each layer keeps its own plan, windows, counters and MaxTextureLOD; the
 // cache, the budget, the queue and the rank order are one for all layers.
@@ -105,6 +114,21 @@ struct Request {
   LayerTile key;
   uint32_t rank = 0;
   Clock::time_point queued_at;
+};
+
+// Deterministic I/O: one read issued on the simulated clock. The render
+// thread owns the ticket's key, due_frame and reread; a worker writes the
+// result fields unlocked, then sets `done` under the streamer's mutex, after
+// which only the render thread touches them.
+struct IoTicket {
+  LayerTile key;
+  uint64_t due_frame = 0;  // published in the update() of this frame
+  bool reread = false;
+  bool done = false;       // guarded by the mutex
+  Status status;
+  FetchInfo info;
+  std::shared_ptr<std::vector<uint8_t>> pixels = std::make_shared<std::vector<uint8_t>>();
+  std::shared_ptr<const TileDetail> detail;
 };
 
 // True when a plan made from the path hint matches the real one: the same
@@ -303,6 +327,15 @@ struct Streamer::Impl {
   double shared_now_s = 0.0;  // copy of now_s for workers (retry times)
   uint64_t shared_frame = 0;  // copy of frame for workers
   bool stopping = false;
+  // Deterministic I/O: tickets not yet taken by a worker, issue order;
+  // io_done_cv is signalled whenever a ticket is done.
+  std::deque<std::shared_ptr<IoTicket>> io_work;
+  std::condition_variable io_done_cv;
+
+  // Render thread only (deterministic I/O): tickets issued and not yet
+  // published, issue order (so due frames never decrease).
+  std::deque<std::shared_ptr<IoTicket>> io_issued;
+  bool deterministic() const { return config.deterministic_io.enabled; }
 
   std::vector<std::thread> workers;
 
@@ -312,6 +345,12 @@ struct Streamer::Impl {
   }
   void loadTerrain();
   void workerLoop();
+  std::shared_ptr<const TileDetail> detailOf(const Layer& layer, const LayerTile& key, const Status& status,
+                                             const std::vector<uint8_t>& pixels, std::vector<float>* floats) const;
+  void publishLocked(const LayerTile& key, const Status& status, std::shared_ptr<std::vector<uint8_t>> pixels,
+                     const FetchInfo& info, bool reread, std::shared_ptr<const TileDetail> tile_detail);
+  void publishDueReads(bool all);
+  void issueReads();
   bool admit(const Request& request, bool neighbour, bool* reread, bool* no_room);
   bool reserveRoom(uint32_t incoming_rank, uint64_t incoming_bytes);
   void buildVictimLists();
@@ -464,7 +503,21 @@ void Streamer::Impl::workerLoop() {
   std::vector<float> floats;
   std::unique_lock<std::mutex> lock(mutex);
   for (;;) {
-    work_cv.wait(lock, [&] { return stopping || !queue.empty(); });
+    // With deterministic I/O the queue is the render thread's to issue
+    // from; workers take only tickets, and finish them before they stop.
+    work_cv.wait(lock, [&] { return stopping || !io_work.empty() || (!deterministic() && !queue.empty()); });
+    if (!io_work.empty()) {
+      const std::shared_ptr<IoTicket> ticket = std::move(io_work.front());
+      io_work.pop_front();
+      const Layer& layer = layers[ticket->key.layer];
+      lock.unlock();
+      ticket->status = layer.spec.source->fetchWithInfo(ticket->key.key, ticket->pixels.get(), &ticket->info);
+      ticket->detail = detailOf(layer, ticket->key, ticket->status, *ticket->pixels, &floats);
+      lock.lock();
+      ticket->done = true;
+      io_done_cv.notify_all();
+      continue;
+    }
     if (stopping) return;
     const Request request = queue.front();
     queue.pop_front();
@@ -527,56 +580,112 @@ void Streamer::Impl::workerLoop() {
     // their cells (their samples, widened by the tile's error from the
     // index, which the read has just used).
     details.assign(n, nullptr);
-    if (int(request.key.layer) == terrain_layer) {
-      for (size_t i = 0; i < n; ++i) {
-        if (!statuses[i] || pixels[i]->size() != layer.tile_bytes) continue;
-        TileHeightBounds hb;
-        if (!layer.spec.source->tileHeightBounds(keys[i], &hb)) continue;
-        floats.resize(pixels[i]->size() / sizeof(float));
-        std::memcpy(floats.data(), pixels[i]->data(), pixels[i]->size());
-        details[i] = makeTileDetail(layer.geometry.tile_px, floats.data(), hb.error);
-      }
-    }
+    for (size_t i = 0; i < n; ++i) details[i] = detailOf(layer, tiles[i], statuses[i], *pixels[i], &floats);
 
     lock.lock();
-    for (size_t i = 0; i < n; ++i) {
-      const LayerTile key = tiles[i];
-      const Status& status = statuses[i];
-      const FetchInfo& info = infos[i];
-      const bool good = status.isOk() && pixels[i]->size() == layer.tile_bytes;
-      LevelCounters& level_counters = layer.counters[key.key.level];
-      in_flight--;
-      level_counters.bytes_read += info.bytes_read;
-      decode_ms_total += info.decode_ms;
-      if (rereads[i]) level_counters.redundant_reads++;
-      auto it = cache.find(key);
-      if (good) {
-        if (details[i]) new_detail.emplace_back(key.key, std::move(details[i]));
-        level_counters.loads++;
-        it->second.state = EntryState::kReady;
-        it->second.rgba = std::move(pixels[i]);
-        it->second.last_wanted_frame = shared_frame;
-      } else {
-        ram_bytes -= layer.entry_bytes;
-        layer.ram_bytes -= layer.entry_bytes;
-        layer.ram_entries--;
-        cache.erase(it);
-        level_counters.failures++;
-        FailedTile& f = failed[key];
-        f.code = status.isOk() ? ErrorCode::kCorruptTile : status.code;
-        f.count++;
-        f.retry_at_s = shared_now_s + std::min(kRetryMaxS, kRetryBaseS * double(1u << std::min(f.count, 16u)));
-        if (f.count == 1 && logged_failures < kMaxLoggedFailures) {
-          logged_failures++;
-          const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
-          std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
-                       layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y,
-                       why.c_str(),
-                       logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
-        }
-      }
+    for (size_t i = 0; i < n; ++i)
+      publishLocked(tiles[i], statuses[i], std::move(pixels[i]), infos[i], rereads[i], std::move(details[i]));
+  }
+}
+
+// The terrain's tiles also refine the planner's bounds: the ranges of their
+// cells (their samples, widened by the tile's error from the index, which
+// the read has just used). Null for other layers' tiles and failed reads.
+// No lock needed: reads only what the constructor fixed.
+std::shared_ptr<const TileDetail> Streamer::Impl::detailOf(const Layer& layer, const LayerTile& key,
+                                                           const Status& status,
+                                                           const std::vector<uint8_t>& pixels,
+                                                           std::vector<float>* floats) const {
+  if (int(key.layer) != terrain_layer || !status || pixels.size() != layer.tile_bytes) return nullptr;
+  TileHeightBounds hb;
+  if (!layer.spec.source->tileHeightBounds(key.key, &hb)) return nullptr;
+  floats->resize(pixels.size() / sizeof(float));
+  std::memcpy(floats->data(), pixels.data(), pixels.size());
+  return makeTileDetail(layer.geometry.tile_px, floats->data(), hb.error);
+}
+
+// A finished read into the cache (its placeholder becomes the tile) or, when
+// it failed, into the failure map. Caller holds the mutex.
+void Streamer::Impl::publishLocked(const LayerTile& key, const Status& status,
+                                   std::shared_ptr<std::vector<uint8_t>> pixels, const FetchInfo& info,
+                                   bool reread, std::shared_ptr<const TileDetail> tile_detail) {
+  Layer& layer = layers[key.layer];
+  const bool good = status.isOk() && pixels->size() == layer.tile_bytes;
+  LevelCounters& level_counters = layer.counters[key.key.level];
+  in_flight--;
+  level_counters.bytes_read += info.bytes_read;
+  decode_ms_total += info.decode_ms;
+  if (reread) level_counters.redundant_reads++;
+  auto it = cache.find(key);
+  if (good) {
+    if (tile_detail) new_detail.emplace_back(key.key, std::move(tile_detail));
+    level_counters.loads++;
+    it->second.state = EntryState::kReady;
+    it->second.rgba = std::move(pixels);
+    it->second.last_wanted_frame = shared_frame;
+  } else {
+    ram_bytes -= layer.entry_bytes;
+    layer.ram_bytes -= layer.entry_bytes;
+    layer.ram_entries--;
+    cache.erase(it);
+    level_counters.failures++;
+    FailedTile& f = failed[key];
+    f.code = status.isOk() ? ErrorCode::kCorruptTile : status.code;
+    f.count++;
+    f.retry_at_s = shared_now_s + std::min(kRetryMaxS, kRetryBaseS * double(1u << std::min(f.count, 16u)));
+    if (f.count == 1 && logged_failures < kMaxLoggedFailures) {
+      logged_failures++;
+      const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
+      std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
+                   layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y, why.c_str(),
+                   logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
     }
   }
+}
+
+// Deterministic I/O, render thread: publishes the issued reads due by this
+// frame (all of them with `all`, at shutdown), in issue order, waiting for
+// the workers to finish each. The wait is the point of the mode: a slow
+// machine takes longer per frame but shows the same frames.
+void Streamer::Impl::publishDueReads(bool all) {
+  std::unique_lock<std::mutex> lock(mutex, std::defer_lock);
+  while (!io_issued.empty() && (all || io_issued.front()->due_frame <= frame)) {
+    const std::shared_ptr<IoTicket> ticket = std::move(io_issued.front());
+    io_issued.pop_front();
+    if (!lock.owns_lock()) lock.lock();
+    io_done_cv.wait(lock, [&] { return ticket->done; });
+    shared_now_s = now_s;  // retry times of failures count from this frame
+    publishLocked(ticket->key, ticket->status, std::move(ticket->pixels), ticket->info, ticket->reread,
+                  std::move(ticket->detail));
+  }
+}
+
+// Deterministic I/O, render thread: this frame's reads. Pops the queue's
+// front as a worker would (admit(): cancellation, budget, eviction,
+// placeholder) until reads_per_frame reads are issued, each due
+// latency_frames frames from now. One tile a read: batching changes how
+// fast a store over HTTP is read, not what a frame shows.
+void Streamer::Impl::issueReads() {
+  const uint32_t reads = std::max(1u, config.deterministic_io.reads_per_frame);
+  const uint64_t due = frame + std::max(1u, config.deterministic_io.latency_frames);
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (stopping || loader_threads == 0) return;  // no worker would ever finish a ticket
+    for (uint32_t issued = 0; issued < reads && !queue.empty();) {
+      const Request request = queue.front();
+      queue.pop_front();
+      bool reread = false, no_room = false;
+      if (!admit(request, false, &reread, &no_room)) continue;
+      auto ticket = std::make_shared<IoTicket>();
+      ticket->key = request.key;
+      ticket->due_frame = due;
+      ticket->reread = reread;
+      io_issued.push_back(ticket);
+      io_work.push_back(std::move(ticket));
+      ++issued;
+    }
+  }
+  work_cv.notify_all();
 }
 
 // ---------------------------------------------------------------------------
@@ -998,6 +1107,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
   if (!any_levels) return;
   s.frame++;
   s.now_s = time_s;
+  if (s.deterministic()) s.publishDueReads(false);
   s.takeDetail();
   const size_t n = s.layers.size();
   // Plans every active layer for `cam` (a world camera) into *plans.
@@ -1095,6 +1205,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
     s.force_rebuild = false;
     s.rebuild(viewport);
   }
+  if (s.deterministic()) s.issueReads();
 }
 
 // Hands off ready tiles of layers [0, layer_count) in rank order within one
@@ -1329,10 +1440,13 @@ void Streamer::shutdown() {
     }
   }
   s.work_cv.notify_all();
-  // Workers finish the read they are in, publish it, then see `stopping`.
+  // Workers finish the read they are in, publish it, then see `stopping`
+  // (with deterministic I/O: finish every ticket issued, which this thread
+  // then publishes).
   for (std::thread& t : s.workers)
     if (t.joinable()) t.join();
   s.workers.clear();
+  s.publishDueReads(true);
   s.flushTrace(true);
 }
 

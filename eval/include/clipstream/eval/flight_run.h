@@ -5,7 +5,9 @@
 //
 // Frame rules (docs/renderer.md, "The frame loop"): recorded frame i shows
 // path time min(i, frames - 1) * kSimulatedFrameSeconds * speed (wrapped
-// with `loop`), whatever the real render time, so runs are deterministic;
+// with `loop`), whatever the real render time, so runs ask for the same
+// cameras (which tiles have landed by then is timing-free only with
+// StreamerConfig::deterministic_io);
 // warm-up frames hold the first camera, rest frames the last; the clock and
 // cut rules are Flight's.
 //

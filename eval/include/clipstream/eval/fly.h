@@ -12,6 +12,7 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
@@ -26,6 +27,10 @@ namespace clipstream {
 inline constexpr double kMaxFlySpeed = 10000.0;     // path seconds per simulated second
 inline constexpr double kMaxFlyDelayMs = 10000.0;   // fault latency per read, rest-frame time
 inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up frames
+// Deterministic I/O (DeterministicIo): more reads a frame than any flight
+// wants, and a latency past any flight's length, mean nothing.
+inline constexpr uint32_t kMaxFlyIoReadsPerFrame = 100000;
+inline constexpr uint32_t kMaxFlyIoLatencyFrames = 100000;
 
 struct FlyOptions {
   std::string store_path;          // tile store file or http(s) URL; empty when procedural_px > 0
@@ -60,6 +65,11 @@ struct FlyOptions {
   bool frustum_priority = true;      // StreamerConfig::frustum_priority
   bool terrain_bounds = true;        // StreamerConfig::terrain_bounds
   bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
+  // Repeatable runs (StreamerConfig::deterministic_io): reads land on a
+  // simulated I/O clock, so the frames do not depend on thread timing.
+  bool deterministic = false;
+  uint32_t io_reads_per_frame = kDefaultIoReadsPerFrame;   // with `deterministic`, at least 1
+  uint32_t io_latency_frames = kDefaultIoLatencyFrames;    // with `deterministic`, at least 1
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
   uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
@@ -83,7 +93,8 @@ struct FlyOptions {
 inline constexpr double kMaxVerticalScale = 1000.0;
 
 // Runs the flythrough. Frame i shows path time i * speed / 60 s whatever
-// the real render time (simulated pacing: results are deterministic).
+// the real render time (simulated pacing: the same cameras every run; the
+// same frames too with `deterministic`).
 // Writes OUT/frames.csv, OUT/frames.json, OUT/summary.tsv and
 // OUT/frame_NNNNN.png, each under OutputFile's rule, after removing what an
 // earlier run wrote in OUT (once the GL context and the first frame's

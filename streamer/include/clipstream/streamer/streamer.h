@@ -12,7 +12,9 @@
 // Thread rule: update(), takeReady(), takeReadyAll(), setPathHint(),
 // resetGpuResidency(), plan() and settled() are for the render thread only
 // and never block on I/O (no source call ever runs on it; nor does
-// PathHint::camera_at run anywhere else). stats(), queuedTiles() and
+// PathHint::camera_at run anywhere else), except that with
+// DeterministicIo::enabled update() waits for the reads due that frame
+// (a benchmark mode; the source is still only called on the workers). stats(), queuedTiles() and
 // queuedLayerTiles() are thread-safe; layerCount(), layer() and geometry()
 // return what the constructor fixed, on any thread.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
@@ -47,6 +49,36 @@ enum class EvictionMode : uint8_t {
 // nothing even on a slow network disk, and each thread costs a stack.
 inline constexpr unsigned kMaxIoThreads = 256;
 
+// Deterministic I/O (DeterministicIo): the simulated device's defaults.
+// 16 reads a frame is 960 tiles/s at 60 frames/s (60 MiB/s of 128-px RGBA8
+// tiles): what two loaders on 2 busy cores delivered in real time on the
+// sweep's line at x100 (3756 loads in 240 frames, 15.6 a frame), so the
+// deterministic speed curve falls where the real-time one does (99 dB to
+// x20, 98 at x50, 42 at x100 against 51-57 in real time; 8 reads a frame
+// already lost x20: 92.6 dB; docs/benchmarks.md, "Repeatable sweeps").
+// 2 frames of latency: a tile asked for in frame f is drawn from frame
+// f + 2 at the earliest, one frame later than a real read that lands
+// while frame f draws.
+inline constexpr uint32_t kDefaultIoReadsPerFrame = 16;
+inline constexpr uint32_t kDefaultIoLatencyFrames = 2;
+
+// A benchmark mode in which a run gives the same frames every time, on any
+// machine (docs/architecture.md, "Deterministic I/O"). The loader threads
+// still read and decode every tile, but the render thread decides, on a
+// simulated I/O clock counted in update() calls, what is read and when it
+// lands: each update() issues at most reads_per_frame requests from the
+// front of the load queue (admitted, with room made, on the render thread),
+// and a request issued in frame f becomes a tile in RAM in update() of
+// frame f + latency_frames, which waits for its real read if it has not
+// finished. Results then depend on the request order only, never on thread
+// timing; frame times still measure the machine. Off (the default) the
+// loaders take requests as fast as they can, as an application wants.
+struct DeterministicIo {
+  bool enabled = false;
+  uint32_t reads_per_frame = kDefaultIoReadsPerFrame;  // at least 1 (0 counts as 1)
+  uint32_t latency_frames = kDefaultIoLatencyFrames;   // at least 1 (0 counts as 1)
+};
+
 struct StreamerConfig {
   uint64_t ram_budget_bytes = uint64_t(256) << 20;  // hard: never exceeded
   unsigned io_threads = 0;       // 0 = the source's suggestion (a URL store: one per
@@ -72,6 +104,8 @@ struct StreamerConfig {
   std::string trace_path;
   double prefetch_ahead_s = 0.5; // how far ahead the predicted camera is placed
   EvictionMode eviction = EvictionMode::kGpuFirst;
+  // Off by default: loads land as fast as the loaders read them.
+  DeterministicIo deterministic_io;
   // Test hook: called after every RAM insert (placeholder reservation) with
   // the accounted bytes and the budget, under the cache lock, on the thread
   // that inserted. Must not call back into the streamer.
@@ -211,7 +245,9 @@ class Streamer {
 
   // Render thread. Plans every layer for this (world) camera, queues what
   // is missing, cancels what the plans no longer need, and queues predicted
-  // tiles at low priority.
+  // tiles at low priority. With DeterministicIo::enabled it first publishes
+  // the reads due this frame (waiting for them) and last issues this
+  // frame's reads.
   void update(const Camera& camera, const Viewport& viewport, double time_s);
 
   // Render thread. Sets (or, with an empty camera_at, clears) the path hint.
