@@ -5,6 +5,7 @@
 #   bash scripts/sweep.sh --quick    # fewer frames, for a smoke run (CSV/charts still written)
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #   SWEEP_ASAN=0 bash scripts/sweep.sh --quick  # without the soak under ASan (its row says "not run")
+#   SWEEP_TERRAIN=0 bash scripts/sweep.sh       # without the terrain methods (scripts/sweep_terrain.sh, ~25 min)
 #
 # Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
 # once, runs every experiment with clipstream-fly --reference (each frame's
@@ -475,3 +476,8 @@ else
   { echo; cat "$GEN"; } >>"$BM"
 fi
 echo "sweep: wrote $DATA/*.csv, $CHARTS/*.png and the sweep section of $BM in $(( $(date +%s) - start ))s"
+
+# The terrain methods side by side (docs/terrain.md); SWEEP_TERRAIN=0 skips them.
+if [[ ${SWEEP_TERRAIN:-1} != 0 ]] && (( ! CHARTS_ONLY )); then
+  if (( QUICK )); then bash scripts/sweep_terrain.sh --quick; else bash scripts/sweep_terrain.sh; fi
+fi
