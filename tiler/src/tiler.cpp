@@ -9,6 +9,7 @@
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
+#include <clipstream/tiler/shard.h>
 
 #include "height_bounds.h"
 #include "height_source.h"
@@ -198,6 +199,97 @@ Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned thre
                            std::to_string((smallest + mb - 1) / mb) + " MB");
 }
 
+// Rows [y0, y0 + height) of another source, as an image of their own: the
+// band a shard tiles. Its pixels are the full image's, converted the same.
+class BandSource final : public ImageSource {
+ public:
+  BandSource(std::unique_ptr<ImageSource> inner, uint64_t y0_px, uint64_t height_px)
+      : m_inner(std::move(inner)), m_y0(y0_px), m_info(m_inner->info()) {
+    m_info.height_px = height_px;
+  }
+  const SourceInfo& info() const override {
+    m_info.clamped_samples = m_inner->info().clamped_samples;
+    return m_info;
+  }
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    return m_inner->readRows(m_y0 + y0, rows, x0, width, dst, dst_stride);
+  }
+
+ private:
+  std::unique_ptr<ImageSource> m_inner;
+  uint64_t m_y0 = 0;
+  mutable SourceInfo m_info;  // the inner one's, with the band's height
+};
+
+// FNV-1a, 64 bit: the run fingerprint must be the same on every machine and
+// build that runs a shard, which std::hash does not promise.
+struct Fnv1a {
+  uint64_t h = 0xcbf29ce484222325ull;
+  void bytes(const void* data, size_t n) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 0x100000001b3ull;
+  }
+  void u64(uint64_t v) { bytes(&v, sizeof(v)); }
+  void text(const std::string& t) {
+    u64(t.size());
+    bytes(t.data(), t.size());
+  }
+};
+
+// Up to 64 KiB from the start and the end of a file, and its size: enough
+// to tell inputs apart without reading them whole in every shard. The path
+// is left out on purpose: shards may see the input under different mounts.
+Status hashFileSample(const std::string& path, Fnv1a* h) {
+  constexpr size_t kSampleBytes = size_t(64) << 10;
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return Status::error(ErrorCode::kIo, path + ": cannot open to fingerprint it");
+  std::vector<uint8_t> buf(kSampleBytes);
+  std::fseek(f, 0, SEEK_END);
+  const long size = std::ftell(f);
+  h->u64(uint64_t(size < 0 ? 0 : size));
+  for (long at : {0L, std::max(0L, size - long(kSampleBytes))}) {
+    std::fseek(f, at, SEEK_SET);
+    const size_t n = std::fread(buf.data(), 1, buf.size(), f);
+    h->bytes(buf.data(), n);
+  }
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed) return Status::error(ErrorCode::kIo, path + ": read failed while fingerprinting it");
+  return Status::ok();
+}
+
+// What a shard's tiles depend on: the input (sampled, above), its size and
+// georeference, and every option that changes a tile's bytes. Equal across
+// the shards of one run, and checked by the merge.
+Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoReference& geo,
+                      uint64_t* out) {
+  Fnv1a h;
+  h.text("clipstream shard run 1");
+  if (o.input_path.empty()) {
+    h.text("synthetic");
+  } else {
+    Status s = hashFileSample(o.input_path, &h);
+    if (!s) return s;
+  }
+  h.u64(src.width_px);
+  h.u64(src.height_px);
+  h.text(src.input_type);
+  h.u64(src.input_channels);
+  h.u64(uint64_t(src.format));
+  h.u64(o.tile_px);
+  h.u64(uint64_t(o.zstd_level));
+  h.u64(o.predictor ? 1 : 0);
+  h.u64(uint64_t(o.filter));
+  h.u64(o.linear_light ? 1 : 0);
+  h.u64(geo.present ? 1 : 0);
+  h.bytes(geo.transform, sizeof(geo.transform));
+  h.text(geo.crs);
+  h.u64(o.shard_count);
+  *out = h.h;
+  return Status::ok();
+}
+
 }  // namespace
 
 Status validateOptions(const TilerOptions& o) {
@@ -261,6 +353,22 @@ Status validateOptions(const TilerOptions& o) {
       (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format)))) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "--synthetic makes colour images; elevation needs an input DEM");
+  }
+  if (o.shard_count != 0 || o.shard_index != 0) {
+    if (o.shard_count == 0 || o.shard_count > kMaxShards || o.shard_index == 0 ||
+        o.shard_index > o.shard_count) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--shard " + std::to_string(o.shard_index) + "/" +
+                               std::to_string(o.shard_count) + " needs 1 <= K <= N <= " +
+                               std::to_string(kMaxShards));
+    }
+    if (o.filter != DownsampleFilter::kBox) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--shard needs the box filter: Lanczos reaches across the bands");
+    }
+    if (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format))) {
+      return Status::error(ErrorCode::kUnsupported, "--shard: elevation stores are not sharded");
+    }
   }
   if (o.format && o.layer == LayerKind::kColour && !isColourFormat(*o.format)) {
     return Status::error(ErrorCode::kInvalidArgument,
@@ -451,6 +559,28 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     s = openElevation(o, geo, &source, &heights, &elevation, summary);
     if (!s) return s;
   }
+  ShardInfo shard;
+  if (o.shard_count != 0) {
+    if (elevation.present) {
+      return Status::error(ErrorCode::kUnsupported,
+                           o.input_path + " becomes an elevation store, and elevation stores are "
+                                          "not sharded (use --layer colour for a picture of it)");
+    }
+    const SourceInfo& whole = source->info();
+    ShardPlan plan;
+    s = planShard(whole.width_px, whole.height_px, o.tile_px, o.shard_index, o.shard_count, &plan);
+    if (!s) return s;
+    shard.present = true;
+    shard.index = o.shard_index;
+    shard.count = o.shard_count;
+    shard.full_width_px = whole.width_px;
+    shard.full_height_px = whole.height_px;
+    shard.y0_px = plan.y0_px;
+    shard.owned_levels = plan.owned_levels;
+    s = runFingerprint(o, whole, geo, &shard.fingerprint);
+    if (!s) return s;
+    source = std::make_unique<BandSource>(std::move(source), plan.y0_px, plan.height_px);
+  }
   const SourceInfo& src = source->info();
   for (const std::string& w : src.warnings) summary->warnings.push_back(w);
 
@@ -464,7 +594,8 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   wopt.fsync = o.fsync;
   wopt.replace = o.overwrite;
   wopt.payload_order = o.payload_order;
-  wopt.geo = geo;
+  wopt.geo = geo;  // a shard's is the whole image's (ShardInfo)
+  wopt.shard = shard;
 
   PyramidGeometry geometry;
   if (!makePyramidGeometry(src.width_px, src.height_px, o.tile_px, src.format, &geometry)) {
@@ -765,6 +896,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->memory_budget_bytes = o.memory_budget_bytes;
   summary->geo = wopt.geo;
   summary->elevation = elevation;
+  summary->shard = shard;
   summary->read_s = read_s;
   summary->build_s = build_s;
   summary->encode_s = encode_s;

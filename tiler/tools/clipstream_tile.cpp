@@ -3,6 +3,7 @@
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
 #include <clipstream/store/output_file.h>
+#include <clipstream/tiler/shard.h>
 #include <clipstream/tiler/tiler.h>
 
 #include <nlohmann/json.hpp>
@@ -41,6 +42,29 @@ std::string parseSize(const std::string& text, uint64_t* width, uint64_t* height
   if (too_large) {
     return "is too large: at most " + std::to_string(clipstream::kMaxSyntheticSidePx) +
            " px on a side";
+  }
+  return {};
+}
+
+// Parses "K/N" (decimal digits) for --shard. Returns "" or what is wrong.
+std::string parseShard(const std::string& text, uint32_t* index, uint32_t* count) {
+  const size_t sep = text.find('/');
+  auto number = [](const std::string& digits, uint32_t* out) {
+    if (digits.empty() || digits.size() > 9) return false;
+    uint64_t v = 0;
+    for (char c : digits) {
+      if (c < '0' || c > '9') return false;
+      v = v * 10 + uint64_t(c - '0');
+    }
+    *out = uint32_t(v);
+    return true;
+  };
+  if (sep == std::string::npos || !number(text.substr(0, sep), index) ||
+      !number(text.substr(sep + 1), count)) {
+    return "is not K/N (e.g. 2/4: the second of four shards)";
+  }
+  if (*count == 0 || *count > clipstream::kMaxShards || *index == 0 || *index > *count) {
+    return "needs 1 <= K <= N <= " + std::to_string(clipstream::kMaxShards);
   }
   return {};
 }
@@ -99,6 +123,16 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
     el["max_height"] = e.max_height;
     j["elevation"] = el;
   }
+  if (s.shard.present) {
+    nlohmann::json sh;
+    sh["index"] = s.shard.index;
+    sh["count"] = s.shard.count;
+    sh["full_width_px"] = s.shard.full_width_px;
+    sh["full_height_px"] = s.shard.full_height_px;
+    sh["y0_px"] = s.shard.y0_px;
+    sh["owned_levels"] = s.shard.owned_levels;
+    j["shard"] = sh;
+  }
   j["warnings"] = s.warnings;
   return j;
 }
@@ -148,6 +182,9 @@ int main(int argc, char** argv) {
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
   app.add_flag("--no-fsync", no_fsync, "skip the final fsync (faster, for scratch outputs)");
+  std::string shard_text;
+  app.add_option("--shard", shard_text,
+                 "K/N: tile only the K-th of N bands into a partial store for clipstream-merge");
   std::string order_text;
   app.add_option("--payload-order", order_text,
                  "where tiles lie in each level: curve (index pages along a Hilbert curve, tiles "
@@ -247,6 +284,10 @@ int main(int argc, char** argv) {
     if (!order) return cli::usageError(app, "--payload-order must be curve or written");
     options.payload_order = *order;
   }
+  if (!shard_text.empty()) {
+    const std::string problem = parseShard(shard_text, &options.shard_index, &options.shard_count);
+    if (!problem.empty()) return cli::usageError(app, "--shard '" + shard_text + "' " + problem);
+  }
   options.cancel = &g_cancel;
   if (Status s = validateOptions(options); !s) return cli::usageError(app, s.message);
   // The summary file follows the output rule too (a regular file named by
@@ -302,6 +343,15 @@ int main(int argc, char** argv) {
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
                   summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
+    }
+    if (summary.shard.present) {
+      const ShardInfo& sh = summary.shard;
+      std::printf("shard %u/%u: rows %llu..%llu of %llux%llu, levels 0..%u (clipstream-merge "
+                  "joins the parts)\n",
+                  sh.index, sh.count, (unsigned long long)sh.y0_px,
+                  (unsigned long long)(sh.y0_px + summary.height_px),
+                  (unsigned long long)sh.full_width_px, (unsigned long long)sh.full_height_px,
+                  sh.owned_levels - 1);
     }
     if (summary.elevation.present) {
       const ElevationInfo& e = summary.elevation;

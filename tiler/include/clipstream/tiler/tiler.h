@@ -73,6 +73,12 @@ struct TilerOptions {
   // range requests (docs/benchmarks.md, "Payload order").
   PayloadOrder payload_order = PayloadOrder::kCurve;
   const std::atomic<int>* cancel = nullptr;  // non-zero (e.g. a signal number) stops the run
+  // Sharded run (shard.h): tile only band shard_index (1..shard_count) of
+  // the image into a partial store, for mergeShards(). 0 = the whole image.
+  // Colour stores with the box filter only (Lanczos reaches across bands;
+  // elevation fill and height bounds too).
+  uint32_t shard_index = 0;
+  uint32_t shard_count = 0;
 };
 
 // What a run did, for the one-line summary and --json-summary.
@@ -99,6 +105,7 @@ struct TilerSummary {
   double encode_s = 0.0;         // encoder threads' CPU time, summed (encode + write)
   GeoReference geo;
   ElevationInfo elevation;       // present for an elevation store
+  ShardInfo shard;               // present for a partial store (width/height are the band's)
   std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
 };
 
