@@ -9,6 +9,7 @@
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
+#include <clipstream/tiler/mosaic.h>
 #include <clipstream/tiler/shard.h>
 
 #include "height_bounds.h"
@@ -263,13 +264,19 @@ Status hashFileSample(const std::string& path, Fnv1a* h) {
 // georeference, and every option that changes a tile's bytes. Equal across
 // the shards of one run, and checked by the merge.
 Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoReference& geo,
-                      uint64_t* out) {
+                      const std::vector<std::string>& sheets, uint64_t* out) {
   Fnv1a h;
   h.text("clipstream shard run 1");
   if (o.input_path.empty()) {
     h.text("synthetic");
   } else {
     Status s = hashFileSample(o.input_path, &h);
+    if (!s) return s;
+  }
+  h.u64(o.mosaic ? 1 : 0);
+  h.u64(o.fill);
+  for (const std::string& sheet : sheets) {
+    Status s = hashFileSample(sheet, &h);
     if (!s) return s;
   }
   h.u64(src.width_px);
@@ -353,6 +360,19 @@ Status validateOptions(const TilerOptions& o) {
       (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format)))) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "--synthetic makes colour images; elevation needs an input DEM");
+  }
+  if (o.mosaic) {
+    if (o.input_path.empty()) {
+      return Status::error(ErrorCode::kInvalidArgument, "a mosaic needs a list file of sheets");
+    }
+    if (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format))) {
+      return Status::error(ErrorCode::kUnsupported,
+                           "mosaics make colour stores; elevation sheets are not mosaicked yet");
+    }
+  }
+  if (o.fill > 65535) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--fill " + std::to_string(o.fill) + " must be 0..65535");
   }
   if (o.shard_count != 0 || o.shard_index != 0) {
     if (o.shard_count == 0 || o.shard_count > kMaxShards || o.shard_index == 0 ||
@@ -542,9 +562,33 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
 
   std::unique_ptr<ImageSource> source;
   GeoReference geo;
+  MosaicInfo mosaic;
   if (o.input_path.empty()) {
     s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
                             o.format.value_or(PixelFormat::kRGB8), &source);
+  } else if (o.mosaic) {
+    s = openMosaic(o.input_path, o.format, o.fill, &source, &mosaic);
+    if (s) geo = mosaic.geo;
+    for (const std::string& sheet : mosaic.sheets) {
+      if (s && sameFile(sheet, o.output_path)) {
+        s = Status::error(ErrorCode::kInvalidArgument,
+                          o.output_path + " is the mosaic's sheet " + sheet +
+                              " (the same file, maybe through a link); refusing to overwrite it");
+      }
+    }
+    if (s && o.layer == LayerKind::kAuto && !o.format) {
+      // What would make a single file a DEM makes a mosaic of such sheets
+      // one too; say so rather than tile heights as a picture unasked.
+      const SourceInfo& mi = source->info();
+      const std::string& type = mi.input_type;
+      if (mi.input_channels == 1 && (type == "int16" || type == "uint16" || type == "float" ||
+                                     type == "half" || type == "double")) {
+        s = Status::error(ErrorCode::kUnsupported,
+                          o.input_path + ": the sheets are single-band " + type +
+                              " (a DEM); mosaics of elevation sheets are not supported yet "
+                              "(--layer colour tiles them as a grey picture)");
+      }
+    }
   } else {
     // A height format asked for by --format is the elevation path's to
     // choose; the first open only looks at the input.
@@ -555,7 +599,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   if (!s) return s;
   HeightSource* heights = nullptr;
   ElevationInfo elevation;
-  if (!o.input_path.empty()) {
+  if (!o.input_path.empty() && !o.mosaic) {
     s = openElevation(o, geo, &source, &heights, &elevation, summary);
     if (!s) return s;
   }
@@ -577,7 +621,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     shard.full_height_px = whole.height_px;
     shard.y0_px = plan.y0_px;
     shard.owned_levels = plan.owned_levels;
-    s = runFingerprint(o, whole, geo, &shard.fingerprint);
+    s = runFingerprint(o, whole, geo, mosaic.sheets, &shard.fingerprint);
     if (!s) return s;
     source = std::make_unique<BandSource>(std::move(source), plan.y0_px, plan.height_px);
   }
@@ -897,6 +941,8 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->geo = wopt.geo;
   summary->elevation = elevation;
   summary->shard = shard;
+  summary->mosaic_sheets = mosaic.sheets.size();
+  summary->gap_px = mosaic.gap_px;
   summary->read_s = read_s;
   summary->build_s = build_s;
   summary->encode_s = encode_s;

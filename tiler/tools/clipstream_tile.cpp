@@ -123,6 +123,10 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
     el["max_height"] = e.max_height;
     j["elevation"] = el;
   }
+  if (s.mosaic_sheets > 0) {
+    j["mosaic_sheets"] = s.mosaic_sheets;
+    j["gap_px"] = s.gap_px;
+  }
   if (s.shard.present) {
     nlohmann::json sh;
     sh["index"] = s.shard.index;
@@ -152,10 +156,19 @@ int main(int argc, char** argv) {
   uint64_t memory_mb = 256;
   bool no_predictor = false, linear_light = false, quiet = false, force = false, no_fsync = false;
   app.add_option("INPUT OUTPUT", positional,
-                 "input image and output store (only OUTPUT with --synthetic)")
+                 "input image and output store (only OUTPUT with --synthetic or --mosaic)")
       ->required()
       ->expected(1, 2);
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
+  std::string mosaic_list;
+  uint32_t fill = 0;
+  app.add_option("--mosaic", mosaic_list,
+                 "input: a list file of georeferenced sheets (one path a line), tiled as one image; "
+                 "later sheets win where they overlap");
+  app.add_option("--fill", fill,
+                 "mosaic: value of every channel but alpha (alpha 0) where no sheet covers "
+                 "(default 0; 0..255, 0..65535 for R16)")
+      ->transform(cli::wholeInRange(0, 65535));
   app.add_option("--format", format_text,
                  "force the store format: R8, R16, RGB8, RGBA8 (colour), I16, R16, F32 (heights)");
   app.add_option("--layer", layer_text,
@@ -197,7 +210,21 @@ int main(int argc, char** argv) {
 
   TilerOptions options;
   std::string input_name;
-  if (!synthetic.empty()) {
+  if (app.count("--fill") > 0 && mosaic_list.empty()) {
+    return cli::usageError(app, "--fill applies to --mosaic");
+  }
+  if (!synthetic.empty() && !mosaic_list.empty()) {
+    return cli::usageError(app, "give --synthetic or --mosaic, not both");
+  }
+  if (!mosaic_list.empty()) {
+    if (positional.size() != 1) return cli::usageError(app, "with --mosaic give only OUTPUT");
+    if (positional[0].empty()) return cli::usageError(app, "OUTPUT must not be empty");
+    options.input_path = mosaic_list;
+    options.mosaic = true;
+    options.fill = fill;
+    options.output_path = positional[0];
+    input_name = "mosaic " + mosaic_list;
+  } else if (!synthetic.empty()) {
     if (positional.size() != 1) return cli::usageError(app, "with --synthetic give only OUTPUT");
     if (positional[0].empty()) return cli::usageError(app, "OUTPUT must not be empty");
     const std::string problem =
@@ -343,6 +370,11 @@ int main(int argc, char** argv) {
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
                   summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
+    }
+    if (summary.mosaic_sheets > 0) {
+      std::printf("mosaic: %llu sheets, %llu px covered by none (filled with %u, alpha 0)\n",
+                  (unsigned long long)summary.mosaic_sheets, (unsigned long long)summary.gap_px,
+                  options.fill);
     }
     if (summary.shard.present) {
       const ShardInfo& sh = summary.shard;

@@ -48,7 +48,11 @@ struct TilerOptions {
   double height_step = 0.0;
   std::optional<double> nodata;              // overrides the input's no-data tag
   std::optional<HeightUnits> vertical_units; // overrides the input's (else metres)
-  std::string input_path;            // image file; empty when synthetic
+  std::string input_path;            // image file (a list file with mosaic); empty when synthetic
+  // input_path is a mosaic list file: one image path a line, the sheets
+  // placed by their georeferences (mosaic.h). Colour stores only.
+  bool mosaic = false;
+  uint32_t fill = 0;                 // mosaic: gap value of every channel but alpha (alpha 0)
   uint64_t synthetic_width_px = 0;   // used when input_path is empty
   uint64_t synthetic_height_px = 0;
   std::optional<PixelFormat> format; // force the store's pixel format
@@ -106,6 +110,8 @@ struct TilerSummary {
   GeoReference geo;
   ElevationInfo elevation;       // present for an elevation store
   ShardInfo shard;               // present for a partial store (width/height are the band's)
+  uint64_t mosaic_sheets = 0;    // sheets of a mosaic input (0: not a mosaic)
+  uint64_t gap_px = 0;           // mosaic pixels no sheet covers, filled with TilerOptions::fill
   std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
 };
 
