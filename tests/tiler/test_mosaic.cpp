@@ -208,6 +208,52 @@ TEST_F(Mosaic, LaterSheetWinsWhereSheetsOverlap) {
   expectSameTiles(m_dir.file("whole.cst"), m_dir.file("first.cst"));
 }
 
+// A VRT of simple sources, as gdalbuildvrt writes one (three bands, each
+// naming every sheet), written here by hand: the same mosaic as the list.
+std::string vrtText(const std::vector<std::pair<std::string, Rect>>& sheets,
+                    const std::string& source = "SimpleSource", uint64_t src_x = 0) {
+  std::string t = "<VRTDataset rasterXSize=\"600\" rasterYSize=\"500\">\n";
+  for (int band = 1; band <= 3; ++band) {
+    t += "  <VRTRasterBand dataType=\"Byte\" band=\"" + std::to_string(band) + "\">\n";
+    for (const auto& [name, r] : sheets) {
+      const std::string size = "xSize=\"" + std::to_string(r.w) + "\" ySize=\"" + std::to_string(r.h) + "\"";
+      t += "    <" + source + ">\n      <SourceFilename relativeToVRT=\"1\">" + name +
+           "</SourceFilename>\n      <SourceBand>" + std::to_string(band) +
+           "</SourceBand>\n      <SrcRect xOff=\"" + std::to_string(src_x) + "\" yOff=\"0\" " + size +
+           " />\n      <DstRect xOff=\"" + std::to_string(r.x) + "\" yOff=\"" + std::to_string(r.y) +
+           "\" " + size + " />\n    </" + source + ">\n";
+    }
+    t += "  </VRTRasterBand>\n";
+  }
+  return t + "</VRTDataset>\n";
+}
+
+TEST_F(Mosaic, VrtOfSimpleSourcesIsTheSameMosaic) {
+  writeWhole("whole.tif");
+  const uint64_t xs[] = {0, 250, 410, kW}, ys[] = {0, 190, kH};
+  std::vector<std::pair<std::string, Rect>> sheets;
+  for (int r = 0; r < 2; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      const Rect rect{xs[c], ys[r], xs[c + 1] - xs[c], ys[r + 1] - ys[r]};
+      const std::string name = "v" + std::to_string(r) + std::to_string(c) + ".tif";
+      writeSheet(name, rect);
+      sheets.emplace_back(name, rect);
+    }
+  }
+  { std::ofstream(m_dir.file("sheets.vrt")) << vrtText(sheets); }
+  tile(run("whole.tif", "whole.cst", false));
+  TilerSummary summary;
+  tile(run("sheets.vrt", "vrt.cst", true), &summary);
+  EXPECT_EQ(summary.mosaic_sheets, 6u);
+  expectSameTiles(m_dir.file("whole.cst"), m_dir.file("vrt.cst"));
+  // What a VRT can do beyond placing whole sheets is refused, naming it.
+  { std::ofstream(m_dir.file("complex.vrt")) << vrtText(sheets, "ComplexSource"); }
+  expectFailure({"--mosaic", m_dir.file("complex.vrt"), m_dir.file("o.cst")},
+                "complex.vrt line 3: ComplexSource is not a simple source");
+  { std::ofstream(m_dir.file("part.vrt")) << vrtText(sheets, "SimpleSource", 5); }
+  expectFailure({"--mosaic", m_dir.file("part.vrt"), m_dir.file("o.cst")}, "draws part of");
+}
+
 TEST_F(Mosaic, ShardedMosaicMergesToTheSingleRun) {
   writeList("sheets.txt", gridSheets());
   const TilerOptions single = run("sheets.txt", "single.cst", true);

@@ -9,9 +9,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include <sys/stat.h>
@@ -136,7 +138,111 @@ class MosaicSource final : public ImageSource {
   uint64_t m_closed_clamped = 0;
 };
 
-Status readList(const std::string& list_path, std::vector<std::pair<std::string, size_t>>* out) {
+// One sheet as the list names it. A VRT source also says which part of the
+// file it uses and how large it is drawn, which must be all of it, unscaled.
+struct ListEntry {
+  std::string path;
+  size_t line = 0;
+  bool has_rects = false;
+  double src[4] = {0, 0, 0, 0};  // SrcRect xOff, yOff, xSize, ySize
+  double dst[2] = {0, 0};        // DstRect xSize, ySize
+};
+
+// The value of attribute `name` in the XML start tag `tag`, or "".
+std::string attribute(const std::string& tag, const std::string& name) {
+  const std::string key = name + "=\"";
+  const size_t at = tag.find(key);
+  if (at == std::string::npos) return {};
+  const size_t end = tag.find('"', at + key.size());
+  return end == std::string::npos ? std::string() : tag.substr(at + key.size(), end - at - key.size());
+}
+
+std::string unescapeXml(std::string t) {
+  const std::pair<const char*, const char*> entities[] = {
+      {"&lt;", "<"}, {"&gt;", ">"}, {"&quot;", "\""}, {"&apos;", "'"}, {"&amp;", "&"}};
+  for (const auto& [from, to] : entities) {
+    for (size_t at = t.find(from); at != std::string::npos; at = t.find(from, at + 1)) {
+      t.replace(at, std::strlen(from), to);
+    }
+  }
+  return t;
+}
+
+// The sheets of a GDAL VRT of simple sources: each band's <SimpleSource>s,
+// which must name the same files in every band, each file's band n feeding
+// band n. Anything a VRT can do beyond placing whole files (other source
+// kinds, band reordering, cropping, scaling) is refused, naming its line.
+Status parseVrt(const std::string& path, const std::string& text, std::vector<ListEntry>* out) {
+  const fs::path dir = fs::path(path).parent_path();
+  auto lineOf = [&](size_t at) { return size_t(std::count(text.begin(), text.begin() + long(at), '\n')) + 1; };
+  auto refuse = [&](size_t at, const std::string& what) {
+    return Status::error(ErrorCode::kUnsupported,
+                         path + " line " + std::to_string(lineOf(at)) + ": " + what +
+                             "; a mosaic takes a VRT of whole sheets (SimpleSource), else a list "
+                             "file of the sheets");
+  };
+  std::vector<ListEntry> first_band;
+  uint32_t band = 0;
+  for (size_t b = text.find("<VRTRasterBand"); b != std::string::npos;
+       b = text.find("<VRTRasterBand", b + 1)) {
+    ++band;
+    const size_t band_end = std::min(text.find("</VRTRasterBand>", b), text.size());
+    const std::string body = text.substr(b, band_end - b);
+    for (const char* kind : {"<ComplexSource", "<AveragedSource", "<KernelFilteredSource",
+                             "<NoDataFromMaskSource"}) {
+      const size_t at = body.find(kind);
+      if (at != std::string::npos) return refuse(b + at, std::string(kind + 1) + " is not a simple source");
+    }
+    std::vector<ListEntry> sources;
+    for (size_t at = body.find("<SimpleSource"); at != std::string::npos;
+         at = body.find("<SimpleSource", at + 1)) {
+      const size_t end = std::min(body.find("</SimpleSource>", at), body.size());
+      const std::string src = body.substr(at, end - at);
+      const size_t name_at = src.find("<SourceFilename");
+      const size_t name_open = name_at == std::string::npos ? name_at : src.find('>', name_at);
+      const size_t name_close = src.find("</SourceFilename>");
+      if (name_open == std::string::npos || name_close == std::string::npos || name_close < name_open) {
+        return refuse(b + at, "a SimpleSource without a SourceFilename");
+      }
+      ListEntry e;
+      e.line = lineOf(b + at);
+      const std::string tag = src.substr(name_at, name_open - name_at);
+      const fs::path name(unescapeXml(src.substr(name_open + 1, name_close - name_open - 1)));
+      e.path = attribute(tag, "relativeToVRT") == "1" && !name.is_absolute() && !dir.empty()
+                   ? (dir / name).string()
+                   : name.string();
+      const size_t band_at = src.find("<SourceBand>");
+      const std::string source_band =
+          band_at == std::string::npos ? "1" : src.substr(band_at + 12, src.find('<', band_at + 12) - band_at - 12);
+      if (source_band != std::to_string(band)) {
+        return refuse(b + at, "band " + std::to_string(band) + " reads band " + source_band +
+                                  " of " + e.path);
+      }
+      const size_t sr = src.find("<SrcRect"), dr = src.find("<DstRect");
+      if (sr != std::string::npos && dr != std::string::npos) {
+        const std::string st = src.substr(sr, src.find('>', sr) - sr);
+        const std::string dt = src.substr(dr, src.find('>', dr) - dr);
+        const char* keys[] = {"xOff", "yOff", "xSize", "ySize"};
+        for (int i = 0; i < 4; ++i) e.src[i] = std::atof(attribute(st, keys[i]).c_str());
+        e.dst[0] = std::atof(attribute(dt, "xSize").c_str());
+        e.dst[1] = std::atof(attribute(dt, "ySize").c_str());
+        e.has_rects = true;
+      }
+      sources.push_back(std::move(e));
+    }
+    if (band == 1) {
+      first_band = std::move(sources);
+    } else {
+      bool same = sources.size() == first_band.size();
+      for (size_t i = 0; same && i < sources.size(); ++i) same = sources[i].path == first_band[i].path;
+      if (!same) return refuse(b, "band " + std::to_string(band) + " has other sources than band 1");
+    }
+  }
+  *out = std::move(first_band);
+  return Status::ok();
+}
+
+Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
   struct stat st{};
   if (::stat(list_path.c_str(), &st) != 0) {
     return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
@@ -153,6 +259,22 @@ Status readList(const std::string& list_path, std::vector<std::pair<std::string,
   std::ifstream in(list_path, std::ios::binary);
   if (!in) return Status::error(ErrorCode::kIo, list_path + ": cannot open the mosaic list");
   const fs::path dir = fs::path(list_path).parent_path();
+  {
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    if (in.bad()) return Status::error(ErrorCode::kIo, list_path + ": read failed");
+    const size_t start = text.find_first_not_of(" \t\r\n");
+    if (start != std::string::npos && text.compare(start, 11, "<VRTDataset") == 0) {
+      Status s = parseVrt(list_path, text, out);
+      if (!s) return s;
+      if (out->empty()) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             list_path + ": the VRT has no SimpleSource, so no sheets");
+      }
+      return Status::ok();
+    }
+    in.clear();
+    in.seekg(0);
+  }
   std::string line;
   size_t number = 0;
   while (std::getline(in, line)) {
@@ -169,7 +291,10 @@ Status readList(const std::string& list_path, std::vector<std::pair<std::string,
                                ": not a path (a NUL byte); is this a list of image paths?");
     }
     const fs::path p(line);
-    out->emplace_back(p.is_absolute() || dir.empty() ? p.string() : (dir / p).string(), number);
+    ListEntry e;
+    e.path = p.is_absolute() || dir.empty() ? p.string() : (dir / p).string();
+    e.line = number;
+    out->push_back(std::move(e));
   }
   if (in.bad()) return Status::error(ErrorCode::kIo, list_path + ": read failed");
   if (out->empty()) {
@@ -184,7 +309,7 @@ Status readList(const std::string& list_path, std::vector<std::pair<std::string,
 Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
                   std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
   *mosaic = MosaicInfo{};
-  std::vector<std::pair<std::string, size_t>> paths;
+  std::vector<ListEntry> paths;
   Status s = readList(list_path, &paths);
   if (!s) return s;
 
@@ -194,8 +319,9 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
   std::vector<std::pair<int64_t, int64_t>> offsets;  // whole pixels from the first sheet
   uint64_t file_bytes = 0;
   bool sequential = false;
-  for (const auto& [path, line] : paths) {
-    const std::string where = list_path + " line " + std::to_string(line) + ": ";
+  for (const ListEntry& entry : paths) {
+    const std::string& path = entry.path;
+    const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
     std::unique_ptr<ImageSource> src;
     s = openImageFile(path, forced, &src);
     if (!s) return Status::error(s.code, where + s.message);
@@ -203,6 +329,15 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
     s = findGeoReference(path, &geo);
     if (!s) return Status::error(s.code, where + s.message);
     const SourceInfo& si = src->info();
+    if (entry.has_rects &&
+        (entry.src[0] != 0.0 || entry.src[1] != 0.0 || entry.src[2] != double(si.width_px) ||
+         entry.src[3] != double(si.height_px) || entry.dst[0] != entry.src[2] ||
+         entry.dst[1] != entry.src[3])) {
+      return Status::error(ErrorCode::kUnsupported,
+                           where + "the VRT draws part of " + path +
+                               " or scales it (SrcRect / DstRect); a mosaic takes whole sheets "
+                               "at their own resolution");
+    }
     if (!geo.present) {
       return Status::error(ErrorCode::kInvalidArgument,
                            where + path + " has no georeference (no GeoTIFF tags, no world file "

@@ -163,7 +163,8 @@ int main(int argc, char** argv) {
   std::string mosaic_list;
   uint32_t fill = 0;
   app.add_option("--mosaic", mosaic_list,
-                 "input: a list file of georeferenced sheets (one path a line), tiled as one image; "
+                 "input: a list file of georeferenced sheets (one path a line) or a VRT of simple "
+                 "sources, tiled as one image; "
                  "later sheets win where they overlap");
   app.add_option("--fill", fill,
                  "mosaic: value of every channel but alpha (alpha 0) where no sheet covers "

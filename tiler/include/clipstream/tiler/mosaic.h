@@ -27,7 +27,9 @@ struct MosaicInfo {
 
 // Opens the mosaic named by the list file at `list_path`: one image path a
 // line (relative paths are relative to the list's folder; blank lines and
-// lines starting with '#' are skipped). Each sheet is opened once here to
+// lines starting with '#' are skipped), or a GDAL VRT whose bands are simple
+// sources drawing whole files unscaled (its sources become the list; other
+// VRTs are kUnsupported, naming the line). Each sheet is opened once here to
 // read its size, pixel type and georeference (GeoTIFF tags, world file,
 // .prj; as findGeoReference) and closed again; while tiling, a sheet is
 // opened when a strip first reaches it and closed once strips have passed
