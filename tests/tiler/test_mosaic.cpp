@@ -6,10 +6,12 @@
 
 #include <clipstream/testing/files.h>
 #include <clipstream/testing/test_data.h>
+#include <clipstream/tiler/mosaic.h>
 #include <clipstream/tiler/shard.h>
 #include <clipstream/tiler/tiler.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 
 namespace clipstream::test {
@@ -252,6 +254,48 @@ TEST_F(Mosaic, VrtOfSimpleSourcesIsTheSameMosaic) {
                 "complex.vrt line 3: ComplexSource is not a simple source");
   { std::ofstream(m_dir.file("part.vrt")) << vrtText(sheets, "SimpleSource", 5); }
   expectFailure({"--mosaic", m_dir.file("part.vrt"), m_dir.file("o.cst")}, "draws part of");
+}
+
+size_t openFiles() {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator("/proc/self/fd")) ++n;
+  return n;
+}
+
+// 3 x 20 sheets of 40 x 20 px: reading the mosaic top to bottom in strips
+// keeps only the sheets under the strip open (each open sheet holds its
+// file), never the whole list.
+TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
+  std::vector<std::string> names;
+  for (uint64_t r = 0; r < 20; ++r) {
+    for (uint64_t c = 0; c < 3; ++c) {
+      const std::string name = "t" + std::to_string(r) + "_" + std::to_string(c) + ".tif";
+      writeSheet(name, {c * 40, r * 20, 40, 20});
+      names.push_back(name);
+    }
+  }
+  writeList("many.txt", names);
+  std::unique_ptr<ImageSource> source;
+  MosaicInfo info;
+  const size_t base = openFiles();
+  ASSERT_TRUE(openMosaic(m_dir.file("many.txt"), std::nullopt, 0, &source, &info).isOk());
+  EXPECT_EQ(openFiles(), base) << "sheets stay open after the mosaic is opened";
+  ASSERT_EQ(source->info().width_px, 120u);
+  ASSERT_EQ(source->info().height_px, 400u);
+  std::vector<uint8_t> strip(120 * 32 * 3);
+  size_t most = 0;
+  for (uint64_t y = 0; y < 400; y += 32) {
+    const uint32_t rows = uint32_t(std::min<uint64_t>(32, 400 - y));
+    ASSERT_TRUE(source->readRows(y, rows, 0, 120, strip.data(), 120 * 3).isOk());
+    most = std::max(most, openFiles() - base);
+    // The strip holds the sheets' pixels (row y + 5 of the image).
+    EXPECT_EQ(strip[(5 * 120 + 50) * 3], m_image.at(50, y + 5, 0)) << y;
+  }
+  // A 32-row strip meets at most three rows of 20-row sheets: 9 sheets.
+  EXPECT_LE(most, 9u) << "of 60 sheets";
+  EXPECT_GE(most, 3u);
+  source.reset();
+  EXPECT_EQ(openFiles(), base);
 }
 
 TEST_F(Mosaic, ShardedMosaicMergesToTheSingleRun) {
