@@ -214,6 +214,32 @@ TEST(ShardMerge, CorruptOrTruncatedShardFailsNamingIt) {
   ASSERT_TRUE(merge(parts, dir.file("out.cst")).isOk());
 }
 
+TEST(ShardMerge, CancelledMergeLeavesNothingAndProgressCountsEveryTile) {
+  TempDir dir("shard");
+  const std::vector<std::string> parts = tileShards(syntheticRun(400, 600, dir.file("u.cst")), 2, dir);
+  const std::vector<std::string> before = dir.entries();
+  MergeOptions m;
+  m.input_paths = parts;
+  m.output_path = dir.file("out.cst");
+  m.fsync = false;
+  std::atomic<int> cancel{15};
+  m.cancel = &cancel;
+  MergeSummary summary;
+  EXPECT_EQ(mergeShards(m, &summary).code, ErrorCode::kCancelled);
+  EXPECT_EQ(dir.entries(), before);
+  m.cancel = nullptr;
+  uint64_t last = 0, total = 0;
+  m.progress = [&](uint64_t done, uint64_t all) {
+    EXPECT_GE(done, last);
+    last = done;
+    total = all;
+  };
+  ASSERT_TRUE(mergeShards(m, &summary).isOk());
+  EXPECT_EQ(last, total);
+  EXPECT_EQ(summary.copied_tiles + summary.built_tiles, total);
+  EXPECT_GT(summary.built_tiles, 0u);
+}
+
 TEST(ShardCli, BadShardArgumentsAreCommandLineMistakes) {
   TempDir dir("shard");
   for (const char* bad : {"0/4", "5/4", "2", "a/b", "1/0", "-1/4", "1/99999999999"}) {
