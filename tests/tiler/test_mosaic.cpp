@@ -10,6 +10,7 @@
 #include <clipstream/tiler/shard.h>
 #include <clipstream/tiler/tiler.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -296,6 +297,61 @@ TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
   EXPECT_GE(most, 3u);
   source.reset();
   EXPECT_EQ(openFiles(), base);
+}
+
+// DEM sheets (int16 with world files) make an elevation store equal to the
+// whole DEM's; gaps are no-data, filled as the whole DEM's voids are.
+TEST_F(Mosaic, DemSheetsGiveTheWholeDemsElevationStore) {
+  constexpr uint64_t w = 200, h = 150;
+  auto height = [](uint64_t x, uint64_t y) {
+    return std::round(300.0 + 80.0 * std::sin(double(x) * 0.05) * std::cos(double(y) * 0.07) +
+                      double((x * 7 + y * 3) % 11));
+  };
+  auto in_hole = [](uint64_t x, uint64_t y) { return x >= 100 && y < 60; };
+  auto dem = [&](const std::string& name, const Rect& r, bool hole) {
+    ASSERT_TRUE(writeImage(m_dir.file(name), r.w, r.h, 1, OIIO::TypeDesc::INT16,
+                           [&](uint64_t x, uint64_t y, int) {
+                             const uint64_t gx = r.x + x, gy = r.y + y;
+                             return hole && in_hole(gx, gy) ? -32768.0 : height(gx, gy);
+                           }));
+    std::FILE* f = std::fopen(m_dir.file(name.substr(0, name.rfind('.')) + ".wld").c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fprintf(f, "30\n0\n0\n-30\n%.6f\n%.6f\n", 500000.0 + (double(r.x) + 0.5) * 30.0,
+                 4000000.0 - (double(r.y) + 0.5) * 30.0);
+    std::fclose(f);
+  };
+  dem("whole.tif", {0, 0, w, h}, false);
+  dem("holed.tif", {0, 0, w, h}, true);
+  const Rect parts[] = {{0, 0, 100, 60}, {100, 0, 100, 60}, {0, 60, 100, 90}, {100, 60, 100, 90}};
+  std::vector<std::string> names;
+  for (int i = 0; i < 4; ++i) {
+    names.push_back("d" + std::to_string(i) + ".tif");
+    dem(names.back(), parts[i], false);
+  }
+  writeList("dem.txt", names);
+  names.erase(names.begin() + 1);  // the top right quarter: the hole
+  writeList("gap.txt", names);
+
+  tile(run("whole.tif", "whole.cst", false));
+  tile(run("dem.txt", "mosaic.cst", true));
+  std::unique_ptr<TileStoreReader> reader;
+  ASSERT_TRUE(TileStoreReader::open(m_dir.file("mosaic.cst"), &reader).isOk());
+  EXPECT_TRUE(reader->info().elevation.present);
+  EXPECT_EQ(reader->geometry().format, PixelFormat::kI16);
+  expectSameTiles(m_dir.file("whole.cst"), m_dir.file("mosaic.cst"));
+
+  TilerOptions holed = run("holed.tif", "holed.cst", false);
+  holed.nodata = -32768;
+  tile(holed);
+  TilerOptions gap = run("gap.txt", "gap.cst", true);
+  gap.nodata = -32768;
+  TilerSummary summary;
+  tile(gap, &summary);
+  EXPECT_EQ(summary.gap_px, 100u * 60u);
+  EXPECT_EQ(summary.elevation.filled_samples, 100u * 60u);
+  expectSameTiles(holed.output_path, gap.output_path);
+  // Integer sheets that declare no no-data value leave nothing to fill gaps with.
+  expectFailure({"--mosaic", m_dir.file("gap.txt"), m_dir.file("o.cst")}, "give --nodata");
 }
 
 TEST_F(Mosaic, ShardedMosaicMergesToTheSingleRun) {

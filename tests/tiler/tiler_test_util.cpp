@@ -218,7 +218,10 @@ void expectSameTiles(const std::string& expected_path, const std::string& actual
         const bool same =
             ra.location.constant == rb.location.constant &&
             std::memcmp(ra.location.constant_pixel, rb.location.constant_pixel, 8) == 0 &&
-            ra.location.checksum == rb.location.checksum && ra.payload == rb.payload;
+            ra.location.checksum == rb.location.checksum && ra.payload == rb.payload &&
+            ra.location.min_height == rb.location.min_height &&
+            ra.location.max_height == rb.location.max_height &&
+            ra.location.error == rb.location.error;
         if (!same && differing++ < 5) {
           ADD_FAILURE() << actual_path << ": level " << l << " tile (" << x << ", " << y
                         << ") differs from " << expected_path;

@@ -65,7 +65,8 @@ RunResult runTiler(const std::vector<std::string>& args, const std::string& stdo
 RunResult runMerge(const std::vector<std::string>& args);
 
 // Every tile of the store at `actual_path` equals the one at `expected_path`
-// (same geometry; same constant value, or same checksum and payload bytes).
+// (same geometry; same constant value, or same checksum and payload bytes;
+// same height bounds and error in an elevation store).
 void expectSameTiles(const std::string& expected_path, const std::string& actual_path);
 
 // Starts clipstream-tile with `args` in a child with its output discarded

@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <sstream>
 
@@ -304,10 +305,12 @@ Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
   return Status::ok();
 }
 
-}  // namespace
+// The gap pixel in the mosaic's format, or an error for a value it cannot hold.
+using FillMaker = std::function<Status(PixelFormat, std::vector<uint8_t>*)>;
 
-Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
-                  std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> forced,
+                      const FillMaker& make_fill, std::unique_ptr<ImageSource>* out,
+                      MosaicInfo* mosaic) {
   *mosaic = MosaicInfo{};
   std::vector<ListEntry> paths;
   Status s = readList(list_path, &paths);
@@ -407,20 +410,9 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
   const uint64_t width = uint64_t(max_col - min_col), height = uint64_t(max_row - min_row);
 
   const PixelFormat format = first_info.format;
-  const uint32_t max_fill = format == PixelFormat::kR16 ? 65535u : 255u;
-  if (fill > max_fill) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "--fill " + std::to_string(fill) + " does not fit a " +
-                             pixelFormatName(format) + " sample (0.." + std::to_string(max_fill) + ")");
-  }
   std::vector<uint8_t> fill_pixel(bytesPerPixel(format));
-  if (format == PixelFormat::kR16) {
-    fill_pixel[0] = uint8_t(fill & 0xff);
-    fill_pixel[1] = uint8_t(fill >> 8);
-  } else {
-    std::fill(fill_pixel.begin(), fill_pixel.end(), uint8_t(fill));
-    if (format == PixelFormat::kRGBA8) fill_pixel[3] = 0;
-  }
+  s = make_fill(format, &fill_pixel);
+  if (!s) return s;
 
   SourceInfo info;
   info.width_px = width;
@@ -438,6 +430,55 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
   *out = std::make_unique<MosaicSource>(std::move(sheets), std::move(info), format,
                                         std::move(fill_pixel));
   return Status::ok();
+}
+
+}  // namespace
+
+Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
+                  std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+  return openMosaicImpl(list_path, forced, [fill](PixelFormat format, std::vector<uint8_t>* px) {
+    const uint32_t max_fill = format == PixelFormat::kR16 ? 65535u : 255u;
+    if (fill > max_fill) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--fill " + std::to_string(fill) + " does not fit a " +
+                               pixelFormatName(format) + " sample (0.." + std::to_string(max_fill) + ")");
+    }
+    if (format == PixelFormat::kR16) {
+      (*px)[0] = uint8_t(fill & 0xff);
+      (*px)[1] = uint8_t(fill >> 8);
+    } else {
+      std::fill(px->begin(), px->end(), uint8_t(fill));
+      if (format == PixelFormat::kRGBA8) (*px)[3] = 0;
+    }
+    return Status::ok();
+  }, out, mosaic);
+}
+
+Status openHeightMosaic(const std::string& list_path, PixelFormat native, double gap_height,
+                        std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+  return openMosaicImpl(list_path, native, [gap_height](PixelFormat format, std::vector<uint8_t>* px) {
+    const bool integer = format == PixelFormat::kI16 || format == PixelFormat::kR16;
+    const double lo = format == PixelFormat::kI16 ? -32768.0 : 0.0;
+    const double hi = format == PixelFormat::kI16 ? 32767.0 : 65535.0;
+    if (integer && !(gap_height >= lo && gap_height <= hi && gap_height == std::floor(gap_height))) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "the no-data value " + std::to_string(gap_height) + " for the gaps is no " +
+                               pixelFormatName(format) + " sample");
+    }
+    if (format == PixelFormat::kI16) {
+      const int16_t v = int16_t(gap_height);
+      std::memcpy(px->data(), &v, 2);
+    } else if (format == PixelFormat::kR16) {
+      const uint16_t v = uint16_t(gap_height);
+      std::memcpy(px->data(), &v, 2);
+    } else if (format == PixelFormat::kF32) {
+      const float v = float(gap_height);
+      std::memcpy(px->data(), &v, 4);
+    } else {
+      return Status::error(ErrorCode::kInvalidArgument, "heights are I16, R16 or F32");
+    }
+    return Status::ok();
+  }, out, mosaic);
 }
 
 }  // namespace clipstream

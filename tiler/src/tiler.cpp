@@ -361,14 +361,8 @@ Status validateOptions(const TilerOptions& o) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "--synthetic makes colour images; elevation needs an input DEM");
   }
-  if (o.mosaic) {
-    if (o.input_path.empty()) {
-      return Status::error(ErrorCode::kInvalidArgument, "a mosaic needs a list file of sheets");
-    }
-    if (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format))) {
-      return Status::error(ErrorCode::kUnsupported,
-                           "mosaics make colour stores; elevation sheets are not mosaicked yet");
-    }
+  if (o.mosaic && o.input_path.empty()) {
+    return Status::error(ErrorCode::kInvalidArgument, "a mosaic needs a list file of sheets");
   }
   if (o.fill > 65535) {
     return Status::error(ErrorCode::kInvalidArgument,
@@ -426,9 +420,14 @@ namespace {
 // Decides whether an opened input becomes an elevation store (LayerKind)
 // and, if so, reopens it delivering native height samples behind a
 // HeightSource (no-data fill, quantisation). *heights points into *source.
-Status openElevation(const TilerOptions& o, const GeoReference& geo,
-                     std::unique_ptr<ImageSource>* source, HeightSource** heights,
-                     ElevationInfo* elevation, TilerSummary* summary) {
+// Opens the input again delivering native samples in `native`; `conversion`
+// says the no-data value (a mosaic fills its gaps with it).
+using ReopenHeights = std::function<Status(PixelFormat native, const HeightConversion& conversion,
+                                           std::unique_ptr<ImageSource>* out)>;
+
+Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::string& tags_path,
+                     const ReopenHeights& reopen_input, std::unique_ptr<ImageSource>* source,
+                     HeightSource** heights, ElevationInfo* elevation, TilerSummary* summary) {
   const SourceInfo& first = (*source)->info();
   const std::string& type = first.input_type;
   const bool int16 = type == "int16", uint16 = type == "uint16";
@@ -488,7 +487,7 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo,
     stored = *o.format;
   }
   ElevationTags tags;
-  Status s = readElevationTags(o.input_path, &tags);
+  Status s = readElevationTags(tags_path, &tags);
   if (!s) return s;
   HeightConversion conversion;
   conversion.stored = stored;
@@ -497,12 +496,12 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo,
 
   // The reader for native samples (the file is opened again: cheap, and
   // it starts from the top).
-  const std::optional<PixelFormat> native_format = stored == PixelFormat::kF32 || o.height_step > 0.0
-                                                       ? PixelFormat::kF32
-                                                       : native;
+  const PixelFormat native_format = stored == PixelFormat::kF32 || o.height_step > 0.0
+                                        ? PixelFormat::kF32
+                                        : native;
   auto reopen = [&]() {
     source->reset();
-    return openImageFile(o.input_path, native_format, source);
+    return reopen_input(native_format, conversion, source);
   };
   s = reopen();
   if (!s) return s;
@@ -567,26 +566,15 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
                             o.format.value_or(PixelFormat::kRGB8), &source);
   } else if (o.mosaic) {
-    s = openMosaic(o.input_path, o.format, o.fill, &source, &mosaic);
+    // As for one file: a height format is the elevation path's to choose.
+    const bool height_format = o.format && !isColourFormat(*o.format);
+    s = openMosaic(o.input_path, height_format ? std::nullopt : o.format, o.fill, &source, &mosaic);
     if (s) geo = mosaic.geo;
     for (const std::string& sheet : mosaic.sheets) {
       if (s && sameFile(sheet, o.output_path)) {
         s = Status::error(ErrorCode::kInvalidArgument,
                           o.output_path + " is the mosaic's sheet " + sheet +
                               " (the same file, maybe through a link); refusing to overwrite it");
-      }
-    }
-    if (s && o.layer == LayerKind::kAuto && !o.format) {
-      // What would make a single file a DEM makes a mosaic of such sheets
-      // one too; say so rather than tile heights as a picture unasked.
-      const SourceInfo& mi = source->info();
-      const std::string& type = mi.input_type;
-      if (mi.input_channels == 1 && (type == "int16" || type == "uint16" || type == "float" ||
-                                     type == "half" || type == "double")) {
-        s = Status::error(ErrorCode::kUnsupported,
-                          o.input_path + ": the sheets are single-band " + type +
-                              " (a DEM); mosaics of elevation sheets are not supported yet "
-                              "(--layer colour tiles them as a grey picture)");
       }
     }
   } else {
@@ -599,8 +587,32 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   if (!s) return s;
   HeightSource* heights = nullptr;
   ElevationInfo elevation;
-  if (!o.input_path.empty() && !o.mosaic) {
-    s = openElevation(o, geo, &source, &heights, &elevation, summary);
+  if (o.mosaic) {
+    // DEM sheets: gaps hold the no-data value (NaN for float samples when
+    // the sheets declare none), so they are filled like any void.
+    const uint64_t gap_px = mosaic.gap_px;
+    auto reopen = [&](PixelFormat native, const HeightConversion& conversion,
+                      std::unique_ptr<ImageSource>* out) {
+      double gap = conversion.has_nodata ? conversion.nodata : std::nan("");
+      if (!conversion.has_nodata && native != PixelFormat::kF32) {
+        if (gap_px > 0) {
+          return Status::error(ErrorCode::kInvalidArgument,
+                               o.input_path + ": the sheets leave " + std::to_string(gap_px) +
+                                   " px uncovered and declare no no-data value to fill them "
+                                   "with; give --nodata");
+        }
+        gap = 0.0;  // never read: no gaps
+      }
+      MosaicInfo again;
+      return openHeightMosaic(o.input_path, native, gap, out, &again);
+    };
+    s = openElevation(o, geo, mosaic.sheets.front(), reopen, &source, &heights, &elevation, summary);
+    if (!s) return s;
+  } else if (!o.input_path.empty()) {
+    auto reopen = [&](PixelFormat native, const HeightConversion&, std::unique_ptr<ImageSource>* out) {
+      return openImageFile(o.input_path, native, out);
+    };
+    s = openElevation(o, geo, o.input_path, reopen, &source, &heights, &elevation, summary);
     if (!s) return s;
   }
   ShardInfo shard;

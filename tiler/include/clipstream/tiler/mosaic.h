@@ -51,4 +51,12 @@ struct MosaicInfo {
 Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
                   std::unique_ptr<ImageSource>* out, MosaicInfo* info);
 
+// The same mosaic of DEM sheets delivering native height samples in
+// `native` (I16, R16 or F32, as openImageFile with that format), with gaps
+// holding `gap_height` (the no-data value, NaN allowed for F32), so that the
+// elevation path fills them like any no-data sample. The checks and errors
+// are openMosaic's.
+Status openHeightMosaic(const std::string& list_path, PixelFormat native, double gap_height,
+                        std::unique_ptr<ImageSource>* out, MosaicInfo* info);
+
 }  // namespace clipstream

@@ -49,10 +49,11 @@ struct TilerOptions {
   std::optional<double> nodata;              // overrides the input's no-data tag
   std::optional<HeightUnits> vertical_units; // overrides the input's (else metres)
   std::string input_path;            // image file (a list file with mosaic); empty when synthetic
-  // input_path is a mosaic list file: one image path a line, the sheets
-  // placed by their georeferences (mosaic.h). Colour stores only.
+  // input_path is a mosaic list file (one image path a line) or a VRT of
+  // simple sources, the sheets placed by their georeferences (mosaic.h).
+  // DEM sheets make an elevation store whose gaps are no-data.
   bool mosaic = false;
-  uint32_t fill = 0;                 // mosaic: gap value of every channel but alpha (alpha 0)
+  uint32_t fill = 0;                 // colour mosaic: gap value of every channel but alpha (alpha 0)
   uint64_t synthetic_width_px = 0;   // used when input_path is empty
   uint64_t synthetic_height_px = 0;
   std::optional<PixelFormat> format; // force the store's pixel format
