@@ -295,6 +295,23 @@ TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
   // A 32-row strip meets at most three rows of 20-row sheets: 9 sheets.
   EXPECT_LE(most, 9u) << "of 60 sheets";
   EXPECT_GE(most, 3u);
+  // Vertical panels read the image block column by block column, each top
+  // to bottom: sheets closed by one column are opened again by the next,
+  // and every pixel is still the sheet's.
+  std::vector<uint8_t> block(64 * 32 * 3);
+  for (uint64_t bx = 0; bx < 120; bx += 64) {
+    const uint64_t bw = std::min<uint64_t>(64, 120 - bx);
+    for (uint64_t y = 0; y < 400; y += 32) {
+      const uint32_t rows = uint32_t(std::min<uint64_t>(32, 400 - y));
+      ASSERT_TRUE(source->readRows(y, rows, bx, bw, block.data(), 64 * 3).isOk());
+      EXPECT_LE(openFiles() - base, 9u);
+      for (uint64_t r = 0; r < rows; r += 7) {
+        for (uint64_t x = 0; x < bw; x += 13) {
+          ASSERT_EQ(block[(r * 64 + x) * 3 + 1], m_image.at(bx + x, y + r, 1)) << bx + x << ", " << y + r;
+        }
+      }
+    }
+  }
   source.reset();
   EXPECT_EQ(openFiles(), base);
 }
