@@ -30,8 +30,9 @@ set(CPACK_DEBIAN_PACKAGE_SUGGESTS
 # The body under the summary line; CPack indents it and marks the blank line.
 set(CPACK_DEBIAN_PACKAGE_DESCRIPTION
 "clipstream shows textures far larger than RAM or GPU memory as a clipmap.
-clipstream-tile cuts an image into a tile store (a checksummed, compressed
-mip pyramid), clipstream-info inspects and verifies stores, clipstream-fly
+clipstream-tile cuts an image or a mosaic of sheets into a tile store (a
+checksummed, compressed mip pyramid), or one band of it for a sharded run
+that clipstream-merge joins; clipstream-info inspects and verifies stores, clipstream-fly
 and clipstream-view fly over them (headless EGL / GLFW window), and
 clipstream-trace replays request traces against the cache policies.
 

@@ -18,7 +18,8 @@ ctest --test-dir build --output-on-failure -j "$jobs" --timeout 900
 
 # clipstream as another program sees it (docs/api.md): install build/ into a
 # temporary prefix; tile the sample image with the installed clipstream-tile
-# (it loads the installed OpenImageIO module) and verify the store; build
+# (it loads the installed OpenImageIO module) and verify the store; tile it
+# again in two shards and join them with the installed clipstream-merge; build
 # examples/embed against the prefix with find_package(clipstream) and fly it
 # headless over that store; link it again from pkg-config's flags alone and
 # fly it over the procedural texture; build the Debian package and list it.
@@ -28,6 +29,11 @@ trap 'rm -rf "$prefix"' EXIT
 cmake --install build --prefix "$prefix" >/dev/null
 "$prefix/bin/clipstream-tile" -q --no-fsync data/autzen.jpg "$prefix/autzen.cst"
 "$prefix/bin/clipstream-info" --verify "$prefix/autzen.cst" | tail -n 1
+for k in 1 2; do
+  "$prefix/bin/clipstream-tile" -q --no-fsync data/autzen.jpg "$prefix/part$k.cst" --shard "$k/2"
+done
+"$prefix/bin/clipstream-merge" -q --no-fsync "$prefix/merged.cst" "$prefix/part1.cst" "$prefix/part2.cst"
+"$prefix/bin/clipstream-info" --verify "$prefix/merged.cst" | tail -n 1
 rm -rf build/embed
 cmake -S examples/embed -B build/embed -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_PREFIX_PATH="$prefix" >/dev/null

@@ -231,8 +231,8 @@ Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum, uint32
 // ---- Metadata block ----
 
 std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs,
-                                    const ElevationInfo* elevation) {
-  std::vector<uint8_t> block(metadataBytes(crs.size(), elevation != nullptr));
+                                    const ElevationInfo* elevation, const ShardInfo* shard) {
+  std::vector<uint8_t> block(metadataBytes(crs.size(), elevation != nullptr, shard != nullptr));
   for (size_t i = 0; i < 6; ++i) putF64(block.data() + kMetaOffTransform + 8 * i, transform[i]);
   put32(block.data() + kMetaOffCrsBytes, static_cast<uint32_t>(crs.size()));
   std::memcpy(block.data() + kMetaOffCrs, crs.data(), crs.size());
@@ -250,16 +250,31 @@ std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string
     putF64(p + kElevOffMinHeight, elevation->min_height);
     putF64(p + kElevOffMaxHeight, elevation->max_height);
   }
+  if (shard != nullptr) {
+    uint8_t* p = block.data() + kMetaOffCrs + crs.size() + (elevation ? kElevationRecordBytes : 0);
+    put32(p + kShardOffIndex, shard->index);
+    put32(p + kShardOffCount, shard->count);
+    put64(p + kShardOffFullWidth, shard->full_width_px);
+    put64(p + kShardOffFullHeight, shard->full_height_px);
+    put64(p + kShardOffX0, shard->x0_px);
+    put64(p + kShardOffY0, shard->y0_px);
+    put32(p + kShardOffOwnedLevels, shard->owned_levels);
+    put32(p + kShardOffReserved0, 0);
+    put64(p + kShardOffFingerprint, shard->fingerprint);
+    put64(p + kShardOffReserved1, 0);
+  }
   sealBlock(&block);
   return block;
 }
 
 Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out,
-                       ElevationInfo* elevation) {
+                       ElevationInfo* elevation, ShardInfo* shard) {
   if (block.size() < kMetadataFixedBytes) return Decoded::kBadSize;
   if (!blockChecksumOk(block)) return Decoded::kBadChecksum;
   const uint32_t crs_bytes = get32(block.data() + kMetaOffCrsBytes);
-  if (metadataBytes(crs_bytes, elevation != nullptr) != block.size()) return Decoded::kBadSize;
+  if (metadataBytes(crs_bytes, elevation != nullptr, shard != nullptr) != block.size()) {
+    return Decoded::kBadSize;
+  }
   for (size_t i = 0; i < 6; ++i) out->transform[i] = getF64(block.data() + kMetaOffTransform + 8 * i);
   out->crs.assign(reinterpret_cast<const char*>(block.data() + kMetaOffCrs), crs_bytes);
   if (elevation != nullptr) {
@@ -280,6 +295,23 @@ Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out,
     elevation->max_error = getF64(p + kElevOffMaxError);
     elevation->min_height = getF64(p + kElevOffMinHeight);
     elevation->max_height = getF64(p + kElevOffMaxHeight);
+  }
+  if (shard != nullptr) {
+    const uint8_t* p =
+        block.data() + kMetaOffCrs + crs_bytes + (elevation ? kElevationRecordBytes : 0);
+    if (get32(p + kShardOffReserved0) != 0 || get64(p + kShardOffReserved1) != 0) {
+      return Decoded::kBadSize;
+    }
+    *shard = ShardInfo{};
+    shard->present = true;
+    shard->index = get32(p + kShardOffIndex);
+    shard->count = get32(p + kShardOffCount);
+    shard->full_width_px = get64(p + kShardOffFullWidth);
+    shard->full_height_px = get64(p + kShardOffFullHeight);
+    shard->x0_px = get64(p + kShardOffX0);
+    shard->y0_px = get64(p + kShardOffY0);
+    shard->owned_levels = get32(p + kShardOffOwnedLevels);
+    shard->fingerprint = get64(p + kShardOffFingerprint);
   }
   return Decoded::kOk;
 }

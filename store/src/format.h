@@ -67,8 +67,12 @@ constexpr size_t kVersionEndBytes = kOffVersion + 4;
 constexpr uint32_t kFlagLinearLight = 1u << 0;
 constexpr uint32_t kFlagGeoPresent = 1u << 1;
 constexpr uint32_t kFlagElevation = 1u << 2;  // version 2
+// A partial store, one shard of a sharded tiler run (version 2; readers
+// that predate it refuse the store as having unknown flags, so a shard is
+// never mistaken for a whole store). The shard record follows.
+constexpr uint32_t kFlagShard = 1u << 3;
 constexpr uint32_t kKnownFlagsV1 = kFlagLinearLight | kFlagGeoPresent;
-constexpr uint32_t kKnownFlags = kKnownFlagsV1 | kFlagElevation;
+constexpr uint32_t kKnownFlags = kKnownFlagsV1 | kFlagElevation | kFlagShard;
 
 // Tiles per index page side: a page holds up to 64 x 64 entries (64 KiB),
 // small enough to read on demand, large enough that the page directory of a
@@ -146,6 +150,20 @@ constexpr size_t kElevOffMaxError = 40;     // f64: largest |stored - input| at 
 constexpr size_t kElevOffMinHeight = 48;    // f64: lowest stored height
 constexpr size_t kElevOffMaxHeight = 56;    // f64: highest stored height
 static_assert(kElevOffMaxHeight + 8 == kElevationRecordBytes);
+// Shard record (partial stores only): follows the elevation record, or the
+// CRS bytes when there is none, before the checksum. Offsets relative to it.
+constexpr uint32_t kShardRecordBytes = 64;
+constexpr size_t kShardOffIndex = 0;         // u32: this shard, 1..count
+constexpr size_t kShardOffCount = 4;         // u32: shards of the run
+constexpr size_t kShardOffFullWidth = 8;     // u64: level-0 size of the whole image
+constexpr size_t kShardOffFullHeight = 16;   // u64
+constexpr size_t kShardOffX0 = 24;           // u64: this store's level-0 origin in it
+constexpr size_t kShardOffY0 = 32;           // u64
+constexpr size_t kShardOffOwnedLevels = 40;  // u32: levels 0..owned-1 are the whole store's tiles
+constexpr size_t kShardOffReserved0 = 44;    // u32: 0
+constexpr size_t kShardOffFingerprint = 48;  // u64: input and options of the run
+constexpr size_t kShardOffReserved1 = 56;    // u64: 0
+static_assert(kShardOffReserved1 + 8 == kShardRecordBytes);
 constexpr uint32_t kElevFlagHasNodata = 1u << 0;
 constexpr uint32_t kElevFlagUnitsAssumed = 1u << 1;
 constexpr uint32_t kElevFlagQuantised = 1u << 2;
@@ -301,21 +319,24 @@ uint64_t encodeIndexPage(std::span<const TileEntry> entries, uint32_t entry_byte
 Decoded decodeIndexPage(std::span<const uint8_t> page, uint64_t checksum, uint32_t entry_bytes,
                         std::vector<TileEntry>* out);
 
-inline uint64_t metadataBytes(uint64_t crs_bytes, bool elevation = false) {
-  return kMetadataFixedBytes + crs_bytes + (elevation ? kElevationRecordBytes : 0);
+inline uint64_t metadataBytes(uint64_t crs_bytes, bool elevation = false, bool shard = false) {
+  return kMetadataFixedBytes + crs_bytes + (elevation ? kElevationRecordBytes : 0) +
+         (shard ? kShardRecordBytes : 0);
 }
 // The metadata block of `transform` and `crs` (at most kMaxCrsBytes; the
-// caller checks), then the elevation record when `elevation` is given,
-// checksum included.
+// caller checks), then the elevation record when `elevation` is given, then
+// the shard record when `shard` is given, checksum included.
 std::vector<uint8_t> encodeMetadata(const double transform[6], const std::string& crs,
-                                    const ElevationInfo* elevation = nullptr);
+                                    const ElevationInfo* elevation = nullptr,
+                                    const ShardInfo* shard = nullptr);
 // Fills transform and crs (not `present`: that is a header flag), and
-// *elevation when it is not null (the elevation flag says the record is
+// *elevation / *shard when not null (the header flags say the records are
 // there). kBadSize when the block is shorter than kMetadataFixedBytes or its
-// CRS length (plus the record) does not match its size, or the record has
-// unknown flags or units.
+// CRS length (plus the records) does not match its size, or the elevation
+// record has unknown flags or units, or a reserved word of the shard record
+// is not 0. The shard record's values are the reader's to check.
 Decoded decodeMetadata(std::span<const uint8_t> block, GeoReference* out,
-                       ElevationInfo* elevation = nullptr);
+                       ElevationInfo* elevation = nullptr, ShardInfo* shard = nullptr);
 
 // ---- Geometry helpers ----
 

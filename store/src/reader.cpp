@@ -254,6 +254,7 @@ Status TileStoreReader::Impl::openImpl() {
     return bad(ErrorCode::kBadHeader, "unknown header flags");
   }
   const bool elevation = (header.flags & format::kFlagElevation) != 0;
+  const bool shard = (header.flags & format::kFlagShard) != 0;
   const PixelFormat pixel_format = static_cast<PixelFormat>(header.pixel_format);
   if (elevation ? !isHeightFormat(pixel_format) : !isColourFormat(pixel_format)) {
     return bad(ErrorCode::kBadHeader, std::string("pixel format ") + pixelFormatName(pixel_format) +
@@ -304,8 +305,8 @@ Status TileStoreReader::Impl::openImpl() {
       metadata_offset + metadata_bytes != file_bytes || index_offset < format::kHeaderBytes) {
     return bad(ErrorCode::kBadHeader, "region offsets in the header are inconsistent");
   }
-  if (metadata_bytes < format::metadataBytes(0, elevation) ||
-      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes, elevation)) {
+  if (metadata_bytes < format::metadataBytes(0, elevation, shard) ||
+      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes, elevation, shard)) {
     return bad(ErrorCode::kBadHeader, "metadata block size out of range");
   }
   // Level table and metadata lie back to back at the end: one read remotely.
@@ -412,7 +413,8 @@ Status TileStoreReader::Impl::openImpl() {
   std::vector<uint8_t> metadata(static_cast<size_t>(metadata_bytes));
   status = read(metadata.data(), metadata.size(), metadata_offset);
   if (!status) return status;
-  switch (format::decodeMetadata(metadata, &info.geo, elevation ? &info.elevation : nullptr)) {
+  switch (format::decodeMetadata(metadata, &info.geo, elevation ? &info.elevation : nullptr,
+                                 shard ? &info.shard : nullptr)) {
     case format::Decoded::kOk: break;
     case format::Decoded::kBadChecksum:
       return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
@@ -420,7 +422,26 @@ Status TileStoreReader::Impl::openImpl() {
       return bad(ErrorCode::kBadHeader,
                  elevation ? "metadata block: CRS length does not match the block size, or the "
                              "elevation record has unknown flags or units"
+                 : shard   ? "metadata block: CRS length does not match the block size, or the "
+                             "shard record's reserved words are not 0"
                            : "metadata CRS length does not match the block size");
+  }
+  if (shard) {
+    // The band must lie inside the whole image, on its tile grid, and own
+    // levels this store has.
+    const ShardInfo& sh = info.shard;
+    const uint64_t block_px = sh.owned_levels >= 1 && sh.owned_levels <= 32
+                                  ? uint64_t(tile_px) << (sh.owned_levels - 1)
+                                  : 0;
+    if (sh.count == 0 || sh.index == 0 || sh.index > sh.count || sh.owned_levels == 0 ||
+        sh.owned_levels > level_count || block_px == 0 ||
+        !fits(sh.x0_px, header.width_px, sh.full_width_px) ||
+        !fits(sh.y0_px, header.height_px, sh.full_height_px) || sh.x0_px % block_px != 0 ||
+        sh.y0_px % block_px != 0) {
+      return bad(ErrorCode::kBadHeader, "shard record: shard " + std::to_string(sh.index) + "/" +
+                                            std::to_string(sh.count) +
+                                            " does not describe a band of the whole image");
+    }
   }
   info.geo.present = (header.flags & format::kFlagGeoPresent) != 0;
   if (elevation) {

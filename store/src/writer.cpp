@@ -719,7 +719,8 @@ Status TileStoreWriter::Impl::finishLocked() {
   // CRS, so stale caller values never reach the file.
   const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
   const std::vector<uint8_t> metadata = format::encodeMetadata(
-      geo.transform, geo.crs, elevation() ? &options.elevation : nullptr);
+      geo.transform, geo.crs, elevation() ? &options.elevation : nullptr,
+      options.shard.present ? &options.shard : nullptr);
   status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
   if (!status) return status;
   position += metadata.size();
@@ -739,6 +740,7 @@ Status TileStoreWriter::Impl::finishLocked() {
   if (encoding.linear_light) header.flags |= format::kFlagLinearLight;
   if (geo.present) header.flags |= format::kFlagGeoPresent;
   if (elevation()) header.flags |= format::kFlagElevation;
+  if (options.shard.present) header.flags |= format::kFlagShard;
   header.tile_entry_bytes = entryBytes();
   header.level_table_offset = level_table_offset;
   header.level_table_bytes = table_bytes.size();

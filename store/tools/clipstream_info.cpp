@@ -114,6 +114,13 @@ void printText(const std::string& path, const StoreInfo& info,
   } else {
     std::printf("layer        colour\n");
   }
+  if (info.shard.present) {
+    const ShardInfo& sh = info.shard;
+    std::printf("partial      shard %u/%u of a %" PRIu64 "x%" PRIu64 " image: band at (%" PRIu64
+                ", %" PRIu64 "), levels 0..%u; clipstream-merge joins the shards\n",
+                sh.index, sh.count, sh.full_width_px, sh.full_height_px, sh.x0_px, sh.y0_px,
+                sh.owned_levels - 1);
+  }
   if (stats == nullptr) return;
   std::printf("\nlevel\twidth_px\theight_px\ttiles\tconstant_tiles\tstored_bytes\traw_bytes\tratio\n");
   LevelStats total;
@@ -173,6 +180,16 @@ nlohmann::json toJson(const std::string& path, const StoreInfo& info,
                         {"max_error", e.max_error},
                         {"nodata", e.has_nodata ? nlohmann::json(e.nodata) : nlohmann::json()},
                         {"filled_samples", e.filled_samples}};
+  }
+  if (info.shard.present) {
+    const ShardInfo& sh = info.shard;
+    out["shard"] = {{"index", sh.index},
+                    {"count", sh.count},
+                    {"full_width_px", sh.full_width_px},
+                    {"full_height_px", sh.full_height_px},
+                    {"x0_px", sh.x0_px},
+                    {"y0_px", sh.y0_px},
+                    {"owned_levels", sh.owned_levels}};
   }
   if (stats != nullptr) {
     nlohmann::json levels = nlohmann::json::array();

@@ -127,6 +127,16 @@ void writeSeeds(const std::string& dir) {
     options.encoding.predictor = s.predictor;
     options.geo.present = (n % 2) == 0;
     options.geo.crs = "EPSG:2992";
+    if (n == 2) {
+      // A partial store: the shard record's checks get fuzzed too.
+      options.shard.present = true;
+      options.shard.index = 1;
+      options.shard.count = 2;
+      options.shard.full_width_px = s.w;
+      options.shard.full_height_px = s.h * 2;
+      options.shard.owned_levels = 1;
+      options.shard.fingerprint = 42;
+    }
     if (!isColourFormat(s.format)) {
       options.encoding.filter = DownsampleFilter::kDecimate;
       options.elevation.present = true;

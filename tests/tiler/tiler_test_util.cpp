@@ -165,8 +165,11 @@ uint32_t maxTileError(const TileStoreReader& reader, uint32_t level, const RefIm
   return worst;
 }
 
-RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect) {
-  std::string cmd = std::string("'") + CLIPSTREAM_TILE_EXE + "'";
+namespace {
+
+RunResult runProgram(const char* exe, const std::vector<std::string>& args,
+                     const std::string& stdout_redirect) {
+  std::string cmd = std::string("'") + exe + "'";
   for (const std::string& a : args) {
     std::string q = "'";
     for (char c : a) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
@@ -182,6 +185,51 @@ RunResult runTiler(const std::vector<std::string>& args, const std::string& stdo
   const int status = pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return r;
+}
+
+}  // namespace
+
+RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect) {
+  return runProgram(CLIPSTREAM_TILE_EXE, args, stdout_redirect);
+}
+
+RunResult runMerge(const std::vector<std::string>& args) {
+  return runProgram(CLIPSTREAM_MERGE_EXE, args, "");
+}
+
+void expectSameTiles(const std::string& expected_path, const std::string& actual_path) {
+  std::unique_ptr<TileStoreReader> a, b;
+  ASSERT_TRUE(TileStoreReader::open(expected_path, &a).isOk()) << expected_path;
+  ASSERT_TRUE(TileStoreReader::open(actual_path, &b).isOk()) << actual_path;
+  const PyramidGeometry& ga = a->geometry();
+  const PyramidGeometry& gb = b->geometry();
+  ASSERT_EQ(ga.width_px, gb.width_px);
+  ASSERT_EQ(ga.height_px, gb.height_px);
+  ASSERT_EQ(ga.tile_px, gb.tile_px);
+  ASSERT_EQ(ga.format, gb.format);
+  ASSERT_EQ(ga.levelCount(), gb.levelCount());
+  uint64_t differing = 0;
+  for (uint32_t l = 0; l < ga.levelCount(); ++l) {
+    for (uint32_t y = 0; y < ga.levels[l].tiles_y; ++y) {
+      for (uint32_t x = 0; x < ga.levels[l].tiles_x; ++x) {
+        RawTile ra, rb;
+        ASSERT_TRUE(a->readRaw({l, x, y}, &ra).isOk());
+        ASSERT_TRUE(b->readRaw({l, x, y}, &rb).isOk());
+        const bool same =
+            ra.location.constant == rb.location.constant &&
+            std::memcmp(ra.location.constant_pixel, rb.location.constant_pixel, 8) == 0 &&
+            ra.location.checksum == rb.location.checksum && ra.payload == rb.payload &&
+            ra.location.min_height == rb.location.min_height &&
+            ra.location.max_height == rb.location.max_height &&
+            ra.location.error == rb.location.error;
+        if (!same && differing++ < 5) {
+          ADD_FAILURE() << actual_path << ": level " << l << " tile (" << x << ", " << y
+                        << ") differs from " << expected_path;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(differing, 0u);
 }
 
 pid_t spawnTiler(const std::vector<std::string>& args) {

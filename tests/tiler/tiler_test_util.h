@@ -61,6 +61,14 @@ struct RunResult {
 // `stdout_redirect` (e.g. ">/dev/full") redirects standard output alone.
 RunResult runTiler(const std::vector<std::string>& args, const std::string& stdout_redirect = "");
 
+// Runs clipstream-merge the same way.
+RunResult runMerge(const std::vector<std::string>& args);
+
+// Every tile of the store at `actual_path` equals the one at `expected_path`
+// (same geometry; same constant value, or same checksum and payload bytes;
+// same height bounds and error in an elevation store).
+void expectSameTiles(const std::string& expected_path, const std::string& actual_path);
+
 // Starts clipstream-tile with `args` in a child with its output discarded
 // and a 120 s alarm (a hang fails the test); returns the pid, or -1.
 pid_t spawnTiler(const std::vector<std::string>& args);

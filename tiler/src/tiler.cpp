@@ -9,6 +9,8 @@
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
+#include <clipstream/tiler/mosaic.h>
+#include <clipstream/tiler/shard.h>
 
 #include "height_bounds.h"
 #include "height_source.h"
@@ -198,6 +200,103 @@ Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned thre
                            std::to_string((smallest + mb - 1) / mb) + " MB");
 }
 
+// Rows [y0, y0 + height) of another source, as an image of their own: the
+// band a shard tiles. Its pixels are the full image's, converted the same.
+class BandSource final : public ImageSource {
+ public:
+  BandSource(std::unique_ptr<ImageSource> inner, uint64_t y0_px, uint64_t height_px)
+      : m_inner(std::move(inner)), m_y0(y0_px), m_info(m_inner->info()) {
+    m_info.height_px = height_px;
+  }
+  const SourceInfo& info() const override {
+    m_info.clamped_samples = m_inner->info().clamped_samples;
+    return m_info;
+  }
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    return m_inner->readRows(m_y0 + y0, rows, x0, width, dst, dst_stride);
+  }
+
+ private:
+  std::unique_ptr<ImageSource> m_inner;
+  uint64_t m_y0 = 0;
+  mutable SourceInfo m_info;  // the inner one's, with the band's height
+};
+
+// FNV-1a, 64 bit: the run fingerprint must be the same on every machine and
+// build that runs a shard, which std::hash does not promise.
+struct Fnv1a {
+  uint64_t h = 0xcbf29ce484222325ull;
+  void bytes(const void* data, size_t n) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 0x100000001b3ull;
+  }
+  void u64(uint64_t v) { bytes(&v, sizeof(v)); }
+  void text(const std::string& t) {
+    u64(t.size());
+    bytes(t.data(), t.size());
+  }
+};
+
+// Up to 64 KiB from the start and the end of a file, and its size: enough
+// to tell inputs apart without reading them whole in every shard. The path
+// is left out on purpose: shards may see the input under different mounts.
+Status hashFileSample(const std::string& path, Fnv1a* h) {
+  constexpr size_t kSampleBytes = size_t(64) << 10;
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return Status::error(ErrorCode::kIo, path + ": cannot open to fingerprint it");
+  std::vector<uint8_t> buf(kSampleBytes);
+  std::fseek(f, 0, SEEK_END);
+  const long size = std::ftell(f);
+  h->u64(uint64_t(size < 0 ? 0 : size));
+  for (long at : {0L, std::max(0L, size - long(kSampleBytes))}) {
+    std::fseek(f, at, SEEK_SET);
+    const size_t n = std::fread(buf.data(), 1, buf.size(), f);
+    h->bytes(buf.data(), n);
+  }
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed) return Status::error(ErrorCode::kIo, path + ": read failed while fingerprinting it");
+  return Status::ok();
+}
+
+// What a shard's tiles depend on: the input (sampled, above), its size and
+// georeference, and every option that changes a tile's bytes. Equal across
+// the shards of one run, and checked by the merge.
+Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoReference& geo,
+                      const std::vector<std::string>& sheets, uint64_t* out) {
+  Fnv1a h;
+  h.text("clipstream shard run 1");
+  if (o.input_path.empty()) {
+    h.text("synthetic");
+  } else {
+    Status s = hashFileSample(o.input_path, &h);
+    if (!s) return s;
+  }
+  h.u64(o.mosaic ? 1 : 0);
+  h.u64(o.fill);
+  for (const std::string& sheet : sheets) {
+    Status s = hashFileSample(sheet, &h);
+    if (!s) return s;
+  }
+  h.u64(src.width_px);
+  h.u64(src.height_px);
+  h.text(src.input_type);
+  h.u64(src.input_channels);
+  h.u64(uint64_t(src.format));
+  h.u64(o.tile_px);
+  h.u64(uint64_t(o.zstd_level));
+  h.u64(o.predictor ? 1 : 0);
+  h.u64(uint64_t(o.filter));
+  h.u64(o.linear_light ? 1 : 0);
+  h.u64(geo.present ? 1 : 0);
+  h.bytes(geo.transform, sizeof(geo.transform));
+  h.text(geo.crs);
+  h.u64(o.shard_count);
+  *out = h.h;
+  return Status::ok();
+}
+
 }  // namespace
 
 Status validateOptions(const TilerOptions& o) {
@@ -262,6 +361,29 @@ Status validateOptions(const TilerOptions& o) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "--synthetic makes colour images; elevation needs an input DEM");
   }
+  if (o.mosaic && o.input_path.empty()) {
+    return Status::error(ErrorCode::kInvalidArgument, "a mosaic needs a list file of sheets");
+  }
+  if (o.fill > 65535) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--fill " + std::to_string(o.fill) + " must be 0..65535");
+  }
+  if (o.shard_count != 0 || o.shard_index != 0) {
+    if (o.shard_count == 0 || o.shard_count > kMaxShards || o.shard_index == 0 ||
+        o.shard_index > o.shard_count) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--shard " + std::to_string(o.shard_index) + "/" +
+                               std::to_string(o.shard_count) + " needs 1 <= K <= N <= " +
+                               std::to_string(kMaxShards));
+    }
+    if (o.filter != DownsampleFilter::kBox) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--shard needs the box filter: Lanczos reaches across the bands");
+    }
+    if (o.layer == LayerKind::kElevation || (o.format && !isColourFormat(*o.format))) {
+      return Status::error(ErrorCode::kUnsupported, "--shard: elevation stores are not sharded");
+    }
+  }
   if (o.format && o.layer == LayerKind::kColour && !isColourFormat(*o.format)) {
     return Status::error(ErrorCode::kInvalidArgument,
                          std::string("--format ") + pixelFormatName(*o.format) +
@@ -298,9 +420,14 @@ namespace {
 // Decides whether an opened input becomes an elevation store (LayerKind)
 // and, if so, reopens it delivering native height samples behind a
 // HeightSource (no-data fill, quantisation). *heights points into *source.
-Status openElevation(const TilerOptions& o, const GeoReference& geo,
-                     std::unique_ptr<ImageSource>* source, HeightSource** heights,
-                     ElevationInfo* elevation, TilerSummary* summary) {
+// Opens the input again delivering native samples in `native`; `conversion`
+// says the no-data value (a mosaic fills its gaps with it).
+using ReopenHeights = std::function<Status(PixelFormat native, const HeightConversion& conversion,
+                                           std::unique_ptr<ImageSource>* out)>;
+
+Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::string& tags_path,
+                     const ReopenHeights& reopen_input, std::unique_ptr<ImageSource>* source,
+                     HeightSource** heights, ElevationInfo* elevation, TilerSummary* summary) {
   const SourceInfo& first = (*source)->info();
   const std::string& type = first.input_type;
   const bool int16 = type == "int16", uint16 = type == "uint16";
@@ -360,7 +487,7 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo,
     stored = *o.format;
   }
   ElevationTags tags;
-  Status s = readElevationTags(o.input_path, &tags);
+  Status s = readElevationTags(tags_path, &tags);
   if (!s) return s;
   HeightConversion conversion;
   conversion.stored = stored;
@@ -369,12 +496,12 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo,
 
   // The reader for native samples (the file is opened again: cheap, and
   // it starts from the top).
-  const std::optional<PixelFormat> native_format = stored == PixelFormat::kF32 || o.height_step > 0.0
-                                                       ? PixelFormat::kF32
-                                                       : native;
+  const PixelFormat native_format = stored == PixelFormat::kF32 || o.height_step > 0.0
+                                        ? PixelFormat::kF32
+                                        : native;
   auto reopen = [&]() {
     source->reset();
-    return openImageFile(o.input_path, native_format, source);
+    return reopen_input(native_format, conversion, source);
   };
   s = reopen();
   if (!s) return s;
@@ -434,9 +561,22 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
 
   std::unique_ptr<ImageSource> source;
   GeoReference geo;
+  MosaicInfo mosaic;
   if (o.input_path.empty()) {
     s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
                             o.format.value_or(PixelFormat::kRGB8), &source);
+  } else if (o.mosaic) {
+    // As for one file: a height format is the elevation path's to choose.
+    const bool height_format = o.format && !isColourFormat(*o.format);
+    s = openMosaic(o.input_path, height_format ? std::nullopt : o.format, o.fill, &source, &mosaic);
+    if (s) geo = mosaic.geo;
+    for (const std::string& sheet : mosaic.sheets) {
+      if (s && sameFile(sheet, o.output_path)) {
+        s = Status::error(ErrorCode::kInvalidArgument,
+                          o.output_path + " is the mosaic's sheet " + sheet +
+                              " (the same file, maybe through a link); refusing to overwrite it");
+      }
+    }
   } else {
     // A height format asked for by --format is the elevation path's to
     // choose; the first open only looks at the input.
@@ -447,9 +587,55 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   if (!s) return s;
   HeightSource* heights = nullptr;
   ElevationInfo elevation;
-  if (!o.input_path.empty()) {
-    s = openElevation(o, geo, &source, &heights, &elevation, summary);
+  if (o.mosaic) {
+    // DEM sheets: gaps hold the no-data value (NaN for float samples when
+    // the sheets declare none), so they are filled like any void.
+    const uint64_t gap_px = mosaic.gap_px;
+    auto reopen = [&](PixelFormat native, const HeightConversion& conversion,
+                      std::unique_ptr<ImageSource>* out) {
+      double gap = conversion.has_nodata ? conversion.nodata : std::nan("");
+      if (!conversion.has_nodata && native != PixelFormat::kF32) {
+        if (gap_px > 0) {
+          return Status::error(ErrorCode::kInvalidArgument,
+                               o.input_path + ": the sheets leave " + std::to_string(gap_px) +
+                                   " px uncovered and declare no no-data value to fill them "
+                                   "with; give --nodata");
+        }
+        gap = 0.0;  // never read: no gaps
+      }
+      MosaicInfo again;
+      return openHeightMosaic(o.input_path, native, gap, out, &again);
+    };
+    s = openElevation(o, geo, mosaic.sheets.front(), reopen, &source, &heights, &elevation, summary);
     if (!s) return s;
+  } else if (!o.input_path.empty()) {
+    auto reopen = [&](PixelFormat native, const HeightConversion&, std::unique_ptr<ImageSource>* out) {
+      return openImageFile(o.input_path, native, out);
+    };
+    s = openElevation(o, geo, o.input_path, reopen, &source, &heights, &elevation, summary);
+    if (!s) return s;
+  }
+  ShardInfo shard;
+  if (o.shard_count != 0) {
+    if (elevation.present) {
+      return Status::error(ErrorCode::kUnsupported,
+                           o.input_path + " becomes an elevation store, and elevation stores are "
+                                          "not sharded (use --layer colour for a picture of it)");
+    }
+    const SourceInfo& whole = source->info();
+    ShardPlan plan;
+    s = planShard(whole.width_px, whole.height_px, o.tile_px, o.shard_index, o.shard_count, &plan);
+    if (!s) return s;
+    shard.present = true;
+    shard.index = o.shard_index;
+    shard.count = o.shard_count;
+    shard.full_width_px = whole.width_px;
+    shard.full_height_px = whole.height_px;
+    shard.y0_px = plan.y0_px;
+    shard.owned_levels = plan.owned_levels;
+    s = runFingerprint(o, whole, geo, mosaic.sheets, &shard.fingerprint);
+    if (!s) return s;
+    source = std::make_unique<BandSource>(std::move(source), plan.y0_px, plan.height_px);
   }
   const SourceInfo& src = source->info();
   for (const std::string& w : src.warnings) summary->warnings.push_back(w);
@@ -464,7 +650,8 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   wopt.fsync = o.fsync;
   wopt.replace = o.overwrite;
   wopt.payload_order = o.payload_order;
-  wopt.geo = geo;
+  wopt.geo = geo;  // a shard's is the whole image's (ShardInfo)
+  wopt.shard = shard;
 
   PyramidGeometry geometry;
   if (!makePyramidGeometry(src.width_px, src.height_px, o.tile_px, src.format, &geometry)) {
@@ -765,6 +952,9 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->memory_budget_bytes = o.memory_budget_bytes;
   summary->geo = wopt.geo;
   summary->elevation = elevation;
+  summary->shard = shard;
+  summary->mosaic_sheets = mosaic.sheets.size();
+  summary->gap_px = mosaic.gap_px;
   summary->read_s = read_s;
   summary->build_s = build_s;
   summary->encode_s = encode_s;

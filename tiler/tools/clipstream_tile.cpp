@@ -3,6 +3,7 @@
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
 #include <clipstream/store/output_file.h>
+#include <clipstream/tiler/shard.h>
 #include <clipstream/tiler/tiler.h>
 
 #include <nlohmann/json.hpp>
@@ -41,6 +42,29 @@ std::string parseSize(const std::string& text, uint64_t* width, uint64_t* height
   if (too_large) {
     return "is too large: at most " + std::to_string(clipstream::kMaxSyntheticSidePx) +
            " px on a side";
+  }
+  return {};
+}
+
+// Parses "K/N" (decimal digits) for --shard. Returns "" or what is wrong.
+std::string parseShard(const std::string& text, uint32_t* index, uint32_t* count) {
+  const size_t sep = text.find('/');
+  auto number = [](const std::string& digits, uint32_t* out) {
+    if (digits.empty() || digits.size() > 9) return false;
+    uint64_t v = 0;
+    for (char c : digits) {
+      if (c < '0' || c > '9') return false;
+      v = v * 10 + uint64_t(c - '0');
+    }
+    *out = uint32_t(v);
+    return true;
+  };
+  if (sep == std::string::npos || !number(text.substr(0, sep), index) ||
+      !number(text.substr(sep + 1), count)) {
+    return "is not K/N (e.g. 2/4: the second of four shards)";
+  }
+  if (*count == 0 || *count > clipstream::kMaxShards || *index == 0 || *index > *count) {
+    return "needs 1 <= K <= N <= " + std::to_string(clipstream::kMaxShards);
   }
   return {};
 }
@@ -99,6 +123,20 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
     el["max_height"] = e.max_height;
     j["elevation"] = el;
   }
+  if (s.mosaic_sheets > 0) {
+    j["mosaic_sheets"] = s.mosaic_sheets;
+    j["gap_px"] = s.gap_px;
+  }
+  if (s.shard.present) {
+    nlohmann::json sh;
+    sh["index"] = s.shard.index;
+    sh["count"] = s.shard.count;
+    sh["full_width_px"] = s.shard.full_width_px;
+    sh["full_height_px"] = s.shard.full_height_px;
+    sh["y0_px"] = s.shard.y0_px;
+    sh["owned_levels"] = s.shard.owned_levels;
+    j["shard"] = sh;
+  }
   j["warnings"] = s.warnings;
   return j;
 }
@@ -118,10 +156,20 @@ int main(int argc, char** argv) {
   uint64_t memory_mb = 256;
   bool no_predictor = false, linear_light = false, quiet = false, force = false, no_fsync = false;
   app.add_option("INPUT OUTPUT", positional,
-                 "input image and output store (only OUTPUT with --synthetic)")
+                 "input image and output store (only OUTPUT with --synthetic or --mosaic)")
       ->required()
       ->expected(1, 2);
   app.add_option("--synthetic", synthetic, "procedural input of WxH pixels instead of a file");
+  std::string mosaic_list;
+  uint32_t fill = 0;
+  app.add_option("--mosaic", mosaic_list,
+                 "input: a list file of georeferenced sheets (one path a line) or a VRT of simple "
+                 "sources, tiled as one image; "
+                 "later sheets win where they overlap");
+  app.add_option("--fill", fill,
+                 "mosaic: value of every channel but alpha (alpha 0) where no sheet covers "
+                 "(default 0; 0..255, 0..65535 for R16)")
+      ->transform(cli::wholeInRange(0, 65535));
   app.add_option("--format", format_text,
                  "force the store format: R8, R16, RGB8, RGBA8 (colour), I16, R16, F32 (heights)");
   app.add_option("--layer", layer_text,
@@ -148,6 +196,9 @@ int main(int argc, char** argv) {
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
   app.add_option("--json-summary", json_path, "also write the summary as JSON to this file ('-' = stdout)");
   app.add_flag("--no-fsync", no_fsync, "skip the final fsync (faster, for scratch outputs)");
+  std::string shard_text;
+  app.add_option("--shard", shard_text,
+                 "K/N: tile only the K-th of N bands into a partial store for clipstream-merge");
   std::string order_text;
   app.add_option("--payload-order", order_text,
                  "where tiles lie in each level: curve (index pages along a Hilbert curve, tiles "
@@ -160,7 +211,21 @@ int main(int argc, char** argv) {
 
   TilerOptions options;
   std::string input_name;
-  if (!synthetic.empty()) {
+  if (app.count("--fill") > 0 && mosaic_list.empty()) {
+    return cli::usageError(app, "--fill applies to --mosaic");
+  }
+  if (!synthetic.empty() && !mosaic_list.empty()) {
+    return cli::usageError(app, "give --synthetic or --mosaic, not both");
+  }
+  if (!mosaic_list.empty()) {
+    if (positional.size() != 1) return cli::usageError(app, "with --mosaic give only OUTPUT");
+    if (positional[0].empty()) return cli::usageError(app, "OUTPUT must not be empty");
+    options.input_path = mosaic_list;
+    options.mosaic = true;
+    options.fill = fill;
+    options.output_path = positional[0];
+    input_name = "mosaic " + mosaic_list;
+  } else if (!synthetic.empty()) {
     if (positional.size() != 1) return cli::usageError(app, "with --synthetic give only OUTPUT");
     if (positional[0].empty()) return cli::usageError(app, "OUTPUT must not be empty");
     const std::string problem =
@@ -247,6 +312,10 @@ int main(int argc, char** argv) {
     if (!order) return cli::usageError(app, "--payload-order must be curve or written");
     options.payload_order = *order;
   }
+  if (!shard_text.empty()) {
+    const std::string problem = parseShard(shard_text, &options.shard_index, &options.shard_count);
+    if (!problem.empty()) return cli::usageError(app, "--shard '" + shard_text + "' " + problem);
+  }
   options.cancel = &g_cancel;
   if (Status s = validateOptions(options); !s) return cli::usageError(app, s.message);
   // The summary file follows the output rule too (a regular file named by
@@ -302,6 +371,20 @@ int main(int argc, char** argv) {
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
                   summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
+    }
+    if (summary.mosaic_sheets > 0) {
+      std::printf("mosaic: %llu sheets, %llu px covered by none (filled with %u, alpha 0)\n",
+                  (unsigned long long)summary.mosaic_sheets, (unsigned long long)summary.gap_px,
+                  options.fill);
+    }
+    if (summary.shard.present) {
+      const ShardInfo& sh = summary.shard;
+      std::printf("shard %u/%u: rows %llu..%llu of %llux%llu, levels 0..%u (clipstream-merge "
+                  "joins the parts)\n",
+                  sh.index, sh.count, (unsigned long long)sh.y0_px,
+                  (unsigned long long)(sh.y0_px + summary.height_px),
+                  (unsigned long long)sh.full_width_px, (unsigned long long)sh.full_height_px,
+                  sh.owned_levels - 1);
     }
     if (summary.elevation.present) {
       const ElevationInfo& e = summary.elevation;

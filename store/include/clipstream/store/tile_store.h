@@ -59,12 +59,31 @@ struct ElevationInfo {
   double max_height = 0.0;
 };
 
+// What a partial store says about the sharded run it is one part of
+// (docs/tile-store.md, section 10, "Shard record"; docs/tiler.md, "Sharded
+// runs"). A partial store is a whole, valid store of a band of the image;
+// its levels 0..owned_levels-1 hold exactly the tiles of those levels of
+// the store the single run makes, shifted by (x0_px, y0_px) / (tile_px * 2^l)
+// tiles. Its georeference is the whole image's, not the band's.
+struct ShardInfo {
+  bool present = false;        // false: an ordinary, whole store
+  uint32_t index = 0;          // 1..count
+  uint32_t count = 0;
+  uint64_t full_width_px = 0;  // level 0 of the whole image
+  uint64_t full_height_px = 0;
+  uint64_t x0_px = 0;          // this store's level-0 origin in the whole image
+  uint64_t y0_px = 0;
+  uint32_t owned_levels = 0;   // 1..level_count of this store
+  uint64_t fingerprint = 0;    // the run's input and options; equal across its shards
+};
+
 // What a store says about itself.
 struct StoreInfo {
   PyramidGeometry geometry;
   StoreEncoding encoding;
   GeoReference geo;
   ElevationInfo elevation;
+  ShardInfo shard;             // present for a partial store
   uint64_t file_bytes = 0;
   uint32_t format_version = 0;
 };
@@ -208,6 +227,7 @@ struct WriterOptions {
   StoreEncoding encoding;
   GeoReference geo;
   ElevationInfo elevation;  // present: write an elevation store (a height format)
+  ShardInfo shard;          // present: write a partial store (the tiler's --shard)
   bool fsync = true;     // flush to disk before the final rename
   bool replace = false;  // a regular file at the path may be replaced (OutputFile's rule)
   PayloadOrder payload_order = PayloadOrder::kWritten;

@@ -48,7 +48,12 @@ struct TilerOptions {
   double height_step = 0.0;
   std::optional<double> nodata;              // overrides the input's no-data tag
   std::optional<HeightUnits> vertical_units; // overrides the input's (else metres)
-  std::string input_path;            // image file; empty when synthetic
+  std::string input_path;            // image file (a list file with mosaic); empty when synthetic
+  // input_path is a mosaic list file (one image path a line) or a VRT of
+  // simple sources, the sheets placed by their georeferences (mosaic.h).
+  // DEM sheets make an elevation store whose gaps are no-data.
+  bool mosaic = false;
+  uint32_t fill = 0;                 // colour mosaic: gap value of every channel but alpha (alpha 0)
   uint64_t synthetic_width_px = 0;   // used when input_path is empty
   uint64_t synthetic_height_px = 0;
   std::optional<PixelFormat> format; // force the store's pixel format
@@ -73,6 +78,12 @@ struct TilerOptions {
   // range requests (docs/benchmarks.md, "Payload order").
   PayloadOrder payload_order = PayloadOrder::kCurve;
   const std::atomic<int>* cancel = nullptr;  // non-zero (e.g. a signal number) stops the run
+  // Sharded run (shard.h): tile only band shard_index (1..shard_count) of
+  // the image into a partial store, for mergeShards(). 0 = the whole image.
+  // Colour stores with the box filter only (Lanczos reaches across bands;
+  // elevation fill and height bounds too).
+  uint32_t shard_index = 0;
+  uint32_t shard_count = 0;
 };
 
 // What a run did, for the one-line summary and --json-summary.
@@ -99,6 +110,9 @@ struct TilerSummary {
   double encode_s = 0.0;         // encoder threads' CPU time, summed (encode + write)
   GeoReference geo;
   ElevationInfo elevation;       // present for an elevation store
+  ShardInfo shard;               // present for a partial store (width/height are the band's)
+  uint64_t mosaic_sheets = 0;    // sheets of a mosaic input (0: not a mosaic)
+  uint64_t gap_px = 0;           // mosaic pixels no sheet covers, filled with TilerOptions::fill
   std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
 };
 

@@ -1,0 +1,484 @@
+// A mosaic of georeferenced sheets as one ImageSource (mosaic.h): each read
+// fills the requested rectangle with the gap value, then copies in, in list
+// order, the part of every sheet that intersects it (so later sheets win).
+// Sheets are opened on first use and closed once reads have passed below
+// them, so memory follows the sheets under one strip, not the whole list.
+#include <clipstream/tiler/mosaic.h>
+
+#include <clipstream/tiler/georef.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <sstream>
+
+#include <sys/stat.h>
+
+namespace clipstream {
+namespace {
+
+namespace fs = std::filesystem;
+
+// How far from a whole pixel a sheet's offset may be (rounding in world
+// files written with 10 digits is far below this).
+constexpr double kGridTolerancePx = 0.01;
+// How much pixel sizes may differ, relative (the same rounding).
+constexpr double kPixelSizeTolerance = 1e-9;
+
+struct Sheet {
+  std::string path;
+  uint64_t x0 = 0, y0 = 0;  // in the mosaic
+  uint64_t width = 0, height = 0;
+  std::unique_ptr<ImageSource> source;  // open only while strips need it
+};
+
+std::string pixelSizeText(const GeoReference& g) {
+  std::ostringstream ss;
+  ss.precision(12);
+  ss << "(" << g.transform[1] << ", " << g.transform[5] << ")";
+  return ss.str();
+}
+
+bool samePixelSize(double a, double b) {
+  return std::fabs(a - b) <= kPixelSizeTolerance * std::max(std::fabs(a), std::fabs(b));
+}
+
+// Pixels of [0, w) x [0, h) that no sheet covers: a sweep over the sheets'
+// row edges, with the union of their column spans in each slab.
+uint64_t gapPixels(const std::vector<Sheet>& sheets, uint64_t w, uint64_t h) {
+  std::vector<uint64_t> ys;
+  for (const Sheet& s : sheets) {
+    ys.push_back(s.y0);
+    ys.push_back(s.y0 + s.height);
+  }
+  std::sort(ys.begin(), ys.end());
+  ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
+  uint64_t covered = 0;
+  std::vector<std::pair<uint64_t, uint64_t>> spans;
+  for (size_t i = 0; i + 1 < ys.size(); ++i) {
+    spans.clear();
+    for (const Sheet& s : sheets) {
+      if (s.y0 <= ys[i] && s.y0 + s.height >= ys[i + 1]) spans.emplace_back(s.x0, s.x0 + s.width);
+    }
+    std::sort(spans.begin(), spans.end());
+    uint64_t run_end = 0, width = 0;
+    for (const auto& [a, b] : spans) {
+      const uint64_t from = std::max(a, run_end);
+      if (b > from) width += b - from;
+      run_end = std::max(run_end, b);
+    }
+    covered += width * (ys[i + 1] - ys[i]);
+  }
+  return w * h - covered;
+}
+
+class MosaicSource final : public ImageSource {
+ public:
+  MosaicSource(std::vector<Sheet> sheets, SourceInfo info, PixelFormat format,
+               std::vector<uint8_t> fill_pixel)
+      : m_sheets(std::move(sheets)), m_info(std::move(info)), m_format(format),
+        m_fill(std::move(fill_pixel)) {}
+
+  const SourceInfo& info() const override {
+    uint64_t clamped = m_closed_clamped;
+    for (const Sheet& s : m_sheets) {
+      if (s.source) clamped += s.source->info().clamped_samples;
+    }
+    m_info.clamped_samples = clamped;
+    return m_info;
+  }
+
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    const size_t bpp = m_fill.size();
+    for (uint32_t r = 0; r < rows; ++r) {
+      uint8_t* row = dst + size_t(r) * dst_stride;
+      for (uint64_t x = 0; x < width; ++x) std::memcpy(row + x * bpp, m_fill.data(), bpp);
+    }
+    const uint64_t y1 = y0 + rows, x1 = x0 + width;
+    for (Sheet& s : m_sheets) {
+      // Reads go down the image (a panel column at a time): a sheet whose
+      // last row is above this read is not needed until the next panel
+      // column comes back up, if ever.
+      if (s.source && s.y0 + s.height <= y0) close(s);
+      const uint64_t ix0 = std::max(x0, s.x0), ix1 = std::min(x1, s.x0 + s.width);
+      const uint64_t iy0 = std::max(y0, s.y0), iy1 = std::min(y1, s.y0 + s.height);
+      if (ix0 >= ix1 || iy0 >= iy1) continue;
+      if (!s.source) {
+        Status st = openImageFile(s.path, m_format, &s.source);
+        if (!st) return st;
+      }
+      Status st = s.source->readRows(iy0 - s.y0, uint32_t(iy1 - iy0), ix0 - s.x0, ix1 - ix0,
+                                     dst + size_t(iy0 - y0) * dst_stride + (ix0 - x0) * bpp,
+                                     dst_stride);
+      if (!st) return st;
+      if (iy1 == s.y0 + s.height && ix1 == s.x0 + s.width) {
+        // This read reached the sheet's last row and column: strips after
+        // it lie below.
+        close(s);
+      }
+    }
+    return Status::ok();
+  }
+
+ private:
+  void close(Sheet& s) {
+    m_closed_clamped += s.source->info().clamped_samples;
+    s.source.reset();
+  }
+
+  std::vector<Sheet> m_sheets;
+  mutable SourceInfo m_info;
+  PixelFormat m_format;
+  std::vector<uint8_t> m_fill;  // one pixel of the gap value
+  uint64_t m_closed_clamped = 0;
+};
+
+// One sheet as the list names it. A VRT source also says which part of the
+// file it uses and how large it is drawn, which must be all of it, unscaled.
+struct ListEntry {
+  std::string path;
+  size_t line = 0;
+  bool has_rects = false;
+  double src[4] = {0, 0, 0, 0};  // SrcRect xOff, yOff, xSize, ySize
+  double dst[2] = {0, 0};        // DstRect xSize, ySize
+};
+
+// The value of attribute `name` in the XML start tag `tag`, or "".
+std::string attribute(const std::string& tag, const std::string& name) {
+  const std::string key = name + "=\"";
+  const size_t at = tag.find(key);
+  if (at == std::string::npos) return {};
+  const size_t end = tag.find('"', at + key.size());
+  return end == std::string::npos ? std::string() : tag.substr(at + key.size(), end - at - key.size());
+}
+
+std::string unescapeXml(std::string t) {
+  const std::pair<const char*, const char*> entities[] = {
+      {"&lt;", "<"}, {"&gt;", ">"}, {"&quot;", "\""}, {"&apos;", "'"}, {"&amp;", "&"}};
+  for (const auto& [from, to] : entities) {
+    for (size_t at = t.find(from); at != std::string::npos; at = t.find(from, at + 1)) {
+      t.replace(at, std::strlen(from), to);
+    }
+  }
+  return t;
+}
+
+// The sheets of a GDAL VRT of simple sources: each band's <SimpleSource>s,
+// which must name the same files in every band, each file's band n feeding
+// band n. Anything a VRT can do beyond placing whole files (other source
+// kinds, band reordering, cropping, scaling) is refused, naming its line.
+Status parseVrt(const std::string& path, const std::string& text, std::vector<ListEntry>* out) {
+  const fs::path dir = fs::path(path).parent_path();
+  auto lineOf = [&](size_t at) { return size_t(std::count(text.begin(), text.begin() + long(at), '\n')) + 1; };
+  auto refuse = [&](size_t at, const std::string& what) {
+    return Status::error(ErrorCode::kUnsupported,
+                         path + " line " + std::to_string(lineOf(at)) + ": " + what +
+                             "; a mosaic takes a VRT of whole sheets (SimpleSource), else a list "
+                             "file of the sheets");
+  };
+  std::vector<ListEntry> first_band;
+  uint32_t band = 0;
+  for (size_t b = text.find("<VRTRasterBand"); b != std::string::npos;
+       b = text.find("<VRTRasterBand", b + 1)) {
+    ++band;
+    const size_t band_end = std::min(text.find("</VRTRasterBand>", b), text.size());
+    const std::string body = text.substr(b, band_end - b);
+    for (const char* kind : {"<ComplexSource", "<AveragedSource", "<KernelFilteredSource",
+                             "<NoDataFromMaskSource"}) {
+      const size_t at = body.find(kind);
+      if (at != std::string::npos) return refuse(b + at, std::string(kind + 1) + " is not a simple source");
+    }
+    std::vector<ListEntry> sources;
+    for (size_t at = body.find("<SimpleSource"); at != std::string::npos;
+         at = body.find("<SimpleSource", at + 1)) {
+      const size_t end = std::min(body.find("</SimpleSource>", at), body.size());
+      const std::string src = body.substr(at, end - at);
+      const size_t name_at = src.find("<SourceFilename");
+      const size_t name_open = name_at == std::string::npos ? name_at : src.find('>', name_at);
+      const size_t name_close = src.find("</SourceFilename>");
+      if (name_open == std::string::npos || name_close == std::string::npos || name_close < name_open) {
+        return refuse(b + at, "a SimpleSource without a SourceFilename");
+      }
+      ListEntry e;
+      e.line = lineOf(b + at);
+      const std::string tag = src.substr(name_at, name_open - name_at);
+      const fs::path name(unescapeXml(src.substr(name_open + 1, name_close - name_open - 1)));
+      e.path = attribute(tag, "relativeToVRT") == "1" && !name.is_absolute() && !dir.empty()
+                   ? (dir / name).string()
+                   : name.string();
+      const size_t band_at = src.find("<SourceBand>");
+      const std::string source_band =
+          band_at == std::string::npos ? "1" : src.substr(band_at + 12, src.find('<', band_at + 12) - band_at - 12);
+      if (source_band != std::to_string(band)) {
+        return refuse(b + at, "band " + std::to_string(band) + " reads band " + source_band +
+                                  " of " + e.path);
+      }
+      const size_t sr = src.find("<SrcRect"), dr = src.find("<DstRect");
+      if (sr != std::string::npos && dr != std::string::npos) {
+        const std::string st = src.substr(sr, src.find('>', sr) - sr);
+        const std::string dt = src.substr(dr, src.find('>', dr) - dr);
+        const char* keys[] = {"xOff", "yOff", "xSize", "ySize"};
+        for (int i = 0; i < 4; ++i) e.src[i] = std::atof(attribute(st, keys[i]).c_str());
+        e.dst[0] = std::atof(attribute(dt, "xSize").c_str());
+        e.dst[1] = std::atof(attribute(dt, "ySize").c_str());
+        e.has_rects = true;
+      }
+      sources.push_back(std::move(e));
+    }
+    if (band == 1) {
+      first_band = std::move(sources);
+    } else {
+      bool same = sources.size() == first_band.size();
+      for (size_t i = 0; same && i < sources.size(); ++i) same = sources[i].path == first_band[i].path;
+      if (!same) return refuse(b, "band " + std::to_string(band) + " has other sources than band 1");
+    }
+  }
+  *out = std::move(first_band);
+  return Status::ok();
+}
+
+Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
+  struct stat st{};
+  if (::stat(list_path.c_str(), &st) != 0) {
+    return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                         list_path + ": " + std::strerror(errno));
+  }
+  if (!S_ISREG(st.st_mode)) {
+    return Status::error(ErrorCode::kIo, list_path + ": the mosaic list is not a regular file");
+  }
+  if (uint64_t(st.st_size) > kMaxMosaicListBytes) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         list_path + ": a mosaic list larger than " +
+                             std::to_string(kMaxMosaicListBytes >> 20) + " MB");
+  }
+  std::ifstream in(list_path, std::ios::binary);
+  if (!in) return Status::error(ErrorCode::kIo, list_path + ": cannot open the mosaic list");
+  const fs::path dir = fs::path(list_path).parent_path();
+  {
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    if (in.bad()) return Status::error(ErrorCode::kIo, list_path + ": read failed");
+    const size_t start = text.find_first_not_of(" \t\r\n");
+    if (start != std::string::npos && text.compare(start, 11, "<VRTDataset") == 0) {
+      Status s = parseVrt(list_path, text, out);
+      if (!s) return s;
+      if (out->empty()) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             list_path + ": the VRT has no SimpleSource, so no sheets");
+      }
+      return Status::ok();
+    }
+    in.clear();
+    in.seekg(0);
+  }
+  std::string line;
+  size_t number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) {
+      line.pop_back();
+    }
+    size_t start = line.find_first_not_of(" \t");
+    if (start == std::string::npos || line[start] == '#') continue;
+    line = line.substr(start);
+    if (line.find('\0') != std::string::npos) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           list_path + " line " + std::to_string(number) +
+                               ": not a path (a NUL byte); is this a list of image paths?");
+    }
+    const fs::path p(line);
+    ListEntry e;
+    e.path = p.is_absolute() || dir.empty() ? p.string() : (dir / p).string();
+    e.line = number;
+    out->push_back(std::move(e));
+  }
+  if (in.bad()) return Status::error(ErrorCode::kIo, list_path + ": read failed");
+  if (out->empty()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         list_path + ": the mosaic list names no sheets (one image path a line)");
+  }
+  return Status::ok();
+}
+
+// The gap pixel in the mosaic's format, or an error for a value it cannot hold.
+using FillMaker = std::function<Status(PixelFormat, std::vector<uint8_t>*)>;
+
+Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> forced,
+                      const FillMaker& make_fill, std::unique_ptr<ImageSource>* out,
+                      MosaicInfo* mosaic) {
+  *mosaic = MosaicInfo{};
+  std::vector<ListEntry> paths;
+  Status s = readList(list_path, &paths);
+  if (!s) return s;
+
+  std::vector<Sheet> sheets;
+  SourceInfo first_info;
+  GeoReference first_geo;
+  std::vector<std::pair<int64_t, int64_t>> offsets;  // whole pixels from the first sheet
+  uint64_t file_bytes = 0;
+  bool sequential = false;
+  for (const ListEntry& entry : paths) {
+    const std::string& path = entry.path;
+    const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
+    std::unique_ptr<ImageSource> src;
+    s = openImageFile(path, forced, &src);
+    if (!s) return Status::error(s.code, where + s.message);
+    GeoReference geo;
+    s = findGeoReference(path, &geo);
+    if (!s) return Status::error(s.code, where + s.message);
+    const SourceInfo& si = src->info();
+    if (entry.has_rects &&
+        (entry.src[0] != 0.0 || entry.src[1] != 0.0 || entry.src[2] != double(si.width_px) ||
+         entry.src[3] != double(si.height_px) || entry.dst[0] != entry.src[2] ||
+         entry.dst[1] != entry.src[3])) {
+      return Status::error(ErrorCode::kUnsupported,
+                           where + "the VRT draws part of " + path +
+                               " or scales it (SrcRect / DstRect); a mosaic takes whole sheets "
+                               "at their own resolution");
+    }
+    if (!geo.present) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           where + path + " has no georeference (no GeoTIFF tags, no world file "
+                                          "beside it): a mosaic places sheets by them");
+    }
+    if (geo.transform[2] != 0.0 || geo.transform[4] != 0.0) {
+      return Status::error(ErrorCode::kUnsupported,
+                           where + path + " is rotated or sheared; mosaics take north-up sheets");
+    }
+    if (sheets.empty()) {
+      first_info = si;
+      first_geo = geo;
+    } else {
+      const std::string& first = sheets[0].path;
+      if (!samePixelSize(geo.transform[1], first_geo.transform[1]) ||
+          !samePixelSize(geo.transform[5], first_geo.transform[5])) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             where + path + ": pixel size " + pixelSizeText(geo) + " differs from " +
+                                 first + "'s " + pixelSizeText(first_geo) +
+                                 "; a mosaic needs one resolution (resample the sheets first)");
+      }
+      if (geo.crs != first_geo.crs) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             where + path + ": CRS '" + printableText(geo.crs, 80) +
+                                 "' differs from " + first + "'s '" +
+                                 printableText(first_geo.crs, 80) + "'; a mosaic needs one CRS");
+      }
+      if (si.input_channels != first_info.input_channels || si.input_type != first_info.input_type) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             where + path + " has " + std::to_string(si.input_channels) + " " +
+                                 si.input_type + " channels, " + first + " " +
+                                 std::to_string(first_info.input_channels) + " " +
+                                 first_info.input_type + "; a mosaic needs one pixel type");
+      }
+    }
+    const double col = (geo.transform[0] - first_geo.transform[0]) / first_geo.transform[1];
+    const double row = (geo.transform[3] - first_geo.transform[3]) / first_geo.transform[5];
+    const double rcol = std::round(col), rrow = std::round(row);
+    if (std::fabs(col - rcol) > kGridTolerancePx || std::fabs(row - rrow) > kGridTolerancePx ||
+        std::fabs(rcol) > 1e15 || std::fabs(rrow) > 1e15) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           where + path + " is not on the pixel grid of " +
+                               (sheets.empty() ? path : sheets[0].path) + " (offset " +
+                               std::to_string(col) + ", " + std::to_string(row) + " pixels)");
+    }
+    offsets.emplace_back(int64_t(rcol), int64_t(rrow));
+    Sheet sheet;
+    sheet.path = path;
+    sheet.width = si.width_px;
+    sheet.height = si.height_px;
+    file_bytes += si.file_bytes;
+    sequential = sequential || si.sequential_only;
+    sheets.push_back(std::move(sheet));
+    // src closes here: sheets are opened again when strips reach them.
+  }
+  int64_t min_col = INT64_MAX, min_row = INT64_MAX, max_col = INT64_MIN, max_row = INT64_MIN;
+  for (size_t i = 0; i < sheets.size(); ++i) {
+    min_col = std::min(min_col, offsets[i].first);
+    min_row = std::min(min_row, offsets[i].second);
+    max_col = std::max(max_col, offsets[i].first + int64_t(sheets[i].width));
+    max_row = std::max(max_row, offsets[i].second + int64_t(sheets[i].height));
+  }
+  for (size_t i = 0; i < sheets.size(); ++i) {
+    sheets[i].x0 = uint64_t(offsets[i].first - min_col);
+    sheets[i].y0 = uint64_t(offsets[i].second - min_row);
+  }
+  const uint64_t width = uint64_t(max_col - min_col), height = uint64_t(max_row - min_row);
+
+  const PixelFormat format = first_info.format;
+  std::vector<uint8_t> fill_pixel(bytesPerPixel(format));
+  s = make_fill(format, &fill_pixel);
+  if (!s) return s;
+
+  SourceInfo info;
+  info.width_px = width;
+  info.height_px = height;
+  info.input_channels = first_info.input_channels;
+  info.input_type = first_info.input_type;
+  info.sequential_only = sequential;
+  info.file_bytes = file_bytes;
+  info.format = format;
+  mosaic->gap_px = gapPixels(sheets, width, height);
+  mosaic->geo = first_geo;
+  mosaic->geo.transform[0] = first_geo.transform[0] + double(min_col) * first_geo.transform[1];
+  mosaic->geo.transform[3] = first_geo.transform[3] + double(min_row) * first_geo.transform[5];
+  for (const Sheet& sh : sheets) mosaic->sheets.push_back(sh.path);
+  *out = std::make_unique<MosaicSource>(std::move(sheets), std::move(info), format,
+                                        std::move(fill_pixel));
+  return Status::ok();
+}
+
+}  // namespace
+
+Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
+                  std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+  return openMosaicImpl(list_path, forced, [fill](PixelFormat format, std::vector<uint8_t>* px) {
+    const uint32_t max_fill = format == PixelFormat::kR16 ? 65535u : 255u;
+    if (fill > max_fill) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--fill " + std::to_string(fill) + " does not fit a " +
+                               pixelFormatName(format) + " sample (0.." + std::to_string(max_fill) + ")");
+    }
+    if (format == PixelFormat::kR16) {
+      (*px)[0] = uint8_t(fill & 0xff);
+      (*px)[1] = uint8_t(fill >> 8);
+    } else {
+      std::fill(px->begin(), px->end(), uint8_t(fill));
+      if (format == PixelFormat::kRGBA8) (*px)[3] = 0;
+    }
+    return Status::ok();
+  }, out, mosaic);
+}
+
+Status openHeightMosaic(const std::string& list_path, PixelFormat native, double gap_height,
+                        std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+  return openMosaicImpl(list_path, native, [gap_height](PixelFormat format, std::vector<uint8_t>* px) {
+    const bool integer = format == PixelFormat::kI16 || format == PixelFormat::kR16;
+    const double lo = format == PixelFormat::kI16 ? -32768.0 : 0.0;
+    const double hi = format == PixelFormat::kI16 ? 32767.0 : 65535.0;
+    if (integer && !(gap_height >= lo && gap_height <= hi && gap_height == std::floor(gap_height))) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "the no-data value " + std::to_string(gap_height) + " for the gaps is no " +
+                               pixelFormatName(format) + " sample");
+    }
+    if (format == PixelFormat::kI16) {
+      const int16_t v = int16_t(gap_height);
+      std::memcpy(px->data(), &v, 2);
+    } else if (format == PixelFormat::kR16) {
+      const uint16_t v = uint16_t(gap_height);
+      std::memcpy(px->data(), &v, 2);
+    } else if (format == PixelFormat::kF32) {
+      const float v = float(gap_height);
+      std::memcpy(px->data(), &v, 4);
+    } else {
+      return Status::error(ErrorCode::kInvalidArgument, "heights are I16, R16 or F32");
+    }
+    return Status::ok();
+  }, out, mosaic);
+}
+
+}  // namespace clipstream
