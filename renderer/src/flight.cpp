@@ -157,7 +157,7 @@ Status Flight::makeTerrain() {
   tc.error_px = t.error_px;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
-  if (t.method == TerrainMethod::kQuadtree) {
+  if (t.method == TerrainMethod::kQuadtree || t.method == TerrainMethod::kFlat) {
     // The per-tile errors the quadtree refines by (index pages, read once).
     std::shared_ptr<const TerrainBounds> bounds;
     if (loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &bounds).isOk())

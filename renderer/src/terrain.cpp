@@ -390,11 +390,6 @@ uint32_t TerrainRenderer::preloadCoarseLevels(const HeightTileFn& tile) {
 bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
                                    uint32_t* level_used) const {
   const TerrainMapping& m = m_config.mapping;
-  if (m_config.method == TerrainMethod::kFlat && !m_config.full_resolution) {
-    *height = 0.0;
-    if (level_used != nullptr) *level_used = 0;
-    return true;
-  }
   const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
   const int64_t tile = m_geometry.tile_px;
   // The coarsest level the next frame may draw here: the innermost ring's
@@ -402,6 +397,8 @@ bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
   // coarser than the leaf drawn here last (a leaf coarsens by one level at
   // a time as the camera moves; where no leaf was drawn, any level).
   uint32_t top = m_frame.finest_level;
+  // The flat method draws no terrain: the finest resident surface alone.
+  if (m_config.method == TerrainMethod::kFlat) top = 0;
   if (m_config.method == TerrainMethod::kQuadtree && !m_config.full_resolution) {
     top = m_geometry.levelCount();
     const int64_t p = m_config.patch_cells;
@@ -509,9 +506,12 @@ void TerrainRenderer::setFrameUniforms(uint32_t p, const Camera& camera,
   glProgramUniform2f(p, loc(p, "uCamFrac"), float(cam.x - cam_int.x), float(cam.y - cam_int.y));
   glProgramUniform2f(p, loc(p, "uWorldPerSample"), float(m.world_per_sample.x),
                      float(m.world_per_sample.y));
-  glProgramUniform1f(p, loc(p, "uWorldPerHeight"),
-                     m_config.method == TerrainMethod::kFlat ? 0.0f : float(m.world_per_height));
-  glProgramUniform1f(p, loc(p, "uCamY"), float(camera.position.y));
+  // The flat method: every height at flatHeight() (heights scaled by 0,
+  // the camera lifted by as much).
+  const bool flat = m_config.method == TerrainMethod::kFlat;
+  glProgramUniform1f(p, loc(p, "uWorldPerHeight"), flat ? 0.0f : float(m.world_per_height));
+  glProgramUniform1f(p, loc(p, "uCamY"),
+                     float(camera.position.y - (flat ? flatHeight() * m.world_per_height : 0.0)));
   std::array<GLint, 2 * renderer_config::kMaxLevels> sizes{};
   for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
     sizes[2 * l] = GLint(m_geometry.levels[l].width_px);

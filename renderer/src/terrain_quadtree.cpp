@@ -44,6 +44,13 @@ bool isAncestorOrSelf(const NodeKey& a, NodeKey k) {
 
 }  // namespace
 
+double TerrainRenderer::flatHeight() const {
+  if (m_bounds) return double(m_bounds->range.x);
+  // The pyramid's last level: one tile, preloaded.
+  const uint32_t last = m_geometry.levelCount() - 1;
+  return m_slot_tile[last][0] == 0 ? double(m_slot_bounds[last][0].x) : 0.0;
+}
+
 uint32_t TerrainRenderer::rootLevel() const {
   // Roots cover the height field and the colour image beyond it (as the
   // full-resolution mesh does), no coarser than the pyramid's last level
@@ -88,7 +95,7 @@ TerrainRenderer::NodeBox TerrainRenderer::nodeBox(const Camera& camera, uint32_t
   const glm::i64vec2 s0(x * p, y * p), s1 = s0 + glm::i64vec2(p, p);
   // Heights the node's vertices and normals read (one sample beyond).
   glm::vec2 h = heightBounds(level, s0 - int64_t(1), s1 + int64_t(1));
-  if (m_config.method == TerrainMethod::kFlat) h = glm::vec2(0.0f);
+  if (m_config.method == TerrainMethod::kFlat) h = glm::vec2(float(flatHeight()));
   NodeBox b;
   const glm::dvec2 x0 = (glm::dvec2(s0) * spacing - cam) * m.world_per_sample;
   const glm::dvec2 x1 = (glm::dvec2(s1) * spacing - cam) * m.world_per_sample;

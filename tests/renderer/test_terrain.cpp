@@ -760,12 +760,29 @@ TEST(TerrainQuadtree, FlatMethodDrawsThePlaneAndRejectsBadSettings) {
   ASSERT_TRUE(s.terrain);
   uploadAll(*s.terrain, s.field);
   const std::vector<uint8_t> rgba = drawTerrain(s, camera);
-  // The plane y = 0: no crack against the plane at 0, and the ground is 0.
+  // The plane at the lowest height of the pyramid's last level: no crack
+  // against the field's lowest ground, every ground pixel at that height
+  // (the position pass), and the ground under a camera is still the
+  // terrain's (cameras fly the same paths as over the other methods).
   EXPECT_GT(groundPixels(rgba), rgba.size() / 8);
-  EXPECT_EQ(crackPixels(rgba, camera, 0.0f), 0u);
-  double h = 1.0;
-  ASSERT_TRUE(s.terrain->groundHeight({1000.0, 1000.0}, &h));
-  EXPECT_EQ(h, 0.0);
+  EXPECT_EQ(crackPixels(rgba, camera, s.field.lowest()), 0u);
+  std::vector<float> xyzw;
+  s.terrain->readPositions(camera, kViewport, *s.colour, &xyzw);
+  float plane = INFINITY;
+  for (uint32_t j = 0; j < s.field.geometry.levels.back().height_px; ++j)
+    for (uint32_t i = 0; i < s.field.geometry.levels.back().width_px; ++i)
+      plane = std::min(plane, s.field.at(s.field.geometry.levelCount() - 1, i, j));
+  size_t on_plane = 0, ground = 0;
+  for (size_t k = 0; k < xyzw.size(); k += 4) {
+    if (xyzw[k + 3] < 1.0f) continue;
+    ++ground;
+    on_plane += std::abs(double(xyzw[k + 1]) + camera.position.y - plane) < 1e-3;
+  }
+  EXPECT_GT(ground, 0u);
+  EXPECT_EQ(on_plane, ground);
+  double h = 0.0;
+  ASSERT_TRUE(s.terrain->groundHeight({1001.0, 777.0}, &h));
+  EXPECT_FLOAT_EQ(float(h), s.field.at(0, 500, 388));
   TerrainConfig tc = s.terrain->config();
   std::unique_ptr<TerrainRenderer> t;
   tc.patch_cells = 7;

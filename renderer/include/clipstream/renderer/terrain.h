@@ -43,8 +43,9 @@ namespace clipstream {
 using TerrainMapping = LayerAlignment;
 
 // How the terrain's geometry is modelled (--terrain): the geometry clipmap,
-// the restricted quadtree, or the flat plane y = 0 drawn through the same
-// pipeline (an end point of the accuracy charts: what no geometry costs).
+// the restricted quadtree, or the flat plane at the terrain's lowest height
+// drawn through the same pipeline (an end point of the accuracy charts: what
+// no geometry costs; cameras still fly above the real ground).
 // kFull: the full-resolution mesh (TerrainConfig::full_resolution), the
 // other end point; it needs level 0 whole in the stack.
 enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat, kFull };
@@ -247,6 +248,9 @@ class TerrainRenderer {
   bool cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const;
   bool samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const;
   uint32_t rootLevel() const;
+  // The flat method's plane: the terrain's lowest height (height units), so
+  // that a camera kept above the ground is above the plane too.
+  double flatHeight() const;
   using Frustum = std::array<glm::dvec4, 6>;
   Frustum frustum(const Camera& camera, const Viewport& viewport) const;
   // Draws the blocks of index pattern `config` of the grid whose vertex
