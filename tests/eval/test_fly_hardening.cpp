@@ -113,7 +113,11 @@ TEST(FlyHardening, AbsurdNumbersAreCommandLineMistakes) {
       {"--speed", "1e999"},       {"--cache-mb", "0"},         {"--upload-tiles", "0"},
       {"--frames", "0"},          {"--fault-latency-ms", "1e308"}, {"--rest-frame-ms", "1e308"},
       {"--fault-corrupt", "nan"}, {"--size", "99999x2"},      {"--size", "0x0"},
-      {"--no-such-flag"},         {"--teleport-frames", "0"}, {"--reference-every", "0"}};
+      {"--no-such-flag"},         {"--teleport-frames", "0"}, {"--reference-every", "0"},
+      // Terrain choices without terrain would be ignored; a method that
+      // does not exist, or a bound of no pixels, cannot be flown.
+      {"--terrain", "quadtree"},  {"--terrain-error", "0"},   {"--terrain-error", "nan"},
+      {"--terrain", "mesh", "--elevation", "dem.cst"}};
   for (std::vector<std::string> args : cases) {
     const std::string what = args[0] + (args.size() > 1 ? " " + args[1] : "");
     args.insert(args.begin(), {"--procedural", "4096", "--out", dir.file("out")});

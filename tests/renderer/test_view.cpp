@@ -44,15 +44,22 @@ TEST(ClipstreamView, FliesOverTerrainUnderXvfb) {
   ASSERT_TRUE(test::writeElevationStore(dir.file("dem.cst"), 300, 200, [](uint64_t x, uint64_t y) {
                 return float(100.0 + 50.0 * std::sin(x * 0.05) * std::cos(y * 0.04));
               }).isOk());
-  const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(CLIPSTREAM_VIEW_EXE) +
-                          " --procedural 4096 --elevation " + dir.file("dem.cst") +
-                          " --size 320x240 --frames 20 > " + dir.file("log.txt") + " 2>&1";
-  const int rc = std::system(cmd.c_str());
-  std::ifstream log(dir.file("log.txt"));
-  std::stringstream ss;
-  ss << log.rdbuf();
-  EXPECT_EQ(rc, 0) << ss.str();
-  EXPECT_NE(ss.str().find("stretched"), std::string::npos) << "the DEM without georeference is stretched, and said so";
+  for (const char* method : {"clipmap", "quadtree"}) {
+    const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(CLIPSTREAM_VIEW_EXE) +
+                            " --procedural 4096 --elevation " + dir.file("dem.cst") + " --terrain " + method +
+                            " --size 320x240 --frames 20 > " + dir.file("log.txt") + " 2>&1";
+    const int rc = std::system(cmd.c_str());
+    std::ifstream log(dir.file("log.txt"));
+    std::stringstream ss;
+    ss << log.rdbuf();
+    EXPECT_EQ(rc, 0) << method << ": " << ss.str();
+    EXPECT_NE(ss.str().find("stretched"), std::string::npos) << "the DEM without georeference is stretched, and said so";
+  }
+  // A method that does not exist is a command-line mistake.
+  const std::string bad = std::string(CLIPSTREAM_VIEW_EXE) + " --procedural 4096 --elevation " + dir.file("dem.cst") +
+                          " --terrain mesh > " + dir.file("bad.txt") + " 2>&1";
+  const int rc = std::system(bad.c_str());
+  EXPECT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 2) << rc;
 }
 
 // Third pass: clipstream-view --record-out naming the store being viewed
