@@ -87,6 +87,7 @@ run() {  # scene method setting, then clipstream-fly arguments
   local out="$WORK/run_${scene}_${method}_${setting}"
   # shellcheck disable=SC2086  # the scene's words
   "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "${SPEED[$scene]}" --frames "$FRAMES" --rest-frames 2 \
+    --warmup-frames 30 \
     --size "$SIZE" --reference --reference-every "$EVERY" --fewest-triangles --terrain "$method" "$@" \
     --out "$out" >/dev/null 2>&1
   # The slow stretch: the same path at a fifth of the speed, every frame

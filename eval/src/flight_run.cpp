@@ -278,7 +278,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       f.terrain_agree_mismatched = te.agree_mismatched;
       if (fewest)
         f.fewest_triangles = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx);
-      if (previous_judged + 1 == i && !f.sample.cut) {
+      if (!previous_streamed.empty() && previous_judged + 1 == i && !f.sample.cut) {
         run->change_pairs += 1;
         run->change_mean += change(streamed_rgba, previous_streamed);
         run->reference_change_mean += change(reference_rgba, previous_reference);

@@ -206,6 +206,7 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
   // Levels until one node covers the whole surface.
   for (uint32_t l = 0; l < renderer_config::kMaxLevels; ++l) {
     const int64_t span = p << l, step = int64_t(1) << l;
+    const int64_t wl = (w + step - 1) / step, hl = (h + step - 1) / step;  // the level's samples
     Level lv;
     lv.nodes_x = std::max<int64_t>((w - 1 + span - 1) / span, 1);
     lv.nodes_y = std::max<int64_t>((h - 1 + span - 1) / span, 1);
@@ -217,8 +218,11 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
       for (int64_t i = 0; i < w; ++i) {
         const int64_t ci = i / step, cj = j / step;
         const double u = double(i - ci * step) / double(step), v = double(j - cj * step) / double(step);
-        const double h00 = at(ci * step, cj * step), h10 = at((ci + 1) * step, cj * step);
-        const double h01 = at(ci * step, (cj + 1) * step), h11 = at((ci + 1) * step, (cj + 1) * step);
+        // Level-l sample k is level-0 sample k 2^l, k clamped to the level's
+        // last (as the renderer clamps it), not the position to level 0's.
+        const int64_t ci1 = std::min(ci + 1, wl - 1), cj1 = std::min(cj + 1, hl - 1);
+        const double h00 = at(ci * step, cj * step), h10 = at(ci1 * step, cj * step);
+        const double h01 = at(ci * step, cj1 * step), h11 = at(ci1 * step, cj1 * step);
         const double coarse = u >= v ? h00 + u * (h10 - h00) + v * (h11 - h10) : h00 + v * (h01 - h00) + u * (h11 - h01);
         const float e = float(std::abs(double(s[size_t(j * w + i)]) - coarse));
         const int64_t nx0 = i == 0 ? 0 : (i - 1) / span, nx1 = std::min(i / span, lv.nodes_x - 1);

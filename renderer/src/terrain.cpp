@@ -81,9 +81,11 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
   }
   const uint32_t p = config.patch_cells;
   const bool patches = config.method == TerrainMethod::kQuadtree || config.method == TerrainMethod::kFlat;
-  if (patches && (p % 2 != 0 || p < 4 || p > 256)) {
+  if (patches && (!isPowerOfTwo(p) || p < 4 || p > 256)) {
+    // A power of two divides every tile size (and is divided by any
+    // smaller one), so a node never straddles part of a tile's block.
     return Status::error(ErrorCode::kInvalidArgument, "terrain patch of " + std::to_string(p) +
-                                                          " cells: must be even, from 4 to 256");
+                                                          " cells: must be a power of two from 4 to 256");
   }
   if (!(config.error_px >= kMinTerrainErrorPx && config.error_px <= kMaxTerrainErrorPx)) {
     return Status::error(ErrorCode::kInvalidArgument, "terrain error bound must be from 0.01 to 1000 pixels");
@@ -307,6 +309,8 @@ void TerrainRenderer::uploadTile(const TileKey& key, const float* heights) {
     const int64_t span0 = int64_t(tile) << key.level, margin = int64_t(1) << key.level;
     const int64_t tx0 = int64_t(key.x) * span0 - margin, tx1 = (int64_t(key.x) + 1) * span0 + margin;
     const int64_t ty0 = int64_t(key.y) * span0 - margin, ty1 = (int64_t(key.y) + 1) * span0 + margin;
+    // Bounded: nodes of tiles long evicted are never asked again.
+    if (m_error_cache.size() > kMaxCachedNodeErrors) m_error_cache.clear();
     for (auto it = m_error_cache.begin(); it != m_error_cache.end();) {
       const NodeId& n = it->first;
       const int64_t span = p << n.level;
@@ -393,24 +397,14 @@ bool TerrainRenderer::groundHeight(const glm::dvec2& world_xz, double* height,
   const glm::dvec2 s0 = (world_xz - m.sample0_world) / m.world_per_sample;  // level-0 samples
   const int64_t tile = m_geometry.tile_px;
   // The coarsest level the next frame may draw here: the innermost ring's
-  // (a coarser ring lies farther out), or, for the quadtree, one level
-  // coarser than the leaf drawn here last (a leaf coarsens by one level at
-  // a time as the camera moves; where no leaf was drawn, any level).
+  // (a coarser ring lies farther out); for the quadtree any level drawn (a
+  // leaf may coarsen by several levels from one frame to the next, when a
+  // tile's arrival tightens its bound or the restriction coarsens it).
   uint32_t top = m_frame.finest_level;
   // The flat method draws no terrain: the finest resident surface alone.
   if (m_config.method == TerrainMethod::kFlat) top = 0;
-  if (m_config.method == TerrainMethod::kQuadtree && !m_config.full_resolution) {
-    top = m_geometry.levelCount();
-    const int64_t p = m_config.patch_cells;
-    for (const TerrainNode& node : m_nodes) {
-      const double span = std::ldexp(double(p), int(node.level));
-      if (s0.x >= double(node.x) * span && s0.x <= double(node.x + 1) * span &&
-          s0.y >= double(node.y) * span && s0.y <= double(node.y + 1) * span) {
-        top = node.level + 1;
-        break;
-      }
-    }
-  }
+  if (m_config.method == TerrainMethod::kQuadtree && !m_config.full_resolution)
+    top = std::max(m_frame.coarsest_level, m_frame.finest_level);
   bool found = false;
   uint32_t first = 0;
   double highest = -INFINITY;

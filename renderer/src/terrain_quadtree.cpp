@@ -202,8 +202,9 @@ double TerrainRenderer::tileErrorBound(uint32_t level, int64_t x, int64_t y) con
     for (int64_t tx = tx0; tx <= tx1; ++tx) {
       // The index's bound of |level-0 ground - bilinear surface of the
       // tile's samples|; for a level finer than the bounds hold, the
-      // bound of its ancestor at the finest level held (looser: an
-      // ancestor's surface is coarser).
+      // height range of its ancestor at the finest level held (the level-0
+      // ground and the node's samples both lie in it). No bounds: none
+      // (the exact pass in nodeError() may give one).
       double e = INFINITY;
       if (m_bounds && !m_bounds->levels.empty()) {
         const uint32_t bl = std::max(level, m_bounds->finest_level);
@@ -211,16 +212,12 @@ double TerrainRenderer::tileErrorBound(uint32_t level, int64_t x, int64_t y) con
         if (!lv.error.empty()) {
           const int64_t bx = std::min<int64_t>(tx >> (bl - level), lv.tiles_x - 1);
           const int64_t by = std::min<int64_t>(ty >> (bl - level), lv.tiles_y - 1);
-          e = lv.error[size_t(by) * lv.tiles_x + size_t(bx)];
+          const size_t t = size_t(by) * lv.tiles_x + size_t(bx);
+          e = bl == level ? double(lv.error[t]) : double(lv.range[t].y - lv.range[t].x);
         }
       }
       const size_t slot = size_t(slotOf(ty)) * m_slots + slotOf(tx);
       const bool resident = m_slot_tile[level][slot] == (uint64_t(tx) | (uint64_t(ty) << 32));
-      if (!std::isfinite(e) && resident) {
-        // No index bound: the tile's own height range (bounds the distance
-        // of any ground between its lowest and highest sample... loosely).
-        e = double(m_slot_bounds[level][slot].y - m_slot_bounds[level][slot].x);
-      }
       // The mesh cuts cells along a diagonal: add the distance between
       // that surface and the bilinear one (a quarter of the cell's twist).
       if (resident && !m_slot_twist[level][slot].empty()) {

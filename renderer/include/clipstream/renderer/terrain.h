@@ -176,8 +176,9 @@ class TerrainRenderer {
   bool groundRange(const Camera& camera, double* lowest, double* highest) const;
 
   // The per-tile geometric errors the quadtree refines by (the elevation
-  // store's index, loadTerrainBounds()). Without them a node's error is
-  // the height range of its resident tiles (a looser bound).
+  // store's index, loadTerrainBounds()). Without them a node has no bound
+  // but the exact one from its resident finer level (it splits wherever
+  // its children are resident).
   void setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_bounds = std::move(bounds); }
   // Quadtree: a new TerrainConfig::error_px (within its range) for the next draws.
   void setErrorBound(double error_px) { m_config.error_px = error_px; }
@@ -248,8 +249,9 @@ class TerrainRenderer {
   bool cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const;
   bool samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const;
   uint32_t rootLevel() const;
-  // The flat method's plane: the terrain's lowest height (height units), so
-  // that a camera kept above the ground is above the plane too.
+  // The flat method's plane: the terrain's lowest height (height units;
+  // without bounds the lowest sample of the pyramid's last level), so that
+  // a camera kept above the ground is above the plane too.
   double flatHeight() const;
   using Frustum = std::array<glm::dvec4, 6>;
   Frustum frustum(const Camera& camera, const Viewport& viewport) const;
@@ -313,6 +315,9 @@ class TerrainRenderer {
     }
   };
   std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
+  // Entries kept at most (cleared beyond): a few frames' nodes, so that an
+  // upload's scan stays cheap and the cache cannot grow over a long flight.
+  static constexpr size_t kMaxCachedNodeErrors = 16384;
   Frustum m_frustum_cache{};
   uint64_t m_texture_bytes = 0;
   TerrainFrame m_frame;
