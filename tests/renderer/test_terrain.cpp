@@ -785,8 +785,10 @@ TEST(TerrainQuadtree, FlatMethodDrawsThePlaneAndRejectsBadSettings) {
   EXPECT_FLOAT_EQ(float(h), s.field.at(0, 500, 388));
   TerrainConfig tc = s.terrain->config();
   std::unique_ptr<TerrainRenderer> t;
-  tc.patch_cells = 7;
-  EXPECT_EQ(TerrainRenderer::create(s.field.geometry, tc, &t).code, ErrorCode::kInvalidArgument);
+  for (uint32_t bad : {7u, 12u, 2u, 512u}) {  // not a power of two from 4 to 256
+    tc.patch_cells = bad;
+    EXPECT_EQ(TerrainRenderer::create(s.field.geometry, tc, &t).code, ErrorCode::kInvalidArgument) << bad;
+  }
   tc.patch_cells = 32;
   tc.error_px = 0.0;
   EXPECT_EQ(TerrainRenderer::create(s.field.geometry, tc, &t).code, ErrorCode::kInvalidArgument);
