@@ -136,8 +136,8 @@ err(v) = v > 0.01 ? v : 0.01
 set logscale y
 set ylabel "triangles / frame (log)"
 plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):4 with linespoints pt 7 title "clipmap (ring 32..256)", \
-     "" using (sel("quadtree") ? err(\$9) : 1/0):4 with linespoints pt 5 title "quadtree (error 32..3 px)", \
-     "" using (sel("quadtree") ? err(\$9) : 1/0):5 with points pt 2 title "fewest within 1 px p95", \
+     "" using (sel("quadtree") ? err(\$9) : 1/0):4 with linespoints pt 5 title "quadtree (bound 24..4 px)", \
+     "" using (sel("quadtree") ? 1 : 1/0):5 with points pt 2 ps 2 title "fewest within 1 px p95 (at 1 px)", \
      "" using (sel("flat") ? err(\$9) : 1/0):(\$4 > 0 ? \$4 : 1) with points pt 9 ps 2 title "flat", \
      "" using (sel("full") ? err(\$9) : 1/0):4 with points pt 11 ps 2 title "full mesh"
 unset logscale y

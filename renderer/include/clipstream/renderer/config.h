@@ -42,14 +42,16 @@ inline constexpr uint32_t kTerrainTransitionDivisor = 10;
 // 128-sample tile a side) refine rough ground where it is rough and not
 // over a whole tile: on the demo orbit it drew 11 % fewer triangles than
 // 32-cell nodes at the same p95 error (20.7k against 23.3k at 1.0 px),
-// for a few hundred draws a frame (docs/terrain.md, "Quadtree").
+// for a few hundred draws a frame (docs/decisions.md, "Terrain: the
+// restricted quadtree beside the geometry clipmap").
 inline constexpr uint32_t kTerrainPatchCells = 16;
 // Quadtree terrain: a node is split while its geometric error bound (the
 // tile's error from the store's index, tightened by the exact distance of
 // the resident finer level), projected at the node's nearest point,
 // exceeds this many pixels. The bound is a worst case at the nearest
 // point, far above the error the frame shows: 10 px kept the measured p95
-// under 1 px on the demo orbit (docs/terrain.md, "Quadtree").
+// under 1 px on both real DEMs of the terrain sweep (0.81 px on the demo
+// orbit, 0.90 on Rainier; docs/terrain.md, "The two methods side by side").
 inline constexpr double kTerrainErrorPx = 10.0;
 // Share of the light that does not depend on the sun (Lambert + ambient).
 inline constexpr float kTerrainAmbient = 0.35f;
