@@ -118,49 +118,43 @@ mv "$tmp_csv" "$CSV"
 fi  # ! CHARTS_ONLY
 
 # ---- charts -----------------------------------------------------------------
-if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then term="pngcairo size 1100,800 font 'sans,10'"
-else term="png size 1100,800"; fi
+if gnuplot -e 'set terminal' 2>&1 | grep -q pngcairo; then term="pngcairo size 1500,1100 font 'sans,9'"
+else term="png size 1500,1100"; fi
+# One chart per pair: triangles, frame time and render-thread CPU time (rows)
+# against the geometric error's mean and p95 and the PSNR (columns).
+panel() {  # y column, y label, y log (1/0), x column, x label, x kind (err|psnr)
+  local yc=$1 yl=$2 ylog=$3 xc=$4 xl=$5 xk=$6 x
+  if [ "$xk" = err ]; then x="err(\$$xc)"; echo "set logscale x"; else x="\$$xc"; echo "unset logscale x"; fi
+  if [ "$ylog" = 1 ]; then echo "set logscale y"; else echo "unset logscale y"; fi
+  echo "set xlabel \"$xl\""
+  echo "set ylabel \"$yl\""
+  local y="\$$yc" fewest=""
+  [ "$yc" = 4 ] && [ "$xk" = err ] && [ "$xc" = 9 ] &&
+    fewest="\"\" using (sel(\"quadtree\") ? 1 : 1/0):5 with points pt 2 ps 2 title \"fewest within 1 px p95 (at 1 px)\", "
+  echo "plot \"$CSV\" using (sel(\"clipmap\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 7 title \"clipmap (ring 32..256)\", \
+    \"\" using (sel(\"quadtree\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 5 title \"quadtree (bound 24..4 px)\", \
+    $fewest\"\" using (sel(\"flat\") ? $x : 1/0):($y > 0 ? $y : 1) with points pt 9 ps 2 title \"flat\", \
+    \"\" using (sel(\"full\") ? $x : 1/0):($y > 0 ? $y : 1) with points pt 11 ps 2 title \"full mesh\""
+}
 for scene in $SCENES; do
   png="$DOCS/charts/terrain_$scene.png"
-  gnuplot <<EOF
-set terminal $term
-set output "$png.tmp"
-set datafile separator ","
-set multiplot layout 2,2 title "Terrain methods, $scene ($SIZE, llvmpipe): each point a setting; flat and full mesh are the end points"
-set key top right
-set grid
-set logscale x
-set xlabel "geometric error p95 (px, log; full mesh plotted at 0.01)"
-sel(m) = (strcol(1) eq "$scene" && strcol(2) eq m) ? 1 : 0
-err(v) = v > 0.01 ? v : 0.01
-set logscale y
-set ylabel "triangles / frame (log)"
-plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):4 with linespoints pt 7 title "clipmap (ring 32..256)", \
-     "" using (sel("quadtree") ? err(\$9) : 1/0):4 with linespoints pt 5 title "quadtree (bound 24..4 px)", \
-     "" using (sel("quadtree") ? 1 : 1/0):5 with points pt 2 ps 2 title "fewest within 1 px p95 (at 1 px)", \
-     "" using (sel("flat") ? err(\$9) : 1/0):(\$4 > 0 ? \$4 : 1) with points pt 9 ps 2 title "flat", \
-     "" using (sel("full") ? err(\$9) : 1/0):4 with points pt 11 ps 2 title "full mesh"
-unset logscale y
-set ylabel "frame ms (mean)"
-plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):6 with linespoints pt 7 title "clipmap", \
-     "" using (sel("quadtree") ? err(\$9) : 1/0):6 with linespoints pt 5 title "quadtree", \
-     "" using (sel("flat") ? err(\$9) : 1/0):6 with points pt 9 ps 2 title "flat", \
-     "" using (sel("full") ? err(\$9) : 1/0):6 with points pt 11 ps 2 title "full mesh"
-set ylabel "render-thread CPU ms / frame"
-plot "$CSV" using (sel("clipmap") ? err(\$9) : 1/0):7 with linespoints pt 7 title "clipmap", \
-     "" using (sel("quadtree") ? err(\$9) : 1/0):7 with linespoints pt 5 title "quadtree", \
-     "" using (sel("flat") ? err(\$9) : 1/0):7 with points pt 9 ps 2 title "flat", \
-     "" using (sel("full") ? err(\$9) : 1/0):7 with points pt 11 ps 2 title "full mesh"
-unset logscale x
-set logscale x
-set xlabel "triangles / frame (log)"
-set ylabel "PSNR against the full mesh with the ideal texture (dB)"
-plot "$CSV" using (sel("clipmap") ? \$4 : 1/0):10 with linespoints pt 7 title "clipmap", \
-     "" using (sel("quadtree") ? \$4 : 1/0):10 with linespoints pt 5 title "quadtree", \
-     "" using (sel("flat") ? (\$4 > 0 ? \$4 : 1) : 1/0):10 with points pt 9 ps 2 title "flat", \
-     "" using (sel("full") ? \$4 : 1/0):(\$10 < 99 ? \$10 : 99) with points pt 11 ps 2 title "full mesh"
-unset multiplot
-EOF
+  {
+    echo "set terminal $term"
+    echo "set output \"$png.tmp\""
+    echo 'set datafile separator ","'
+    echo "set multiplot layout 3,3 title \"Terrain methods, $scene ($SIZE, llvmpipe): each point a setting; flat and full mesh are the end points (full mesh: error plotted at 0.01 px)\""
+    echo "set key top right"
+    echo "set grid"
+    echo "sel(m) = (strcol(1) eq \"$scene\" && strcol(2) eq m) ? 1 : 0"
+    echo "err(v) = v > 0.01 ? v : 0.01"
+    for row in "4|triangles / frame (log)|1" "6|frame ms (mean)|0" "7|render-thread CPU ms / frame|0"; do
+      IFS='|' read -r yc yl ylog <<<"$row"
+      panel "$yc" "$yl" "$ylog" 8 "geometric error mean (px, log)" err
+      panel "$yc" "$yl" "$ylog" 9 "geometric error p95 (px, log)" err
+      panel "$yc" "$yl" "$ylog" 10 "PSNR against the full mesh, ideal texture (dB)" psnr
+    done
+    echo "unset multiplot"
+  } | gnuplot
   mv "$png.tmp" "$png"
 done
 png="$DOCS/charts/terrain_stability.png"
