@@ -19,20 +19,8 @@ namespace {
 
 int64_t floorDiv(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
-// A node of the quadtree: level-L node (x, y).
-struct NodeKey {
-  uint32_t level;
-  int64_t x, y;
-  bool operator==(const NodeKey& o) const { return level == o.level && x == o.x && y == o.y; }
-};
-struct NodeKeyHash {
-  size_t operator()(const NodeKey& k) const {
-    uint64_t h = uint64_t(k.level) * 0x9E3779B97F4A7C15ull;
-    h ^= uint64_t(k.x) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
-    h ^= uint64_t(k.y) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
-    return size_t(h);
-  }
-};
+using NodeKey = TerrainRenderer::NodeId;
+using NodeKeyHash = TerrainRenderer::NodeIdHash;
 
 NodeKey parentOf(const NodeKey& k) { return {k.level + 1, floorDiv(k.x, 2), floorDiv(k.y, 2)}; }
 
@@ -67,22 +55,9 @@ uint32_t TerrainRenderer::rootLevel() const {
   return r;
 }
 
-bool TerrainRenderer::samplesResident(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const {
-  const uint32_t level = std::min(ring_level, m_geometry.levelCount() - 1);
-  const int shift = int(ring_level - level);
-  s0 *= int64_t(1) << shift;
-  s1 *= int64_t(1) << shift;
-  const LevelInfo& info = m_geometry.levels[level];
-  const int64_t tile = m_geometry.tile_px;
-  const int64_t tx0 = std::clamp<int64_t>(s0.x, 0, int64_t(info.width_px) - 1) / tile;
-  const int64_t tx1 = std::clamp<int64_t>(s1.x, 0, int64_t(info.width_px) - 1) / tile;
-  const int64_t ty0 = std::clamp<int64_t>(s0.y, 0, int64_t(info.height_px) - 1) / tile;
-  const int64_t ty1 = std::clamp<int64_t>(s1.y, 0, int64_t(info.height_px) - 1) / tile;
-  for (int64_t ty = ty0; ty <= ty1; ++ty)
-    for (int64_t tx = tx0; tx <= tx1; ++tx)
-      if (m_slot_tile[level][size_t(slotOf(ty)) * m_slots + slotOf(tx)] != (uint64_t(tx) | (uint64_t(ty) << 32)))
-        return false;
-  return true;
+bool TerrainRenderer::samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const {
+  // heightBounds() has no bound (infinite) exactly where a tile is missing.
+  return std::isfinite(heightBounds(level, s0, s1).x);
 }
 
 TerrainRenderer::NodeBox TerrainRenderer::nodeBox(const Camera& camera, uint32_t level, int64_t x,

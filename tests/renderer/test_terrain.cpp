@@ -161,29 +161,42 @@ Camera overField(double x, double z, double height, double heading, double pitch
   return c;
 }
 
+// The area and the edge uses of a mesh of index triples over an
+// (n + 1)^2 vertex grid; a degenerate triangle fails the test.
+struct MeshTopology {
+  double area = 0.0;
+  std::map<std::pair<uint32_t, uint32_t>, int> edges;  // (lower, higher vertex) -> triangles
+};
+MeshTopology topologyOf(const std::vector<uint32_t>& tris, uint32_t n) {
+  MeshTopology m;
+  EXPECT_EQ(tris.size() % 3, 0u);
+  auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
+  for (size_t t = 0; t + 2 < tris.size(); t += 3) {
+    const auto [ax, ay] = xy(tris[t]);
+    const auto [bx, by] = xy(tris[t + 1]);
+    const auto [cx, cy] = xy(tris[t + 2]);
+    const double a = 0.5 * ((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
+    EXPECT_GT(std::abs(a), 0.0) << "degenerate triangle";
+    m.area += std::abs(a);
+    for (int e = 0; e < 3; ++e) {
+      uint32_t u = tris[t + e], v = tris[t + (e + 1) % 3];
+      if (u > v) std::swap(u, v);
+      ++m.edges[{u, v}];
+    }
+  }
+  return m;
+}
+
 TEST(TerrainMesh, RingsCoverTheirCellsOnceAndMeetWithoutTJunctions) {
   for (uint32_t n : {16u, 64u, 128u}) {
     for (int config = 0; config < 5; ++config) {
       const int hx = config == 0 ? -1 : int(n / 4) + (config - 1) % 2;
       const int hy = config == 0 ? -1 : int(n / 4) + (config - 1) / 2;
       const std::vector<uint32_t> tris = terrain_mesh::ringTriangles(n, hx, hy);
-      ASSERT_EQ(tris.size() % 3, 0u);
-      double area = 0.0;
-      std::map<std::pair<uint32_t, uint32_t>, int> edges;
+      const MeshTopology topology = topologyOf(tris, n);
+      const double area = topology.area;
+      const auto& edges = topology.edges;
       auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
-      for (size_t t = 0; t < tris.size(); t += 3) {
-        const auto [ax, ay] = xy(tris[t]);
-        const auto [bx, by] = xy(tris[t + 1]);
-        const auto [cx, cy] = xy(tris[t + 2]);
-        const double a = 0.5 * ((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
-        EXPECT_GT(std::abs(a), 0.0) << "degenerate triangle";
-        area += std::abs(a);
-        for (int e = 0; e < 3; ++e) {
-          uint32_t u = tris[t + e], v = tris[t + (e + 1) % 3];
-          if (u > v) std::swap(u, v);
-          ++edges[{u, v}];
-        }
-      }
       const double hole = config == 0 ? 0.0 : double(n / 2) * (n / 2);
       EXPECT_DOUBLE_EQ(area, double(n) * n - hole) << "n " << n << " config " << config;
       for (const auto& [edge, uses] : edges) {
@@ -509,23 +522,10 @@ TEST(TerrainMesh, PatchEdgePatternsCoverTheirCellsAndSkipOddVerticesTowardsCoars
   for (uint32_t n : {4u, 8u, 32u}) {
     for (uint32_t mask = 0; mask < 16; ++mask) {
       const std::vector<uint32_t> tris = terrain_mesh::patchTriangles(n, mask);
-      ASSERT_EQ(tris.size() % 3, 0u);
-      double area = 0.0;
-      std::map<std::pair<uint32_t, uint32_t>, int> edges;
+      const MeshTopology topology = topologyOf(tris, n);
+      const double area = topology.area;
+      const auto& edges = topology.edges;
       auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
-      for (size_t t = 0; t < tris.size(); t += 3) {
-        const auto [ax, ay] = xy(tris[t]);
-        const auto [bx, by] = xy(tris[t + 1]);
-        const auto [cx, cy] = xy(tris[t + 2]);
-        const double a = 0.5 * ((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
-        EXPECT_GT(std::abs(a), 0.0) << "degenerate triangle";
-        area += std::abs(a);
-        for (int e = 0; e < 3; ++e) {
-          uint32_t u = tris[t + e], v = tris[t + (e + 1) % 3];
-          if (u > v) std::swap(u, v);
-          ++edges[{u, v}];
-        }
-      }
       EXPECT_DOUBLE_EQ(area, double(n) * n) << "n " << n << " mask " << mask;
       // Every border edge lies on a side: two cells long between even
       // vertices on a side towards a coarser node, one cell elsewhere.

@@ -114,6 +114,18 @@ struct TerrainNode {
 
 class TerrainRenderer {
  public:
+  // A quadtree node: level-L node (x, y) (TerrainNode's coordinates).
+  struct NodeId {
+    uint32_t level;
+    int64_t x, y;
+    bool operator==(const NodeId& o) const { return level == o.level && x == o.x && y == o.y; }
+  };
+  struct NodeIdHash {
+    size_t operator()(const NodeId& k) const {
+      return size_t((uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^ k.level);
+    }
+  };
+
   // Allocates the height stack for `heights` (an elevation store's
   // geometry) and builds the ring meshes. kInvalidArgument for a ring size
   // that is not a power of two in 16..1024 or a non-positive mapping;
@@ -304,16 +316,6 @@ class TerrainRenderer {
   std::vector<std::vector<std::vector<float>>> m_slot_twist;
   std::shared_ptr<const TerrainBounds> m_bounds;
   std::vector<TerrainNode> m_nodes;
-  struct NodeId {
-    uint32_t level;
-    int64_t x, y;
-    bool operator==(const NodeId& o) const { return level == o.level && x == o.x && y == o.y; }
-  };
-  struct NodeIdHash {
-    size_t operator()(const NodeId& k) const {
-      return size_t((uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^ k.level);
-    }
-  };
   std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
   // Entries kept at most (cleared beyond): a few frames' nodes, so that an
   // upload's scan stays cheap and the cache cannot grow over a long flight.
