@@ -59,16 +59,6 @@ inline constexpr double kMinTerrainErrorPx = 0.01;
 inline constexpr double kMaxTerrainErrorPx = 1000.0;
 
 struct TerrainConfig {
-  TerrainMethod method = TerrainMethod::kClipmap;
-  // Quadtree: the screen-space error bound (pixels) a node is split above.
-  double error_px = renderer_config::kTerrainErrorPx;
-  // Quadtree: cells per node side (even, 4..256).
-  uint32_t patch_cells = renderer_config::kTerrainPatchCells;
-  // Quadtree, for measuring only (eval's FewestTriangles): each node's
-  // error from this function (height units; level, node x, node y) instead
-  // of the bounds, and no restriction between neighbours (no stitching:
-  // cracks may open). Null for display.
-  std::function<double(uint32_t, int64_t, int64_t)> exact_node_error;
   uint32_t ring_cells = renderer_config::kTerrainRingCells;  // n: power of two, 16..1024
   TerrainMapping mapping;
   // The streamer's clip size for the height layer (tiles a side), so that
@@ -83,6 +73,17 @@ struct TerrainConfig {
   // other levels). The accuracy reference of terrain flights
   // (eval/terrain_accuracy.h); for measuring, not for display.
   bool full_resolution = false;
+  // How the geometry is modelled (kFull sets full_resolution).
+  TerrainMethod method = TerrainMethod::kClipmap;
+  // Quadtree: the screen-space error bound (pixels) a node is split above.
+  double error_px = renderer_config::kTerrainErrorPx;
+  // Quadtree: cells per node side (a power of two, 4..256).
+  uint32_t patch_cells = renderer_config::kTerrainPatchCells;
+  // Quadtree, for measuring only (eval's FewestTriangles): each node's
+  // error from this function (height units; level, node x, node y) instead
+  // of the bounds, and no restriction between neighbours (no stitching:
+  // cracks may open). Null for display.
+  std::function<double(uint32_t, int64_t, int64_t)> exact_node_error;
 };
 
 // What the last draw() drew.
