@@ -99,7 +99,10 @@ TEST(Flight, DeltasAddUpAndAStillCameraTurnsGpuMissesIntoHits) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   const StreamerStats stats = flight->finish();
-  EXPECT_EQ(first.total.gpu_hits, 0u) << "nothing but the pyramid is on the GPU before the first frame";
+  // Before the first frame only the pyramid is on the GPU: the first frame's
+  // hits are tiles that frame uploaded (a loader may finish a read between
+  // the frame's update and its hand-off), never more.
+  EXPECT_LE(first.total.gpu_hits, first.tiles_uploaded) << "nothing but the pyramid is on the GPU before the first frame";
   EXPECT_GT(first.total.gpu_misses, 0u);
   EXPECT_GT(last.total.gpu_hits, 0u);
   // Not every miss turns: a visible tile of a coarser needed level that a
