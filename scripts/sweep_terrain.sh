@@ -167,6 +167,7 @@ set style data histograms
 set style histogram clustered gap 1
 set style fill solid 0.7 border -1
 set ylabel "excess change per pixel (grey levels)"
+set key bottom left
 set xtics rotate by -45
 set grid y
 plot "$CSV" every ::1 using (\$11 - \$12):xtic(strcol(1)."/".strcol(2)."/".strcol(3)) title "streamed - reference"
