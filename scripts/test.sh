@@ -67,9 +67,7 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 # Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
 # Mesa's driver mapped until the check, tests/lsan.supp names the
 # third-party code that may leak (docs/accuracy.md, "Leak checking"). Any
-# ASan, UBSan or leak report fails the test and this command. The leak
-# check runs after each binary's last test rather than at exit (the same
-# file), which is where the tracer crashed. Without a GL
+# ASan, UBSan or leak report fails the test and this command. Without a GL
 # context these tests skip; on the CI machine llvmpipe provides one.
 echo "== AddressSanitizer + UBSan build of the stability scenarios (texture and terrain) and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \

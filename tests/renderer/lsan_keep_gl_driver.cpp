@@ -1,6 +1,5 @@
 // Under AddressSanitizer: keeps the dlopen'd GL driver mapped until the
-// process ends, so that LeakSanitizer can name it, and runs the leak check
-// after the last test instead of at exit.
+// process ends, so that LeakSanitizer can name it.
 //
 // Why: Mesa unloads its driver (swrast_dri.so, which holds llvmpipe and
 // links libLLVM) with dlclose() while the process exits, before the leak
@@ -11,23 +10,14 @@
 // the last test, every GL driver library already loaded is re-opened with
 // RTLD_NOLOAD | RTLD_NODELETE: nothing is loaded, the driver's later
 // dlclose() keeps it mapped, and its frames keep their module name
-// (tests/lsan.supp matches on it).
-//
-// The leak check runs right after the last test (__lsan_do_recoverable_
-// leak_check), not from the exit handler: at exit the driver's and the C
-// library's threads are being torn down, and LeakSanitizer's tracer then
-// crashed now and then ("Tracer caught signal 11"), failing a test whose
-// body passed (docs/decisions.md). After the last test every thread of
-// ours is joined and the driver's are idle. A leak fails the binary as
-// before: LeakSanitizer prints its report and the environment records a
-// failure. Without AddressSanitizer this file does nothing.
+// (tests/lsan.supp matches on it). Without AddressSanitizer this file does
+// nothing.
 #include <gtest/gtest.h>
 
 #if defined(__SANITIZE_ADDRESS__)
 
 #include <dlfcn.h>
 #include <link.h>
-#include <sanitizer/lsan_interface.h>
 
 #include <cstring>
 #include <string>
@@ -56,7 +46,6 @@ class KeepGlDriverMapped : public ::testing::Environment {
     // The handles are dropped on purpose: closing them would undo nothing
     // (RTLD_NODELETE sticks) and keeping them costs nothing.
     for (const std::string& path : paths) dlopen(path.c_str(), RTLD_LAZY | RTLD_NOLOAD | RTLD_NODELETE);
-    if (__lsan_do_recoverable_leak_check() != 0) ADD_FAILURE() << "LeakSanitizer found leaks (report above)";
   }
 };
 
@@ -66,9 +55,5 @@ class KeepGlDriverMapped : public ::testing::Environment {
 
 }  // namespace
 }  // namespace clipstream
-
-// The check above replaces the one at exit (options in LSAN_OPTIONS come
-// on top of these).
-extern "C" const char* __lsan_default_options() { return "leak_check_at_exit=0"; }
 
 #endif  // __SANITIZE_ADDRESS__
