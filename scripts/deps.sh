@@ -8,6 +8,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   dpkg-dev file  # the Debian package: dpkg-shlibdeps, and CPack finds ELF files with file
   libopenimageio-dev libzstd-dev libxxhash-dev
+  libtiff-dev libjpeg62-turbo-dev libpng-dev  # the tiler reads TIFF, JPEG and PNG without OpenImageIO
   libcurl4-openssl-dev  # stores read over HTTP(S)
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   openssl               # ... and make a certificate for its https:// test

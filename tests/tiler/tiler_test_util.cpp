@@ -92,7 +92,8 @@ RefImage referenceLanczosDownsample(const RefImage& in, bool linear_light) {
 }
 
 bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, OIIO::TypeDesc type,
-                const std::function<double(uint64_t, uint64_t, int)>& sample, int tile_px) {
+                const std::function<double(uint64_t, uint64_t, int)>& sample, int tile_px,
+                const std::function<void(OIIO::ImageSpec&)>& configure) {
   auto out = OIIO::ImageOutput::create(path);
   if (!out) return false;
   OIIO::ImageSpec spec(int(w), int(h), channels, type);
@@ -101,6 +102,7 @@ bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, O
     spec.tile_width = tile_px;
     spec.tile_height = tile_px;
   }
+  if (configure) configure(spec);
   if (!out->open(path, spec)) return false;
   // The whole image in native samples: test images are small.
   std::vector<uint8_t> native(w * h * channels * type.size());
@@ -120,6 +122,8 @@ bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, O
         } else if (type == OIIO::TypeDesc::FLOAT) {
           const float f = float(v);
           std::memcpy(p, &f, 4);
+        } else if (type == OIIO::TypeDesc::DOUBLE) {
+          std::memcpy(p, &v, 8);
         } else if (type == OIIO::TypeDesc::UINT32) {
           const uint32_t s = uint32_t(v);
           std::memcpy(p, &s, 4);

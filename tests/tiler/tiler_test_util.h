@@ -46,8 +46,10 @@ RefImage referenceLanczosDownsample(const RefImage& in, bool linear_light);
 
 // Writes an image file through OIIO; sample(x, y, c) gives native values.
 // tile_px > 0 writes a tiled file (TIFF) with square tiles of that size.
+// `configure` may set more of the spec (compression, BigTIFF, ...).
 bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, OIIO::TypeDesc type,
-                const std::function<double(uint64_t, uint64_t, int)>& sample, int tile_px = 0);
+                const std::function<double(uint64_t, uint64_t, int)>& sample, int tile_px = 0,
+                const std::function<void(OIIO::ImageSpec&)>& configure = {});
 
 // Compares every tile of level `level` against `ref`, including padding
 // (edge clamp). Returns the largest absolute sample difference.

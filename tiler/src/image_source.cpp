@@ -1,7 +1,9 @@
-// Image sources: the procedural image, and the loader for the OpenImageIO
-// module that reads files (oiio_source.cpp).
+// Image sources: the procedural image, and which reader opens a file: the
+// tiler's own (native_source.h) or the OpenImageIO module (oiio_source.cpp),
+// loaded here on first use.
 #include <clipstream/tiler/image_source.h>
 
+#include "native_source.h"
 #include "oiio_module.h"
 
 #include <dlfcn.h>
@@ -160,6 +162,7 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
   info.height_px = height_px;
   info.input_channels = channelCount(format);
   info.input_type = "synthetic";
+  info.decoder = "synthetic";
   info.tiled = true;
   info.format = format;
   *out = std::make_unique<SyntheticSource>(info);
@@ -167,8 +170,21 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
 }
 
 Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
-                     std::unique_ptr<ImageSource>* out) {
+                     std::unique_ptr<ImageSource>* out, const ImageReadOptions& read) {
   out->reset();
+  std::error_code ec;
+  if (!fs::exists(path, ec)) {
+    if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
+    return Status::error(ErrorCode::kNotFound, path + ": no such file");
+  }
+  if (!fs::is_regular_file(path, ec)) {
+    return Status::error(ErrorCode::kIo, path + ": not a regular file");
+  }
+  if (read.reader == ImageReader::kAuto) {
+    bool covered = false;
+    Status s = openNativeImage(path, forced, read, out, &covered);
+    if (covered || !s) return s;
+  }
   OpenImageFileFn fn = nullptr;
   Status s = loadOiioModule(&fn);
   if (!s) return s;

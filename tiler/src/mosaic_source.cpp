@@ -80,9 +80,9 @@ uint64_t gapPixels(const std::vector<Sheet>& sheets, uint64_t w, uint64_t h) {
 class MosaicSource final : public ImageSource {
  public:
   MosaicSource(std::vector<Sheet> sheets, SourceInfo info, PixelFormat format,
-               std::vector<uint8_t> fill_pixel)
+               std::vector<uint8_t> fill_pixel, const ImageReadOptions& read)
       : m_sheets(std::move(sheets)), m_info(std::move(info)), m_format(format),
-        m_fill(std::move(fill_pixel)) {}
+        m_fill(std::move(fill_pixel)), m_read(read) {}
 
   const SourceInfo& info() const override {
     uint64_t clamped = m_closed_clamped;
@@ -110,7 +110,7 @@ class MosaicSource final : public ImageSource {
       const uint64_t iy0 = std::max(y0, s.y0), iy1 = std::min(y1, s.y0 + s.height);
       if (ix0 >= ix1 || iy0 >= iy1) continue;
       if (!s.source) {
-        Status st = openImageFile(s.path, m_format, &s.source);
+        Status st = openImageFile(s.path, m_format, &s.source, m_read);
         if (!st) return st;
       }
       Status st = s.source->readRows(iy0 - s.y0, uint32_t(iy1 - iy0), ix0 - s.x0, ix1 - ix0,
@@ -136,6 +136,7 @@ class MosaicSource final : public ImageSource {
   mutable SourceInfo m_info;
   PixelFormat m_format;
   std::vector<uint8_t> m_fill;  // one pixel of the gap value
+  ImageReadOptions m_read;
   uint64_t m_closed_clamped = 0;
 };
 
@@ -310,7 +311,7 @@ using FillMaker = std::function<Status(PixelFormat, std::vector<uint8_t>*)>;
 
 Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> forced,
                       const FillMaker& make_fill, std::unique_ptr<ImageSource>* out,
-                      MosaicInfo* mosaic) {
+                      MosaicInfo* mosaic, const ImageReadOptions& read) {
   *mosaic = MosaicInfo{};
   std::vector<ListEntry> paths;
   Status s = readList(list_path, &paths);
@@ -326,7 +327,7 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
     const std::string& path = entry.path;
     const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
     std::unique_ptr<ImageSource> src;
-    s = openImageFile(path, forced, &src);
+    s = openImageFile(path, forced, &src, read);
     if (!s) return Status::error(s.code, where + s.message);
     GeoReference geo;
     s = findGeoReference(path, &geo);
@@ -419,6 +420,7 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   info.height_px = height;
   info.input_channels = first_info.input_channels;
   info.input_type = first_info.input_type;
+  info.decoder = "mosaic of " + first_info.decoder;
   info.sequential_only = sequential;
   info.file_bytes = file_bytes;
   info.format = format;
@@ -428,14 +430,15 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   mosaic->geo.transform[3] = first_geo.transform[3] + double(min_row) * first_geo.transform[5];
   for (const Sheet& sh : sheets) mosaic->sheets.push_back(sh.path);
   *out = std::make_unique<MosaicSource>(std::move(sheets), std::move(info), format,
-                                        std::move(fill_pixel));
+                                        std::move(fill_pixel), read);
   return Status::ok();
 }
 
 }  // namespace
 
 Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
-                  std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+                  std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic,
+                  const ImageReadOptions& read) {
   return openMosaicImpl(list_path, forced, [fill](PixelFormat format, std::vector<uint8_t>* px) {
     const uint32_t max_fill = format == PixelFormat::kR16 ? 65535u : 255u;
     if (fill > max_fill) {
@@ -451,11 +454,12 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
       if (format == PixelFormat::kRGBA8) (*px)[3] = 0;
     }
     return Status::ok();
-  }, out, mosaic);
+  }, out, mosaic, read);
 }
 
 Status openHeightMosaic(const std::string& list_path, PixelFormat native, double gap_height,
-                        std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic) {
+                        std::unique_ptr<ImageSource>* out, MosaicInfo* mosaic,
+                        const ImageReadOptions& read) {
   return openMosaicImpl(list_path, native, [gap_height](PixelFormat format, std::vector<uint8_t>* px) {
     const bool integer = format == PixelFormat::kI16 || format == PixelFormat::kR16;
     const double lo = format == PixelFormat::kI16 ? -32768.0 : 0.0;
@@ -478,7 +482,7 @@ Status openHeightMosaic(const std::string& list_path, PixelFormat native, double
       return Status::error(ErrorCode::kInvalidArgument, "heights are I16, R16 or F32");
     }
     return Status::ok();
-  }, out, mosaic);
+  }, out, mosaic, read);
 }
 
 }  // namespace clipstream

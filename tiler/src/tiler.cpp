@@ -562,13 +562,18 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   std::unique_ptr<ImageSource> source;
   GeoReference geo;
   MosaicInfo mosaic;
+  ImageReadOptions read;
+  read.reader = o.reader;
+  read.decode_threads = o.threads;
+  read.memory_budget_bytes = o.memory_budget_bytes;
   if (o.input_path.empty()) {
     s = makeSyntheticSource(o.synthetic_width_px, o.synthetic_height_px,
                             o.format.value_or(PixelFormat::kRGB8), &source);
   } else if (o.mosaic) {
     // As for one file: a height format is the elevation path's to choose.
     const bool height_format = o.format && !isColourFormat(*o.format);
-    s = openMosaic(o.input_path, height_format ? std::nullopt : o.format, o.fill, &source, &mosaic);
+    s = openMosaic(o.input_path, height_format ? std::nullopt : o.format, o.fill, &source, &mosaic,
+                   read);
     if (s) geo = mosaic.geo;
     for (const std::string& sheet : mosaic.sheets) {
       if (s && sameFile(sheet, o.output_path)) {
@@ -581,7 +586,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
     // A height format asked for by --format is the elevation path's to
     // choose; the first open only looks at the input.
     const bool height_format = o.format && !isColourFormat(*o.format);
-    s = openImageFile(o.input_path, height_format ? std::nullopt : o.format, &source);
+    s = openImageFile(o.input_path, height_format ? std::nullopt : o.format, &source, read);
     if (s) s = findGeoReference(o.input_path, &geo);
   }
   if (!s) return s;
@@ -604,13 +609,13 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
         gap = 0.0;  // never read: no gaps
       }
       MosaicInfo again;
-      return openHeightMosaic(o.input_path, native, gap, out, &again);
+      return openHeightMosaic(o.input_path, native, gap, out, &again, read);
     };
     s = openElevation(o, geo, mosaic.sheets.front(), reopen, &source, &heights, &elevation, summary);
     if (!s) return s;
   } else if (!o.input_path.empty()) {
     auto reopen = [&](PixelFormat native, const HeightConversion&, std::unique_ptr<ImageSource>* out) {
-      return openImageFile(o.input_path, native, out);
+      return openImageFile(o.input_path, native, out, read);
     };
     s = openElevation(o, geo, o.input_path, reopen, &source, &heights, &elevation, summary);
     if (!s) return s;
@@ -939,6 +944,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->height_px = src.height_px;
   summary->format = src.format;
   summary->input_type = src.input_type;
+  summary->decoder = src.decoder;
   summary->input_channels = src.input_channels;
   summary->levels = levels;
   summary->tiles = tiles_done.load();

@@ -84,6 +84,7 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["height_px"] = s.height_px;
   j["format"] = clipstream::pixelFormatName(s.format);
   j["input_type"] = s.input_type;
+  j["decoder"] = s.decoder;
   j["input_channels"] = s.input_channels;
   j["levels"] = s.levels;
   j["tiles"] = s.tiles;
@@ -188,7 +189,11 @@ int main(int argc, char** argv) {
   app.add_flag("--no-predictor", no_predictor, "store tiles without the left-delta predictor");
   app.add_option("--filter", filter_text, "downsampling filter: box (default) or lanczos3");
   app.add_flag("--linear-light", linear_light, "with lanczos3: filter in linear light (sRGB input)");
-  app.add_option("--threads", threads, "encoder threads (default: all cores)")
+  std::string reader_text = "auto";
+  app.add_option("--reader", reader_text,
+                 "auto (default: the tiler's own readers for the TIFF, JPEG and PNG files they "
+                 "cover, OpenImageIO for the rest) or openimageio (every file)");
+  app.add_option("--threads", threads, "encoder threads, and TIFF decode threads (default: all cores)")
       ->transform(cli::wholeInRange(0, kMaxThreads));
   app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)")
       ->transform(cli::wholeInRange(int64_t(kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
@@ -295,6 +300,13 @@ int main(int argc, char** argv) {
   options.predictor = !no_predictor;
   options.linear_light = linear_light;
   options.threads = threads;
+  if (reader_text == "auto") {
+    options.reader = ImageReader::kAuto;
+  } else if (reader_text == "openimageio") {
+    options.reader = ImageReader::kOpenImageIO;
+  } else {
+    return cli::usageError(app, "--reader '" + reader_text + "' is not auto or openimageio");
+  }
   options.memory_budget_bytes = memory_mb << 20;
   options.overwrite = force;
   // The bar is made at the first report, when the image size is known, and

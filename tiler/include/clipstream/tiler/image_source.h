@@ -1,5 +1,7 @@
-// Where the tiler's level-0 pixels come from: an image file read through
-// OpenImageIO, or a procedural image computed on demand. Either way the
+// Where the tiler's level-0 pixels come from: an image file (TIFF, JPEG and
+// PNG through the tiler's own readers on libtiff, libjpeg-turbo and libpng;
+// everything else through OpenImageIO), or a procedural image computed on
+// demand. Either way the
 // source hands out rows already converted to the store's pixel format, so
 // the pyramid code never sees input pixel types.
 //
@@ -24,6 +26,7 @@ struct SourceInfo {
   uint64_t height_px = 0;
   uint32_t input_channels = 0;
   std::string input_type;        // "uint8", "uint16", "int16", "float", "half", "synthetic"
+  std::string decoder;           // "libtiff", "libjpeg", "libpng", "openimageio", "synthetic", "mosaic"
   bool tiled = false;            // true when the file stores tiles (region reads are cheap)
   bool sequential_only = false;  // true when rows must be read top to bottom (e.g. JPEG)
   uint64_t file_bytes = 0;       // size of the input file, 0 for synthetic input
@@ -44,19 +47,42 @@ class ImageSource {
   // info().format. The caller owns `dst`. Reading rows in increasing order
   // is fastest; going back up may re-decode the file from the start.
   // Errors: kIo / kTruncated / kCorruptTile-like decoder failures, with the
-  // file name and OpenImageIO's message.
+  // file name and the decoder's message.
   virtual Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width,
                           uint8_t* dst, size_t dst_stride) = 0;
 };
 
-// Opens an image file with OpenImageIO and decides its conversion: 1
-// channel -> R8 (8-bit or float input) or R16 (16-bit input), 2 channels
-// (grey + alpha) -> RGBA8, 3 -> RGB8, 4 -> RGBA8. `forced` overrides the
-// target format. Fails with kNotFound, kIo (names the file and OIIO's
-// error), kInvalidArgument (zero size) or kUnsupported (pixel type,
-// channel count).
+// Which decoder reads an image file.
+enum class ImageReader {
+  // The tiler's own readers for the TIFF, JPEG and PNG files they cover
+  // (tiled and striped TIFF and BigTIFF of 8/16-bit integer or 32/64-bit
+  // float samples, any compression libtiff has; grey and colour JPEG,
+  // baseline or progressive; 8/16-bit grey, grey+alpha, RGB and RGBA PNG),
+  // OpenImageIO for every other file.
+  kAuto,
+  kOpenImageIO,  // OpenImageIO for every file (for comparison)
+};
+
+struct ImageReadOptions {
+  ImageReader reader = ImageReader::kAuto;
+  // Threads decoding a TIFF's strips or tiles at once (the calling thread
+  // is one of them); 0 = all cores. Other formats decode on the caller.
+  unsigned decode_threads = 0;
+  // The memory the caller may spend, 0 = no bound. A progressive JPEG
+  // holds every DCT coefficient of the image until its last scan (2 bytes
+  // a sample); when they would take more than a quarter of this, they are
+  // kept in a temporary file in $TMPDIR (else /tmp) instead, a few MB of
+  // them in memory at a time.
+  uint64_t memory_budget_bytes = 0;
+};
+
+// Opens an image file and decides its conversion: 1 channel -> R8 (8-bit
+// or float input) or R16 (16-bit input), 2 channels (grey + alpha) ->
+// RGBA8, 3 -> RGB8, 4 -> RGBA8. `forced` overrides the target format.
+// Fails with kNotFound, kIo (names the file and the decoder's error),
+// kInvalidArgument (zero size) or kUnsupported (pixel type, channel count).
 Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
-                     std::unique_ptr<ImageSource>* out);
+                     std::unique_ptr<ImageSource>* out, const ImageReadOptions& read = {});
 
 // A deterministic procedural image of width_px x height_px whose pixels are
 // a pure function of (x, y) (see syntheticPixel). No memory beyond the

@@ -41,7 +41,8 @@ struct MosaicInfo {
 // of the sheets; pixels no sheet covers take `fill` in every channel except
 // alpha, which is 0 (transparent; with RGB sheets, ask for RGBA8 to get an
 // alpha channel). Where sheets overlap, the later one in the list wins.
-// `forced` is the store format as for openImageFile.
+// `forced` is the store format and `read` the readers' options as for
+// openImageFile.
 //
 // Errors name the list (and line) or the sheet: kNotFound / kIo (the list
 // or a sheet), kInvalidArgument (an empty list, a sheet without a
@@ -49,7 +50,8 @@ struct MosaicInfo {
 // the grid, a fill value the format cannot hold), kUnsupported (rotated
 // sheets), and openImageFile's errors for a sheet.
 Status openMosaic(const std::string& list_path, std::optional<PixelFormat> forced, uint32_t fill,
-                  std::unique_ptr<ImageSource>* out, MosaicInfo* info);
+                  std::unique_ptr<ImageSource>* out, MosaicInfo* info,
+                  const ImageReadOptions& read = {});
 
 // The same mosaic of DEM sheets delivering native height samples in
 // `native` (I16, R16 or F32, as openImageFile with that format), with gaps
@@ -57,6 +59,7 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
 // elevation path fills them like any no-data sample. The checks and errors
 // are openMosaic's.
 Status openHeightMosaic(const std::string& list_path, PixelFormat native, double gap_height,
-                        std::unique_ptr<ImageSource>* out, MosaicInfo* info);
+                        std::unique_ptr<ImageSource>* out, MosaicInfo* info,
+                        const ImageReadOptions& read = {});
 
 }  // namespace clipstream

@@ -12,6 +12,7 @@
 
 #include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
+#include <clipstream/tiler/image_source.h>
 
 #include <atomic>
 #include <cstdint>
@@ -57,6 +58,10 @@ struct TilerOptions {
   uint64_t synthetic_width_px = 0;   // used when input_path is empty
   uint64_t synthetic_height_px = 0;
   std::optional<PixelFormat> format; // force the store's pixel format
+  // Which decoder reads the input (image_source.h): the tiler's own for the
+  // TIFF, JPEG and PNG files they cover, else OpenImageIO; or OpenImageIO
+  // for every file. TIFF strips and tiles decode on `threads` threads.
+  ImageReader reader = ImageReader::kAuto;
   std::string output_path;
   uint32_t tile_px = 128;            // power of two in [kMinTilePx, kMaxTilePx]
   int zstd_level = 1;
@@ -92,6 +97,7 @@ struct TilerSummary {
   uint64_t height_px = 0;
   PixelFormat format = PixelFormat::kRGB8;
   std::string input_type;        // "uint8", "synthetic", ...
+  std::string decoder;           // SourceInfo::decoder: "libtiff", "openimageio", ...
   uint32_t input_channels = 0;
   uint32_t levels = 0;
   uint64_t tiles = 0;

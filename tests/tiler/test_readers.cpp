@@ -1,0 +1,213 @@
+// The tiler's own TIFF, JPEG and PNG readers (tiler/src/native_source.h)
+// against OpenImageIO: for each kind of file, tiling it with --reader auto
+// gives the tiles tiling it with --reader openimageio gives, and the summary
+// names the reader that decoded it (a silent fall-back to OpenImageIO would
+// fail). Files the readers leave alone are still tiled, by OpenImageIO.
+#include "tiler_test_util.h"
+
+#include <clipstream/testing/files.h>
+#include <clipstream/tiler/tiler.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+
+namespace clipstream::test {
+namespace {
+
+double pattern(uint64_t x, uint64_t y, int c) {
+  return double((x * 131 + y * 71 + uint64_t(c) * 29 + ((x * y) >> 3)) & 255);
+}
+
+struct Case {
+  const char* name;
+  const char* file;  // its extension picks OIIO's writer
+  uint64_t w, h;
+  int channels;
+  OIIO::TypeDesc type;
+  int tile_px;
+  std::function<void(OIIO::ImageSpec&)> configure;
+  const char* decoder;  // the summary's decoder with --reader auto
+  double scale = 1.0;   // sample = pattern * scale (+ offset)
+  double offset = 0.0;
+};
+
+std::ostream& operator<<(std::ostream& os, const Case& c) { return os << c.name; }
+
+TilerSummary tileWith(const std::string& in, const std::string& out, ImageReader reader,
+                      uint64_t budget_mb = 256, unsigned threads = 2) {
+  TilerOptions o;
+  o.input_path = in;
+  o.output_path = out;
+  o.tile_px = 64;
+  o.threads = threads;
+  o.fsync = false;
+  o.reader = reader;
+  o.memory_budget_bytes = budget_mb << 20;
+  TilerSummary summary;
+  const Status s = tileImage(o, &summary);
+  EXPECT_TRUE(s.isOk()) << in << ": " << s.toString();
+  return summary;
+}
+
+class Readers : public ::testing::TestWithParam<Case> {};
+
+TEST_P(Readers, GiveOpenImageIosTiles) {
+  const Case& c = GetParam();
+  TempDir dir;
+  const std::string in = dir.file(c.file);
+  ASSERT_TRUE(writeImage(in, c.w, c.h, c.channels, c.type,
+                         [&](uint64_t x, uint64_t y, int ch) { return pattern(x, y, ch) * c.scale + c.offset; },
+                         c.tile_px, c.configure));
+  const TilerSummary ours = tileWith(in, dir.file("ours.cst"), ImageReader::kAuto);
+  const TilerSummary oiio = tileWith(in, dir.file("oiio.cst"), ImageReader::kOpenImageIO);
+  EXPECT_EQ(ours.decoder, c.decoder);
+  EXPECT_EQ(oiio.decoder, "openimageio");
+  EXPECT_EQ(ours.input_type, oiio.input_type);
+  EXPECT_EQ(ours.format, oiio.format);
+  EXPECT_EQ(ours.clamped_samples, oiio.clamped_samples);
+  expectSameTiles(dir.file("oiio.cst"), dir.file("ours.cst"));
+}
+
+auto set(const char* key, const char* value) {
+  return [=](OIIO::ImageSpec& s) { s.attribute(key, value); };
+}
+auto setInt(const char* key, int value) {
+  return [=](OIIO::ImageSpec& s) { s.attribute(key, value); };
+}
+
+const OIIO::TypeDesc kU8 = OIIO::TypeDesc::UINT8, kU16 = OIIO::TypeDesc::UINT16,
+                     kI16 = OIIO::TypeDesc::INT16, kF32 = OIIO::TypeDesc::FLOAT,
+                     kF64 = OIIO::TypeDesc::DOUBLE;
+
+INSTANTIATE_TEST_SUITE_P(
+    Kinds, Readers,
+    ::testing::Values(
+        Case{"TiffRgbStrips", "a.tif", 301, 257, 3, kU8, 0, set("compression", "none"), "libtiff"},
+        Case{"TiffRgbTiledDeflate", "a.tif", 300, 200, 3, kU8, 64, set("compression", "zip"), "libtiff"},
+        Case{"TiffRgbaLzw", "a.tif", 257, 131, 4, kU8, 0, set("compression", "lzw"), "libtiff"},
+        Case{"TiffGreyAlpha", "a.tif", 130, 70, 2, kU8, 32, set("compression", "zip"), "libtiff"},
+        Case{"TiffGrey16Tiled", "a.tif", 200, 190, 1, kU16, 48, set("compression", "zip"), "libtiff", 250.0},
+        Case{"TiffRgb16Strips", "a.tif", 150, 140, 3, kU16, 0, set("compression", "lzw"), "libtiff", 251.0},
+        Case{"TiffInt16Elevation", "a.tif", 190, 170, 1, kI16, 0, set("compression", "zip"), "libtiff", 40.0, -3000.0},
+        Case{"TiffFloatClamped", "a.tif", 140, 120, 1, kF32, 16, set("compression", "zip"), "libtiff", 1.0 / 200.0, -0.1},
+        Case{"TiffDoubleRgb", "a.tif", 90, 80, 3, kF64, 0, set("compression", "none"), "libtiff", 1.0 / 255.0},
+        Case{"TiffJpegStrips", "a.tif", 200, 150, 3, kU8, 0, set("compression", "jpeg"), "libtiff"},
+        Case{"BigTiff", "a.tif", 170, 90, 3, kU8, 32,
+             [](OIIO::ImageSpec& s) { s.attribute("tiff:bigtiff", 1); s.attribute("compression", "zip"); },
+             "libtiff"},
+        Case{"TiffSeparatePlanesGoToOpenImageIo", "a.tif", 120, 100, 3, kU8, 0,
+             set("planarconfig", "separate"), "openimageio"},
+        Case{"JpegBaseline", "a.jpg", 333, 222, 3, kU8, 0, setInt("Compression", 90), "libjpeg"},
+        Case{"JpegGrey", "a.jpg", 201, 199, 1, kU8, 0, {}, "libjpeg"},
+        Case{"JpegProgressive", "a.jpg", 400, 300, 3, kU8, 0, setInt("jpeg:progressive", 1), "libjpeg"},
+        Case{"PngRgb", "a.png", 211, 173, 3, kU8, 0, {}, "libpng"},
+        Case{"PngRgba", "a.png", 99, 77, 4, kU8, 0, {}, "libpng"},
+        Case{"PngGrey16", "a.png", 120, 110, 1, kU16, 0, {}, "libpng", 257.0},
+        Case{"PngGreyAlpha16", "a.png", 64, 100, 2, kU16, 0, {}, "libpng", 200.0}),
+    [](const ::testing::TestParamInfo<Case>& info) { return std::string(info.param.name); });
+
+// clipstream-tile's JSON summary of tiling `in` with extra `args`: a child
+// process, so that the memory plan sees the program's own memory (this test
+// binary links OpenImageIO).
+nlohmann::json tileCli(const TempDir& dir, const std::string& in, const std::string& out,
+                       std::vector<std::string> args) {
+  const std::string json = dir.file("summary.json");
+  std::vector<std::string> all = {in, out, "-f", "-q", "--no-fsync", "--tile-size", "64",
+                                  "--json-summary", json};
+  all.insert(all.end(), args.begin(), args.end());
+  const RunResult r = runTiler(all);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  if (r.exit_code != 0) return nlohmann::json::object();
+  std::ifstream f(json);
+  return nlohmann::json::parse(f);
+}
+
+#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
+constexpr bool kSanitized = true;  // the runtimes' own memory breaks small budgets
+#else
+constexpr bool kSanitized = false;
+#endif
+
+// A progressive JPEG whose coefficients would take more than a quarter of
+// the budget is decoded through a temporary file, within the budget, with
+// OpenImageIO's tiles.
+TEST(Readers, ProgressiveJpegOverTheBudgetSpillsItsCoefficients) {
+  if (kSanitized) GTEST_SKIP() << "memory budgets do not hold under sanitizers";
+  TempDir dir;
+  const std::string in = dir.file("big.jpg");
+  // 4096 x 3072 at 4:2:0: 36 MiB of coefficients, over a quarter of the
+  // 64 MiB budget; OpenImageIO alone would hold them all.
+  ASSERT_TRUE(writeImage(in, 4096, 3072, 3, kU8, pattern, 0, setInt("jpeg:progressive", 1)));
+  const nlohmann::json small = tileCli(dir, in, dir.file("small.cst"), {"--memory-mb", "64"});
+  EXPECT_EQ(small.value("decoder", ""), "libjpeg, coefficients in a temporary file");
+  EXPECT_LT(small.value("peak_rss_bytes", uint64_t(0)), uint64_t(64) << 20);
+  const nlohmann::json roomy = tileCli(dir, in, dir.file("roomy.cst"), {"--memory-mb", "512"});
+  EXPECT_EQ(roomy.value("decoder", ""), "libjpeg");
+  tileCli(dir, in, dir.file("oiio.cst"), {"--reader", "openimageio"});
+  expectSameTiles(dir.file("oiio.cst"), dir.file("small.cst"));
+  expectSameTiles(dir.file("oiio.cst"), dir.file("roomy.cst"));
+}
+
+// Panels (a budget too small for the image's width) read each file in
+// blocks of columns, going back up the image for every block: the tiles
+// are those of one pass down, for every reader.
+TEST(Readers, PanelReadsGiveTheTilesOfOnePass) {
+  if (kSanitized) GTEST_SKIP() << "memory budgets do not hold under sanitizers";
+  TempDir dir;
+  struct File {
+    const char* name;
+    int channels, tile_px;
+    const char* decoder;
+  } files[] = {{"strips.tif", 4, 0, "libtiff"}, {"tiled.tif", 4, 128, "libtiff"},
+               {"wide.png", 4, 0, "libpng"}, {"wide.jpg", 3, 0, "libjpeg"}};
+  for (const File& f : files) {
+    SCOPED_TRACE(f.name);
+    const std::string in = dir.file(f.name);
+    ASSERT_TRUE(writeImage(in, 40000, 300, f.channels, kU8, pattern, f.tile_px));
+    const nlohmann::json whole = tileCli(dir, in, dir.file("whole.cst"), {});
+    const nlohmann::json panels = tileCli(dir, in, dir.file("panels.cst"), {"--memory-mb", "36"});
+    EXPECT_EQ(whole.value("panels", 0), 1);
+    EXPECT_GT(panels.value("panels", 0), 1);
+    EXPECT_EQ(panels.value("decoder", ""), f.decoder);
+    expectSameTiles(dir.file("whole.cst"), dir.file("panels.cst"));
+  }
+}
+
+// One decode thread and eight give the same tiles (the band logic does not
+// depend on which thread decoded what).
+TEST(Readers, TiffDecodeThreadsDoNotChangeTiles) {
+  TempDir dir;
+  const std::string in = dir.file("t.tif");
+  ASSERT_TRUE(writeImage(in, 1000, 700, 3, kU8, pattern, 0, [](OIIO::ImageSpec& s) {
+    s.attribute("compression", "zip");
+    s.attribute("tiff:RowsPerStrip", 7);  // many strips per band, not aligned to the tiler's
+  }));
+  tileWith(in, dir.file("one.cst"), ImageReader::kAuto, 256, 1);
+  tileWith(in, dir.file("eight.cst"), ImageReader::kAuto, 256, 8);
+  expectSameTiles(dir.file("one.cst"), dir.file("eight.cst"));
+}
+
+// Damage found by a decode worker is the run's error, naming the file.
+TEST(Readers, DamagedTiffStripFailsTheRunNamingTheFile) {
+  TempDir dir;
+  const std::string in = dir.file("d.tif");
+  ASSERT_TRUE(writeImage(in, 600, 400, 3, kU8, pattern, 0, set("compression", "zip")));
+  // Overwrite the middle of the file (compressed strips) with garbage.
+  std::vector<uint8_t> bytes = readBytes(in);
+  for (size_t i = bytes.size() / 3; i < bytes.size() / 2; ++i) bytes[i] = uint8_t(i * 37);
+  writeBytes(in, bytes);
+  TilerOptions o;
+  o.input_path = in;
+  o.output_path = dir.file("d.cst");
+  o.fsync = false;
+  TilerSummary summary;
+  const Status s = tileImage(o, &summary);
+  ASSERT_FALSE(s.isOk());
+  EXPECT_NE(s.message.find("d.tif"), std::string::npos) << s.message;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("d.cst")));
+}
+
+}  // namespace
+}  // namespace clipstream::test

@@ -1,0 +1,432 @@
+// TIFF and BigTIFF through libtiff (native_source.h): the strips or tiles
+// under each read are decoded by several threads at once, each with its own
+// handle on the file (a libtiff handle is one thread's), into a band kept
+// for the next read, since the tiler's strips are seldom the file's.
+#include "native_source.h"
+#include "pixel_convert.h"
+
+#include <tiffio.h>
+
+#include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+namespace clipstream {
+namespace {
+
+using namespace pixel_convert;
+namespace fs = std::filesystem;
+
+// A strip that decodes to more than this (a file written as one huge
+// compressed strip) is read a scanline at a time on one thread instead of
+// being held whole; tiles larger than this are left to OpenImageIO.
+constexpr size_t kMaxChunkBytes = size_t(64) << 20;
+// libtiff refuses any single allocation above this, so a damaged header
+// asking for terabytes fails with a message instead of exhausting memory.
+constexpr tmsize_t kMaxTiffAllocBytes = tmsize_t(1) << 30;
+// More decode threads than this gain nothing on one file's bands.
+constexpr unsigned kMaxDecodeThreads = 16;
+
+// One libtiff handle and the errors it reported since they were last taken.
+struct Handle {
+  TIFF* tiff = nullptr;
+  std::string messages;
+  ~Handle() {
+    if (tiff != nullptr) TIFFClose(tiff);
+  }
+};
+
+int onTiffError(TIFF*, void* user, const char* module, const char* fmt, va_list ap) {
+  auto* h = static_cast<Handle*>(user);
+  char text[512];
+  std::vsnprintf(text, sizeof text, fmt, ap);
+  if (!h->messages.empty()) h->messages += '\n';
+  if (module != nullptr && *module) h->messages += std::string(module) + ": ";
+  h->messages += text;
+  return 1;  // handled: nothing reaches libtiff's default (stderr)
+}
+
+// Warnings (tags libtiff does not know, such as GDAL's metadata) are not
+// the user's concern: the pixels decide.
+int onTiffWarning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
+
+Status openHandle(const std::string& path, Handle* h) {
+  TIFFOpenOptions* opts = TIFFOpenOptionsAlloc();
+  if (opts == nullptr) return Status::error(ErrorCode::kOutOfMemory, path + ": cannot open image");
+  TIFFOpenOptionsSetMaxSingleMemAlloc(opts, kMaxTiffAllocBytes);
+  TIFFOpenOptionsSetErrorHandlerExtR(opts, onTiffError, h);
+  TIFFOpenOptionsSetWarningHandlerExtR(opts, onTiffWarning, h);
+  // "m": read(), not mmap(): mapped pages of a large uncompressed input
+  // would count as the tiler's resident memory.
+  h->tiff = TIFFOpenExt(path.c_str(), "rm", opts);
+  TIFFOpenOptionsFree(opts);
+  if (h->tiff == nullptr) {
+    return Status::error(ErrorCode::kIo, path + ": cannot open image: " +
+                                             decoderMessage(h->messages, "not a TIFF libtiff can read"));
+  }
+  h->messages.clear();
+  return Status::ok();
+}
+
+// Runs tasks on the calling thread and up to `extra` threads of its own,
+// started on the first run that has work for them.
+//
+// Thread rule: run() is called by one thread at a time (the source's).
+class DecodePool {
+ public:
+  explicit DecodePool(unsigned extra) : m_wanted(extra) {}
+  ~DecodePool() {
+    {
+      std::lock_guard lock(m_mutex);
+      m_stop = true;
+    }
+    m_wake.notify_all();
+    for (std::thread& t : m_threads) t.join();
+  }
+
+  unsigned workers() const { return 1 + unsigned(m_threads.size()); }
+
+  // fn(task, worker) for every task in [0, n), worker in [0, workers()).
+  void run(size_t n, const std::function<void(size_t, unsigned)>& fn) {
+    if (n > 1) startThreads();
+    if (n <= 1 || m_threads.empty()) {
+      for (size_t i = 0; i < n; ++i) fn(i, 0);
+      return;
+    }
+    {
+      std::lock_guard lock(m_mutex);
+      m_fn = &fn;
+      m_tasks = n;
+      m_next.store(0);
+      m_busy = unsigned(m_threads.size());
+      ++m_generation;
+    }
+    m_wake.notify_all();
+    work(0);
+    std::unique_lock lock(m_mutex);
+    m_done.wait(lock, [&] { return m_busy == 0; });
+    m_fn = nullptr;
+  }
+
+ private:
+  void startThreads() {
+    while (m_threads.size() < m_wanted) {
+      const unsigned id = 1 + unsigned(m_threads.size());
+      try {
+        m_threads.emplace_back([this, id] { loop(id); });
+      } catch (const std::system_error&) {
+        m_wanted = unsigned(m_threads.size());  // the system's thread limit: decode with fewer
+      }
+    }
+  }
+
+  void work(unsigned worker) {
+    for (size_t i = m_next.fetch_add(1); i < m_tasks; i = m_next.fetch_add(1)) (*m_fn)(i, worker);
+  }
+
+  void loop(unsigned worker) {
+    uint64_t seen = 0;
+    std::unique_lock lock(m_mutex);
+    for (;;) {
+      m_wake.wait(lock, [&] { return m_stop || m_generation != seen; });
+      if (m_stop) return;
+      seen = m_generation;
+      lock.unlock();
+      work(worker);
+      lock.lock();
+      if (--m_busy == 0) m_done.notify_one();
+    }
+  }
+
+  unsigned m_wanted;
+  std::vector<std::thread> m_threads;
+  std::mutex m_mutex;
+  std::condition_variable m_wake, m_done;
+  const std::function<void(size_t, unsigned)>* m_fn = nullptr;
+  size_t m_tasks = 0;
+  std::atomic<size_t> m_next{0};
+  unsigned m_busy = 0;
+  uint64_t m_generation = 0;
+  bool m_stop = false;
+};
+
+// How the file's pixels are laid out, read once from the first handle.
+struct Layout {
+  SampleKind kind = SampleKind::kU8;
+  bool doubles = false;       // 64-bit floats, narrowed to float on conversion
+  size_t native_pixel = 0;    // bytes of one decoded pixel
+  bool tiled = false;
+  uint32_t chunk_w = 0;       // tile width, or the image width for strips
+  uint32_t chunk_h = 0;       // tile height, or rows per strip
+  bool scanlines = false;     // strips too large to hold: one row at a time
+  bool jpeg_rgb = false;      // JPEG-compressed YCbCr, delivered as RGB by libtiff
+};
+
+class TiffSource final : public ImageSource {
+ public:
+  TiffSource(std::string path, SourceInfo info, Layout layout, std::unique_ptr<Handle> first,
+             unsigned threads)
+      : m_path(std::move(path)), m_info(std::move(info)), m_layout(layout), m_pool(threads - 1) {
+    m_handles.resize(threads);
+    m_handles[0] = std::move(first);
+    m_scratch.resize(threads);
+  }
+
+  const SourceInfo& info() const override { return m_info; }
+
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
+      return Status::error(ErrorCode::kOutOfRange, m_path + ": row request outside the image");
+    }
+    if (rows == 0 || width == 0) return Status::ok();
+    const size_t np = m_layout.native_pixel;
+    if (m_layout.scanlines) {
+      m_row.resize(size_t(m_info.width_px) * np);
+      for (uint32_t r = 0; r < rows; ++r) {
+        Handle& h = *m_handles[0];
+        if (TIFFReadScanline(h.tiff, m_row.data(), uint32_t(y0 + r), 0) < 0) {
+          return readError(h, "row " + std::to_string(y0 + r));
+        }
+        convert(m_row.data() + x0 * np, width, dst + size_t(r) * dst_stride);
+      }
+      return Status::ok();
+    }
+    Status s = ensureBand(y0, y0 + rows, x0, x0 + width);
+    if (!s) return s;
+    const size_t stride = size_t(m_band_x1 - m_band_x0) * np;
+    for (uint32_t r = 0; r < rows; ++r) {
+      const uint8_t* src = m_band.data() + size_t(y0 + r - m_band_y0) * stride + (x0 - m_band_x0) * np;
+      convert(src, width, dst + size_t(r) * dst_stride);
+    }
+    return Status::ok();
+  }
+
+ private:
+  void convert(const uint8_t* src, uint64_t width, uint8_t* out) {
+    const uint32_t nch = m_info.input_channels;
+    if (m_layout.doubles) {
+      m_narrow.resize(size_t(width) * nch);
+      for (size_t i = 0; i < m_narrow.size(); ++i) {
+        double d;
+        std::memcpy(&d, src + 8 * i, 8);
+        m_narrow[i] = float(d);
+      }
+      src = reinterpret_cast<const uint8_t*>(m_narrow.data());
+    }
+    const bool fast_copy = m_layout.kind == SampleKind::kU8 && formatChannels(m_info.format) == nch;
+    convertNativeRow(m_layout.kind, src, nch, width, m_info.format, fast_copy, out,
+                     &m_info.clamped_samples);
+  }
+
+  Status readError(Handle& h, const std::string& what) {
+    std::string why = decoderMessage(h.messages, "decoder failed");
+    h.messages.clear();
+    return Status::error(ErrorCode::kIo, m_path + ": cannot read " + what + ": " + why);
+  }
+
+  // Makes the band hold every chunk under rows [y0, y1) and columns
+  // [x0, x1): chunk rows already in it are kept, the rest decoded.
+  Status ensureBand(uint64_t y0, uint64_t y1, uint64_t x0, uint64_t x1) {
+    const uint64_t W = m_info.width_px, H = m_info.height_px;
+    const uint64_t cw = m_layout.chunk_w, ch = m_layout.chunk_h;
+    const uint64_t by0 = y0 / ch * ch, by1 = std::min((y1 + ch - 1) / ch * ch, H);
+    const uint64_t bx0 = m_layout.tiled ? x0 / cw * cw : 0;
+    const uint64_t bx1 = m_layout.tiled ? std::min((x1 + cw - 1) / cw * cw, W) : W;
+    if (m_band_valid && by0 >= m_band_y0 && by1 <= m_band_y1 && bx0 == m_band_x0 && bx1 == m_band_x1) {
+      return Status::ok();
+    }
+    const size_t np = m_layout.native_pixel;
+    const size_t stride = size_t(bx1 - bx0) * np;
+    // Rows of the old band that the new one starts with move to its top.
+    uint64_t kept_y1 = by0;
+    if (m_band_valid && bx0 == m_band_x0 && bx1 == m_band_x1 && by0 >= m_band_y0 && by0 < m_band_y1) {
+      kept_y1 = m_band_y1;
+      std::memmove(m_band.data(), m_band.data() + size_t(by0 - m_band_y0) * stride,
+                   size_t(kept_y1 - by0) * stride);
+    }
+    m_band_valid = false;
+    m_band.resize(size_t(by1 - by0) * stride);
+    m_band_y0 = by0, m_band_y1 = by1, m_band_x0 = bx0, m_band_x1 = bx1;
+
+    struct Chunk {
+      uint64_t x, y;  // its first pixel
+    };
+    std::vector<Chunk> chunks;
+    for (uint64_t y = kept_y1; y < by1; y += ch)
+      for (uint64_t x = bx0; x < bx1; x += cw) chunks.push_back({x, y});
+    std::vector<Status> results(chunks.size());
+    m_pool.run(chunks.size(), [&](size_t i, unsigned worker) {
+      results[i] = decodeChunk(chunks[i].x, chunks[i].y, worker, stride);
+    });
+    for (Status& s : results)
+      if (!s) return std::move(s);
+    m_band_valid = true;
+    return Status::ok();
+  }
+
+  // Decodes the strip or tile whose first pixel is (x, y) into the band.
+  Status decodeChunk(uint64_t x, uint64_t y, unsigned worker, size_t stride) {
+    std::unique_ptr<Handle>& slot = m_handles[worker];
+    if (!slot) {
+      auto h = std::make_unique<Handle>();
+      Status s = openHandle(m_path, h.get());
+      if (!s) return s;
+      if (m_layout.jpeg_rgb) TIFFSetField(h->tiff, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+      slot = std::move(h);
+    }
+    Handle& h = *slot;
+    const size_t np = m_layout.native_pixel;
+    const uint64_t W = m_info.width_px, H = m_info.height_px;
+    const uint64_t rows = std::min<uint64_t>(m_layout.chunk_h, H - y);
+    uint8_t* at = m_band.data() + size_t(y - m_band_y0) * stride + size_t(x - m_band_x0) * np;
+    if (!m_layout.tiled) {
+      const uint32_t strip = TIFFComputeStrip(h.tiff, uint32_t(y), 0);
+      const tmsize_t want = tmsize_t(rows * W * np);
+      const tmsize_t got = TIFFReadEncodedStrip(h.tiff, strip, at, want);
+      if (got != want) {
+        if (got >= 0 && h.messages.empty()) h.messages = "strip holds fewer pixels than its rows";
+        return readError(h, "strip " + std::to_string(strip) + " (rows " + std::to_string(y) + "-" +
+                                std::to_string(y + rows - 1) + ")");
+      }
+      return Status::ok();
+    }
+    const size_t tile_bytes = size_t(m_layout.chunk_w) * m_layout.chunk_h * np;
+    std::vector<uint8_t>& scratch = m_scratch[worker];
+    scratch.resize(tile_bytes);
+    const uint32_t tile = TIFFComputeTile(h.tiff, uint32_t(x), uint32_t(y), 0, 0);
+    const tmsize_t got = TIFFReadEncodedTile(h.tiff, tile, scratch.data(), tmsize_t(tile_bytes));
+    if (got != tmsize_t(tile_bytes)) {
+      if (got >= 0 && h.messages.empty()) h.messages = "tile holds fewer pixels than its size";
+      return readError(h, "tile " + std::to_string(tile) + " at (" + std::to_string(x) + ", " +
+                              std::to_string(y) + ")");
+    }
+    const size_t cols = size_t(std::min<uint64_t>(m_layout.chunk_w, W - x));
+    for (uint64_t r = 0; r < rows; ++r) {
+      std::memcpy(at + r * stride, scratch.data() + r * m_layout.chunk_w * np, cols * np);
+    }
+    return Status::ok();
+  }
+
+  std::string m_path;
+  SourceInfo m_info;
+  Layout m_layout;
+  std::vector<std::unique_ptr<Handle>> m_handles;  // one per worker, opened when it first decodes
+  std::vector<std::vector<uint8_t>> m_scratch;     // one tile per worker
+  std::vector<uint8_t> m_band;                     // decoded pixels of [y0, y1) x [x0, x1)
+  uint64_t m_band_y0 = 0, m_band_y1 = 0, m_band_x0 = 0, m_band_x1 = 0;
+  bool m_band_valid = false;
+  std::vector<uint8_t> m_row;     // one scanline (scanline mode)
+  std::vector<float> m_narrow;    // one row of doubles narrowed
+  DecodePool m_pool;              // last: stopped before the handles close
+};
+
+}  // namespace
+
+Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
+                     const ImageReadOptions& read, std::unique_ptr<ImageSource>* out,
+                     bool* covered) {
+  *covered = true;
+  auto first = std::make_unique<Handle>();
+  Status s = openHandle(path, first.get());
+  if (!s) return s;
+  TIFF* t = first->tiff;
+  uint32_t w = 0, h = 0;
+  uint16_t spp = 1, bits = 1, sample_format = SAMPLEFORMAT_UINT, planar = PLANARCONFIG_CONTIG;
+  uint16_t photometric = 0, compression = COMPRESSION_NONE, orientation = ORIENTATION_TOPLEFT;
+  TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &w);
+  TIFFGetField(t, TIFFTAG_IMAGELENGTH, &h);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &spp);
+  TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &bits);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &sample_format);
+  TIFFGetFieldDefaulted(t, TIFFTAG_PLANARCONFIG, &planar);
+  TIFFGetFieldDefaulted(t, TIFFTAG_COMPRESSION, &compression);
+  TIFFGetFieldDefaulted(t, TIFFTAG_ORIENTATION, &orientation);
+  if (!TIFFGetField(t, TIFFTAG_PHOTOMETRIC, &photometric)) photometric = spp >= 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK;
+  if (w == 0 || h == 0) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(w) +
+                                                          "x" + std::to_string(h) + " is empty or not 2D");
+  }
+
+  // What these readers cover; the rest (and its errors) is OpenImageIO's.
+  Layout layout;
+  bool ok = spp >= 1 && spp <= 4 && (planar == PLANARCONFIG_CONTIG || spp == 1);
+  if (sample_format == SAMPLEFORMAT_UINT && bits == 8) {
+    layout.kind = SampleKind::kU8;
+  } else if (sample_format == SAMPLEFORMAT_UINT && bits == 16) {
+    layout.kind = SampleKind::kU16;
+  } else if (sample_format == SAMPLEFORMAT_INT && bits == 16) {
+    layout.kind = SampleKind::kI16;
+  } else if (sample_format == SAMPLEFORMAT_IEEEFP && (bits == 32 || bits == 64)) {
+    layout.kind = SampleKind::kF32;
+    layout.doubles = bits == 64;
+  } else {
+    ok = false;
+  }
+  if (photometric == PHOTOMETRIC_YCBCR) {
+    ok = ok && compression == COMPRESSION_JPEG && spp == 3;
+    layout.jpeg_rgb = true;
+  } else if (photometric == PHOTOMETRIC_RGB) {
+    ok = ok && spp >= 3;
+  } else {
+    ok = ok && photometric == PHOTOMETRIC_MINISBLACK;
+  }
+  if (!ok) {
+    *covered = false;
+    return Status::ok();
+  }
+  if (layout.jpeg_rgb) TIFFSetField(t, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+  layout.native_pixel = size_t(bits / 8) * spp;
+  layout.tiled = TIFFIsTiled(t) != 0;
+  if (layout.tiled) {
+    uint32_t tw = 0, th = 0;
+    TIFFGetField(t, TIFFTAG_TILEWIDTH, &tw);
+    TIFFGetField(t, TIFFTAG_TILELENGTH, &th);
+    if (tw == 0 || th == 0 || size_t(tw) * th * layout.native_pixel > kMaxChunkBytes ||
+        TIFFTileSize64(t) != uint64_t(tw) * th * layout.native_pixel) {
+      *covered = false;
+      return Status::ok();
+    }
+    layout.chunk_w = tw, layout.chunk_h = th;
+  } else {
+    uint32_t rps = h;
+    TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rps);
+    rps = std::clamp<uint32_t>(rps, 1, h);
+    layout.chunk_w = w, layout.chunk_h = rps;
+    layout.scanlines = uint64_t(rps) * w * layout.native_pixel > kMaxChunkBytes;
+    if (TIFFScanlineSize64(t) != uint64_t(w) * layout.native_pixel) {
+      *covered = false;
+      return Status::ok();
+    }
+  }
+
+  SourceInfo info;
+  info.width_px = w;
+  info.height_px = h;
+  info.input_channels = spp;
+  info.input_type = layout.doubles ? "double" : sampleKindName(layout.kind);
+  info.decoder = "libtiff";
+  info.tiled = layout.tiled;
+  info.sequential_only = false;
+  std::error_code ec;
+  info.file_bytes = fs::file_size(path, ec);
+  info.format = forced ? *forced : defaultFormat(spp, layout.kind);
+  if (orientation != ORIENTATION_TOPLEFT) info.warnings.push_back(orientationWarning(path, orientation));
+
+  unsigned threads = read.decode_threads != 0 ? read.decode_threads : std::thread::hardware_concurrency();
+  threads = std::clamp(threads, 1u, kMaxDecodeThreads);
+  if (layout.scanlines) threads = 1;
+  *out = std::make_unique<TiffSource>(path, std::move(info), layout, std::move(first), threads);
+  return Status::ok();
+}
+
+}  // namespace clipstream
