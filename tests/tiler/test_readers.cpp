@@ -6,6 +6,7 @@
 #include "tiler_test_util.h"
 
 #include <clipstream/testing/files.h>
+#include <clipstream/tiler/image_source.h>
 #include <clipstream/tiler/tiler.h>
 
 #include <nlohmann/json.hpp>
@@ -148,6 +149,40 @@ TEST(Readers, ProgressiveJpegOverTheBudgetSpillsItsCoefficients) {
   tileCli(dir, in, dir.file("oiio.cst"), {"--reader", "openimageio"});
   expectSameTiles(dir.file("oiio.cst"), dir.file("small.cst"));
   expectSameTiles(dir.file("oiio.cst"), dir.file("roomy.cst"));
+}
+
+// The reader alone, so that sanitizer builds run it too: a progressive
+// JPEG decoded with its coefficients in a temporary file gives the rows of
+// one decoded with them in memory, read in strips and again from the top.
+TEST(Readers, SpilledCoefficientsDecodeLikeHeldOnes) {
+  TempDir dir;
+  const std::string in = dir.file("p.jpg");
+  // Luma alone is 9 MiB of coefficients: more than one window of the file.
+  ASSERT_TRUE(writeImage(in, 1600, 2800, 3, kU8, pattern, 0, setInt("jpeg:progressive", 1)));
+  auto decodeAll = [&](uint64_t budget_bytes, std::string* decoder) {
+    ImageReadOptions read;
+    read.memory_budget_bytes = budget_bytes;
+    std::unique_ptr<ImageSource> src;
+    const Status s = openImageFile(in, std::nullopt, &src, read);
+    EXPECT_TRUE(s.isOk()) << s.toString();
+    std::vector<uint8_t> px(1600 * 2800 * 3);
+    if (!s) return px;
+    *decoder = src->info().decoder;
+    for (uint64_t y = 0; y < 2800; y += 100) {
+      EXPECT_TRUE(src->readRows(y, 100, 0, 1600, px.data() + y * 4800, 4800).isOk());
+    }
+    // Back to the top: decoded again from the start, same rows.
+    std::vector<uint8_t> again(4800 * 10);
+    EXPECT_TRUE(src->readRows(5, 10, 0, 1600, again.data(), 4800).isOk());
+    EXPECT_TRUE(std::equal(again.begin(), again.end(), px.begin() + 5 * 4800));
+    return px;
+  };
+  std::string spilled_by, held_by;
+  const std::vector<uint8_t> spilled = decodeAll(uint64_t(4) << 20, &spilled_by);  // 12.8 MiB > 1 MiB
+  const std::vector<uint8_t> held = decodeAll(0, &held_by);
+  EXPECT_EQ(spilled_by, "libjpeg, coefficients in a temporary file");
+  EXPECT_EQ(held_by, "libjpeg");
+  EXPECT_TRUE(spilled == held);
 }
 
 // Panels (a budget too small for the image's width) read each file in
