@@ -51,12 +51,15 @@ dpkg-deb --contents build/clipstream_*.deb
 rm -rf "$prefix"
 trap - EXIT
 
-echo "== ThreadSanitizer build of the store, streamer and HTTP tests =="
+echo "== ThreadSanitizer build of the store, streamer, HTTP and image reader tests =="
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=thread -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net
+cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_tiler
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
   ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
+# ... and the tiler's own image readers, whose TIFF decode runs on threads.
+TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
+  ctest --test-dir build-tsan -R '^(Kinds/)?Readers\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
 
 # A test is run a second time only if it fails the first: LeakSanitizer's
 # tracer now and then crashes on the way out of a test whose body passed
@@ -73,10 +76,15 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 # in two clean-clone runs under this step's parallel load, while passing
 # alone 15 times (docs/decisions.md, "The ASan step retries..."). Without a GL
 # context these tests skip; on the CI machine llvmpipe provides one.
-echo "== AddressSanitizer + UBSan build of the stability scenarios (texture and terrain) and soak, leak-checked =="
+echo "== AddressSanitizer + UBSan build of the image readers and the stability scenarios (texture and terrain) and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-asan -j "$jobs" --target test_eval
+cmake --build build-asan -j "$jobs" --target test_eval test_tiler
+# The tiler's image readers (libjpeg's coefficients in a temporary file,
+# libtiff's bands, libpng) first: no GL, no retry.
+ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
+  UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
+  ctest --test-dir build-asan -R '^(Kinds/)?Readers\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \
   UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
   ctest --test-dir build-asan -R '^(Methods/)?(Stability|TerrainStability|TerrainFlight|TerrainAccuracy)\.' \

@@ -6,6 +6,7 @@
 #include "tiler_test_util.h"
 
 #include <clipstream/testing/files.h>
+#include <clipstream/testing/test_data.h>
 #include <clipstream/tiler/image_source.h>
 #include <clipstream/tiler/tiler.h>
 
@@ -108,6 +109,24 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"PngGrey16", "a.png", 120, 110, 1, kU16, 0, {}, "libpng", 257.0},
         Case{"PngGreyAlpha16", "a.png", 64, 100, 2, kU16, 0, {}, "libpng", 200.0}),
     [](const ::testing::TestParamInfo<Case>& info) { return std::string(info.param.name); });
+
+// The real GeoTIFFs (colour, int16 and float DEMs with no-data): the same
+// tiles through libtiff as through OpenImageIO.
+TEST(Readers, RealGeoTiffsGiveOpenImageIosTiles) {
+  std::vector<std::string> inputs = {bundledDataPath("mount_st_helens_30m.tif")};
+  for (const char* name : {"RGB.byte.tif", "mt_rainier_90m.tif"}) {
+    if (!sharedDataPath(name).empty()) inputs.push_back(sharedDataPath(name));
+  }
+  for (const std::string& in : inputs) {
+    SCOPED_TRACE(in);
+    TempDir dir;
+    const TilerSummary ours = tileWith(in, dir.file("ours.cst"), ImageReader::kAuto);
+    tileWith(in, dir.file("oiio.cst"), ImageReader::kOpenImageIO);
+    EXPECT_EQ(ours.decoder, "libtiff");
+    expectSameTiles(dir.file("oiio.cst"), dir.file("ours.cst"));
+  }
+  if (inputs.size() < 3) GTEST_SKIP() << "St Helens passed; " << sharedDataAbsent("RGB.byte.tif");
+}
 
 // clipstream-tile's JSON summary of tiling `in` with extra `args`: a child
 // process, so that the memory plan sees the program's own memory (this test
