@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <functional>
 #include <mutex>
+#include <new>
 #include <system_error>
 #include <thread>
 #include <vector>
@@ -266,7 +267,12 @@ class TiffSource final : public ImageSource {
       for (uint64_t x = bx0; x < bx1; x += cw) chunks.push_back({x, y});
     std::vector<Status> results(chunks.size());
     m_pool.run(chunks.size(), [&](size_t i, unsigned worker) {
-      results[i] = decodeChunk(chunks[i].x, chunks[i].y, worker, stride);
+      try {
+        results[i] = decodeChunk(chunks[i].x, chunks[i].y, worker, stride);
+      } catch (const std::bad_alloc&) {  // a worker must not throw: the run fails instead
+        results[i] = Status::error(ErrorCode::kOutOfMemory,
+                                   m_path + ": an allocation failed while decoding");
+      }
     });
     for (Status& s : results)
       if (!s) return std::move(s);
