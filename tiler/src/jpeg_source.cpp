@@ -9,6 +9,7 @@
 // application may replace (libjpeg.txt, "Memory management").
 #include "native_source.h"
 #include "pixel_convert.h"
+#include "sequential_source.h"
 
 #include <cstdio>  // jpeglib.h needs FILE first
 #include <jpeglib.h>
@@ -280,7 +281,7 @@ class Decoder {
     return Status::ok();
   }
 
-  JDIMENSION nextRow() const { return m_cinfo.output_scanline; }
+  uint64_t nextRow() const { return m_cinfo.output_scanline; }
 
   // Decodes the next scanline into `row`.
   Status readRow(uint8_t* row) {
@@ -315,57 +316,6 @@ class Decoder {
   JpegError m_err{};
   Spill m_spill;
   bool m_created = false;
-};
-
-class JpegSource final : public ImageSource {
- public:
-  JpegSource(std::string path, SourceInfo info, J_COLOR_SPACE space, bool spill,
-             std::unique_ptr<Decoder> decoder)
-      : m_path(std::move(path)), m_info(std::move(info)), m_space(space), m_spill(spill),
-        m_decoder(std::move(decoder)) {}
-
-  const SourceInfo& info() const override { return m_info; }
-
-  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
-                  size_t dst_stride) override {
-    if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
-      return Status::error(ErrorCode::kOutOfRange, m_path + ": row request outside the image");
-    }
-    if (y0 < m_decoder->nextRow()) {
-      // Back up the image: decode again from the start.
-      auto again = std::make_unique<Decoder>();
-      Status s = again->open(m_path);
-      if (s) s = again->start(m_space, m_spill);
-      if (!s) return s;
-      m_decoder = std::move(again);
-    }
-    const uint32_t nch = m_info.input_channels;
-    const bool fast_copy = formatChannels(m_info.format) == nch;
-    const bool direct = fast_copy && x0 == 0 && width == m_info.width_px;
-    m_row.resize(size_t(m_info.width_px) * nch);
-    while (m_decoder->nextRow() < y0) {
-      Status s = m_decoder->readRow(m_row.data());
-      if (!s) return s;
-    }
-    for (uint32_t r = 0; r < rows; ++r) {
-      uint8_t* out = dst + size_t(r) * dst_stride;
-      Status s = m_decoder->readRow(direct ? out : m_row.data());
-      if (!s) return s;
-      if (!direct) {
-        convertNativeRow(SampleKind::kU8, m_row.data() + x0 * nch, nch, width, m_info.format,
-                         fast_copy, out, &m_info.clamped_samples);
-      }
-    }
-    return Status::ok();
-  }
-
- private:
-  std::string m_path;
-  SourceInfo m_info;
-  J_COLOR_SPACE m_space;
-  bool m_spill;
-  std::unique_ptr<Decoder> m_decoder;  // started
-  std::vector<uint8_t> m_row;
 };
 
 }  // namespace
@@ -417,7 +367,14 @@ Status openJpegImage(const std::string& path, std::optional<PixelFormat> forced,
   // start: the tiler's memory plan then sees what they take.
   s = decoder->start(space, spill);
   if (!s) return s;
-  *out = std::make_unique<JpegSource>(path, std::move(info), space, spill, std::move(decoder));
+  auto restart = [path, space, spill](std::unique_ptr<Decoder>* again) {
+    *again = std::make_unique<Decoder>();
+    Status st = (*again)->open(path);
+    if (st) st = (*again)->start(space, spill);
+    return st;
+  };
+  *out = std::make_unique<SequentialSource<Decoder>>(path, std::move(info), SampleKind::kU8,
+                                                     std::move(decoder), restart);
   return Status::ok();
 }
 

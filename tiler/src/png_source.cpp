@@ -4,6 +4,7 @@
 // the whole image at once) are OpenImageIO's.
 #include "native_source.h"
 #include "pixel_convert.h"
+#include "sequential_source.h"
 
 #include <png.h>
 
@@ -109,55 +110,6 @@ class Decoder {
   uint64_t m_next_row = 0;
 };
 
-class PngSource final : public ImageSource {
- public:
-  PngSource(std::string path, SourceInfo info, SampleKind kind, std::unique_ptr<Decoder> decoder)
-      : m_path(std::move(path)), m_info(std::move(info)), m_kind(kind), m_decoder(std::move(decoder)) {}
-
-  const SourceInfo& info() const override { return m_info; }
-
-  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
-                  size_t dst_stride) override {
-    if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
-      return Status::error(ErrorCode::kOutOfRange, m_path + ": row request outside the image");
-    }
-    if (y0 < m_decoder->nextRow()) {
-      // Back up the image: decode again from the start.
-      auto again = std::make_unique<Decoder>();
-      Status s = again->open(m_path);
-      if (s) s = again->start();
-      if (!s) return s;
-      m_decoder = std::move(again);
-    }
-    const uint32_t nch = m_info.input_channels;
-    const size_t np = sampleBytes(m_kind) * nch;
-    const bool fast_copy = m_kind == SampleKind::kU8 && formatChannels(m_info.format) == nch;
-    const bool direct = fast_copy && x0 == 0 && width == m_info.width_px;
-    m_row.resize(size_t(m_info.width_px) * np);
-    while (m_decoder->nextRow() < y0) {
-      Status s = m_decoder->readRow(m_row.data());
-      if (!s) return s;
-    }
-    for (uint32_t r = 0; r < rows; ++r) {
-      uint8_t* out = dst + size_t(r) * dst_stride;
-      Status s = m_decoder->readRow(direct ? out : m_row.data());
-      if (!s) return s;
-      if (!direct) {
-        convertNativeRow(m_kind, m_row.data() + x0 * np, nch, width, m_info.format, fast_copy, out,
-                         &m_info.clamped_samples);
-      }
-    }
-    return Status::ok();
-  }
-
- private:
-  std::string m_path;
-  SourceInfo m_info;
-  SampleKind m_kind;
-  std::unique_ptr<Decoder> m_decoder;
-  std::vector<uint8_t> m_row;
-};
-
 }  // namespace
 
 Status openPngImage(const std::string& path, std::optional<PixelFormat> forced,
@@ -207,7 +159,14 @@ Status openPngImage(const std::string& path, std::optional<PixelFormat> forced,
   }
   s = decoder->start();
   if (!s) return s;
-  *out = std::make_unique<PngSource>(path, std::move(info), kind, std::move(decoder));
+  auto restart = [path](std::unique_ptr<Decoder>* again) {
+    *again = std::make_unique<Decoder>();
+    Status st = (*again)->open(path);
+    if (st) st = (*again)->start();
+    return st;
+  };
+  *out = std::make_unique<SequentialSource<Decoder>>(path, std::move(info), kind, std::move(decoder),
+                                                     restart);
   return Status::ok();
 }
 
