@@ -238,10 +238,8 @@ class Decoder {
   // Opens the file and reads its header (markers kept for the EXIF block).
   Status open(const std::string& path) {
     m_path = path;
-    m_file = std::fopen(path.c_str(), "rb");
-    if (m_file == nullptr) {
-      return Status::error(ErrorCode::kIo, path + ": cannot open: " + std::strerror(errno));
-    }
+    Status opened = openInputFile(path, &m_file);
+    if (!opened) return opened;
     m_cinfo.err = jpeg_std_error(&m_err.pub);
     m_err.pub.error_exit = onJpegError;
     m_err.pub.emit_message = onJpegMessage;

@@ -3,10 +3,17 @@
 #include "native_source.h"
 
 #include <array>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 
 namespace clipstream {
+
+Status openInputFile(const std::string& path, std::FILE** out) {
+  *out = std::fopen(path.c_str(), "rb");
+  if (*out == nullptr) return Status::error(ErrorCode::kIo, path + ": cannot open: " + std::strerror(errno));
+  return Status::ok();
+}
 
 uint16_t exifOrientation(const uint8_t* data, size_t size) {
   if (data == nullptr || size < 8) return 1;

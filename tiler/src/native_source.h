@@ -15,6 +15,7 @@
 #include <clipstream/tiler/image_source.h>
 
 #include <cstddef>
+#include <cstdio>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -44,6 +45,10 @@ Status openJpegImage(const std::string& path, std::optional<PixelFormat> forced,
 Status openPngImage(const std::string& path, std::optional<PixelFormat> forced,
                     const ImageReadOptions& read, std::unique_ptr<ImageSource>* out,
                     bool* covered);
+
+// Opens `path` for reading with stdio (what libjpeg and libpng read from);
+// kIo naming the file and the reason otherwise.
+Status openInputFile(const std::string& path, std::FILE** out);
 
 // The Orientation tag (0x0112) of the first IFD of a TIFF-structured EXIF
 // block (without the "Exif\0\0" prefix), every offset checked; 1 (as

@@ -22,6 +22,10 @@ namespace fs = std::filesystem;
 
 using namespace pixel_convert;
 
+// Scratch reads are split so one OIIO call never needs more than this many
+// bytes of native pixels, whatever the image width.
+constexpr size_t kMaxScratchBytes = size_t(8) << 20;
+
 class OiioSource final : public ImageSource {
  public:
   OiioSource(std::string path, std::unique_ptr<OIIO::ImageInput> input, SourceInfo info,

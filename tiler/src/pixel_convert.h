@@ -63,10 +63,6 @@ inline void convertHeightRow(const T* src, uint32_t nch, uint64_t width, PixelFo
   }
 }
 
-// Scratch reads are split so one OIIO call never needs more than this many
-// bytes of native pixels, whatever the image width.
-inline constexpr size_t kMaxScratchBytes = size_t(8) << 20;
-
 enum class SampleKind { kU8, kU16, kI16, kF32 };
 
 // One sample of the input converted to the target's bit depth (8 or 16).

@@ -47,10 +47,8 @@ class Decoder {
 
   Status open(const std::string& path) {
     m_path = path;
-    m_file = std::fopen(path.c_str(), "rb");
-    if (m_file == nullptr) {
-      return Status::error(ErrorCode::kIo, path + ": cannot open: " + std::strerror(errno));
-    }
+    Status opened = openInputFile(path, &m_file);
+    if (!opened) return opened;
     m_png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &m_err, onPngError, onPngWarning);
     if (m_png != nullptr) m_info = png_create_info_struct(m_png);
     if (m_png == nullptr || m_info == nullptr) {
