@@ -54,7 +54,7 @@ trap - EXIT
 echo "== ThreadSanitizer build of the store, streamer, HTTP and image reader tests =="
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=thread -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_tiler
+cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_tiler_readers
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
   ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
 # ... and the tiler's own image readers, whose TIFF decode runs on threads.
@@ -79,7 +79,7 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
 echo "== AddressSanitizer + UBSan build of the image readers and the stability scenarios (texture and terrain) and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-asan -j "$jobs" --target test_eval test_tiler
+cmake --build build-asan -j "$jobs" --target test_eval_stability test_tiler_readers
 # The tiler's image readers (libjpeg's coefficients in a temporary file,
 # libtiff's bands, libpng) first: no GL, no retry.
 ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp" \

@@ -108,7 +108,7 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"PngRgba", "a.png", 99, 77, 4, kU8, 0, {}, "libpng"},
         Case{"PngGrey16", "a.png", 120, 110, 1, kU16, 0, {}, "libpng", 257.0},
         Case{"PngGreyAlpha16", "a.png", 64, 100, 2, kU16, 0, {}, "libpng", 200.0}),
-    [](const ::testing::TestParamInfo<Case>& info) { return std::string(info.param.name); });
+    [](const ::testing::TestParamInfo<Case>& c) { return std::string(c.param.name); });
 
 // The real GeoTIFFs (colour, int16 and float DEMs with no-data): the same
 // tiles through libtiff as through OpenImageIO.
