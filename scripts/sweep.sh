@@ -52,14 +52,14 @@ mkdir -p "$WORK" "$DATA" "$CHARTS"
 # ---- build ------------------------------------------------------------------
 scripts/deps.sh
 need=()
-for t in tiler/clipstream-tile eval/clipstream-fly streamer/clipstream-trace tests/eval/test_eval; do
+for t in tiler/clipstream-tile eval/clipstream-fly streamer/clipstream-trace tests/eval/test_eval_stability; do
   [[ -x "$BUILD/$t" ]] || need+=("$(basename "$t")")
 done
 if [[ ! -f "$BUILD/build.ninja" ]]; then
   cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 fi
 echo "sweep: building ${need[*]:-(up to date check)}"
-cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_eval >/dev/null
+cmake --build "$BUILD" -j "$JOBS" --target clipstream-tile clipstream-fly clipstream-trace test_eval_stability >/dev/null
 # The soak also runs under ASan + UBSan: reuse $ASAN_BUILD, configure it if
 # missing; building brings it up to date (a no-op when it is).
 if (( ! CHARTS_ONLY && ASAN )); then
@@ -67,8 +67,8 @@ if (( ! CHARTS_ONLY && ASAN )); then
     cmake -S . -B "$ASAN_BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
       -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_BENCH=OFF >/dev/null
   fi
-  echo "sweep: building test_eval under ASan in $ASAN_BUILD (minutes when it is new)"
-  cmake --build "$ASAN_BUILD" -j "$JOBS" --target test_eval >/dev/null
+  echo "sweep: building test_eval_stability under ASan in $ASAN_BUILD (minutes when it is new)"
+  cmake --build "$ASAN_BUILD" -j "$JOBS" --target test_eval_stability >/dev/null
 fi
 FLY=${SWEEP_FLY:-$BUILD/eval/clipstream-fly}
 TRACE_TOOL="$BUILD/streamer/clipstream-trace"
@@ -90,6 +90,18 @@ cat >"$LINE" <<JSON
   {"t": 0, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30},
   {"t": 1000, "x": 33654432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30}]}
 JSON
+# Snap turns: the line's start, a quarter turn every second (60 frames at
+# x1), each a cut (renderer/flight.h, isCut()); time to sharp after each.
+TURN="$WORK/turn.json"
+cat >"$TURN" <<JSON
+{"interpolation": "step", "keyframes": [
+  {"t": 0, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30},
+  {"t": 1, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 180, "pitch_deg": -30},
+  {"t": 2, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 270, "pitch_deg": -30},
+  {"t": 3, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 0, "pitch_deg": -30},
+  {"t": 4, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30},
+  {"t": 5, "x": 33554432, "y": 200, "z": 33554432, "heading_deg": 90, "pitch_deg": -30}]}
+JSON
 RUNS=()
 add() { RUNS+=("$1|$2|$3"); }
 # realtime NAME WEIGHT ARGS: the same flight without --deterministic, run
@@ -104,6 +116,25 @@ for u in 1 2 4 8 16 32 64; do
   add "upload_$u" 12 "$COMMON $DET --frames $FRAMES --speed 20 --upload-tiles $u"
   realtime "upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u"
 done
+# Throttling pays for itself at every speed and upload budget: the same
+# flights with --no-throttle (docs/decisions.md, "Throttling").
+for s in 1 2 5 10 20 50 100; do
+  add "nothrottle_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --no-throttle"
+  realtime "nothrottle_speed_$s" 12 "$COMMON --frames $FRAMES --speed $s --no-throttle"
+done
+for u in 1 2 4 8 16 32 64; do
+  add "nothrottle_upload_$u" 12 "$COMMON $DET --frames $FRAMES --speed 20 --upload-tiles $u --no-throttle"
+  realtime "nothrottle_upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u --no-throttle"
+done
+# Loading what the frames sample: the whole clip window of every needed
+# level (the classic clipmap) beside the default sampled scope, the same
+# flights, turns and teleports.
+for s in 1 2 5 10 20 50 100; do
+  add "window_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --plan-scope window"
+done
+TURNS="--procedural 67108864 --path $TURN --size $SIZE --io-threads 2 --reference --warmup-frames 60"
+add "turn" 12 "$TURNS $DET --frames $LONG"
+add "turn_window" 12 "$TURNS $DET --frames $LONG --plan-scope window"
 # BC1 tiles (transcoded by the loaders), judged against the RGBA8 reference:
 # compression and streaming error together, beside speed_S's streaming error.
 for s in 1 10 100; do
@@ -129,6 +160,7 @@ done
 AUTZEN="$STORE --size $SIZE --io-threads 2 --reference --warmup-frames 60"
 add "ground_truth" 20 "$AUTZEN $DET --path orbit --loop --frames $FRAMES --speed 5 --ground-truth-every 10"
 add "teleport" 12 "$AUTZEN $DET --path teleport --teleport-frames 30 --frames $FRAMES --rest-frames 60"
+add "teleport_window" 12 "$AUTZEN $DET --path teleport --teleport-frames 30 --frames $FRAMES --rest-frames 60 --plan-scope window"
 add "trace" 8 "$STORE --size $SIZE --io-threads 2 $DET --path orbit --loop --speed 5 --frames $TRACE_FRAMES --trace $WORK/orbit.trace"
 # Weights are about 0.75 s each on 2 cores; the soak at 1280x720 costs
 # about 17 ms a frame in the release build and 24 ms under ASan (most of it
@@ -165,18 +197,18 @@ for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
   echo "$FLY $args --out $WORK/$name" >"$WORK/$name.cmd"
   i=$((i + 1)); done_weight=$((done_weight + w))
 done
-STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/eval/test_eval --gtest_filter=Stability.*"
+STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/eval/test_eval_stability --gtest_filter=Stability.*"
 # The soak once more under ASan + UBSan: LeakSanitizer checks at exit, with
 # the driver kept mapped (tests/renderer/lsan_keep_gl_driver.cpp) and
 # tests/lsan.supp; any report makes the process fail (docs/accuracy.md).
 ASAN_ENV=(ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp"
           UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1")
-ASAN_SOAK_CMD="ASAN_OPTIONS='detect_leaks=1 halt_on_error=1' LSAN_OPTIONS=suppressions=tests/lsan.supp UBSAN_OPTIONS='halt_on_error=1 print_stacktrace=1' CLIPSTREAM_STABILITY_OUT=$WORK/soak_asan.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $ASAN_BUILD/tests/eval/test_eval --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget"
+ASAN_SOAK_CMD="ASAN_OPTIONS='detect_leaks=1 halt_on_error=1' LSAN_OPTIONS=suppressions=tests/lsan.supp UBSAN_OPTIONS='halt_on_error=1 print_stacktrace=1' CLIPSTREAM_STABILITY_OUT=$WORK/soak_asan.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $ASAN_BUILD/tests/eval/test_eval_stability --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget"
 if (( ! CHARTS_ONLY )); then
 progress "$i" "stability scenarios"
 rm -f "$WORK/stability.jsonl"
 if ! env CLIPSTREAM_STABILITY_OUT="$WORK/stability.jsonl" CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK \
-    "$BUILD/tests/eval/test_eval" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
+    "$BUILD/tests/eval/test_eval_stability" --gtest_filter='Stability.*' >"$WORK/stability.log" 2>&1; then
   echo; echo "sweep: a stability scenario failed (see $WORK/stability.log); its row says FAIL"
 fi
 done_weight=$((done_weight + STAB_WEIGHT))
@@ -185,7 +217,7 @@ rm -f "$WORK/soak_asan.jsonl"
 if (( ! ASAN )); then
   echo "skipped" >"$WORK/soak_asan.rc"; : >"$WORK/soak_asan.log"
 elif ! env "${ASAN_ENV[@]}" CLIPSTREAM_STABILITY_OUT="$WORK/soak_asan.jsonl" CLIPSTREAM_SOAK=full \
-    CLIPSTREAM_SOAK_FRAMES=$SOAK "$ASAN_BUILD/tests/eval/test_eval" \
+    CLIPSTREAM_SOAK_FRAMES=$SOAK "$ASAN_BUILD/tests/eval/test_eval_stability" \
     --gtest_filter=Stability.SoakKeepsRssFlatAndTheBudget >"$WORK/soak_asan.log" 2>&1; then
   echo "1" >"$WORK/soak_asan.rc"
   echo; echo "sweep: the soak under ASan failed or reported (see $WORK/soak_asan.log); its row says FAIL"
@@ -281,6 +313,37 @@ pair "$DATA/frametime_prefetch.csv" prefetch_on prefetch_off rt1_prefetch_on rt1
   done
 } >"$DATA/throttle_prefetch.csv.tmp.$$"
 publish "$DATA/throttle_prefetch.csv"
+# Throttling on and off at every speed (default upload budget) and every
+# upload budget (x20): accuracy from the deterministic runs, p99 frame time
+# from the real-time ones (range of the repeats).
+{
+  echo "flight,psnr_mean_on,psnr_mean_off,frames_below_30db_on,frames_below_30db_off,rt_frame_ms_p99_on_lo,rt_frame_ms_p99_on_hi,rt_frame_ms_p99_off_lo,rt_frame_ms_p99_off_hi,tiles_loaded_on,tiles_loaded_off"
+  row() {  # LABEL ON OFF
+    echo "$1,$(S "$2" psnr_mean_db),$(S "$3" psnr_mean_db),$(S "$2" frames_below_30db),$(S "$3" frames_below_30db),$(R "$2" frame_ms_p99),$(R "$3" frame_ms_p99),$(S "$2" tiles_loaded),$(S "$3" tiles_loaded)"
+  }
+  for s in 1 2 5 10 20 50 100; do row "speed x$s" "speed_$s" "nothrottle_speed_$s"; done
+  for u in 1 2 4 8 16 32 64; do row "x20 upload $u" "upload_$u" "nothrottle_upload_$u"; done
+  row "x50 upload 4" throttle_on throttle_off
+} >"$DATA/throttle.csv.tmp.$$"
+publish "$DATA/throttle.csv"
+# Over-fetch without the pyramid (clip levels' loads / their sampled tiles),
+# PSNR and RAM hit rate: the sampled scope (the default) against the whole
+# window, the same flights.
+{
+  echo "speed,over_fetch_sampled,over_fetch_window,psnr_mean_sampled,psnr_mean_window,ram_hit_rate_sampled,ram_hit_rate_window,tiles_loaded_stack_sampled,tiles_loaded_stack_window,tiles_sampled_stack"
+  for s in 1 2 5 10 20 50 100; do
+    echo "$s,$(S speed_$s over_fetch_stack_ratio),$(S window_speed_$s over_fetch_stack_ratio),$(S speed_$s psnr_mean_db),$(S window_speed_$s psnr_mean_db),$(S speed_$s ram_hit_rate),$(S window_speed_$s ram_hit_rate),$(S speed_$s tiles_loaded_stack),$(S window_speed_$s tiles_loaded_stack),$(S speed_$s tiles_sampled_stack)"
+  done
+} >"$DATA/plan_scope.csv.tmp.$$"
+publish "$DATA/plan_scope.csv"
+{
+  echo "run,plan_scope,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,over_fetch_stack_ratio,tiles_loaded"
+  for n in turn turn_window teleport teleport_window; do
+    scope=sampled; [[ $n == *_window ]] && scope=window
+    echo "$n,$scope,$(S $n psnr_mean_db),$(S $n psnr_min_db),$(S $n frames_below_30db),$(S $n time_to_sharp_mean),$(S $n time_to_sharp_max),$(S $n over_fetch_stack_ratio),$(S $n tiles_loaded)"
+  done
+} >"$DATA/cuts.csv.tmp.$$"
+publish "$DATA/cuts.csv"
 {
   echo "speed,over_fetch_on,over_fetch_off,psnr_mean_on,psnr_mean_off,tiles_loaded_on,tiles_loaded_off,tiles_sampled"
   for s in 1 10 100; do
@@ -289,12 +352,12 @@ publish "$DATA/throttle_prefetch.csv"
 } >"$DATA/overfetch.csv.tmp.$$"
 publish "$DATA/overfetch.csv"
 {
-  echo "run,io_mode,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,ground_truth_psnr_mean_db"
+  echo "run,io_mode,frames,psnr_mean_db,psnr_min_db,frames_below_30db,time_to_sharp_mean,time_to_sharp_max,frame_ms_p50,frame_ms_p99,frame_ms_max,bytes_read,tiles_uploaded,tiles_loaded,ram_hit_rate,gpu_hit_rate,peak_rss_mib,over_fetch_ratio,over_fetch_stack_ratio,ground_truth_psnr_mean_db"
   for r in "${RUNS[@]}"; do
     IFS='|' read -r name _ _ <<<"$r"
     [[ "$name" == trace ]] && continue
     line="$name"
-    for k in io_mode frames psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_mean time_to_sharp_max frame_ms_p50 frame_ms_p99 frame_ms_max bytes_read tiles_uploaded tiles_loaded ram_hit_rate gpu_hit_rate peak_rss_mib over_fetch_ratio ground_truth_psnr_mean_db; do
+    for k in io_mode frames psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_mean time_to_sharp_max frame_ms_p50 frame_ms_p99 frame_ms_max bytes_read tiles_uploaded tiles_loaded ram_hit_rate gpu_hit_rate peak_rss_mib over_fetch_ratio over_fetch_stack_ratio ground_truth_psnr_mean_db; do
       line="$line,$(S "$name" "$k")"
     done
     echo "$line"
@@ -389,6 +452,22 @@ set ylabel 'PSNR, dB'; set xlabel 'frame'; set yrange [0:100]
 plot '$DATA/frametime_$n.csv' u 1:3 skip 1 w l t '$n $a', '' u 1:5 skip 1 w l t '$n $b'
 unset multiplot"
 done
+plot throttle "
+set multiplot layout 1,2 title 'Throttling on and off: mean PSNR (deterministic) by flight'
+set style data histograms; set style histogram clustered gap 1; set style fill solid 0.6 border -1
+set ylabel 'mean PSNR, dB'; set yrange [0:100]; set xtics rotate by -45 font ',8'; set key bottom left
+plot '$DATA/throttle.csv' u 2:xtic(1) skip 1 t 'throttle on', '' u 3 skip 1 t 'off'
+set ylabel 'p99 frame ms, real time (worst run)'; set yrange [0:*]
+plot '$DATA/throttle.csv' u 7:xtic(1) skip 1 t 'throttle on', '' u 9 skip 1 t 'off'
+unset multiplot"
+plot plan_scope "
+set multiplot layout 1,2 title 'Loading what the frames sample: sampled scope against the whole window'
+set logscale x; set xlabel 'camera speed'; set ylabel 'over-fetch (clip levels: loaded / sampled)'; set yrange [0:*]
+plot '$DATA/plan_scope.csv' u 1:2 skip 1 w lp lw 2 t 'sampled (default)', '' u 1:3 skip 1 w lp lw 2 t 'window', 2 w l dt 2 t '2x'
+unset logscale x; set xlabel 'over-fetch'; set ylabel 'mean PSNR, dB / RAM hit rate x 100'; set yrange [0:100]; set key bottom right
+plot '$DATA/plan_scope.csv' u 2:4 skip 1 w p pt 7 ps 1.5 t 'PSNR, sampled', '' u 3:5 skip 1 w p pt 5 ps 1.5 t 'PSNR, window', \
+     '' u 2:(100*\$6) skip 1 w p pt 6 ps 1.5 t 'hit rate, sampled', '' u 3:(100*\$7) skip 1 w p pt 4 ps 1.5 t 'hit rate, window'
+unset multiplot"
 plot overfetch "
 set title 'Over-fetch (tiles loaded / tiles sampled) with and without frustum-aware priorities'
 set logscale x; set xlabel 'camera speed'; set ylabel 'over-fetch ratio'; set yrange [0:*]
@@ -445,6 +524,23 @@ GEN="$WORK/benchmarks_sweep.md"
       csv2md "$DATA/throttle_prefetch.csv"; echo
     fi
   done
+  echo "### Throttling on and off at every speed and upload budget"
+  echo; echo "![throttle](charts/throttle.png)"; echo
+  echo "The speed and upload-budget flights above, each again with \`--no-throttle\` (\`nothrottle_speed_S\`,"
+  echo "\`nothrottle_upload_T\`), and the x50 / 4-uploads pair of the frame-time trace. PSNR and frames below"
+  echo "30 dB from the deterministic runs, p99 frame time the range of the $RT_RUNS real-time runs each."; echo
+  csv2md "$DATA/throttle.csv"; echo
+  echo "### Loading what the frames sample: over-fetch against PSNR and hit rate"
+  echo; echo "![plan scope](charts/plan_scope.png)"; echo
+  echo "The speed flights (\`speed_S\`, the default sampled scope) and the same with \`--plan-scope window\`"
+  echo "(\`window_speed_S\`). Over-fetch here leaves out the coarse pyramid (loaded whole once): the clip"
+  echo "levels' loads over the clip-level tiles the frames sampled (\`over_fetch_stack_ratio\`)."; echo
+  csv2md "$DATA/plan_scope.csv"; echo
+  echo "### Turns and teleports: time to sharp"
+  echo
+  for f in "$WORK"/turn.cmd "$WORK"/turn_window.cmd "$WORK"/teleport.cmd "$WORK"/teleport_window.cmd; do echo "- \`$(cat "$f")\`"; done; echo
+  echo "\`$TURN\`: a quarter turn every second in place (each a cut); time to sharp in frames to 40 dB."; echo
+  csv2md "$DATA/cuts.csv"; echo
   echo "### Over-fetch with and without frustum-aware priorities"
   echo; echo "![over-fetch](charts/overfetch.png)"; echo
   for f in "$WORK"/frustum_*_10.cmd; do echo "- \`$(cat "$f")\`"; done; echo

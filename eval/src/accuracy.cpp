@@ -84,6 +84,14 @@ Status IdealReference::prepare(const Camera& camera, bool every_level) {
           r.resident[size_t(y - lp.window.y0) * size_t(lp.window.width()) + size_t(x - lp.window.x0)] = 1;
         }
       m_loaded[lp.level] = lp.window;
+      // The streamer's rule for a tile that failed: it keeps its neighbours
+      // from being drawn only where a tap of the frame reads it.
+      if (!lp.sampled.empty()) {
+        r.unread.assign(r.resident.size(), 0);
+        size_t j = 0;
+        for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+          for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j) r.unread[j] = lp.wants(x, y) ? 0 : 1;
+      }
     } else {
       m_loaded[lp.level] = TileRect{};
     }

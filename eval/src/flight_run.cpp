@@ -409,6 +409,19 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
                                     : run->summary.tiles_loaded + run->warmup_loads;
   if (run->summary.tiles_sampled > 0)
     run->summary.over_fetch_ratio = double(colour_loads) / double(run->summary.tiles_sampled);
+  // Without the pyramid: the clip levels' loads over their sampled tiles.
+  const uint32_t pyramid_level = flight->firstPlan().pyramid_level;
+  const std::unordered_set<uint64_t>& sampled = accuracy ? accuracy->sampledSet() : terrain_sampled;
+  for (uint64_t key : sampled)
+    if ((key >> 58) < pyramid_level) ++run->summary.tiles_sampled_stack;
+  if (!run->streamer.layers.empty()) {
+    const std::vector<LevelCounters>& levels = run->streamer.layers[0].levels;
+    for (uint32_t l = 0; l < pyramid_level && l < levels.size(); ++l)
+      run->summary.tiles_loaded_stack += levels[l].loads;
+  }
+  if (run->summary.tiles_sampled_stack > 0)
+    run->summary.over_fetch_stack_ratio =
+        double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
   return Status::ok();
 }
 

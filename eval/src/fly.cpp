@@ -244,6 +244,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.streamer.throttle = o.throttle;
   r.streamer.prefetch = o.prefetch;
   r.streamer.frustum_priority = o.frustum_priority;
+  r.streamer.planner.scope = o.plan_scope;
   r.streamer.terrain_bounds = o.terrain_bounds;
   r.streamer.trace_path = o.trace_path;
   r.streamer.deterministic_io.enabled = o.deterministic;
@@ -307,6 +308,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.throttle = o.throttle;
   d.prefetch = o.prefetch;
   d.frustum_priority = o.frustum_priority;
+  d.plan_scope = o.plan_scope;
   d.path_hint = o.path_hint;
   d.deterministic = o.deterministic;
   d.io_reads_per_frame = o.io_reads_per_frame;

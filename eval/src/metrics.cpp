@@ -133,7 +133,10 @@ std::string RunSummary::toJson() const {
       {"gpu_hit_rate", finite(gpu_hit_rate)},
       {"peak_rss_bytes", peak_rss_bytes},
       {"tiles_sampled", tiles_sampled},
-      {"over_fetch_ratio", finite(over_fetch_ratio)}};
+      {"over_fetch_ratio", finite(over_fetch_ratio)},
+      {"tiles_loaded_stack", tiles_loaded_stack},
+      {"tiles_sampled_stack", tiles_sampled_stack},
+      {"over_fetch_stack_ratio", finite(over_fetch_stack_ratio)}};
   return j.dump();
 }
 

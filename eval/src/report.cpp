@@ -149,6 +149,7 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["throttle"] = d.throttle;
   acc["prefetch"] = d.prefetch;
   acc["frustum_priority"] = d.frustum_priority;
+  acc["plan_scope"] = d.plan_scope == PlanScope::kSampled ? "sampled" : "window";
   acc["path_hint"] = d.path_hint;
   acc["io_mode"] = d.deterministic ? "deterministic" : "real-time";
   acc["io_reads_per_frame"] = d.deterministic ? d.io_reads_per_frame : 0;
@@ -247,6 +248,9 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("tiles_loaded", std::to_string(s.tiles_loaded));
   add("tiles_sampled", std::to_string(s.tiles_sampled));
   add("over_fetch_ratio", num(s.over_fetch_ratio));
+  add("tiles_loaded_stack", std::to_string(s.tiles_loaded_stack));
+  add("tiles_sampled_stack", std::to_string(s.tiles_sampled_stack));
+  add("over_fetch_stack_ratio", num(s.over_fetch_stack_ratio));
   add("ram_hit_rate", num(s.ram_hit_rate));
   add("gpu_hit_rate", num(s.gpu_hit_rate));
   add("peak_rss_mib", num(mib(s.peak_rss_bytes)));
@@ -360,6 +364,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     }
     if (run.seen_frames > 0) {
       row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+    row("over_fetch_stack_ratio", s.over_fetch_stack_ratio, "%.3f");
       row("needed_coarser_frames", double(run.needed_coarser_frames), "%.0f");
       row("needed_finer_frames", double(run.needed_finer_frames), "%.0f");
     }
@@ -372,6 +377,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     row("time_to_sharp_mean", s.time_to_sharp_mean, "%.1f");
     row("time_to_sharp_max", double(s.time_to_sharp_max), "%.0f");
     row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+    row("over_fetch_stack_ratio", s.over_fetch_stack_ratio, "%.3f");
     row("frames_with_holes", double(run.frames_with_holes), "%.0f");
     if (run.ground_truth_frames > 0) row("ground_truth_psnr_mean_db", run.ground_truth_psnr_mean_db, "%.2f");
   }

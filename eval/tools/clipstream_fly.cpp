@@ -64,6 +64,12 @@ int main(int argc, char** argv) {
   app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
   app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
   app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
+  std::string plan_scope = "sampled";
+  app.add_option("--plan-scope", plan_scope,
+                 "What of each clip level is loaded: sampled (the tiles the frames sample and their "
+                 "ancestors, the default) or window (the whole clip window, the classic clipmap); over "
+                 "terrain always the window")
+      ->check(CLI::IsMember({"sampled", "window"}));
   app.add_flag("--no-terrain-bounds", no_terrain_bounds,
                "Over terrain, plan against the plane under the camera and the resident heights' relief "
                "instead of the elevation store's per-tile height bounds");
@@ -146,6 +152,7 @@ int main(int argc, char** argv) {
   o.throttle = !no_throttle;
   o.prefetch = !no_prefetch;
   o.frustum_priority = !no_frustum;
+  o.plan_scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
   o.terrain_bounds = !no_terrain_bounds;
 
   cli::installSignalHandlers();

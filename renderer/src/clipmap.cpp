@@ -33,19 +33,27 @@ UsableMap computeUsableMap(const PyramidGeometry& geometry, uint32_t clip_tiles,
     if (r == nullptr || r->window.empty()) continue;
     const TileRect& w = r->window;
     const LevelInfo& info = geometry.levels[size_t(level)];
+    const bool any_unread = r->unread.size() == r->resident.size();
     auto resident = [&](int64_t x, int64_t y) {
       if (x < 0 || y < 0 || x >= int64_t(info.tiles_x) || y >= int64_t(info.tiles_y))
         return true;  // outside the image: only edge padding is read there
       if (!w.contains(x, y)) return false;
       return r->resident[size_t(y - w.y0) * size_t(w.width()) + size_t(x - w.x0)] != 0;
     };
+    // A neighbour the filter may read: resident, or one no tap of the
+    // frame reads (LevelResidency::unread).
+    auto readable = [&](int64_t x, int64_t y) {
+      if (resident(x, y)) return true;
+      return any_unread && w.contains(x, y) &&
+             r->unread[size_t(y - w.y0) * size_t(w.width()) + size_t(x - w.x0)] != 0;
+    };
     const bool parent_is_pyramid = uint32_t(level) + 1 >= pyramid_level;
     const TileRect& pw = parent_is_pyramid ? TileRect{} : map.windows[size_t(level) + 1];
     for (int64_t y = w.y0; y < w.y1; ++y) {
       for (int64_t x = w.x0; x < w.x1; ++x) {
-        bool ok = true;
+        bool ok = resident(x, y);
         for (int64_t dy = -1; dy <= 1 && ok; ++dy)
-          for (int64_t dx = -1; dx <= 1 && ok; ++dx) ok = resident(x + dx, y + dy);
+          for (int64_t dx = -1; dx <= 1 && ok; ++dx) ok = readable(x + dx, y + dy);
         if (ok && !parent_is_pyramid) {
           const int64_t px = x / 2, py = y / 2;
           ok = pw.contains(px, py) &&

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 namespace clipstream {
 namespace {
@@ -24,6 +25,10 @@ double msBetween(Clock::time_point a, Clock::time_point b) {
 
 bool isCut(const Camera& previous, const Camera& current, double previous_step_texels) {
   const double step = glm::length(current.position - previous.position);
+  const double two_pi = 6.283185307179586;
+  double turn = std::fmod(std::abs(current.heading_rad - previous.heading_rad), two_pi);
+  turn = std::min(turn, two_pi - turn);
+  if (turn > kCutTurnRad || std::abs(current.pitch_rad - previous.pitch_rad) > kCutTurnRad) return true;
   return step > 0.5 * std::max(previous.position.y, 1.0) &&
          step > 8.0 * std::max(previous_step_texels, 1.0);
 }

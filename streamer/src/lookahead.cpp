@@ -64,11 +64,14 @@ void PathLookahead::advance(const PyramidGeometry& geometry, const Viewport& vie
     m_steps.pop_back();
     m_windows.pop_back();
   }
+  // Eviction looks at windows only: the sampled tiles are not needed here.
+  PlannerConfig windows_only = planner;
+  windows_only.scope = PlanScope::kWindow;
   for (int64_t k = m_steps.empty() ? first : m_steps.back() + 1; k <= last; ++k) {
     const Camera camera = hint.camera_at(double(k) * step);
     if (!finiteCamera(camera)) break;  // the hinted path ends here for now
     m_steps.push_back(k);
-    m_windows.push_back(planWindows(planClipmap(geometry, viewport, camera, planner)));
+    m_windows.push_back(planWindows(planClipmap(geometry, viewport, camera, windows_only)));
     ++m_planner_calls;
   }
 }

@@ -113,8 +113,8 @@ int64_t windowOrigin(double centre_tiles, uint32_t clip_tiles, uint32_t level_ti
   return int64_t(std::clamp(start, 0.0, max_origin));
 }
 
-// The rect of a level the plan wants whole: full grid for pyramid levels,
-// the window for needed stack levels, empty otherwise.
+// The rect that holds every tile the plan wants of a level: the full grid
+// for pyramid levels, the window for needed stack levels, empty otherwise.
 TileRect wantedRect(const ClipmapPlan& plan, uint32_t level) {
   if (level < plan.stack.size()) {
     const ClipLevelPlan& l = plan.stack[level];
@@ -123,6 +123,131 @@ TileRect wantedRect(const ClipmapPlan& plan, uint32_t level) {
   if (level >= plan.pyramid_level && level - plan.pyramid_level < plan.pyramid.size())
     return plan.pyramid[level - plan.pyramid_level];
   return {};
+}
+
+bool planWants(const ClipmapPlan& plan, uint32_t level, int64_t x, int64_t y) {
+  if (level < plan.stack.size()) return plan.stack[level].wants(x, y);
+  return wantedRect(plan, level).contains(x, y);
+}
+
+// PlanScope::kSampled. Screen cells of at least kSampleStepMinPx pixels,
+// at most kSampleCellsMax along the longer side: the cell bounds are exact,
+// so the grid only trades tightness for time (320x180: 80 x 45 cells, about
+// 0.1 ms; 1920x1080: 96 x 54).
+constexpr double kSampleStepMinPx = 4.0;
+constexpr double kSampleCellsMax = 96.0;
+// Levels of detail are compared with this much slack: the GPU forms its
+// derivatives per 2x2 quad, from pixel pairs a little apart from the ones
+// sampled here.
+constexpr double kSampleLodSlack = 0.05;
+// Each cell's ground also reaches this many tiles of the level ahead along
+// the horizontal view direction: a camera that starts to move forward
+// finds the next tiles loaded (the prefetch needs a few frames of motion
+// to see it). Measured on the sweep's line, deterministic (docs/decisions.md,
+// "Loading what the frames sample"): none lost 1-3 frames below 30 dB at
+// each start from rest (x10: 98.7 dB mean, x50: 97.1), half a tile one
+// (x50: 97.8), one tile none (99.0, 98.4) for an over-fetch of 1.85 at x1
+// instead of 1.27.
+constexpr double kSampleLeadTiles = 1.0;
+
+// Marks, for every needed stack level m, the window tiles under ground
+// whose level of detail is below m + 1 (PlanScope::kSampled): per screen
+// cell, the level of detail at its corners (log2 of the longer ground step
+// to the next pixel across and up, as the renderer's shader and
+// renderReference() form it), its least value over the corners, and the
+// bounding box of the corners' ground points. On a plane the ground a cell
+// sees is the convex quad of its corners, so the box holds it; a corner
+// above the horizon stands for the ground out to far_h along its azimuth.
+void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, const Camera& camera,
+                 double far_h, ClipmapPlan* plan) {
+  const double W = viewport.width_px, H = viewport.height_px;
+  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
+  std::vector<double> xs, ys;
+  for (double x = 0.5; x < W - 0.5; x += step) xs.push_back(x);
+  xs.push_back(W - 0.5);
+  for (double y = 0.5; y < H - 0.5; y += step) ys.push_back(y);
+  ys.push_back(H - 0.5);
+
+  const double tan_half = std::tan(camera.vfov_rad * 0.5);
+  const glm::dvec3 fwd = camera.forward();
+  const glm::dvec3 right = camera.right() * (tan_half * W / H);
+  const glm::dvec3 up = camera.up() * tan_half;
+  const glm::dvec2 nadir{camera.position.x, camera.position.z};
+  glm::dvec2 ahead{fwd.x, fwd.z};
+  if (glm::length(ahead) > 1e-9) ahead = glm::normalize(ahead); else ahead = {0.0, 0.0};
+  auto ray = [&](double px, double py) {
+    return fwd + right * (2.0 * px / W - 1.0) + up * (1.0 - 2.0 * py / H);
+  };
+  auto hit = [&](double px, double py, glm::dvec2* p) {
+    const glm::dvec3 d = ray(px, py);
+    if (d.y >= -1e-12 || camera.position.y <= 0.0) return false;
+    const double t = -camera.position.y / d.y;
+    *p = nadir + t * glm::dvec2(d.x, d.z);
+    return true;
+  };
+  struct Corner {
+    glm::dvec2 ground;
+    double lod = INFINITY;
+  };
+  std::vector<Corner> corners(xs.size() * ys.size());
+  for (size_t j = 0; j < ys.size(); ++j) {
+    for (size_t i = 0; i < xs.size(); ++i) {
+      Corner& c = corners[j * xs.size() + i];
+      if (!hit(xs[i], ys[j], &c.ground)) {
+        const glm::dvec3 d = ray(xs[i], ys[j]);
+        const glm::dvec2 dxz{d.x, d.z};
+        const double len = glm::length(dxz);
+        c.ground = len > 1e-12 ? nadir + dxz * (far_h / len) : nadir;
+        continue;
+      }
+      glm::dvec2 across, above;
+      if (hit(xs[i] + 1.0, ys[j], &across) && hit(xs[i], ys[j] - 1.0, &above)) {
+        const double rho = std::max(glm::length(across - c.ground), glm::length(above - c.ground));
+        c.lod = std::log2(std::max(rho, 1e-30));
+      }
+    }
+  }
+
+  std::vector<ClipLevelPlan*> levels;
+  for (ClipLevelPlan& lp : plan->stack) {
+    if (!lp.needed || lp.window.empty()) continue;
+    lp.sampled.assign(size_t(lp.window.width()) * size_t(lp.window.height()), 0);
+    levels.push_back(&lp);
+  }
+  if (levels.empty()) return;
+  for (size_t j = 0; j + 1 < ys.size(); ++j) {
+    for (size_t i = 0; i + 1 < xs.size(); ++i) {
+      const Corner* q[4] = {&corners[j * xs.size() + i], &corners[j * xs.size() + i + 1],
+                            &corners[(j + 1) * xs.size() + i], &corners[(j + 1) * xs.size() + i + 1]};
+      double lod = INFINITY;
+      glm::dvec2 lo{INFINITY}, hi{-INFINITY};
+      for (const Corner* c : q) {
+        lod = std::min(lod, c->lod);
+        lo = glm::min(lo, c->ground);
+        hi = glm::max(hi, c->ground);
+      }
+      // No corner with a level of detail: the cell lies above the horizon
+      // (a straight line on the screen), or only touches it, where every
+      // level is finer than the pixels.
+      if (!std::isfinite(lod)) continue;
+      for (ClipLevelPlan* lp : levels) {
+        if (lod - kSampleLodSlack >= double(lp->level) + 1.0) continue;
+        const double tile_texels = double(geometry.tile_px) * levelScale(lp->level);
+        const double tap = 0.5 * levelScale(lp->level);  // bilinear: half a texel of the level
+        const glm::dvec2 lead = ahead * (kSampleLeadTiles * tile_texels);
+        const glm::dvec2 lo2 = glm::min(lo, lo + lead), hi2 = glm::max(hi, hi + lead);
+        const TileRect r = intersect({int64_t(std::floor((lo2.x - tap) / tile_texels)),
+                                      int64_t(std::floor((lo2.y - tap) / tile_texels)),
+                                      int64_t(std::floor((hi2.x + tap) / tile_texels)) + 1,
+                                      int64_t(std::floor((hi2.y + tap) / tile_texels)) + 1},
+                                     lp->window);
+        const size_t w = size_t(lp->window.width());
+        for (int64_t y = r.y0; y < r.y1; ++y)
+          for (int64_t x = r.x0; x < r.x1; ++x)
+            lp->sampled[size_t(y - lp->window.y0) * w + size_t(x - lp->window.x0)] = 1;
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -246,7 +371,16 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
       lp.visible = intersect(fp_rect, lp.window);
     }
   }
+  const bool flat = !config.terrain.bounds && !(config.ground_above > 0.0) && !(config.ground_below > 0.0);
+  if (config.scope == PlanScope::kSampled && flat && fp.any_hit && viewport.height_px > 0)
+    markSampled(geometry, viewport, camera, farLimit(geometry, camera), &plan);
   return plan;
+}
+
+uint64_t ClipLevelPlan::wantedCount() const {
+  if (!needed) return 0;
+  if (sampled.empty()) return uint64_t(window.width()) * uint64_t(window.height());
+  return uint64_t(std::count(sampled.begin(), sampled.end(), uint8_t(1)));
 }
 
 PlanDelta diffPlans(const ClipmapPlan& before, const ClipmapPlan& after) {
@@ -255,13 +389,18 @@ PlanDelta diffPlans(const ClipmapPlan& before, const ClipmapPlan& after) {
                                             after.stack.size() + after.pyramid.size()));
   for (uint32_t l = 0; l < levels; ++l) {
     const TileRect a = wantedRect(before, l), b = wantedRect(after, l);
-    if (a == b) continue;
+    static const std::vector<uint8_t> kWhole;
+    const std::vector<uint8_t>& ma = l < before.stack.size() ? before.stack[l].sampled : kWhole;
+    const std::vector<uint8_t>& mb = l < after.stack.size() ? after.stack[l].sampled : kWhole;
+    if (a == b && ma == mb) continue;
     for (int64_t y = b.y0; y < b.y1; ++y)
       for (int64_t x = b.x0; x < b.x1; ++x)
-        if (!a.contains(x, y)) delta.entered.push_back({l, uint32_t(x), uint32_t(y)});
+        if (planWants(after, l, x, y) && !planWants(before, l, x, y))
+          delta.entered.push_back({l, uint32_t(x), uint32_t(y)});
     for (int64_t y = a.y0; y < a.y1; ++y)
       for (int64_t x = a.x0; x < a.x1; ++x)
-        if (!b.contains(x, y)) delta.left.push_back({l, uint32_t(x), uint32_t(y)});
+        if (planWants(before, l, x, y) && !planWants(after, l, x, y))
+          delta.left.push_back({l, uint32_t(x), uint32_t(y)});
   }
   return delta;
 }
@@ -280,6 +419,7 @@ std::vector<TileKey> rankPlanTiles(const PyramidGeometry& geometry, const Clipma
     const glm::dvec2 focus = plan.focus_texel / tile_texels;
     for (int64_t y = rect.y0; y < rect.y1; ++y) {
       for (int64_t x = rect.x0; x < rect.x1; ++x) {
+        if (!planWants(plan, level, x, y)) continue;
         const double dx = double(x) + 0.5 - focus.x, dy = double(y) + 0.5 - focus.y;
         const int hidden = frustum_first && !visible.contains(x, y) ? 1 : 0;
         ranked.push_back({level, hidden, dx * dx + dy * dy, {level, uint32_t(x), uint32_t(y)}});

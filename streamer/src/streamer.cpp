@@ -37,6 +37,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <limits>
 #include <system_error>
 #include <mutex>
 #include <thread>
@@ -152,7 +153,9 @@ bool sameWindows(const ClipmapPlan& a, const ClipmapPlan& b) {
     return false;
   for (size_t i = 0; i < a.stack.size(); ++i) {
     const ClipLevelPlan &x = a.stack[i], &y = b.stack[i];
-    if (x.needed != y.needed || x.window != y.window || x.visible != y.visible) return false;
+    if (x.needed != y.needed || x.window != y.window || x.visible != y.visible ||
+        x.sampled != y.sampled)
+      return false;
   }
   return true;
 }
@@ -230,8 +233,6 @@ struct Streamer::Impl {
     TerrainView terrain;        // the scene's terrain in this layer's texels (bounds null: flat)
     PathHint hint;              // the streamer's hint seen through layerCamera()
     PathLookahead lookahead;    // windows along that hint
-    uint32_t lod = 0;
-    uint32_t lod_ready_frames = 0;
 
     // Guarded by the streamer's mutex.
     std::vector<LevelCounters> counters;
@@ -287,6 +288,7 @@ struct Streamer::Impl {
   std::vector<LayerTile> prefetch;                       // predicted tiles, after wanted
   std::unordered_set<LayerTile, FastKeyHash> gpu;        // handed off and still wanted
   std::vector<LayerTile> pending;                        // wanted, not yet handed off (rank order)
+  uint64_t upload_budget = 0;  // the last non-zero hand-off budget (tiles); 0: none seen
   // The trace (layer 0's requests): text buffered here, appended to
   // trace_file in blocks and published at shutdown(). `tracing` is false
   // without a trace or after a failure (trace_status says which).
@@ -301,6 +303,9 @@ struct Streamer::Impl {
   mutable std::mutex mutex;
   std::condition_variable work_cv;
   std::deque<Request> queue;  // rank order, front first
+  // Reads the throttle still allows until the next hand-off (readAhead());
+  // the loaders and issueReads() take one per tile they read.
+  int64_t read_allowance = std::numeric_limits<int64_t>::max();
   std::unordered_map<LayerTile, CacheEntry, FastKeyHash> cache;
   std::unordered_map<LayerTile, uint32_t, FastKeyHash> rank;  // wanted + prefetch ranks
   std::unordered_map<LayerTile, FailedTile, FastKeyHash> failed;
@@ -356,7 +361,18 @@ struct Streamer::Impl {
   void buildVictimLists();
   std::vector<LayerTile> rankScene() const;
   void rebuild(const Viewport& viewport);
-  uint32_t computeLod(const Layer& layer, uint32_t index) const;
+  uint32_t servedLod(const Layer& layer, uint32_t index) const;
+  void setReadAllowance(uint64_t budget);
+  // The tile lies in its layer's current plan: a pyramid tile, or inside
+  // a needed stack level's window (where the renderer keeps its slot).
+  bool inNeededWindow(const LayerTile& k) const {
+    if (k.layer >= layers.size()) return false;
+    const ClipmapPlan& plan = layers[k.layer].plan;
+    if (k.key.level >= plan.pyramid_level) return k.key.level - plan.pyramid_level < plan.pyramid.size();
+    if (k.key.level >= plan.stack.size()) return false;
+    const ClipLevelPlan& lp = plan.stack[k.key.level];
+    return lp.needed && lp.window.contains(k.key.x, k.key.y);
+  }
   std::vector<FrameHandoff> handOff(size_t layer_count, size_t max_tiles, size_t max_bytes);
 };
 
@@ -505,7 +521,9 @@ void Streamer::Impl::workerLoop() {
   for (;;) {
     // With deterministic I/O the queue is the render thread's to issue
     // from; workers take only tickets, and finish them before they stop.
-    work_cv.wait(lock, [&] { return stopping || !io_work.empty() || (!deterministic() && !queue.empty()); });
+    work_cv.wait(lock, [&] {
+      return stopping || !io_work.empty() || (!deterministic() && !queue.empty() && read_allowance > 0);
+    });
     if (!io_work.empty()) {
       const std::shared_ptr<IoTicket> ticket = std::move(io_work.front());
       io_work.pop_front();
@@ -558,6 +576,7 @@ void Streamer::Impl::workerLoop() {
       }
       for (size_t j = taken.size(); j-- > 0;) queue.erase(queue.begin() + std::ptrdiff_t(taken[j]));
     }
+    read_allowance -= int64_t(tiles.size());
     lock.unlock();
 
     const size_t n = tiles.size();
@@ -671,7 +690,7 @@ void Streamer::Impl::issueReads() {
   {
     std::lock_guard<std::mutex> lock(mutex);
     if (stopping || loader_threads == 0) return;  // no worker would ever finish a ticket
-    for (uint32_t issued = 0; issued < reads && !queue.empty();) {
+    for (uint32_t issued = 0; issued < reads && !queue.empty() && read_allowance > 0;) {
       const Request request = queue.front();
       queue.pop_front();
       bool reread = false, no_room = false;
@@ -683,6 +702,7 @@ void Streamer::Impl::issueReads() {
       io_issued.push_back(ticket);
       io_work.push_back(std::move(ticket));
       ++issued;
+      --read_allowance;
     }
   }
   work_cv.notify_all();
@@ -772,10 +792,13 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
   for (const LayerTile& k : new_wanted) new_rank.emplace(k, next_rank++);
   for (const LayerTile& k : new_prefetch) new_rank.emplace(k, next_rank++);
 
-  // GPU residency survives only while the tile stays wanted: the renderer
-  // reuses a slot as soon as its tile leaves the window.
+  // GPU residency survives while the tile stays in its needed window (or
+  // the pyramid): the renderer reuses a slot as soon as its tile leaves the
+  // window, and keeps it until then, so a tile that is no longer sampled
+  // (PlanScope::kSampled) but still in the window is drawn again, without
+  // a new upload, when it is sampled again.
   for (auto it = gpu.begin(); it != gpu.end();) {
-    if (new_set.count(*it) == 0) it = gpu.erase(it); else ++it;
+    if (new_set.count(*it) == 0 && !inNeededWindow(*it)) it = gpu.erase(it); else ++it;
   }
   pending.clear();
   for (const LayerTile& k : new_wanted)
@@ -885,48 +908,53 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
   prefetch.swap(new_prefetch);
 }
 
-// Finest level l of `layer` such that every level from the coarsest down to
-// l is ready: a pyramid level with all its tiles on the GPU, a stack level
-// with at least lod_min_coverage of its visible tiles. The missing tiles of
-// a ready level are drawn from their finest usable ancestor (the renderer's
-// usable map), so no tile that is not loaded is ever sampled; demanding
-// every visible tile (coverage 1) kept the whole view several levels too
-// coarse at speed (docs/accuracy.md, "Throttling"). Tiles that failed for
-// good count as done: the renderer shows their ancestor, and one bad tile
-// must not pin the whole view to the coarsest level.
-uint32_t Streamer::Impl::computeLod(const Layer& layer, uint32_t index) const {
+// MaxTextureLOD with throttling on (docs/decisions.md, "Throttling"): the
+// finest needed level that streaming serves now, i.e. that has a wanted
+// tile on the GPU or in RAM or on its way there; the coarsest level when
+// none has. Levels finer than that have nothing to draw, so the clamp never
+// hides a tile the renderer holds: the per-tile fallback (the usable map)
+// draws every missing tile from its finest resident ancestor, and a uniform
+// clamp that hid resident tiles was measured to cost 5-8 dB at speed. What
+// throttling does is on the reads (setReadAllowance()); this level shows it.
+uint32_t Streamer::Impl::servedLod(const Layer& layer, uint32_t index) const {
   const uint32_t levels = layer.geometry.levelCount();
   if (levels == 0) return 0;
   const ClipmapPlan& plan = layer.plan;
-  std::lock_guard<std::mutex> lock(mutex);  // for `failed`
-  auto done = [&](const TileKey& k) {
-    if (gpu.count({index, k}) != 0) return true;
-    const auto f = failed.find({index, k});
-    return f != failed.end() && f->second.code != ErrorCode::kUnavailable;
-  };
-  uint32_t finest = levels;
-  for (uint32_t l = levels; l-- > 0;) {
-    TileRect rect;
-    if (l >= plan.pyramid_level) {
-      if (l - plan.pyramid_level >= plan.pyramid.size()) break;  // no plan yet
-      rect = plan.pyramid[l - plan.pyramid_level];
-    } else {
-      const ClipLevelPlan& lp = plan.stack[l];
-      if (!lp.needed) break;
-      rect = lp.visible;
-    }
-    // Pyramid levels need every tile (they are loaded first and kept);
-    // a stack level is ready with lod_min_coverage of its visible tiles.
-    uint64_t total = 0, ready = 0;
-    for (int64_t y = rect.y0; y < rect.y1; ++y)
-      for (int64_t x = rect.x0; x < rect.x1; ++x, ++total)
-        if (done({l, uint32_t(x), uint32_t(y)})) ++ready;
-    const double need =
-        l >= plan.pyramid_level ? 1.0 : std::clamp(config.lod_min_coverage, 0.0, 1.0);
-    if (double(ready) < need * double(total)) break;
-    finest = l;
+  std::lock_guard<std::mutex> lock(mutex);  // for the cache
+  for (uint32_t l = plan.finest_level; l < plan.pyramid_level && l < plan.stack.size(); ++l) {
+    const ClipLevelPlan& lp = plan.stack[l];
+    if (!lp.needed) continue;
+    for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+      for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) {
+        if (!lp.wants(x, y)) continue;
+        const LayerTile k{index, {l, uint32_t(x), uint32_t(y)}};
+        if (gpu.count(k) != 0 || cache.count(k) != 0) return l;
+      }
   }
-  return std::min(finest, levels - 1);
+  return std::min(plan.pyramid_level, levels - 1);
+}
+
+// The throttle (docs/decisions.md, "Throttling"): with an upload budget of
+// B tiles a frame, the loaders read no further ahead of the uploads than
+// throttle_read_ahead_frames x B wanted tiles waiting in RAM (or on their
+// way) for the GPU. Reads go in load order, coarse levels first, so when
+// the uploads cannot keep up the finer levels wait to be read instead of
+// being read, decoded and evicted unseen, and every read of a coarse tile
+// entering the view finds a loader free. Set once a frame by handOff(),
+// under the lock; no budget seen yet, or throttling off: no limit.
+void Streamer::Impl::setReadAllowance(uint64_t budget) {
+  if (!config.throttle || budget == 0) {
+    read_allowance = std::numeric_limits<int64_t>::max();
+    return;
+  }
+  const uint64_t frames = std::max<uint64_t>(config.throttle_read_ahead_frames, 1);
+  const uint64_t limit = budget > uint64_t(std::numeric_limits<int64_t>::max()) / frames
+                             ? uint64_t(std::numeric_limits<int64_t>::max())
+                             : budget * frames;
+  uint64_t backlog = 0;
+  for (const LayerTile& k : pending)
+    if (cache.count(k) != 0) ++backlog;
+  read_allowance = backlog >= limit ? 0 : int64_t(limit - backlog);
 }
 
 // One colour layer with the identity map (elevation if the source hands out
@@ -966,8 +994,7 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     layer.log2_units_per_texel = layer.spec.source ? -0.5 * std::log2(k.x * k.y) : 0.0;
     layer.role_order = roleOrder(layer.spec.role);
     layer.counters.resize(layer.geometry.levelCount());
-    layer.lod = layer.geometry.levelCount() ? layer.geometry.levelCount() - 1 : 0;
-    layer.published_lod = layer.lod;
+    layer.published_lod = layer.geometry.levelCount() ? layer.geometry.levelCount() - 1 : 0;
     s.any_active = s.any_active || layer.spec.source != nullptr;
   }
   s.loadTerrain();
@@ -1155,9 +1182,12 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
     if (dt >= kMinHistoryS) {
       const glm::dvec3 velocity = (s.history.back().second - s.history.front().second) / dt;
       const glm::dvec3 step = velocity * s.config.prefetch_ahead_s;
-      // A jump farther than two windows of the finest needed level (of any
-      // layer, in its texels) is a teleport, not motion: forget the history
-      // instead of prefetching a path nobody flies.
+      // A jump since the last frame farther than two windows of the finest
+      // needed level (of any layer, in its texels) is a teleport, not
+      // motion: forget the history instead of prefetching a path nobody
+      // flies. (Measured on the predicted move, the rule took fast flight
+      // for teleports: x50 moves 2500 texels in prefetch_ahead_s.)
+      const glm::dvec3 jump = s.history.back().second - s.history[s.history.size() - 2].second;
       bool teleport = false;
       for (size_t i = 0; i < n; ++i) {
         const Impl::Layer& layer = s.layers[i];
@@ -1165,7 +1195,7 @@ void Streamer::update(const Camera& camera, const Viewport& viewport, double tim
         const glm::dvec2 k = layer.spec.texels_per_unit;
         const double window_texels = double(next[i].clip_tiles) * double(layer.geometry.tile_px) *
                                      std::ldexp(1.0, int(next[i].finest_level));
-        if (glm::length(glm::dvec2(step.x * k.x, step.z * k.y)) > kTeleportWindows * window_texels)
+        if (glm::length(glm::dvec2(jump.x * k.x, jump.z * k.y)) > kTeleportWindows * window_texels)
           teleport = true;
       }
       if (teleport) {
@@ -1240,23 +1270,19 @@ std::vector<FrameHandoff> Streamer::Impl::handOff(size_t layer_count, size_t max
       bytes += tile_bytes;
     }
     pending.swap(still_pending);
+    // A budget of 0 hands nothing and tells nothing of the renderer's rate.
+    if (max_tiles > 0) upload_budget = max_tiles;
+    setReadAllowance(upload_budget);
   }
+  work_cv.notify_all();  // the loaders may read again
 
   for (uint32_t i = 0; i < layer_count; ++i) {
     Layer& layer = layers[i];
     FrameHandoff& h = out[i];
-    const uint32_t target = config.throttle ? computeLod(layer, i) : layer.plan.finest_level;
-    if (target >= layer.lod) {
-      layer.lod = target;  // coarser (or equal): at once
-      layer.lod_ready_frames = 0;
-    } else if (++layer.lod_ready_frames >= config.lod_hysteresis_frames) {
-      layer.lod = target;
-      layer.lod_ready_frames = 0;
-    }
-    h.max_texture_lod = layer.lod;
+    h.max_texture_lod = config.throttle ? servedLod(layer, i) : layer.plan.finest_level;
     {
       std::lock_guard<std::mutex> lock(mutex);
-      layer.published_lod = layer.lod;
+      layer.published_lod = h.max_texture_lod;
     }
 
     h.residency.reserve(layer.plan.stack.size());
@@ -1270,6 +1296,12 @@ std::vector<FrameHandoff> Streamer::Impl::handOff(size_t layer_count, size_t max
         for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
           for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j)
             r.resident[j] = gpu.count({i, {lp.level, uint32_t(x), uint32_t(y)}}) ? 1 : 0;
+        if (!lp.sampled.empty()) {
+          r.unread.assign(r.resident.size(), 0);
+          j = 0;
+          for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+            for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j) r.unread[j] = lp.wants(x, y) ? 0 : 1;
+        }
       }
       h.residency.push_back(std::move(r));
     }
@@ -1325,10 +1357,6 @@ void Streamer::resetGpuResidency() {
   }
   s.force_rebuild = true;  // re-queue wanted tiles no longer in RAM
   s.pending = s.wanted;
-  for (Impl::Layer& layer : s.layers) {
-    layer.lod = layer.geometry.levelCount() ? layer.geometry.levelCount() - 1 : 0;
-    layer.lod_ready_frames = 0;
-  }
 }
 
 const ClipmapPlan& Streamer::plan(size_t layer) const {

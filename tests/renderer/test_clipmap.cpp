@@ -63,6 +63,24 @@ TEST(UsableMap, NeedsEveryNeighbourResidentAndInTheWindow) {
   EXPECT_EQ(usableAt(m, 1, 0, 0), 1);  // image corner: outside neighbours only read padding
 }
 
+// A missing neighbour that no tap of the frame reads (LevelResidency::
+// unread, the streamer's sampled plan) does not keep a tile from being
+// drawn; one the frame may read still does, and so does the window's edge.
+TEST(UsableMap, IgnoresMissingNeighboursTheFrameDoesNotRead) {
+  const PyramidGeometry g = geometry1024();
+  const uint32_t clip = 6, pyramid = 2;
+  std::vector<LevelResidency> res{full(0, {4, 4, 10, 10}), full(1, {0, 0, 6, 6})};
+  res[0].resident[(6 - 4) * 6 + (6 - 4)] = 0;  // tile (6, 6) of level 0 missing ...
+  res[0].unread.assign(res[0].resident.size(), 0);
+  res[0].unread[(6 - 4) * 6 + (6 - 4)] = 1;    // ... and never read this frame
+  const UsableMap m = computeUsableMap(g, clip, pyramid, res);
+  EXPECT_EQ(usableAt(m, 0, 7, 7), 1);  // its neighbour is drawn
+  EXPECT_EQ(usableAt(m, 0, 6, 6), 0);  // the missing tile itself never is
+  EXPECT_EQ(usableAt(m, 0, 4, 5), 0);  // the window edge still counts
+  res[0].unread[(6 - 4) * 6 + (6 - 4)] = 0;
+  EXPECT_EQ(usableAt(computeUsableMap(g, clip, pyramid, res), 0, 7, 7), 0) << "read: it blocks";
+}
+
 TEST(UsableMap, NeedsTheParentTileUsable) {
   const PyramidGeometry g = geometry1024();
   const uint32_t clip = 6, pyramid = 2;

@@ -24,6 +24,19 @@ TEST(IsCut, ContinuousMotionIsNotACutButATeleportIs) {
   EXPECT_TRUE(isCut(a, c, 0.0)) << "a jump after standing still";
 }
 
+TEST(IsCut, ASnapTurnIsACutButAFastContinuousTurnIsNot) {
+  Camera a, b, c, d;
+  b.heading_rad = a.heading_rad + 0.1;  // 6 degrees a frame: 360 deg/s
+  c.heading_rad = a.heading_rad + 1.6;  // 90 degrees at once
+  d.heading_rad = 6.2;                  // across the wrap: 4.6 degrees from 0
+  EXPECT_FALSE(isCut(a, b, 0.0));
+  EXPECT_TRUE(isCut(a, c, 0.0));
+  EXPECT_FALSE(isCut(a, d, 0.0)) << "the turn is measured the short way round";
+  Camera e = a;
+  e.pitch_rad = a.pitch_rad - 0.7;
+  EXPECT_TRUE(isCut(a, e, 0.0)) << "a pitch snap";
+}
+
 Camera overTheMiddle(double x_offset = 0.0) {
   Camera c;
   c.position = {double(1 << 19) + x_offset, 300.0, double(1 << 19)};

@@ -76,7 +76,7 @@ struct DeterministicFlight {
 
 // A flight that exercises every path a frame's result depends on: prefetch,
 // a RAM budget of a few windows (evictions, budget skips), 5 % corrupt tiles
-// (failures), the LOD hysteresis, a per-frame upload limit.
+// (failures), a per-frame upload limit (and the throttle it drives).
 std::vector<HandoffRecord> fly(const DeterministicFlight& d, StreamerStats* final_stats = nullptr) {
   constexpr uint32_t kTilePx = 32;
   FaultSpec fault;

@@ -101,7 +101,7 @@ StepResult stepEastAndBack(EvictionMode mode) {
   cfg.prefetch = false;
   cfg.planner.clip_tiles = 8;
   cfg.eviction = mode;
-  cfg.lod_hysteresis_frames = 1;
+  cfg.planner.scope = PlanScope::kWindow;  // whole columns enter and leave
   auto base = procedural(8192);
   const size_t wanted = rankPlanTiles(base->geometry(), planClipmap(base->geometry(), vp, a, cfg.planner)).size();
   cfg.ram_budget_bytes = wanted * (128 * 128 * 4 + kCacheEntryOverheadBytes);

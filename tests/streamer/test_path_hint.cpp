@@ -44,6 +44,7 @@ StreamerConfig orbitConfig(uint64_t budget_tiles, const std::string& trace_path)
   cfg.io_threads = 1;
   cfg.prefetch = false;  // hits then come from eviction alone, as in the replay
   cfg.planner.clip_tiles = 8;
+  cfg.planner.scope = PlanScope::kWindow;  // the replay re-plans whole windows
   cfg.ram_budget_bytes = budget_tiles * (128 * 128 * 4 + kCacheEntryOverheadBytes);
   cfg.trace_path = trace_path;
   return cfg;

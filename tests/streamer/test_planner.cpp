@@ -188,6 +188,7 @@ TEST(Planner, DiffPlansReportsTheColumnsThatEnterAndLeave) {
   const PyramidGeometry g = geometryOf(1 << 16, 1 << 16);
   PlannerConfig cfg;
   cfg.clip_tiles = 8;
+  cfg.scope = PlanScope::kWindow;  // whole windows
   const Viewport vp{800, 600};
   const ClipmapPlan a = planClipmap(g, vp, lookingDown(20000.0 + 64, 20000.0 + 64, 4.0), cfg);
   const ClipmapPlan b = planClipmap(g, vp, lookingDown(20000.0 + 64 + 128, 20000.0 + 64, 4.0), cfg);
@@ -221,6 +222,7 @@ TEST(Planner, RankPutsPyramidFirstThenCoarseToFineVisibleFirstNearFirst) {
   const PyramidGeometry g = geometryOf(1 << 16, 1 << 16);
   PlannerConfig cfg;
   cfg.clip_tiles = 8;
+  cfg.scope = PlanScope::kWindow;  // whole windows
   Camera c = lookingDown(30000.0, 30000.0, 30.0);
   c.pitch_rad = -0.6;
   c.heading_rad = 0.4;

@@ -244,6 +244,7 @@ StreamerConfig sceneConfig(unsigned threads) {
   cfg.io_threads = threads;
   cfg.prefetch = false;
   cfg.planner.clip_tiles = 8;
+  cfg.planner.scope = PlanScope::kWindow;  // whole windows: each layer's are checked
   return cfg;
 }
 

@@ -109,6 +109,7 @@ class FlyAccuracy {
                  bool ground_truth, AccuracyFrame* out);
   Status resize(const Viewport& viewport);
   uint64_t tilesSampled() const { return m_sampled.size(); }
+  const std::unordered_set<uint64_t>& sampledSet() const { return m_sampled; }
   // The streamed frame the last comparing measure() read back.
   const std::vector<uint8_t>& lastStreamed() const { return m_streamed; }
 

@@ -63,6 +63,7 @@ struct FlyOptions {
   bool throttle = true;              // StreamerConfig::throttle
   bool prefetch = true;              // StreamerConfig::prefetch
   bool frustum_priority = true;      // StreamerConfig::frustum_priority
+  PlanScope plan_scope = PlanScope::kSampled;  // PlannerConfig::scope
   bool terrain_bounds = true;        // StreamerConfig::terrain_bounds
   bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
   // Repeatable runs (StreamerConfig::deterministic_io): reads land on a

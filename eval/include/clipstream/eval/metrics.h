@@ -78,6 +78,11 @@ struct RunSummary {
   uint64_t peak_rss_bytes = 0;
   uint64_t tiles_sampled = 0;  // distinct (level, tile) the visible pixels sample, whole run
   double over_fetch_ratio = 0.0;  // tiles_loaded / tiles_sampled; 0 when not measured
+  // The same without the coarse pyramid (levels that fit one clip, loaded
+  // whole once and kept): the clip levels' loads over their sampled tiles.
+  uint64_t tiles_loaded_stack = 0;
+  uint64_t tiles_sampled_stack = 0;
+  double over_fetch_stack_ratio = 0.0;  // 0 when not measured
 
   // One JSON object with the fields above (time_to_sharp_frames as an
   // array). Always valid JSON.

@@ -30,6 +30,7 @@ struct RunDescription {
   bool reference = false;
   TileContent reference_tile_format = TileContent::kRgba8;  // the ideal reference's tiles
   bool throttle = true, prefetch = true, frustum_priority = true, path_hint = false;
+  PlanScope plan_scope = PlanScope::kSampled;
   // Deterministic I/O (DeterministicIo); the other two only count with it.
   bool deterministic = false;
   uint32_t io_reads_per_frame = 0, io_latency_frames = 0;

@@ -45,9 +45,11 @@ namespace clipstream {
 
 // Whether the camera jumped between two consecutive frames: it moved more
 // than half its height above the ground AND more than 8 times the previous
-// frame's movement (with at least one texel of that). A continuous path at
-// any speed moves about as much each frame, so it never counts; a teleport
+// frame's movement (with at least one texel of that), or it turned (heading
+// or pitch) by more than kCutTurnRad. A continuous path at any speed moves
+// about as much each frame, so it never counts; a teleport or a snap turn
 // (a step path) does.
+inline constexpr double kCutTurnRad = 0.5235987755982988;  // 30 degrees: 1800 deg/s at 60 frames/s
 bool isCut(const Camera& previous, const Camera& current, double previous_step_texels);
 
 // The set-up every loop shares: plans the first frame for `camera`, creates

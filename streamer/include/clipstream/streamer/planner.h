@@ -28,6 +28,23 @@ struct TileRect {
   friend bool operator==(const TileRect&, const TileRect&) = default;
 };
 
+// Which tiles of a needed stack level a plan asks to load.
+enum class PlanScope {
+  // The window tiles over ground that the screen samples at this level or
+  // through it: where the pixel's level of detail (the renderer's, from
+  // screen derivatives) is below level + 1. Trilinear filtering reads
+  // level l where the LOD lies in (l - 1, l + 1); the nearer ground, whose
+  // LOD is below l - 1, is kept too, so that every sampled tile has its
+  // ancestors for the per-tile fallback while it loads. Computed on a grid
+  // of screen cells, each cell's ground and LOD range bounded by its
+  // corners (exact bounds on the plane). On the flat plane only: over
+  // terrain bounds or relief planes the plan wants the whole window.
+  // The default: a scene loads what its frames sample (docs/decisions.md,
+  // "Loading what the frames sample").
+  kSampled,
+  kWindow,  // the whole clip window of every needed level (the classic clipmap)
+};
+
 struct PlannerConfig {
   uint32_t clip_tiles = 0;       // clip size in tiles; 0 = choose from the viewport
   double max_oversample = 2.0;   // finest level: texel footprint >= 1/this screen pixel
@@ -48,6 +65,7 @@ struct PlannerConfig {
   // docs/terrain.md "Planning against the terrain"); windows are placed
   // by the same rule as on the plane.
   TerrainView terrain;
+  PlanScope scope = PlanScope::kSampled;
 };
 
 // One level of the clip stack.
@@ -58,6 +76,18 @@ struct ClipLevelPlan {
   int64_t origin_ty = 0;
   TileRect window;           // the clip window clamped to the level's tiles
   TileRect visible;          // tiles under the frustum's ground footprint (within window)
+  // Window tiles the plan wants loaded, row-major over `window` (1 = wanted);
+  // empty: the whole window (PlanScope::kWindow, or no sampled scope here).
+  std::vector<uint8_t> sampled;
+  // True when the plan wants tile (x, y) of this level loaded: a needed
+  // level, inside the window, and sampled (or the whole window).
+  bool wants(int64_t x, int64_t y) const {
+    if (!needed || !window.contains(x, y)) return false;
+    return sampled.empty() ||
+           sampled[size_t(y - window.y0) * size_t(window.width()) + size_t(x - window.x0)] != 0;
+  }
+  // Tiles wants() is true for.
+  uint64_t wantedCount() const;
 };
 
 struct ClipmapPlan {
@@ -95,8 +125,8 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
 uint32_t finestLevelAt(double distance, const Viewport& viewport, const Camera& camera,
                        const PlannerConfig& config, uint32_t level_count);
 
-// Tiles that entered and left the needed windows (stack levels with
-// needed = true, plus every pyramid tile) between two plans. Order: level by
+// Tiles that entered and left the wanted tiles (ClipLevelPlan::wants() of
+// the stack levels, plus every pyramid tile) between two plans. Order: level by
 // level, row-major; no duplicates.
 struct PlanDelta {
   std::vector<TileKey> entered;
@@ -105,9 +135,9 @@ struct PlanDelta {
 PlanDelta diffPlans(const ClipmapPlan& before, const ClipmapPlan& after);
 
 // Tiles of the plan in load order: pyramid first (coarse to fine), then the
-// needed stack levels coarse to fine; inside a level visible before hidden
-// (when frustum_first) and near the camera's ground point first. Tiles of
-// levels that are not needed are not listed.
+// wanted tiles of the needed stack levels coarse to fine; inside a level
+// visible before hidden (when frustum_first) and near the camera's ground
+// point first. Tiles the plan does not want are not listed.
 std::vector<TileKey> rankPlanTiles(const PyramidGeometry& geometry, const ClipmapPlan& plan,
                                    bool frustum_first = true);
 

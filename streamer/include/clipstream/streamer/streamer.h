@@ -85,18 +85,23 @@ struct StreamerConfig {
                                  // connection), else the number of cores; at most kMaxIoThreads
   bool prefetch = true;          // velocity-predictive prefetch
   bool frustum_priority = true;  // visible tiles before hidden ones
-  bool throttle = true;          // compute MaxTextureLOD from residency
+  // Throttling (docs/decisions.md, "Throttling"): reads no further ahead of
+  // the uploads than throttle_read_ahead_frames of the hand-off budget, and
+  // MaxTextureLOD as the finest level streaming serves. Off: reads as fast
+  // as the loaders go, MaxTextureLOD the plan's finest level.
+  bool throttle = true;
   // Plan against an elevation layer's per-tile height bounds when it has
   // them (StreamLayer::world_per_height, plansOnTerrain()). false: against
   // the plane, with the relief planes a caller sets (setGroundRelief()),
   // the older method, kept for comparison (docs/benchmarks.md, terrain).
   bool terrain_bounds = true;
-  uint32_t lod_hysteresis_frames = 8;  // frames a finer LOD must be ready before use
-  // A stack level is ready for MaxTextureLOD when at least this fraction of
-  // its visible tiles is on the GPU (or failed for good); the rest are drawn
-  // from their ancestors per tile. 1 = every visible tile (strict). 0.5 was
-  // measured best (docs/decisions.md, Streamer).
-  double lod_min_coverage = 0.5;
+  // With throttling: at most this many frames of the upload budget (the
+  // last non-zero max_tiles of takeReady()) wait in RAM, or on their way,
+  // for the GPU; past that the loaders wait. 32 keeps every flight of the
+  // sweep as accurate as without the bound; 8 cost 2 dB at one upload a
+  // frame, where tiles read ahead are the ones the uploads need next
+  // (docs/decisions.md, "Throttling").
+  uint32_t throttle_read_ahead_frames = 32;
   PlannerConfig planner;
   // Non-empty: record the request stream here (written under OutputFile's
   // rule: a temporary name, published at shutdown(); a regular file there
@@ -155,6 +160,12 @@ struct LevelResidency {
   uint32_t level = 0;
   TileRect window;
   std::vector<uint8_t> resident;  // window.width() * window.height(), row-major, 1 = handed off
+  // Window tiles no filter reads this frame, row-major like `resident` (1 =
+  // unread): the plan does not want them (PlanScope::kSampled wants every
+  // tile a tap of the frame reads), so a missing one does not keep its
+  // neighbours from being drawn (computeUsableMap()). Empty: any window
+  // tile may be read.
+  std::vector<uint8_t> unread;
 };
 
 // One layer's hand-off for a frame. Levels, tiles and windows are the
