@@ -158,6 +158,8 @@ constexpr double kSampleLeadTiles = 1.0;
 // bounding box of the corners' ground points. On a plane the ground a cell
 // sees is the convex quad of its corners, so the box holds it; a corner
 // above the horizon stands for the ground out to far_h along its azimuth.
+// Each box is widened by half a texel of the level (the bilinear taps) and
+// stretched kSampleLeadTiles ahead along the horizontal view direction.
 void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, const Camera& camera,
                  double far_h, ClipmapPlan* plan) {
   const double W = viewport.width_px, H = viewport.height_px;

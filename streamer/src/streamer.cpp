@@ -303,7 +303,7 @@ struct Streamer::Impl {
   mutable std::mutex mutex;
   std::condition_variable work_cv;
   std::deque<Request> queue;  // rank order, front first
-  // Reads the throttle still allows until the next hand-off (readAhead());
+  // Reads the throttle still allows until the next hand-off (setReadAllowance());
   // the loaders and issueReads() take one per tile they read.
   int64_t read_allowance = std::numeric_limits<int64_t>::max();
   std::unordered_map<LayerTile, CacheEntry, FastKeyHash> cache;
@@ -910,11 +910,12 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
 
 // MaxTextureLOD with throttling on (docs/decisions.md, "Throttling"): the
 // finest needed level that streaming serves now, i.e. that has a wanted
-// tile on the GPU or in RAM or on its way there; the coarsest level when
-// none has. Levels finer than that have nothing to draw, so the clamp never
-// hides a tile the renderer holds: the per-tile fallback (the usable map)
-// draws every missing tile from its finest resident ancestor, and a uniform
-// clamp that hid resident tiles was measured to cost 5-8 dB at speed. What
+// tile on the GPU or in RAM or on its way there; the pyramid level (always
+// resident) when none has. Levels finer than that have nothing to draw, so
+// the clamp never hides a tile the renderer holds: the per-tile fallback
+// (the usable map) draws every missing tile from its finest resident
+// ancestor, and a uniform clamp that hid resident tiles was measured to
+// cost 5-7 dB at x50-x100. What
 // throttling does is on the reads (setReadAllowance()); this level shows it.
 uint32_t Streamer::Impl::servedLod(const Layer& layer, uint32_t index) const {
   const uint32_t levels = layer.geometry.levelCount();

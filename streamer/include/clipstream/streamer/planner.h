@@ -35,9 +35,10 @@ enum class PlanScope {
   // screen derivatives) is below level + 1. Trilinear filtering reads
   // level l where the LOD lies in (l - 1, l + 1); the nearer ground, whose
   // LOD is below l - 1, is kept too, so that every sampled tile has its
-  // ancestors for the per-tile fallback while it loads. Computed on a grid
-  // of screen cells, each cell's ground and LOD range bounded by its
-  // corners (exact bounds on the plane). On the flat plane only: over
+  // ancestors for the per-tile fallback while it loads, and one tile of
+  // each level ahead along the view (a start from rest finds it loaded).
+  // Computed on a grid of screen cells, each cell's ground and LOD range
+  // bounded by its corners (exact bounds on the plane). On the flat plane only: over
   // terrain bounds or relief planes the plan wants the whole window.
   // The default: a scene loads what its frames sample (docs/decisions.md,
   // "Loading what the frames sample").
