@@ -108,29 +108,20 @@ add() { RUNS+=("$1|$2|$3"); }
 # RT_RUNS times as rt1_NAME, rt2_NAME, ...
 realtime() { local k; for ((k = 1; k <= RT_RUNS; k++)); do add "rt${k}_$1" "$2" "$3"; done; }
 COMMON="--procedural 67108864 --path $LINE --size $SIZE --io-threads 2 --reference --warmup-frames 60"
+# both NAME ARGS: a deterministic run and its real-time repeats.
+both() { add "$1" 12 "$COMMON $DET $2"; realtime "$1" 12 "$COMMON $2"; }
+# Each speed and upload budget also without throttling: throttling pays
+# for itself there (docs/decisions.md, "Throttling"); and each speed with
+# the whole clip window of every needed level (the classic clipmap) beside
+# the default sampled scope, as the turns and teleports below.
 for s in 1 2 5 10 20 50 100; do
-  add "speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s"
-  realtime "speed_$s" 12 "$COMMON --frames $FRAMES --speed $s"
-done
-for u in 1 2 4 8 16 32 64; do
-  add "upload_$u" 12 "$COMMON $DET --frames $FRAMES --speed 20 --upload-tiles $u"
-  realtime "upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u"
-done
-# Throttling pays for itself at every speed and upload budget: the same
-# flights with --no-throttle (docs/decisions.md, "Throttling").
-for s in 1 2 5 10 20 50 100; do
-  add "nothrottle_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --no-throttle"
-  realtime "nothrottle_speed_$s" 12 "$COMMON --frames $FRAMES --speed $s --no-throttle"
-done
-for u in 1 2 4 8 16 32 64; do
-  add "nothrottle_upload_$u" 12 "$COMMON $DET --frames $FRAMES --speed 20 --upload-tiles $u --no-throttle"
-  realtime "nothrottle_upload_$u" 12 "$COMMON --frames $FRAMES --speed 20 --upload-tiles $u --no-throttle"
-done
-# Loading what the frames sample: the whole clip window of every needed
-# level (the classic clipmap) beside the default sampled scope, the same
-# flights, turns and teleports.
-for s in 1 2 5 10 20 50 100; do
+  both "speed_$s" "--frames $FRAMES --speed $s"
+  both "nothrottle_speed_$s" "--frames $FRAMES --speed $s --no-throttle"
   add "window_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --plan-scope window"
+done
+for u in 1 2 4 8 16 32 64; do
+  both "upload_$u" "--frames $FRAMES --speed 20 --upload-tiles $u"
+  both "nothrottle_upload_$u" "--frames $FRAMES --speed 20 --upload-tiles $u --no-throttle"
 done
 TURNS="--procedural 67108864 --path $TURN --size $SIZE --io-threads 2 --reference --warmup-frames 60"
 add "turn" 12 "$TURNS $DET --frames $LONG"
