@@ -8,3 +8,6 @@ target_link_libraries(bench_streamer_hitrate PRIVATE clipstream::streamer clipst
 
 add_executable(bench_streamer_bc1 ${CMAKE_CURRENT_LIST_DIR}/streamer_bc1.cpp)
 target_link_libraries(bench_streamer_bc1 PRIVATE clipstream::streamer clipstream_warnings)
+
+add_executable(bench_streamer_plan ${CMAKE_CURRENT_LIST_DIR}/streamer_plan.cpp)
+target_link_libraries(bench_streamer_plan PRIVATE clipstream::streamer clipstream_warnings)

@@ -132,8 +132,9 @@ bool planWants(const ClipmapPlan& plan, uint32_t level, int64_t x, int64_t y) {
 
 // PlanScope::kSampled. Screen cells of at least kSampleStepMinPx pixels,
 // at most kSampleCellsMax along the longer side: the cell bounds are exact,
-// so the grid only trades tightness for time (320x180: 80 x 45 cells, about
-// 0.1 ms; 1920x1080: 96 x 54).
+// so the grid only trades tightness for time (320x180: 80 x 45 cells,
+// 1920x1080: 96 x 54; a plan costs 0.17 / 0.40 ms on this machine against
+// 3-6 us for the whole window: bench_streamer_plan).
 constexpr double kSampleStepMinPx = 4.0;
 constexpr double kSampleCellsMax = 96.0;
 // Levels of detail are compared with this much slack: the GPU forms its
@@ -149,6 +150,10 @@ constexpr double kSampleLodSlack = 0.05;
 // (x50: 97.8), one tile none (99.0, 98.4) for an over-fetch of 1.85 at x1
 // instead of 1.27.
 constexpr double kSampleLeadTiles = 1.0;
+// A block of cells over at most this many window tiles that are all marked
+// already is not searched further (a larger one costs more to check than
+// its search saves).
+constexpr int64_t kSampleMarkedCheckTiles = 64;
 
 // Marks, for every needed stack level m, the window tiles under ground
 // whose level of detail is below m + 1 (PlanScope::kSampled): per screen
@@ -217,37 +222,106 @@ void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, cons
     levels.push_back(&lp);
   }
   if (levels.empty()) return;
-  for (size_t j = 0; j + 1 < ys.size(); ++j) {
-    for (size_t i = 0; i + 1 < xs.size(); ++i) {
+
+  // The cells, then a pyramid of blocks of 2x2 cells (blocks of blocks...):
+  // a block's level of detail is the least of its cells', its box the union
+  // of the boxes of its cells that have one (a finite level of detail).
+  struct Cell {
+    double lod = INFINITY;
+    glm::dvec2 lo{INFINITY}, hi{-INFINITY};
+  };
+  struct Grid {
+    size_t w = 0, h = 0;
+    std::vector<Cell> cells;
+  };
+  std::vector<Grid> grids(1);
+  grids[0].w = xs.size() - 1;
+  grids[0].h = ys.size() - 1;
+  grids[0].cells.resize(grids[0].w * grids[0].h);
+  for (size_t j = 0; j < grids[0].h; ++j) {
+    for (size_t i = 0; i < grids[0].w; ++i) {
       const Corner* q[4] = {&corners[j * xs.size() + i], &corners[j * xs.size() + i + 1],
                             &corners[(j + 1) * xs.size() + i], &corners[(j + 1) * xs.size() + i + 1]};
-      double lod = INFINITY;
-      glm::dvec2 lo{INFINITY}, hi{-INFINITY};
-      for (const Corner* c : q) {
-        lod = std::min(lod, c->lod);
-        lo = glm::min(lo, c->ground);
-        hi = glm::max(hi, c->ground);
-      }
+      Cell& cell = grids[0].cells[j * grids[0].w + i];
+      for (const Corner* c : q) cell.lod = std::min(cell.lod, c->lod);
       // No corner with a level of detail: the cell lies above the horizon
       // (a straight line on the screen), or only touches it, where every
-      // level is finer than the pixels.
-      if (!std::isfinite(lod)) continue;
-      for (ClipLevelPlan* lp : levels) {
-        if (lod - kSampleLodSlack >= double(lp->level) + 1.0) continue;
-        const double tile_texels = double(geometry.tile_px) * levelScale(lp->level);
-        const double tap = 0.5 * levelScale(lp->level);  // bilinear: half a texel of the level
-        const glm::dvec2 lead = ahead * (kSampleLeadTiles * tile_texels);
-        const glm::dvec2 lo2 = glm::min(lo, lo + lead), hi2 = glm::max(hi, hi + lead);
-        const TileRect r = intersect({int64_t(std::floor((lo2.x - tap) / tile_texels)),
-                                      int64_t(std::floor((lo2.y - tap) / tile_texels)),
-                                      int64_t(std::floor((hi2.x + tap) / tile_texels)) + 1,
-                                      int64_t(std::floor((hi2.y + tap) / tile_texels)) + 1},
-                                     lp->window);
-        const size_t w = size_t(lp->window.width());
+      // level is finer than the pixels. It samples nothing.
+      if (!std::isfinite(cell.lod)) continue;
+      for (const Corner* c : q) {
+        cell.lo = glm::min(cell.lo, c->ground);
+        cell.hi = glm::max(cell.hi, c->ground);
+      }
+    }
+  }
+  while (grids.back().w > 1 || grids.back().h > 1) {
+    const Grid& fine = grids.back();
+    Grid coarse;
+    coarse.w = (fine.w + 1) / 2;
+    coarse.h = (fine.h + 1) / 2;
+    coarse.cells.resize(coarse.w * coarse.h);
+    for (size_t j = 0; j < fine.h; ++j)
+      for (size_t i = 0; i < fine.w; ++i) {
+        const Cell& c = fine.cells[j * fine.w + i];
+        Cell& b = coarse.cells[(j / 2) * coarse.w + i / 2];
+        b.lod = std::min(b.lod, c.lod);
+        b.lo = glm::min(b.lo, c.lo);
+        b.hi = glm::max(b.hi, c.hi);
+      }
+    grids.push_back(std::move(coarse));
+  }
+
+  // Per level, from the top block down: a block none of whose cells reaches
+  // the level's detail is skipped; a block whose widened box lies within one
+  // tile marks that tile (every cell of it that reaches the level would mark
+  // that tile and no other); any other block goes down to its four. A cell
+  // marks the window tiles its widened box touches. The result is exactly
+  // that of marking cell by cell, at a cost that follows the tiles, not the
+  // cells times the levels.
+  struct Block {
+    size_t grid, i, j;
+  };
+  std::vector<Block> todo;
+  for (ClipLevelPlan* lp : levels) {
+    const double below = double(lp->level) + 1.0 + kSampleLodSlack;  // lod - slack < level + 1
+    const double tile_texels = double(geometry.tile_px) * levelScale(lp->level);
+    const double tap = 0.5 * levelScale(lp->level);  // bilinear: half a texel of the level
+    const glm::dvec2 lead = ahead * (kSampleLeadTiles * tile_texels);
+    const size_t w = size_t(lp->window.width());
+    todo.assign(1, Block{grids.size() - 1, 0, 0});
+    while (!todo.empty()) {
+      const Block b = todo.back();
+      todo.pop_back();
+      const Grid& grid = grids[b.grid];
+      const Cell& c = grid.cells[b.j * grid.w + b.i];
+      if (!(c.lod < below)) continue;
+      const glm::dvec2 lo = glm::min(c.lo, c.lo + lead), hi = glm::max(c.hi, c.hi + lead);
+      const TileRect whole{int64_t(std::floor((lo.x - tap) / tile_texels)),
+                           int64_t(std::floor((lo.y - tap) / tile_texels)),
+                           int64_t(std::floor((hi.x + tap) / tile_texels)) + 1,
+                           int64_t(std::floor((hi.y + tap) / tile_texels)) + 1};
+      const TileRect r = intersect(whole, lp->window);
+      if (r.empty()) continue;
+      if (b.grid == 0 || (whole.width() == 1 && whole.height() == 1)) {
         for (int64_t y = r.y0; y < r.y1; ++y)
           for (int64_t x = r.x0; x < r.x1; ++x)
             lp->sampled[size_t(y - lp->window.y0) * w + size_t(x - lp->window.x0)] = 1;
+        continue;
       }
+      // Nothing left to mark under a small block whose tiles are all marked.
+      if (r.width() * r.height() <= kSampleMarkedCheckTiles) {
+        bool all = true;
+        for (int64_t y = r.y0; y < r.y1 && all; ++y)
+          for (int64_t x = r.x0; x < r.x1 && all; ++x)
+            all = lp->sampled[size_t(y - lp->window.y0) * w + size_t(x - lp->window.x0)] != 0;
+        if (all) continue;
+      }
+      const Grid& finer = grids[b.grid - 1];
+      for (size_t dj = 0; dj < 2; ++dj)
+        for (size_t di = 0; di < 2; ++di) {
+          const size_t i = b.i * 2 + di, j = b.j * 2 + dj;
+          if (i < finer.w && j < finer.h) todo.push_back({b.grid - 1, i, j});
+        }
     }
   }
 }
