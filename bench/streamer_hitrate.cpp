@@ -99,7 +99,10 @@ class FlatSource final : public TileSource {
 int main(int argc, char** argv) {
   const int frames = argc > 1 ? std::atoi(argv[1]) : 600;
   const std::string dir = argc > 2 ? argv[2] : "/tmp";
-  const double budgets_mb[] = {128, 256, 512, 1024};
+  // The plans want only the tiles the frames sample (PlanScope::kSampled):
+  // every path's distinct tiles fit 256 MiB (2,377 tiles at most), so the
+  // budgets where eviction decides anything are the small ones.
+  const double budgets_mb[] = {32, 48, 64, 96, 128, 256};
   const uint64_t entry_bytes = 128 * 128 * 4 + kCacheEntryOverheadBytes;
   PyramidGeometry geometry;
   makePyramidGeometry(uint64_t(kSide), uint64_t(kSide), 128, PixelFormat::kRGBA8, &geometry);
