@@ -545,7 +545,7 @@ GEN="$WORK/benchmarks_sweep.md"
   echo
   echo "Defaults: 1280x720 (clipstream-fly's), 256 MiB RAM budget, a loader thread per core, 16 uploads per"
   echo "frame, double-buffered uploads, throttling, prefetch and frustum priority on; the straight line"
-  echo "above at x3 (300 texels/s) over the 2^26-texel procedural texture, never revisiting a tile, so the"
+  echo "above at x10 (1,000 texels/s) over the 2^26-texel procedural texture, never revisiting a tile, so the"
   echo "cache turns over many times (loaded ÷ budget). Release run (RSS at a quarter of the frames and at the"
   echo "end): the soak row of the table above. ASan + UBSan run with LeakSanitizer at exit (leaks reported,"
   echo "leaked bytes, allocations matched by \`tests/lsan.supp\`; RSS there includes ASan's quarantine):"

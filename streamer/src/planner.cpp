@@ -283,7 +283,7 @@ void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, cons
   };
   std::vector<Block> todo;
   for (ClipLevelPlan* lp : levels) {
-    const double below = double(lp->level) + 1.0 + kSampleLodSlack;  // lod - slack < level + 1
+    const double reach = double(lp->level) + 1.0;  // a cell with lod - slack below it samples the level
     const double tile_texels = double(geometry.tile_px) * levelScale(lp->level);
     const double tap = 0.5 * levelScale(lp->level);  // bilinear: half a texel of the level
     const glm::dvec2 lead = ahead * (kSampleLeadTiles * tile_texels);
@@ -294,7 +294,7 @@ void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, cons
       todo.pop_back();
       const Grid& grid = grids[b.grid];
       const Cell& c = grid.cells[b.j * grid.w + b.i];
-      if (!(c.lod < below)) continue;
+      if (!(c.lod - kSampleLodSlack < reach)) continue;
       const glm::dvec2 lo = glm::min(c.lo, c.lo + lead), hi = glm::max(c.hi, c.hi + lead);
       const TileRect whole{int64_t(std::floor((lo.x - tap) / tile_texels)),
                            int64_t(std::floor((lo.y - tap) / tile_texels)),
