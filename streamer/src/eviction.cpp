@@ -13,7 +13,7 @@ namespace {
 // kNoPlanScore).
 constexpr double kInsideFirst = 1e15;
 
-double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode) {
+double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode, bool on_gpu) {
   if (key.level >= w.rects.size()) return kNoPlanScore;
   const TileRect& r = w.rects[key.level];
   const int64_t x = key.x, y = key.y;
@@ -25,7 +25,9 @@ double scoreOne(const TileKey& key, const PlanWindows& w, EvictionMode mode) {
     // Deeper inside takes longer to leave and come back: goes first.
     const int64_t d_in = std::min({x - r.x0, r.x1 - 1 - x, y - r.y0, r.y1 - 1 - y}) + 1;
     const double steps = 2.0 * double(d_in) * level_weight;
-    if (mode == EvictionMode::kProtectGpu) return 1.0 - 1.0 / (1.0 + steps);
+    // Not on the GPU (its window came back over it, no frame has sampled it
+    // since): the next frame that samples it reads this copy. Protected.
+    if (mode == EvictionMode::kProtectGpu || !on_gpu) return 1.0 - 1.0 / (1.0 + steps);
     return kInsideFirst + steps;
   }
   double tiles = double(w.clip_tiles);
@@ -74,9 +76,9 @@ bool isPyramidTile(const TileKey& key, const PlanWindows& windows) {
 }
 
 double evictionScore(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
-                     EvictionMode mode) {
-  double s = scoreOne(key, current, mode);
-  if (!predicted.empty()) s = std::min(s, scoreOne(key, predicted, mode));
+                     EvictionMode mode, bool on_gpu) {
+  double s = scoreOne(key, current, mode, on_gpu);
+  if (!predicted.empty()) s = std::min(s, scoreOne(key, predicted, mode, on_gpu));
   return s;
 }
 

@@ -9,14 +9,18 @@
 //     level, they never leave it, so their RAM copy can only serve a
 //     renderer reset (and the renderer reloads the pyramid itself then);
 //  2. then stack tiles inside a needed window that are on the GPU, deepest
-//     first (deeper takes longer to leave and come back);
+//     first (deeper takes longer to leave and come back; until it has left,
+//     the GPU draws such a tile whenever it is wanted again);
 //  3. then tiles outside every window, by score: Chebyshev distance to the
 //     window (tiles) times 4^level; levels the plan does not need add a
 //     clip's width per level away from the finest needed level. The
-//     predicted plan counts too (the smaller score wins).
-// With kProtectGpu, inside tiles go after every outside tile and pyramid
-// tiles are never scored (only a better-ranked newcomer may take their
-// room). Larger score = evicted sooner; ties go MOST recently wanted first:
+//     predicted plan counts too (the smaller score wins);
+//  4. last, tiles inside a needed window that are not on the GPU: with
+//     PlanScope::kSampled a window can come back over a tile no frame
+//     samples yet, and the next frame that does reads its RAM copy.
+// With kProtectGpu, every inside tile goes after every outside tile and
+// pyramid tiles are never scored (only a better-ranked newcomer may take
+// their room). Larger score = evicted sooner; ties go MOST recently wanted first:
 // tiles the score cannot tell apart (a whole level the plan no longer
 // needs, tiles equally far beside the path) then stay a stable subset
 // instead of cycling through RAM, which is what pays on loops, zoom cycles
@@ -69,9 +73,10 @@ inline constexpr double kNoPlanScore = 1e30;
 // stack tile, below kNoPlanScore.
 inline constexpr double kPyramidFirstScore = 1e25;
 
-// Eviction score (see above). `predicted` may be empty.
+// Eviction score (see above). `predicted` may be empty; `on_gpu`: the
+// renderer holds the tile now.
 double evictionScore(const TileKey& key, const PlanWindows& current, const PlanWindows& predicted,
-                     EvictionMode mode);
+                     EvictionMode mode, bool on_gpu);
 
 // Victim order shared by the streamer and the replay: true when a tile with
 // (score_a, wanted_a) is evicted before one with (score_b, wanted_b), where

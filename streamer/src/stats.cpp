@@ -10,7 +10,8 @@ namespace {
 
 nlohmann::json countersJson(const LevelCounters& c) {
   return {{"requests", c.requests},       {"ram_hits", c.ram_hits},
-          {"ram_misses", c.ram_misses},   {"gpu_handoffs", c.gpu_handoffs},
+          {"ram_misses", c.ram_misses},   {"gpu_reentries", c.gpu_reentries},
+          {"gpu_handoffs", c.gpu_handoffs},
           {"cancellations", c.cancellations}, {"evictions", c.evictions},
           {"redundant_reads", c.redundant_reads}, {"bytes_read", c.bytes_read},
           {"failures", c.failures},       {"loads", c.loads},

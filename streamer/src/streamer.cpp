@@ -397,7 +397,7 @@ void Streamer::Impl::buildVictimLists() {
     if (r == rank.end() || (e.gpu && scoredWhenOnGpu(key))) {
       const Layer& layer = layers[key.layer];
       scored_list.push_back({evictionScoreAhead(key.key, layer.windows, layer.predicted_windows,
-                                                config.eviction, layer.ahead.get()),
+                                                config.eviction, e.gpu, layer.ahead.get()),
                              e.last_wanted_frame, key});
     } else {
       pinned.emplace_back(r->second, key);
@@ -760,7 +760,8 @@ std::vector<LayerTile> Streamer::Impl::rankScene() const {
 
 // Recomputes the wanted list, ranks, pending hand-offs and the queue after
 // the plans (or the predictions) changed. Cancels queued requests that are
-// no longer wanted; counts RAM hits/misses for tiles that became wanted.
+// no longer wanted; counts RAM hits/misses for tiles that became wanted
+// (GPU re-entries for those still on the GPU).
 void Streamer::Impl::rebuild(const Viewport& viewport) {
   std::vector<LayerTile> new_wanted = rankScene();
   std::unordered_set<LayerTile, FastKeyHash> new_set(new_wanted.begin(), new_wanted.end());
@@ -866,7 +867,10 @@ void Streamer::Impl::rebuild(const Viewport& viewport) {
       auto c = cache.find(k);
       if (c != cache.end()) c->second.last_wanted_frame = frame;
       if (wanted_set.count(k) == 0) {
-        if (c != cache.end() && c->second.state == EntryState::kReady) counters(k).ram_hits++;
+        // A tile back in the wanted set that never left its needed window
+        // is still on the GPU: drawn again, not read from RAM.
+        if (gpu.count(k) != 0) counters(k).gpu_reentries++;
+        else if (c != cache.end() && c->second.state == EntryState::kReady) counters(k).ram_hits++;
         else counters(k).ram_misses++;
       }
     }
@@ -1383,6 +1387,7 @@ void addCounters(const LevelCounters& c, LevelCounters* sum) {
   sum->requests += c.requests;
   sum->ram_hits += c.ram_hits;
   sum->ram_misses += c.ram_misses;
+  sum->gpu_reentries += c.gpu_reentries;
   sum->gpu_handoffs += c.gpu_handoffs;
   sum->cancellations += c.cancellations;
   sum->evictions += c.evictions;

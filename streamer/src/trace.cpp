@@ -185,6 +185,85 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   return Status::ok();
 }
 
+namespace {
+
+// Which tiles the GPU holds as the trace goes: a tile is handed over at its
+// access (every access is taken to be handed over at once, as in the rest
+// of the replay) and stays until a plan change finds it neither wanted nor
+// in its needed window (the streamer's rule, streamer.cpp rebuild()). So an
+// entry of a tile that left the wanted set but not its window is served by
+// the GPU: not an access. This depends on the trace alone, not on a policy.
+// A plan change is its frame's lines; one without window lines keeps the
+// windows it had. Call step(i) for every event in order.
+class GpuResidency {
+ public:
+  GpuResidency(const std::vector<TraceEvent>& events, const std::vector<uint32_t>& id_of, size_t n_ids)
+      : m_events(events), m_id_of(id_of), m_on_gpu(n_ids, 0), m_wanted(n_ids, 0), m_key_of(n_ids) {}
+
+  // Takes event i; true when it is an entry the GPU serves.
+  bool step(size_t i) {
+    const TraceEvent& e = m_events[i];
+    if (e.frame != m_open_frame) {
+      if (m_open_frame != kNone) closePlanChange();
+      m_open_frame = e.frame;
+      m_fresh_windows = true;
+    }
+    if (e.window) {
+      if (e.window != kTraceWindowTag) return false;
+      if (m_fresh_windows) m_windows = {}, m_fresh_windows = false;
+      if (m_windows.rects.size() <= e.key.level) {
+        m_windows.rects.resize(e.key.level + 1);
+        m_windows.kinds.resize(e.key.level + 1, PlanWindows::kNotNeeded);
+      }
+      m_windows.rects[e.key.level] = e.rect;
+      m_windows.kinds[e.key.level] = e.kind;
+      return false;
+    }
+    const uint32_t id = m_id_of[i];
+    m_key_of[id] = e.key;
+    if (e.leave) {
+      m_wanted[id] = 0;
+      if (m_on_gpu[id]) m_left.push_back(id);
+      return false;
+    }
+    // An entry with no leave before it (a hand-written trace) is an access.
+    const bool served = m_on_gpu[id] && !m_wanted[id];
+    m_wanted[id] = 1;
+    m_on_gpu[id] = 1;
+    return served;
+  }
+  bool onGpu(uint32_t id) const { return m_on_gpu[id] != 0; }
+
+ private:
+  static constexpr uint64_t kNone = UINT64_MAX;
+  bool inNeededWindow(const TileKey& k) const {
+    if (k.level >= m_windows.kinds.size()) return false;
+    const uint8_t kind = m_windows.kinds[k.level];
+    return kind == PlanWindows::kPyramid ||
+           (kind == PlanWindows::kNeeded && m_windows.rects[k.level].contains(k.x, k.y));
+  }
+  void closePlanChange() {
+    std::vector<uint32_t> kept;
+    for (uint32_t id : m_left) {
+      if (!m_on_gpu[id] || m_wanted[id]) continue;  // stale: back, or already dropped
+      if (inNeededWindow(m_key_of[id])) kept.push_back(id);
+      else m_on_gpu[id] = 0;
+    }
+    m_left.swap(kept);
+  }
+
+  const std::vector<TraceEvent>& m_events;
+  const std::vector<uint32_t>& m_id_of;
+  std::vector<uint8_t> m_on_gpu, m_wanted;
+  std::vector<TileKey> m_key_of;
+  std::vector<uint32_t> m_left;  // ids that left the wanted set while on the GPU
+  PlanWindows m_windows;
+  uint64_t m_open_frame = kNone;
+  bool m_fresh_windows = false;  // the next window line starts a new set
+};
+
+}  // namespace
+
 ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacity_tiles,
                          const ReplayHint* hint) {
   ReplayResult result;
@@ -203,17 +282,28 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
   const size_t n_ids = ids.size();
   constexpr uint64_t kNever = UINT64_MAX;
 
+  // Entries the GPU serves are not accesses (GpuResidency).
+  std::vector<uint8_t> access(events.size(), 0);
+  {
+    GpuResidency gpu(events, id_of, n_ids);
+    for (size_t i = 0; i < events.size(); ++i) {
+      const bool served = gpu.step(i);
+      if (!events[i].isAccess()) continue;
+      if (served) result.gpu_reentries++;
+      else access[i] = 1, result.accesses++;
+    }
+  }
+
   // Next access (not leave) of the same tile, for OPT.
   std::vector<uint64_t> next_use(events.size(), kNever);
   {
     std::vector<uint64_t> seen(n_ids, kNever);
     for (size_t i = events.size(); i-- > 0;) {
-      if (!events[i].isAccess()) continue;
+      if (!access[i]) continue;
       next_use[i] = seen[id_of[i]];
       seen[id_of[i]] = i;
     }
   }
-  for (const TraceEvent& e : events) result.accesses += e.isAccess() ? 1 : 0;
   if (capacity_tiles == 0) return result;
 
   // OPT: evict the tile used farthest in the future; bypass when the
@@ -223,7 +313,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     std::vector<uint64_t> cached_next(n_ids, 0);
     std::vector<uint8_t> in_cache(n_ids, 0);
     for (size_t i = 0; i < events.size(); ++i) {
-      if (!events[i].isAccess()) continue;
+      if (!access[i]) continue;
       const uint32_t id = id_of[i];
       if (in_cache[id]) {
         result.hits_opt++;
@@ -246,7 +336,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     std::vector<std::list<uint32_t>::iterator> where(n_ids);
     std::vector<uint8_t> in_cache(n_ids, 0);
     for (size_t i = 0; i < events.size(); ++i) {
-      if (!events[i].isAccess()) continue;
+      if (!access[i]) continue;
       const uint32_t id = id_of[i];
       if (in_cache[id]) {
         result.hits_lru++;
@@ -307,12 +397,22 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     // on the GPU (wanted) or not wanted: all are scored but pyramid tiles
     // under kProtectGpu (streamer.cpp, buildVictimLists).
     auto scored = [&](uint32_t id) { return scoredOnGpu(key_of[id], current, mode); };
+    GpuResidency gpu(events, id_of, n_ids);
+    // The tiles this plan change brings in are pinned until their entry, as
+    // the streamer pins wanted tiles that are in RAM but not yet on the GPU:
+    // an entry is not evicted for an earlier one of the same plan change.
+    std::vector<uint8_t> entering(n_ids, 0);
+    std::vector<uint32_t> entering_ids;
     auto enroll = [&](uint32_t id) {
-      if (!scored(id)) return;
-      score[id] = evictionScoreAhead(key_of[id], current, predicted, mode, ahead.get());
+      if (!scored(id) || entering[id]) return;
+      score[id] = evictionScoreAhead(key_of[id], current, predicted, mode, gpu.onGpu(id), ahead.get());
       candidates.insert(slotOf(id));
     };
-    auto rescore = [&](uint64_t seq) {
+    auto rescore = [&](size_t seq) {
+      for (uint32_t id : entering_ids) entering[id] = 0;
+      entering_ids.clear();
+      for (size_t j = seq; j < events.size() && events[j].frame == events[seq].frame; ++j)
+        if (access[j] && !entering[id_of[j]]) entering[id_of[j]] = 1, entering_ids.push_back(id_of[j]);
       candidates.clear();
       std::vector<uint32_t> live;
       for (uint32_t id : cached_ids) {
@@ -325,6 +425,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     };
     for (size_t i = 0; i < events.size(); ++i) {
       const TraceEvent& e = events[i];
+      (void)gpu.step(i);  // access[] already says which entries it serves
       if (e.window) {
         if (e.frame != building_frame) {
           building_frame = e.frame;
@@ -356,7 +457,7 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
         dirty = false;
       }
       const uint32_t id = id_of[i];
-      if (e.leave) {
+      if (e.leave || !access[i]) {  // a leave, or an entry the GPU serves: only the stamp moves
         if (in_cache[id] && scored(id)) {
           candidates.erase(slotOf(id));
           stamp[id] = i;
@@ -364,10 +465,11 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
         } else {
           stamp[id] = i;
         }
-        wanted[id] = 0;
+        wanted[id] = e.leave ? 0 : 1;
         continue;
       }
       wanted[id] = 1;
+      entering[id] = 0;
       if (in_cache[id]) {
         hits++;
         if (scored(id)) candidates.erase(slotOf(id));

@@ -64,15 +64,39 @@ TEST(Eviction, PyramidTilesOnTheGpuGoBeforeATileThatWillReturn) {
   w.kinds = {PlanWindows::kNeeded, PlanWindows::kPyramid};
   w.finish();
   const PlanWindows none;
-  const double pyramid = evictionScore(p, w, none, EvictionMode::kGpuFirst);
-  const double inside = evictionScore({0, 2, 0}, w, none, EvictionMode::kGpuFirst);
-  const double outside = evictionScore(a, w, none, EvictionMode::kGpuFirst);
+  const double pyramid = evictionScore(p, w, none, EvictionMode::kGpuFirst, true);
+  const double inside = evictionScore({0, 2, 0}, w, none, EvictionMode::kGpuFirst, true);
+  const double outside = evictionScore(a, w, none, EvictionMode::kGpuFirst, true);
+  const double inside_off_gpu = evictionScore({0, 2, 0}, w, none, EvictionMode::kGpuFirst, false);
   EXPECT_GT(pyramid, inside);
   EXPECT_GT(inside, outside);
+  EXPECT_GT(outside, inside_off_gpu);
   EXPECT_LT(pyramid, kNoPlanScore);
   EXPECT_TRUE(scoredOnGpu(p, w, EvictionMode::kGpuFirst));
   EXPECT_FALSE(scoredOnGpu(p, w, EvictionMode::kProtectGpu));
   EXPECT_TRUE(scoredOnGpu(a, w, EvictionMode::kProtectGpu));
+}
+
+// With the sampled scope a window can come back over a tile that no frame
+// samples yet: the tile is in RAM but no longer on the GPU, so the next
+// frame that samples it reads that copy. Room for two: A leaves with its
+// window, the window comes back over it while C (outside now) is cached and
+// D needs room. C goes, A stays and hits when it is sampled again (as with
+// OPT); evicting A first, as tiles inside a window on the GPU are, would
+// read it again, and LRU does.
+TEST(Eviction, ATileInsideItsWindowButOffTheGpuIsKept) {
+  const TileKey a{0, 0, 0}, c{0, 5, 0}, d{0, 1, 0};
+  const std::vector<TraceEvent> ev = {
+      windowLine(1, 0, {0, 0, 1, 1}, 1), tileLine(1, a, false),
+      windowLine(2, 0, {5, 0, 6, 1}, 1), tileLine(2, a, true),  tileLine(2, c, false),
+      windowLine(3, 0, {0, 0, 2, 1}, 1), tileLine(3, c, true),  tileLine(3, d, false),
+      windowLine(4, 0, {0, 0, 2, 1}, 1), tileLine(4, a, false)};
+  const ReplayResult r = replayTrace(ev, 2);
+  EXPECT_EQ(r.accesses, 4u);
+  EXPECT_EQ(r.gpu_reentries, 0u);  // A left its window: the GPU dropped it
+  EXPECT_EQ(r.hits_opt, 1u);
+  EXPECT_EQ(r.hits_gpu_first, 1u);
+  EXPECT_EQ(r.hits_lru, 0u);
 }
 
 // Budget = exactly the wanted set, everything handed to the GPU, then one

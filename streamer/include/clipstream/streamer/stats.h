@@ -11,8 +11,10 @@ namespace clipstream {
 
 struct LevelCounters {
   uint64_t requests = 0;        // tiles asked of the loader
-  uint64_t ram_hits = 0;        // needed tile found decoded in RAM
-  uint64_t ram_misses = 0;      // needed tile had to be read
+  uint64_t ram_hits = 0;        // tile entering the wanted set found decoded in RAM
+  uint64_t ram_misses = 0;      // tile entering the wanted set had to be read
+  uint64_t gpu_reentries = 0;   // tile entering the wanted set still on the GPU (it had
+                                // not left its needed window): neither a RAM hit nor a miss
   uint64_t gpu_handoffs = 0;    // tiles given to the renderer
   uint64_t cancellations = 0;   // queued requests dropped by a newer plan
   uint64_t evictions = 0;

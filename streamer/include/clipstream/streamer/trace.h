@@ -17,7 +17,9 @@
 // the hinted policy.
 // An access is a hit when the tile is decoded in RAM at that moment; tiles
 // that stay wanted are on the GPU and cost nothing more, so only entries
-// are accesses.
+// are accesses. Nor is an entry that the GPU serves: a tile that left the
+// wanted set but not its needed window since it was last handed over keeps
+// its GPU slot and is drawn again without a read (a GPU re-entry).
 #pragma once
 
 #include <clipstream/store/types.h>
@@ -72,7 +74,8 @@ void appendTraceLine(const TraceEvent& event, std::string* out);
 Status readTrace(const std::string& path, std::vector<TraceEvent>* events);
 
 struct ReplayResult {
-  uint64_t accesses = 0;
+  uint64_t accesses = 0;        // tile entries the GPU does not serve
+  uint64_t gpu_reentries = 0;   // tile entries the GPU serves (not accesses)
   uint64_t distinct_tiles = 0;
   uint64_t capacity_tiles = 0;
   uint64_t hits_opt = 0;   // Belady's optimal replacement (with bypass)
