@@ -319,6 +319,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   row("gpu_hit_rate", s.gpu_hit_rate, "%.4f");
   row("ram_hits", double(run.streamer.total.ram_hits), "%.0f");
   row("ram_misses", double(run.streamer.total.ram_misses), "%.0f");
+  row("gpu_reentries", double(run.streamer.total.gpu_reentries), "%.0f");
   row("bytes_read_mib", mib(run.streamer.total.bytes_read), "%.1f");
   row("tile_failures", double(run.tile_failures), "%.0f");
   if (d.path_hint) {
