@@ -14,7 +14,9 @@
 //  3. then tiles outside every window, by score: Chebyshev distance to the
 //     window (tiles) times 4^level; levels the plan does not need add a
 //     clip's width per level away from the finest needed level. The
-//     predicted plan counts too (the smaller score wins);
+//     predicted plan counts too: outside both, the distance is extrapolated
+//     along the motion to twice the prediction's horizon (tiles left
+//     behind go sooner); inside either, the smaller score wins;
 //  4. last, tiles inside a needed window that are not on the GPU: with
 //     PlanScope::kSampled a window can come back over a tile no frame
 //     samples yet, and the next frame that does reads its RAM copy.

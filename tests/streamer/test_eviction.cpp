@@ -71,6 +71,20 @@ TEST(Eviction, PyramidTilesOnTheGpuGoBeforeATileThatWillReturn) {
   EXPECT_GT(pyramid, inside);
   EXPECT_GT(inside, outside);
   EXPECT_GT(outside, inside_off_gpu);
+  // The predicted plan one tile east of the current: outside both, a tile
+  // the window moves away from (west) is scored past either distance, one
+  // it moves towards (east) nearer than either, at twice the prediction's
+  // horizon; inside the predicted window the smaller score still wins.
+  PlanWindows east = w;
+  east.rects[0] = TileRect{2, 0, 5, 1};
+  east.finish();
+  const TileKey behind{0, 0, 0}, ahead{0, 8, 0};  // 1 and 5 tiles out of w; 2 and 4 of east
+  EXPECT_EQ(evictionScore(behind, w, none, EvictionMode::kGpuFirst, true), 1.0);
+  EXPECT_EQ(evictionScore(behind, w, east, EvictionMode::kGpuFirst, true), 3.0);  // 2 x 2 - 1
+  EXPECT_EQ(evictionScore(ahead, w, none, EvictionMode::kGpuFirst, true), 5.0);
+  EXPECT_EQ(evictionScore(ahead, w, east, EvictionMode::kGpuFirst, true), 3.0);   // 2 x 4 - 5
+  // (4, 0): out of w, in east and off the GPU: kept like an inside tile.
+  EXPECT_LT(evictionScore({0, 4, 0}, w, east, EvictionMode::kGpuFirst, false), 1.0);
   EXPECT_LT(pyramid, kNoPlanScore);
   EXPECT_TRUE(scoredOnGpu(p, w, EvictionMode::kGpuFirst));
   EXPECT_FALSE(scoredOnGpu(p, w, EvictionMode::kProtectGpu));
