@@ -198,7 +198,8 @@ namespace {
 class GpuResidency {
  public:
   GpuResidency(const std::vector<TraceEvent>& events, const std::vector<uint32_t>& id_of, size_t n_ids)
-      : m_events(events), m_id_of(id_of), m_on_gpu(n_ids, 0), m_wanted(n_ids, 0), m_key_of(n_ids) {}
+      : m_events(events), m_id_of(id_of), m_on_gpu(n_ids, 0), m_wanted(n_ids, 0), m_listed(n_ids, 0),
+        m_key_of(n_ids) {}
 
   // Takes event i; true when it is an entry the GPU serves.
   bool step(size_t i) {
@@ -223,7 +224,7 @@ class GpuResidency {
     m_key_of[id] = e.key;
     if (e.leave) {
       m_wanted[id] = 0;
-      if (m_on_gpu[id]) m_left.push_back(id);
+      if (m_on_gpu[id] && !m_listed[id]) m_listed[id] = 1, m_left.push_back(id);
       return false;
     }
     // An entry with no leave before it (a hand-written trace) is an access.
@@ -245,16 +246,19 @@ class GpuResidency {
   void closePlanChange() {
     std::vector<uint32_t> kept;
     for (uint32_t id : m_left) {
-      if (!m_on_gpu[id] || m_wanted[id]) continue;  // stale: back, or already dropped
-      if (inNeededWindow(m_key_of[id])) kept.push_back(id);
-      else m_on_gpu[id] = 0;
+      if (m_on_gpu[id] && !m_wanted[id] && inNeededWindow(m_key_of[id])) {
+        kept.push_back(id);
+        continue;
+      }
+      if (!m_wanted[id]) m_on_gpu[id] = 0;  // else back in the wanted set: stays
+      m_listed[id] = 0;
     }
     m_left.swap(kept);
   }
 
   const std::vector<TraceEvent>& m_events;
   const std::vector<uint32_t>& m_id_of;
-  std::vector<uint8_t> m_on_gpu, m_wanted;
+  std::vector<uint8_t> m_on_gpu, m_wanted, m_listed;  // m_listed: in m_left
   std::vector<TileKey> m_key_of;
   std::vector<uint32_t> m_left;  // ids that left the wanted set while on the GPU
   PlanWindows m_windows;
