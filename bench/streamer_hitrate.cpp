@@ -112,7 +112,8 @@ int main(int argc, char** argv) {
   std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
               kSide, kSide, frames);
   std::printf(
-      "path\tbudget_mib\taccesses\tgpu_reentries\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%\tours_of_opt_%%"
+      "path\tbudget_mib\taccesses\tgpu_reentries\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%"
+      "\tours_of_opt_%%"
       "\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
   struct FrameCost {
     std::string path;
@@ -188,7 +189,8 @@ int main(int argc, char** argv) {
       };
       std::printf("%s\t%.0f\t%llu\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
                   (unsigned long long)r.accesses, (unsigned long long)r.gpu_reentries,
-                  (unsigned long long)r.distinct_tiles, pct(r.hits_opt), pct(r.hits_lru), pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
+                  (unsigned long long)r.distinct_tiles, pct(r.hits_opt), pct(r.hits_lru),
+                  pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
                   pct(r.hits_plan), ofOpt(r.hits_plan), pct(h.hits_hinted), ofOpt(h.hits_hinted));
     }
   }

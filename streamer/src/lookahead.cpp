@@ -113,7 +113,8 @@ void LookaheadSnapshot::index(const std::vector<PlanWindows>& windows,
     for (size_t l = 0; l < runs.size(); ++l) {
       const bool needed = l < w.rects.size() && w.kinds[l] == PlanWindows::kNeeded;
       const TileRect rect = needed ? w.rects[l] : TileRect{};
-      const SampledMask mask = needed && j < sampled.size() && l < sampled[j].size() ? sampled[j][l] : nullptr;
+      const bool has_mask = needed && j < sampled.size() && l < sampled[j].size();
+      const SampledMask mask = has_mask ? sampled[j][l] : nullptr;
       if (runs[l].empty() || runs[l].back().rect != rect || !sameMask(runs[l].back().sampled, mask))
         runs[l].push_back({times_s[j], rect, mask});
     }

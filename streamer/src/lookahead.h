@@ -44,7 +44,8 @@ struct LookaheadSnapshot {
 
   // Builds `runs` from the samples' windows, one per entry of times_s, and
   // their masks (per sample, per level; null or absent: the whole window).
-  void index(const std::vector<PlanWindows>& windows, const std::vector<std::vector<SampledMask>>& sampled = {});
+  void index(const std::vector<PlanWindows>& windows,
+             const std::vector<std::vector<SampledMask>>& sampled = {});
 };
 
 class PathLookahead {

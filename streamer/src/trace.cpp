@@ -187,6 +187,16 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
 
 namespace {
 
+// Puts a window line's level rect and kind into *w.
+void placeWindow(PlanWindows* w, const TraceEvent& e) {
+  if (w->rects.size() <= e.key.level) {
+    w->rects.resize(e.key.level + 1);
+    w->kinds.resize(e.key.level + 1, PlanWindows::kNotNeeded);
+  }
+  w->rects[e.key.level] = e.rect;
+  w->kinds[e.key.level] = e.kind;
+}
+
 // Which tiles the GPU holds as the trace goes: a tile is handed over at its
 // access (every access is taken to be handed over at once, as in the rest
 // of the replay) and stays until a plan change finds it neither wanted nor
@@ -212,12 +222,7 @@ class GpuResidency {
     if (e.window) {
       if (e.window != kTraceWindowTag) return false;
       if (m_fresh_windows) m_windows = {}, m_fresh_windows = false;
-      if (m_windows.rects.size() <= e.key.level) {
-        m_windows.rects.resize(e.key.level + 1);
-        m_windows.kinds.resize(e.key.level + 1, PlanWindows::kNotNeeded);
-      }
-      m_windows.rects[e.key.level] = e.rect;
-      m_windows.kinds[e.key.level] = e.kind;
+      placeWindow(&m_windows, e);
       return false;
     }
     const uint32_t id = m_id_of[i];
@@ -374,14 +379,6 @@ ReplayResult replayTrace(const std::vector<TraceEvent>& events, uint64_t capacit
     double building_time = 0.0;
     Viewport building_viewport{0, 0};
     bool building_hint_used = false;
-    auto placeWindow = [](PlanWindows* w, const TraceEvent& e) {
-      if (w->rects.size() <= e.key.level) {
-        w->rects.resize(e.key.level + 1);
-        w->kinds.resize(e.key.level + 1, PlanWindows::kNotNeeded);
-      }
-      w->rects[e.key.level] = e.rect;
-      w->kinds[e.key.level] = e.kind;
-    };
     // (score, stamp, id): victims are taken from the end, in the streamer's
     // order (evictsBefore).
     using Slot = std::tuple<double, uint64_t, uint32_t>;

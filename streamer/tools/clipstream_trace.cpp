@@ -37,7 +37,8 @@ int main(int argc, char** argv) {
   std::printf("# %s: %llu accesses (%llu more entries the GPU serves), %llu distinct tiles, "
               "budget %.1f MiB = %llu tiles of %llu B\n",
               clipstream::printableText(trace_path, 300).c_str(), (unsigned long long)r.accesses,
-              (unsigned long long)r.gpu_reentries, (unsigned long long)r.distinct_tiles, budget_mb, (unsigned long long)capacity,
+              (unsigned long long)r.gpu_reentries, (unsigned long long)r.distinct_tiles, budget_mb,
+              (unsigned long long)capacity,
               (unsigned long long)entry_bytes);
   std::printf("policy\thits\thit_rate_%%\tof_opt_%%\n");
   auto row = [&](const char* name, uint64_t hits) {
