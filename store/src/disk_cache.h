@@ -9,14 +9,25 @@
 // bytes, and drop()s a bad one, which is then fetched again. So a torn
 // entry costs a request, never a wrong tile.
 //
-// Size: entries are evicted least recently used first (by bytes) whenever
-// an insert takes the folder over its cap. Recency survives a restart
-// through the files' modification times (a hit touches its file).
+// Size: room for an entry is made before it is written, by evicting least
+// recently used entries (by bytes), so within one process the folder's
+// entries and temporaries never hold more than the cap. Recency survives a
+// restart through the files' modification times (a hit touches its file).
+//
+// What it touches: only what it wrote. The folder must belong to this
+// user (open() refuses another's); a store sub-folder is used only if it is
+// a real folder of this user (not a symlink); a file in it counts as an
+// entry, and may be evicted, dropped or replaced, only if its name is one
+// this cache gives (t<level>-<x>-<y>, p<level>-<x>-<y>, tmp.<pid>.<n>) and
+// its header is this cache's (or it is shorter than a header or its header
+// is zeros: a write a crash cut off). Anything else in the folder is left
+// alone, whatever its name.
 //
 // Thread-safe: all methods, from any thread; no lock held across file I/O.
 // Several processes may share a folder: each keeps the cap by its own
-// count, made at open from the folder's contents, and an entry another
-// process removed reads as a miss.
+// count, made at open from the folder's contents (so N processes may
+// together hold up to N caps), and an entry another process removed reads
+// as a miss.
 #pragma once
 
 #include <clipstream/store/types.h>
@@ -81,8 +92,13 @@ class DiskCache {
   Status scan();
   // Removes the index entry of `path` (mutex held); its file is left alone.
   void forget(const std::string& path);
-  // Evicts until under the cap (mutex held); returns the files to remove.
-  std::vector<std::string> evict();
+  // Evicts until `extra` more bytes fit under the cap (mutex held); returns
+  // the entries to remove, which the caller passes to removeEntry().
+  std::vector<std::string> evict(uint64_t extra);
+  // Unlinks entry `path` if it is still one of ours (name and header).
+  void removeEntry(const std::string& path) const;
+  // Whether store sub-folder `store_key` may be used (made if missing).
+  bool usableStoreDir(const std::string& store_key);
   std::string entryPath(const std::string& store_key, const std::string& name) const {
     return store_key + "/" + name;
   }
@@ -92,8 +108,11 @@ class DiskCache {
   mutable std::mutex m_mutex;  // guards everything below
   std::list<std::string> m_lru;  // relative paths, most recently used first
   std::unordered_map<std::string, Entry> m_entries;
-  std::unordered_map<std::string, bool> m_store_dirs;  // sub-folders known to exist
-  uint64_t m_bytes = 0;
+  // Sub-folders checked: true if ours (usable), false if not (a symlink,
+  // a file, another user's folder).
+  std::unordered_map<std::string, bool> m_store_dirs;
+  uint64_t m_bytes = 0;     // entries in m_entries
+  uint64_t m_reserved = 0;  // entries being written (room made for them)
   uint64_t m_evictions = 0;
   uint64_t m_write_failures = 0;
 };

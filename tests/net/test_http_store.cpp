@@ -610,6 +610,122 @@ TEST_F(HttpStore, DiskCacheNeverServesTheEntriesOfAReplacedStore) {
   EXPECT_GT(remote->remoteStats().disk_cache_misses, 0u);
 }
 
+// The one store sub-folder (a 32-digit hash) of a cache folder.
+std::string storeSubFolder(const std::string& dir) {
+  std::string found;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    if (e.path().filename().string().size() == 32) found = e.path().string();
+  }
+  return found;
+}
+
+// Files a user put into the folder (beside the store sub-folders and inside
+// one: a large file, a text file, a file named like an entry, a symlink to a
+// file elsewhere) survive a run that evicts; the entries stay under the cap.
+TEST_F(HttpStore, DiskCacheEvictsOnlyTheEntriesItWrote) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  options.disk_cache_bytes = 100 << 10;
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  const std::string sub = storeSubFolder(options.disk_cache_dir);
+  ASSERT_FALSE(sub.empty());
+  const std::string outside = m_dir.file("precious.txt");
+  const std::vector<std::pair<std::string, std::vector<uint8_t>>> users = {
+      {sub + "/big.bin", std::vector<uint8_t>(3 << 20, 7)},
+      {sub + "/notes.txt", {'k', 'e', 'e', 'p'}},
+      {sub + "/t9-9-9", std::vector<uint8_t>(4096, 1)},  // an entry's name, not its header
+      {options.disk_cache_dir + "/beside.txt", {'m', 'i', 'n', 'e'}},
+      {outside, {'o', 'u', 't'}},
+  };
+  for (const auto& [path, bytes] : users) test::writeBytes(path, bytes);
+  std::filesystem::create_symlink(outside, sub + "/t8-8-8");
+  // A second run reads every tile again (half of them evicted by the first):
+  // the scan sees the user's files, the evictions never take them.
+  for (int run = 0; run < 2; ++run) {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    std::vector<TileKey> order = keys;
+    if (run == 1) std::reverse(order.begin(), order.end());
+    expectSamePayloads(*remote, *local, order);
+  }
+  for (const auto& [path, bytes] : users) {
+    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was deleted";
+    EXPECT_EQ(test::readBytes(path), bytes) << path;
+  }
+  EXPECT_TRUE(std::filesystem::is_symlink(sub + "/t8-8-8"));
+  // The cap holds for what the cache wrote (the files named like entries
+  // that are not the user's).
+  uint64_t entry_bytes = 0;
+  for (const auto& e : std::filesystem::directory_iterator(sub)) {
+    const std::string name = e.path().filename().string();
+    if (e.is_symlink() || name == "big.bin" || name == "notes.txt" || name == "t9-9-9") continue;
+    entry_bytes += e.file_size();
+  }
+  EXPECT_LE(entry_bytes, options.disk_cache_bytes);
+  EXPECT_GT(entry_bytes, options.disk_cache_bytes / 2);
+}
+
+// A store sub-folder that is a symlink is never followed: the folder it
+// points to keeps its files, nothing is written there, and reads still work
+// (from the server).
+TEST_F(HttpStore, DiskCacheNeverFollowsASymlinkedStoreFolder) {
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("cache");
+  options.disk_cache_bytes = 100 << 10;
+  std::unique_ptr<TileStoreReader> local;
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  const std::vector<TileKey> keys = allKeys(local->geometry());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+  }
+  const std::string sub = storeSubFolder(options.disk_cache_dir);
+  ASSERT_FALSE(sub.empty());
+  // The user's folder, holding a copy of the cache's own entries and files
+  // of theirs, put where the store's sub-folder was.
+  const std::string theirs = m_dir.file("theirs");
+  std::filesystem::copy(sub, theirs);
+  std::filesystem::remove_all(sub);
+  test::writeBytes(theirs + "/big.bin", std::vector<uint8_t>(3 << 20, 7));
+  std::filesystem::create_directory_symlink(theirs, sub);
+  std::vector<std::string> before;
+  for (const auto& e : std::filesystem::directory_iterator(theirs)) before.push_back(e.path());
+  std::sort(before.begin(), before.end());
+  {
+    std::unique_ptr<TileStoreReader> remote;
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    expectSamePayloads(*remote, *local, keys);
+    EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u) << "entries read through the symlink";
+  }
+  std::vector<std::string> after;
+  for (const auto& e : std::filesystem::directory_iterator(theirs)) after.push_back(e.path());
+  std::sort(after.begin(), after.end());
+  EXPECT_EQ(after, before);
+}
+
+// A folder of another user is refused, naming it (run as root, which can
+// give a folder away; skipped otherwise).
+TEST_F(HttpStore, DiskCacheRefusesAFolderOfAnotherUser) {
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root to make a folder of another user";
+  RemoteOptions options;
+  options.disk_cache_dir = m_dir.file("someone-elses");
+  std::filesystem::create_directory(options.disk_cache_dir);
+  ASSERT_EQ(::chown(options.disk_cache_dir.c_str(), 65534, 65534), 0);
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(m_server->url("store.cstore"), options, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kIo) << s.toString();
+  EXPECT_NE(s.message.find(options.disk_cache_dir), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("belongs to user 65534"), std::string::npos) << s.message;
+}
+
 TEST_F(HttpStore, DiskCacheFolderThatCannotBeMadeIsNamed) {
   RemoteOptions options;
   options.disk_cache_dir = m_dir.file("no/such/parent/cache");
