@@ -153,9 +153,36 @@ Status checkFlyOptions(const FlyOptions& o) {
     return bad("I/O latency must be from 1 to " + std::to_string(kMaxFlyIoLatencyFrames) + " frames");
   if (o.terrain_ring < 16 || o.terrain_ring > 1024 || (o.terrain_ring & (o.terrain_ring - 1)) != 0)
     return bad("terrain ring must be a power of two from 16 to 1024");
+  if (!(o.max_failed_reads_percent >= 0.0 && o.max_failed_reads_percent <= 100.0))
+    return bad("failed reads allowed must be from 0 to 100 per cent");
   if (!std::isfinite(o.terrain_error_px) || o.terrain_error_px < kMinTerrainErrorPx ||
       o.terrain_error_px > kMaxTerrainErrorPx)
     return bad("terrain error must be from 0.01 to 1000 pixels");
+  return Status::ok();
+}
+
+// Failed tile reads: a warning when there are any, an error past the
+// allowed share or when nothing loaded (the statistics are written first:
+// they say where it failed).
+Status checkFailedReads(const FlyOptions& o, const FlightRun& run, std::ostream& warnings) {
+  const uint64_t failed = run.tile_failures;
+  if (failed == 0) return Status::ok();
+  const uint64_t loaded = run.streamer.total.loads;
+  const double percent = 100.0 * double(failed) / double(failed + loaded);
+  char share[32];
+  std::snprintf(share, sizeof share, "%.2f", percent);
+  const std::string what = std::to_string(failed) + " of " + std::to_string(failed + loaded) +
+                           " tile reads failed (" + share + " %; the first are named above)";
+  if (loaded == 0 || percent > o.max_failed_reads_percent) {
+    char allowed[32];
+    std::snprintf(allowed, sizeof allowed, "%g", o.max_failed_reads_percent);
+    return Status::error(ErrorCode::kUnavailable,
+                         what + (loaded == 0 ? std::string(": none loaded")
+                                             : std::string(": more than the ") + allowed +
+                                                   " % allowed (--max-failed-reads)") +
+                             "; the run's statistics are in " + o.out_dir);
+  }
+  warnings << "clipstream-fly: warning: " << what << ": those tiles showed coarser levels\n";
   return Status::ok();
 }
 
@@ -328,7 +355,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     printSummary(log, run, d);
     log << "wrote " << o.out_dir << "/frames.csv, frames.json\n";
   }
-  return Status::ok();
+  return checkFailedReads(o, run, warnings ? *warnings : log);
 }
 
 }  // namespace clipstream

@@ -96,6 +96,10 @@ int main(int argc, char** argv) {
       ->transform(delay_ms);
   app.add_option("--fault-corrupt", o.fault_corrupt_fraction, "Fraction of tiles failing as corrupt")
       ->transform(cli::inRange(0.0, 1.0));
+  app.add_option("--max-failed-reads", o.max_failed_reads_percent,
+                 "Fail the run (exit 1, after writing its statistics) when more than this per cent of "
+                 "the tile reads failed, or reads failed and none loaded (default 1)")
+      ->transform(cli::inRange(0.0, 100.0));
   app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
   app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames")
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
@@ -124,9 +128,10 @@ int main(int argc, char** argv) {
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
   app.footer(
-      "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written;\n"
-      "nothing half-written is left), 2 command-line mistake, killed by INT/TERM/HUP after\n"
-      "removing its temporaries (shell status 128+N). docs/cli.md.");
+      "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written,\n"
+      "tile reads failed past --max-failed-reads; nothing half-written is left), 2 command-line\n"
+      "mistake, killed by INT/TERM/HUP after removing its temporaries (shell status 128+N).\n"
+      "docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
   if (Status s = terrainMethodFromName(terrain_method, &o.terrain_method); !s)
     return cli::usageError(app, "--terrain: " + s.message);

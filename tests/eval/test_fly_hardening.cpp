@@ -346,5 +346,43 @@ TEST(FlyHardening, ASignalIgnoredAtStartStaysIgnored) {
   EXPECT_TRUE(fs::exists(out / "summary.tsv"));
 }
 
+// A run whose tile reads failed exited 0 with nothing on stderr (a store
+// replaced on the server gave "tile_failures 97, tiles_loaded 0", rc 0). Now
+// any failure is a warning, more than --max-failed-reads per cent an error
+// (exit 1, the statistics written), and a run that loaded nothing fails
+// whatever the threshold.
+TEST(FlyHardening, FailedTileReadsAreReportedAndFailTheRunPastTheThreshold) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_failures");
+  const std::vector<std::string> base = {"--procedural", "65536", "--path", "pass", "--frames", "20",
+                                         "--size", "160x96", "--out", dir.file("out")};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = base;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return runFly(args, dir.file("log"));
+  };
+  const FlyRun clean = with({});
+  EXPECT_EQ(clean.exit_code, 0) << clean.output;
+  EXPECT_EQ(clean.output.find("tile reads failed"), std::string::npos) << clean.output;
+
+  const FlyRun failing = with({"--fault-corrupt", "0.3"});
+  EXPECT_EQ(failing.exit_code, 1) << failing.output;
+  EXPECT_NE(failing.output.find("tile reads failed"), std::string::npos) << failing.output;
+  EXPECT_NE(failing.output.find("--max-failed-reads"), std::string::npos) << failing.output;
+  EXPECT_TRUE(fs::exists(dir.file("out") + "/summary.tsv")) << "the statistics say where it failed";
+
+  const FlyRun allowed = with({"--fault-corrupt", "0.3", "--max-failed-reads", "100"});
+  EXPECT_EQ(allowed.exit_code, 0) << allowed.output;
+  EXPECT_NE(allowed.output.find("warning: "), std::string::npos) << allowed.output;
+  EXPECT_NE(allowed.output.find("tile reads failed"), std::string::npos) << allowed.output;
+
+  const FlyRun none = with({"--fault-corrupt", "1", "--max-failed-reads", "100"});
+  EXPECT_EQ(none.exit_code, 1) << none.output;
+  EXPECT_NE(none.output.find("none loaded"), std::string::npos) << none.output;
+
+  const FlyRun absurd = with({"--max-failed-reads", "101"});
+  EXPECT_EQ(absurd.exit_code, 2) << absurd.output;
+}
+
 }  // namespace
 }  // namespace clipstream

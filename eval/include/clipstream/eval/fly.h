@@ -31,6 +31,11 @@ inline constexpr uint32_t kMaxFlyFrames = 10000000; // frames, rest and warm-up 
 // wants, and a latency past any flight's length, mean nothing.
 inline constexpr uint32_t kMaxFlyIoReadsPerFrame = 100000;
 inline constexpr uint32_t kMaxFlyIoLatencyFrames = 100000;
+// Tile reads that may fail before a run counts as failed, in per cent of
+// the reads: a few failures show as blur (coarser levels) and are worth a
+// warning; past 1 % the frames no longer show the store (a server that
+// lost it, a store replaced under the run, a damaged file).
+inline constexpr double kDefaultMaxFailedReadsPercent = 1.0;
 
 struct FlyOptions {
   std::string store_path;          // tile store file or http(s) URL; empty when procedural_px > 0
@@ -73,6 +78,9 @@ struct FlyOptions {
   uint32_t io_latency_frames = kDefaultIoLatencyFrames;    // with `deterministic`, at least 1
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
+  // Failed tile reads (per cent of the reads) past which the run fails;
+  // a run in which reads failed and none loaded fails whatever this is.
+  double max_failed_reads_percent = kDefaultMaxFailedReadsPercent;
   uint32_t resize_at_frame = 0;      // > 0: switch to resize_to before this frame
   Viewport resize_to{0, 0};
   uint32_t warmup_frames = 0;        // first hold the first camera this many frames, unrecorded
@@ -102,7 +110,10 @@ inline constexpr double kMaxVerticalScale = 1000.0;
 // resources exist; the statistics files are published only when the run
 // succeeded), and prints a summary table to `log`. Returns the first error
 // (options out of bounds, bad store, no GL context, unwritable output or
-// trace); per-tile failures are counted, not errors.
+// trace). Failed tile reads are counted and, when there are any, a warning
+// says how many; past `max_failed_reads_percent` of the reads, or when
+// reads failed and none loaded, the run returns an error after writing its
+// statistics (kUnavailable).
 // Warnings (temporaries of killed runs removed) go to `warnings`, or to
 // `log` when it is null.
 Status runFly(const FlyOptions& options, std::ostream& log, std::ostream* warnings = nullptr);
