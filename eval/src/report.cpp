@@ -233,12 +233,16 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("speed", num(d.speed));
   add("upload_tiles", std::to_string(d.upload_tiles));
   add("cache_mb", std::to_string(d.cache_mb));
-  add("psnr_mean_db", num(s.psnr_mean_db));
-  add("psnr_min_db", num(s.psnr_min_db));
-  add("frames_below_30db", std::to_string(s.frames_below_30db));
-  add("identical_frames", std::to_string(s.identical_frames));
-  add("time_to_sharp_mean", num(s.time_to_sharp_mean));
-  add("time_to_sharp_max", std::to_string(s.time_to_sharp_max));
+  // Accuracy: empty when no frame was compared with the reference.
+  const bool judged = s.measured_frames > 0;
+  auto judgedNum = [&](double v) { return judged ? num(v) : std::string(); };
+  auto judgedCount = [&](int64_t v) { return judged ? std::to_string(v) : std::string(); };
+  add("psnr_mean_db", judgedNum(s.psnr_mean_db));
+  add("psnr_min_db", judgedNum(s.psnr_min_db));
+  add("frames_below_30db", judgedCount(s.frames_below_30db));
+  add("identical_frames", judgedCount(s.identical_frames));
+  add("time_to_sharp_mean", judgedNum(s.time_to_sharp_mean));
+  add("time_to_sharp_max", judgedCount(s.time_to_sharp_max));
   add("frame_ms_mean", num(s.frame_ms_mean));
   add("frame_ms_p50", num(s.frame_ms_p50));
   add("frame_ms_p99", num(s.frame_ms_p99));
@@ -266,7 +270,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
                                     : 0.0));
   add("ram_peak_mib", num(mib(run.streamer.ram_peak_bytes)));
   add("ram_budget_mib", num(mib(run.streamer.ram_budget_bytes)));
-  add("frames_with_holes", std::to_string(run.frames_with_holes));
+  add("frames_with_holes", judgedCount(run.frames_with_holes));
   // Empty: not measured.
   add("ground_truth_psnr_mean_db", run.ground_truth_frames ? num(run.ground_truth_psnr_mean_db) : std::string());
   add("tile_failures", std::to_string(run.tile_failures));

@@ -21,6 +21,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <thread>
 
 namespace clipstream {
@@ -382,6 +384,50 @@ TEST(FlyHardening, FailedTileReadsAreReportedAndFailTheRunPastTheThreshold) {
 
   const FlyRun absurd = with({"--max-failed-reads", "101"});
   EXPECT_EQ(absurd.exit_code, 2) << absurd.output;
+}
+
+// summary.tsv as key -> value (its two lines: the keys, the values).
+std::map<std::string, std::string> readSummary(const std::string& path) {
+  std::ifstream in(path);
+  std::string keys, values;
+  std::getline(in, keys);
+  std::getline(in, values);
+  std::map<std::string, std::string> summary;
+  std::stringstream k(keys), v(values);
+  for (std::string key, value; std::getline(k, key, '\t');) {
+    value.clear();
+    std::getline(v, value, '\t');
+    summary[key] = value;
+  }
+  return summary;
+}
+
+// Without --reference, summary.tsv said psnr_mean_db 99.0000 (the cap of
+// an identical frame) for a run that compared nothing; the accuracy fields
+// are empty now, and numbers with --reference.
+TEST(FlyHardening, AccuracyFieldsAreEmptyWithoutTheReference) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_blank");
+  const std::vector<std::string> accuracy = {"psnr_mean_db", "psnr_min_db", "frames_below_30db",
+                                             "identical_frames", "time_to_sharp_mean",
+                                             "time_to_sharp_max", "frames_with_holes"};
+  for (const bool reference : {false, true}) {
+    std::vector<std::string> args = {"--procedural", "65536", "--path", "pass", "--frames", "8",
+                                     "--size", "160x96", "--out", dir.file("out")};
+    if (reference) args.push_back("--reference");
+    const FlyRun run = runFly(args, dir.file("log"));
+    ASSERT_EQ(run.exit_code, 0) << run.output;
+    const auto summary = readSummary(dir.file("out") + "/summary.tsv");
+    for (const std::string& key : accuracy) {
+      ASSERT_EQ(summary.count(key), 1u) << key;
+      if (reference) {
+        EXPECT_FALSE(summary.at(key).empty()) << key;
+      } else {
+        EXPECT_EQ(summary.at(key), "") << key;
+      }
+    }
+    EXPECT_FALSE(summary.at("frame_ms_mean").empty());
+  }
 }
 
 }  // namespace
