@@ -47,7 +47,7 @@ fly() {  # name, then clipstream-fly arguments
     local flag=()
     [ "$planner" = relief ] && flag=(--no-terrain-bounds)
     build/eval/clipstream-fly "$@" "${flag[@]}" --size "$size" --reference --reference-every 30 \
-      --out "$work/run" >/dev/null 2>&1
+      --save-frames 0 --out "$work/run" >/dev/null 2>&1
     local sampled ratio
     sampled=$(value "$work/run" tiles_sampled)
     ratio=$(value "$work/run" over_fetch_ratio)

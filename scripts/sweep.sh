@@ -182,10 +182,10 @@ for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
   progress "$i" "$name"
   rm -rf "${WORK:?}/$name"
   # shellcheck disable=SC2086
-  if ! "$FLY" $args --out "$WORK/$name" >"$WORK/$name.log" 2>&1; then
+  if ! "$FLY" $args --save-frames 0 --out "$WORK/$name" >"$WORK/$name.log" 2>&1; then
     echo; echo "sweep: run $name failed, see $WORK/$name.log"; tail -5 "$WORK/$name.log"; exit 1
   fi
-  echo "$FLY $args --out $WORK/$name" >"$WORK/$name.cmd"
+  echo "$FLY $args --save-frames 0 --out $WORK/$name" >"$WORK/$name.cmd"
   i=$((i + 1)); done_weight=$((done_weight + w))
 done
 STAB_CMD="CLIPSTREAM_STABILITY_OUT=$WORK/stability.jsonl CLIPSTREAM_SOAK=full CLIPSTREAM_SOAK_FRAMES=$SOAK $BUILD/tests/eval/test_eval_stability --gtest_filter=Stability.*"

@@ -89,7 +89,7 @@ run() {  # scene method setting, then clipstream-fly arguments
   "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "${SPEED[$scene]}" --frames "$FRAMES" --rest-frames 2 \
     --warmup-frames 30 \
     --size "$SIZE" --reference --reference-every "$EVERY" --fewest-triangles --terrain "$method" "$@" \
-    --out "$out" >/dev/null 2>&1
+    --save-frames 0 --out "$out" >/dev/null 2>&1
   # The slow stretch: the same path at a fifth of the speed, every frame
   # judged (not for the full mesh: it is the reference).
   local slow_speed
@@ -99,7 +99,7 @@ run() {  # scene method setting, then clipstream-fly arguments
   # shellcheck disable=SC2086
   [ "$method" = full ] || "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "$slow_speed" --frames "$SLOW" \
     --warmup-frames 10 --size "$SIZE" --reference --reference-every 1 --terrain "$method" "$@" \
-    --out "$out/slow" >/dev/null 2>&1
+    --save-frames 0 --out "$out/slow" >/dev/null 2>&1
   printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$scene" "$method" "$setting" \
     "$(value "$out" judged_triangles_mean)" "$(value "$out" fewest_triangles_mean)" \
     "$(value "$out" frame_ms_mean)" "$(value "$out" render_cpu_ms_mean)" \

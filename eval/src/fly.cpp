@@ -302,9 +302,11 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   };
   FrameWriter writer(kMaxQueuedPngFrames);
   const uint32_t total_frames = r.frames + r.rest_frames;
+  const uint32_t save_every = o.save_every.value_or(std::max(1u, (total_frames + 3) / 4));
   r.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target, double* readback_ms) -> Status {
     const uint32_t i = frame.frame;
-    if (o.save_every == 0 || !(i % o.save_every == 0 || i + 1 == total_frames)) return Status::ok();
+    if (o.on_progress) o.on_progress(i + 1, total_frames);
+    if (save_every == 0 || !(i % save_every == 0 || i + 1 == total_frames)) return Status::ok();
     const auto start = std::chrono::steady_clock::now();
     std::vector<uint8_t> rgba;
     target.readRgba(&rgba);

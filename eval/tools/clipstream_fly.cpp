@@ -1,12 +1,14 @@
 // clipstream-fly: headless flythrough with per-frame statistics.
 // Usage and output formats: docs/renderer.md; exit codes: docs/cli.md.
 #include <clipstream/cli/cli.h>
+#include <clipstream/cli/progress.h>
 #include <clipstream/cli/sizes.h>
 #include <clipstream/eval/fly.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <iostream>
+#include <memory>
 #include <new>
 #include <system_error>
 
@@ -37,8 +39,12 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out_dir,
                  "Output directory (holds one run: an earlier run's frames and statistics there are "
                  "removed first)");
-  app.add_option("--save-frames", o.save_every, "Save every Nth frame as PNG (0 = none)")
-      ->transform(cli::wholeInRange(0, kMaxFlyFrames));
+  uint32_t save_every = 0;
+  CLI::Option* save_frames =
+      app.add_option("--save-frames", save_every,
+                     "Save every Nth frame (and the last) as PNG; 0 = none (default: five frames, "
+                     "the first, one each quarter of the run and the last)")
+          ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--buffering", buffering, "single, double-upload, double-copy or staged");
@@ -160,6 +166,18 @@ int main(int argc, char** argv) {
   o.plan_scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
   o.terrain_bounds = !no_terrain_bounds;
 
+  if (save_frames->count() > 0) o.save_every = save_every;
+  // A progress line on a terminal (CLIPSTREAM_PROGRESS=0/1 overrides),
+  // finished before the summary table is printed.
+  std::unique_ptr<cli::ProgressBar> bar;
+  const bool progress = !o.quiet && cli::progressEnabledByDefault();
+  o.on_progress = [&](uint32_t done, uint32_t total) {
+    if (!progress) return;
+    if (!bar) bar = std::make_unique<cli::ProgressBar>("flying", total, true, "frames");
+    bar->update(done);
+    if (done == total) bar->finish();
+  };
+
   cli::installSignalHandlers();
   try {
     s = runFly(o, std::cout, &std::cerr);
@@ -168,6 +186,7 @@ int main(int argc, char** argv) {
   } catch (const std::system_error& e) {
     s = Status::error(ErrorCode::kIo, std::string("cannot start a thread: ") + e.what());
   }
+  if (bar) bar->finish();  // before any message
   if (!s) {
     cli::printError(app, s.toString());
     return cli::finish(app, cli::kExitFailure);

@@ -306,7 +306,8 @@ TEST(FlyHardening, NothingIsRemovedBeforeTheRunCanStartAndOnlyItsOwnNames) {
     EXPECT_EQ(run.exit_code, 2) << resize << ": " << run.output;
   }
   CLIPSTREAM_REQUIRE_GL();
-  run = runFly({"--procedural", "65536", "--frames", "010", "--size", "160x90", "--out", out.string()},
+  run = runFly({"--procedural", "65536", "--frames", "010", "--size", "160x90", "--save-frames", "0", "--out",
+                out.string()},
                dir.file("log"));
   ASSERT_EQ(run.exit_code, 0) << run.output;
   std::ifstream csv(out / "frames.csv");
@@ -428,6 +429,39 @@ TEST(FlyHardening, AccuracyFieldsAreEmptyWithoutTheReference) {
     }
     EXPECT_FALSE(summary.at("frame_ms_mean").empty());
   }
+}
+
+// The first hour: a run saved no frame unless asked and showed no progress
+// on a 1,200-frame flight. By default five frames are saved (the first, one
+// each quarter, the last), --save-frames 0 saves none, and a progress line
+// is drawn when stderr is a terminal (CLIPSTREAM_PROGRESS=1 here).
+TEST(FlyHardening, FramesAreSavedAndProgressShownByDefault) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_defaults");
+  const std::vector<std::string> base = {"--procedural", "65536", "--path", "pass", "--frames", "12",
+                                         "--size", "160x96", "--out", dir.file("out")};
+  auto pngs = [&] {
+    std::vector<std::string> found;
+    for (const std::string& name : namesIn(dir.file("out")))
+      if (name.size() > 4 && name.compare(name.size() - 4, 4, ".png") == 0) found.push_back(name);
+    return found;
+  };
+  ::setenv("CLIPSTREAM_PROGRESS", "1", 1);
+  const FlyRun run = runFly(base, dir.file("log"));
+  ::unsetenv("CLIPSTREAM_PROGRESS");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  EXPECT_EQ(pngs(), (std::vector<std::string>{"frame_00000.png", "frame_00003.png", "frame_00006.png",
+                                              "frame_00009.png", "frame_00011.png"}));
+  EXPECT_NE(run.output.find("flying 100% [##############################] 12/12"), std::string::npos)
+      << run.output;
+  expectOnlyWholeFiles(dir.file("out"), 160, 96);
+
+  std::vector<std::string> none = base;
+  none.insert(none.end(), {"--save-frames", "0"});
+  const FlyRun quiet = runFly(none, dir.file("log"));
+  ASSERT_EQ(quiet.exit_code, 0) << quiet.output;
+  EXPECT_TRUE(pngs().empty());
+  EXPECT_EQ(quiet.output.find("flying"), std::string::npos) << "no progress when stderr is a file";
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
+#include <functional>
 #include <iosfwd>
 #include <optional>
 #include <string>
@@ -49,13 +50,18 @@ struct FlyOptions {
   unsigned io_threads = 0;         // 0 = cores (a URL store: one per HTTP connection)
   RemoteOptions remote;            // a URL store: requests in flight, disk cache
   std::string out_dir = "fly-out";
-  uint32_t save_every = 0;         // 0 = no PNGs; N = every Nth frame (and the last)
+  // PNGs: every Nth frame and the last; 0 = none; unset = five frames
+  // spread over the run (the first, one each quarter, the last).
+  std::optional<uint32_t> save_every;
   Buffering buffering = kDefaultBuffering;
   // Colour tiles on the GPU: kRgba8 as the source gives them, or kBc1
   // transcoded by the loader threads (makeBc1Source()).
   TileContent tile_format = TileContent::kRgba8;
   bool overlay = false;
   bool quiet = false;              // no summary table
+  // Called on the render thread after each frame (warm-up excluded) with
+  // the frames done and the run's total: a progress display.
+  std::function<void(uint32_t done, uint32_t total)> on_progress;
   // Speed against accuracy (docs/accuracy.md).
   bool reference = false;            // compare frames with the ideal reference
   bool fewest_triangles = false;     // over terrain, judged frames count the fewest triangles too
