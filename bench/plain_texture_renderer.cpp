@@ -34,7 +34,7 @@ Status PlainTextureRenderer::create(const uint8_t* rgba, uint32_t width_px, uint
   r->m_width_px = width_px;
   r->m_height_px = height_px;
   *out = std::move(r);
-  return Status::ok();
+  return okStatus();
 }
 
 PlainTextureRenderer::~PlainTextureRenderer() {

@@ -74,7 +74,7 @@ Result runOnce(Buffering buffering, TileSource& source, const Viewport& vp, uint
     return c;
   };
   std::unique_ptr<ClipmapRenderer> r;
-  if (!createClipmapRenderer(source, vp, cameraAt(0), {}, buffering, &r, nullptr).isOk()) return {};
+  if (!createClipmapRenderer(source, vp, cameraAt(0), {}, buffering, &r, nullptr).ok()) return {};
   glFinish();
 
   std::set<TileKey, KeyLess> resident;
@@ -97,7 +97,7 @@ Result runOnce(Buffering buffering, TileSource& source, const Viewport& vp, uint
       if (batch.size() >= upload_tiles) break;
       if (k.level >= plan.pyramid_level || resident.count(k)) continue;
       auto px = std::make_shared<std::vector<uint8_t>>();
-      if (!source.fetch(k, px.get()).isOk()) continue;
+      if (!source.fetch(k, px.get()).ok()) continue;
       batch.push_back({k, std::move(px)});
     }
     std::vector<LevelResidency> residency;
@@ -164,7 +164,7 @@ int main(int argc, char** argv) {
   Viewport vp{1280, 720};
   uint32_t frames = 240, upload_tiles = 16, runs = 3;
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).isOk()) return 2;
+    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).ok()) return 2;
     if (!std::strcmp(argv[i], "--frames")) frames = uint32_t(std::max(2, std::atoi(argv[i + 1])));
     if (!std::strcmp(argv[i], "--upload-tiles")) upload_tiles = uint32_t(std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--runs")) runs = uint32_t(std::max(1, std::atoi(argv[i + 1])));
@@ -178,7 +178,7 @@ int main(int argc, char** argv) {
   spec.width_px = spec.height_px = uint64_t(1) << 20;
   auto source = makeProceduralSource(spec);
   std::unique_ptr<OffscreenTarget> target;
-  if (!OffscreenTarget::create(vp, &target).isOk()) return 1;
+  if (!OffscreenTarget::create(vp, &target).ok()) return 1;
   std::printf("# %s, %ux%u, procedural 2^20, %u frames, %u uploads/frame, best of %u runs (by p99)\n",
               ctx->describe().c_str(), vp.width_px, vp.height_px, frames, upload_tiles, runs);
   std::printf("buffering\tframe_mean_ms\tframe_p50_ms\tframe_p99_ms\tframe_max_ms\tframe_sd_ms\t"

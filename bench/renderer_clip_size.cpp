@@ -36,7 +36,7 @@ namespace {
 uint64_t stackBytes(const PyramidGeometry& g, const ClipmapPlan& plan) {
   RendererConfig rc{plan.clip_tiles, plan.pyramid_level, Buffering::kSingle};
   std::unique_ptr<ClipmapRenderer> r;
-  if (!ClipmapRenderer::create(g, rc, &r).isOk()) return 0;
+  if (!ClipmapRenderer::create(g, rc, &r).ok()) return 0;
   return r->textureBytes().stack;
 }
 
@@ -47,7 +47,7 @@ int main(int argc, char** argv) {
   std::vector<int> deltas = {-8, -6, -4, -2, 2, 4};
   std::string only;  // --view NAME: that view only
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).isOk()) return 2;
+    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).ok()) return 2;
     if (!std::strcmp(argv[i], "--view")) only = argv[i + 1];
     if (!std::strcmp(argv[i], "--deltas")) {
       deltas.clear();

@@ -73,7 +73,7 @@ int main(int argc, char** argv) {
   int repeats = 15;
   PlannerConfig planner;
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).isOk()) return 2;
+    if (!std::strcmp(argv[i], "--size") && !cli::parseSize(argv[i + 1], &vp.width_px, &vp.height_px).ok()) return 2;
     if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--clip-tiles")) planner.clip_tiles = uint32_t(std::atoi(argv[i + 1]));
   }
@@ -128,7 +128,7 @@ int main(int argc, char** argv) {
       const PyramidGeometry& g = source->geometry();
       auto upload = [&](uint32_t l, int64_t x, int64_t y) {
         auto px = std::make_shared<std::vector<uint8_t>>();
-        if (tiles.fetch({l, uint32_t(x), uint32_t(y)}, px.get()).isOk())
+        if (tiles.fetch({l, uint32_t(x), uint32_t(y)}, px.get()).ok())
           r->uploadTile({l, uint32_t(x), uint32_t(y)}, px);
       };
       for (uint32_t l = plan.pyramid_level; l < g.levelCount(); ++l)

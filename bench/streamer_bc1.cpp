@@ -41,7 +41,7 @@ std::vector<std::vector<uint8_t>> sampleTiles(TileSource& source, size_t count) 
     for (size_t i = 0; i < per_level && tiles.size() < count; ++i) {
       const TileKey key{l, uint32_t((i * 7919 + l) % info.tiles_x), uint32_t((i * 104729 + 3 * l) % info.tiles_y)};
       std::vector<uint8_t> rgba;
-      if (source.fetch(key, &rgba).isOk()) tiles.push_back(std::move(rgba));
+      if (source.fetch(key, &rgba).ok()) tiles.push_back(std::move(rgba));
     }
   }
   return tiles;
@@ -58,13 +58,13 @@ void run(const char* name, TileSource& source, int repeats) {
     for (int r = 0; r < repeats; ++r) {
       const double t0 = threadCpuMs();
       for (const auto& t : tiles) {
-        if (Status s = encodeBc1Tile(t, tp, &blocks, hq); !s.isOk()) fail(s);
+        if (Status s = encodeBc1Tile(t, tp, &blocks, hq); !s.ok()) fail(s);
       }
       best = std::min(best, (threadCpuMs() - t0) / double(tiles.size()));
     }
     for (const auto& t : tiles) {
-      if (Status s = encodeBc1Tile(t, tp, &blocks, hq); !s.isOk()) fail(s);
-      if (Status s = decodeBc1Tile(blocks, tp, &decoded); !s.isOk()) fail(s);
+      if (Status s = encodeBc1Tile(t, tp, &blocks, hq); !s.ok()) fail(s);
+      if (Status s = decodeBc1Tile(blocks, tp, &decoded); !s.ok()) fail(s);
       for (size_t i = 0; i < t.size(); ++i) {
         if (i % 4 == 3) continue;
         const int d = int(t[i]) - int(decoded[i]);

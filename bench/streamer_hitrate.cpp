@@ -86,7 +86,7 @@ class FlatSource final : public TileSource {
   const PyramidGeometry& geometry() const override { return m_geometry; }
   Status fetch(const TileKey&, std::vector<uint8_t>* rgba) override {
     rgba->assign(size_t(m_geometry.tile_px) * m_geometry.tile_px * 4, 128);
-    return Status::ok();
+    return okStatus();
   }
   std::string describe() const override { return "flat"; }
 

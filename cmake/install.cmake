@@ -21,6 +21,26 @@ include(CMakePackageConfigHelpers)
 set(CLIPSTREAM_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/clipstream)
 set(CLIPSTREAM_CMAKE_DIR ${CMAKE_CURRENT_LIST_DIR})
 
+# `installables`: every target `cmake --install` installs, and nothing else
+# (no tests, no benchmarks). scripts/demo.sh builds it, so the README's
+# install step works right after the demo; scripts/test.sh installs right
+# after building it, before the rest, to keep it so.
+add_custom_target(installables)
+
+# clipstream_install_program(<target> [DESTINATION dir])
+#
+# Installs a program (to bin/, or DESTINATION for a module the tiler loads)
+# and adds it to `installables`.
+function(clipstream_install_program target)
+  cmake_parse_arguments(PARSE_ARGV 1 arg "" "DESTINATION" "")
+  if(arg_DESTINATION)
+    install(TARGETS ${target} LIBRARY DESTINATION ${arg_DESTINATION})
+  else()
+    install(TARGETS ${target})
+  endif()
+  add_dependencies(installables ${target})
+endfunction()
+
 # clipstream_install_library(<clipstream_NAME> [PKG_CONFIG module...] [LIBS lib...])
 #
 # Installs the library and the public headers of the calling folder
@@ -55,6 +75,7 @@ function(clipstream_install_library target)
   install(TARGETS ${target} EXPORT clipstreamTargets
     ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
     LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+  add_dependencies(installables ${target})
   install(DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/include/clipstream/${name}
     DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/clipstream
     FILES_MATCHING PATTERN "*.h" PATTERN "*.hpp")

@@ -9,7 +9,8 @@ scripts/deps.sh
 
 jobs=$(nproc)
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
-cmake --build build -j "$jobs" --target clipstream-tile clipstream-info clipstream-fly
+# The programs and libraries (not the tests): what `cmake --install build` installs.
+cmake --build build -j "$jobs" --target installables
 
 out=out/demo
 mkdir -p "$out"

@@ -62,9 +62,23 @@ std::string quotedValue(const std::string& text) { return "'" + printableText(te
 
 }  // namespace
 
+std::string versionText(const CLI::App& app) {
+  return app.get_name() + " " + CLIPSTREAM_VERSION;
+}
+
 std::optional<int> parse(CLI::App& app, int argc, char** argv) {
+  // Every program: --version, and each option's default in --help (the
+  // value its variable holds before parsing; flags and empty values show
+  // none).
+  if (app.get_option_no_throw("--version") == nullptr) app.set_version_flag("--version", versionText(app));
+  for (CLI::Option* option : app.get_options()) {
+    if (option->get_type_size() != 0) option->capture_default_str();
+  }
   try {
     app.parse(argc, argv);
+  } catch (const CLI::CallForVersion& version) {
+    std::cout << version.what() << "\n";
+    return kExitOk;
   } catch (const CLI::CallForHelp&) {
     std::cout << app.help();
     return kExitOk;

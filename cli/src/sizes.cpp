@@ -22,7 +22,7 @@ Status parseSize(const std::string& text, uint32_t* width_px, uint32_t* height_p
                              std::to_string(kMaxSizeSidePx) + " px");
   *width_px = uint32_t(side[0]);
   *height_px = uint32_t(side[1]);
-  return Status::ok();
+  return okStatus();
 }
 
 Status parseResize(const std::string& text, uint32_t max_frame, uint32_t* frame, uint32_t* width_px,
@@ -37,7 +37,7 @@ Status parseResize(const std::string& text, uint32_t max_frame, uint32_t* frame,
                              " (e.g. 120:640x360)");
   if (Status s = parseSize(text.substr(colon + 1), width_px, height_px); !s) return s;
   *frame = uint32_t(std::stoul(digits));
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream::cli

@@ -18,7 +18,7 @@ Status IdealReference::create(std::shared_ptr<TileSource> source, const Viewport
   r->m_planner = planner;
   if (Status s = r->resize(viewport); !s) return s;
   *out = std::move(r);
-  return Status::ok();
+  return okStatus();
 }
 
 Status IdealReference::resize(const Viewport& viewport) {
@@ -36,7 +36,7 @@ Status IdealReference::resize(const Viewport& viewport) {
   // Tiles that failed show their ancestor, as in the streamed renderer.
   m_renderer->loadPyramid([this](const TileKey& key) { return tile(key); });
   m_renderer->endUploads();
-  return Status::ok();
+  return okStatus();
 }
 
 std::shared_ptr<const std::vector<uint8_t>> IdealReference::tile(const TileKey& key) {
@@ -45,7 +45,7 @@ std::shared_ptr<const std::vector<uint8_t>> IdealReference::tile(const TileKey& 
   if (it != m_cache.end()) return it->second;
   auto px = std::make_shared<std::vector<uint8_t>>();
   std::shared_ptr<const std::vector<uint8_t>> value;
-  if (m_source->fetch(key, px.get()).isOk()) value = std::move(px);
+  if (m_source->fetch(key, px.get()).ok()) value = std::move(px);
   m_cache.emplace(packed, value);
   return value;
 }
@@ -56,7 +56,7 @@ Status IdealReference::render(const Camera& camera, std::vector<uint8_t>* rgba) 
   ClipmapRenderer::clearSky();
   m_renderer->draw(camera, m_viewport);
   m_target->readRgba(rgba);
-  return Status::ok();
+  return okStatus();
 }
 
 Status IdealReference::prepare(const Camera& camera, bool every_level) {
@@ -100,7 +100,7 @@ Status IdealReference::prepare(const Camera& camera, bool every_level) {
   m_renderer->setResidency(residency);
   m_renderer->setMaxTextureLod(0);
   m_renderer->endUploads();
-  return Status::ok();
+  return okStatus();
 }
 
 Status FlyAccuracy::create(std::shared_ptr<TileSource> source, const Viewport& viewport,
@@ -114,19 +114,19 @@ Status FlyAccuracy::create(std::shared_ptr<TileSource> source, const Viewport& v
     if (Status s = IdealReference::create(source, viewport, planner, &a->m_reference); !s) return s;
   if (options.ground_truth) a->m_texels = texelsFromSource(source);
   *out = std::move(a);
-  return Status::ok();
+  return okStatus();
 }
 
 Status FlyAccuracy::resize(const Viewport& viewport) {
   m_viewport = viewport;
-  return m_reference ? m_reference->resize(viewport) : Status::ok();
+  return m_reference ? m_reference->resize(viewport) : okStatus();
 }
 
 Status FlyAccuracy::measure(const Camera& camera, const OffscreenTarget& target, bool compare,
                             bool ground_truth, AccuracyFrame* out) {
   *out = AccuracyFrame{};
   if (m_options.sample_tiles) sampledTiles(m_source->geometry(), camera, m_viewport, &m_sampled);
-  if (!compare) return Status::ok();
+  if (!compare) return okStatus();
   if (!m_reference)
     return Status::error(ErrorCode::kInvalidArgument, "accuracy: a comparison asked of a run without a reference");
   target.readRgba(&m_streamed);
@@ -139,7 +139,7 @@ Status FlyAccuracy::measure(const Camera& camera, const OffscreenTarget& target,
     out->ground_truth_measured = true;
     out->ground_truth = compareFrames(m_ideal, m_truth);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -370,6 +370,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   run->trace_status = flight->streamer().traceStatus();
   run->render_thread_fetches = watched->renderThreadFetches();
   run->tile_failures = run->streamer.total.failures + run->preload_failures;
+  run->remote = o.source->remoteStats();
+  if (o.terrain && o.terrain->source) run->remote += o.terrain->source->remoteStats();
   run->rss_end_bytes = currentRssBytes();
 
   std::vector<FrameRecord> records;
@@ -422,7 +424,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   if (run->summary.tiles_sampled_stack > 0)
     run->summary.over_fetch_stack_ratio =
         double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -41,7 +41,7 @@ Status writeRunFiles(const std::vector<std::pair<std::string, std::string>>& fil
   }
   for (std::unique_ptr<OutputFile>& output : outputs)
     if (Status s = output->commit(); !s) return s;
-  return Status::ok();
+  return okStatus();
 }
 
 // "frame_NNNNN.png" exactly as the frame loop names frames ("%05u"): five
@@ -86,7 +86,7 @@ Status checkFlyOutputs(const FlyOptions& o) {
     trace_options.existing = ExistingOutput::kReplaceRegular;
     if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
   }
-  return Status::ok();
+  return okStatus();
 }
 
 // --out holds one run: creates it if needed, then removes what an earlier run
@@ -122,7 +122,7 @@ Status prepareOutDir(const std::string& dir, std::vector<std::string>* swept) {
       return Status::error(ErrorCode::kIo, "cannot remove " + path + " of an earlier run: " +
                                                std::strerror(errno));
   }
-  return Status::ok();
+  return okStatus();
 }
 
 // Library-side guard for values a program's command line already bounds
@@ -158,7 +158,7 @@ Status checkFlyOptions(const FlyOptions& o) {
   if (!std::isfinite(o.terrain_error_px) || o.terrain_error_px < kMinTerrainErrorPx ||
       o.terrain_error_px > kMaxTerrainErrorPx)
     return bad("terrain error must be from 0.01 to 1000 pixels");
-  return Status::ok();
+  return okStatus();
 }
 
 // Failed tile reads: a warning when there are any, an error past the
@@ -166,7 +166,7 @@ Status checkFlyOptions(const FlyOptions& o) {
 // they say where it failed).
 Status checkFailedReads(const FlyOptions& o, const FlightRun& run, std::ostream& warnings) {
   const uint64_t failed = run.tile_failures;
-  if (failed == 0) return Status::ok();
+  if (failed == 0) return okStatus();
   const uint64_t loaded = run.streamer.total.loads;
   const double percent = 100.0 * double(failed) / double(failed + loaded);
   char share[32];
@@ -183,7 +183,7 @@ Status checkFailedReads(const FlyOptions& o, const FlightRun& run, std::ostream&
                              "; the run's statistics are in " + o.out_dir);
   }
   warnings << "clipstream-fly: warning: " << what << ": those tiles showed coarser levels\n";
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -202,7 +202,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   } else {
     Status s;
     source = openStoreSource(o.store_path, o.remote, &s);
-    if (!source) return s.isOk() ? Status::error(ErrorCode::kIo, "cannot open " + o.store_path) : s;
+    if (!source) return s.ok() ? Status::error(ErrorCode::kIo, "cannot open " + o.store_path) : s;
   }
   if (o.fault_latency_ms > 0.0 || o.fault_corrupt_fraction > 0.0) {
     FaultSpec fault;
@@ -298,7 +298,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.on_start = [&]() -> Status {
     if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
     if (!o.trace_path.empty()) sweepOutputTemporaries(o.trace_path, &swept);
-    return Status::ok();
+    return okStatus();
   };
   FrameWriter writer(kMaxQueuedPngFrames);
   const uint32_t total_frames = r.frames + r.rest_frames;
@@ -306,7 +306,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target, double* readback_ms) -> Status {
     const uint32_t i = frame.frame;
     if (o.on_progress) o.on_progress(i + 1, total_frames);
-    if (save_every == 0 || !(i % save_every == 0 || i + 1 == total_frames)) return Status::ok();
+    if (save_every == 0 || !(i % save_every == 0 || i + 1 == total_frames)) return okStatus();
     const auto start = std::chrono::steady_clock::now();
     std::vector<uint8_t> rgba;
     target.readRgba(&rgba);
@@ -314,7 +314,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     std::snprintf(name, sizeof name, "/frame_%05u.png", i);
     writer.submit(o.out_dir + name, target.viewport().width_px, target.viewport().height_px, std::move(rgba));
     *readback_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return Status::ok();
+    return okStatus();
   };
   // The frames are written before the streamer publishes its trace: a
   // frame that failed leaves no trace.

@@ -49,7 +49,7 @@ Status readImageRgba(const std::string& path, std::vector<uint8_t>* rgba, uint32
       (*rgba)[i * 4 + c] = raw[i * channels + (channels >= 3 ? c : 0)];
   *width_px = uint32_t(spec.width);
   *height_px = uint32_t(spec.height);
-  return Status::ok();
+  return okStatus();
 }
 
 FrameWriter::FrameWriter(size_t max_queued)
@@ -83,8 +83,8 @@ void FrameWriter::run() {
     }
     Status s = writePng(job.path, job.width_px, job.height_px, job.rgba.data());
     std::lock_guard<std::mutex> lock(m_mutex);
-    if (s.isOk()) ++m_written;
-    else if (m_first_error.isOk()) m_first_error = std::move(s);
+    if (s.ok()) ++m_written;
+    else if (m_first_error.ok()) m_first_error = std::move(s);
   }
 }
 

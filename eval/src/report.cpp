@@ -39,6 +39,17 @@ std::string viewportText(const Viewport& v) {
   return std::to_string(v.width_px) + "x" + std::to_string(v.height_px);
 }
 
+nlohmann::json remoteJson(const RemoteStats& r) {
+  return {{"http_requests", r.requests},         {"http_retries", r.retries},
+          {"http_bytes", r.bytes},               {"http_failures", r.failures},
+          {"http_connections", r.connections},   {"http2_requests", r.http2_requests},
+          {"disk_cache_hits", r.disk_cache_hits}, {"disk_cache_misses", r.disk_cache_misses},
+          {"disk_cache_dropped", r.disk_cache_dropped}};
+}
+
+// Whether the run read a store over HTTP (RemoteStats are all zero otherwise).
+bool readRemotely(const FlightRun& run) { return run.remote.requests > 0 || run.remote.disk_cache_hits > 0; }
+
 }  // namespace
 
 std::string framesCsv(const FlightRun& run, uint32_t levels) {
@@ -212,6 +223,7 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       {"render_thread_fetches", run.render_thread_fetches},
       {"pngs_written", d.pngs_written},
       {"pngs_dropped", d.pngs_dropped},
+      {"remote", remoteJson(run.remote)},
       {"streamer", nlohmann::json::parse(run.streamer.toJson(), nullptr, false)},
       {"accuracy", acc}};
   return nlohmann::json{{"summary", summary}, {"frames", jframes}}.dump(1) + "\n";
@@ -297,6 +309,17 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("io_mode", d.deterministic ? "deterministic" : "real-time");
   add("io_reads_per_frame", d.deterministic ? std::to_string(d.io_reads_per_frame) : "0");
   add("io_latency_frames", d.deterministic ? std::to_string(d.io_latency_frames) : "0");
+  add("pngs_written", std::to_string(d.pngs_written));
+  add("pngs_dropped", std::to_string(d.pngs_dropped));
+  // A store read over HTTP: the requests, bytes and retries it cost, and
+  // what the disk cache served. Empty for local stores.
+  const bool remote = readRemotely(run);
+  auto remoteCount = [&](uint64_t v) { return remote ? std::to_string(v) : std::string(); };
+  add("http_requests", remoteCount(run.remote.requests));
+  add("http_bytes", remoteCount(run.remote.bytes));
+  add("http_retries", remoteCount(run.remote.retries));
+  add("disk_cache_hits", remoteCount(run.remote.disk_cache_hits));
+  add("disk_cache_misses", remoteCount(run.remote.disk_cache_misses));
   return keys + "\n" + values + "\n";
 }
 
@@ -332,6 +355,14 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   }
   row("ram_peak_mib", mib(run.streamer.ram_peak_bytes), "%.1f");
   row("pngs_written", double(d.pngs_written), "%.0f");
+  if (d.pngs_dropped > 0) row("pngs_dropped", double(d.pngs_dropped), "%.0f");
+  if (readRemotely(run)) {
+    row("http_requests", double(run.remote.requests), "%.0f");
+    row("http_mib", mib(run.remote.bytes), "%.1f");
+    row("http_retries", double(run.remote.retries), "%.0f");
+    row("disk_cache_hits", double(run.remote.disk_cache_hits), "%.0f");
+    row("disk_cache_misses", double(run.remote.disk_cache_misses), "%.0f");
+  }
   row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
   out << "tile_format\t" << tileContentName(run.tile_content) << "\n";
   out << "io_mode\t"

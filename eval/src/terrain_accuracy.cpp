@@ -44,7 +44,7 @@ Status ReferenceSurface::load(TileSource& heights, const LayerAlignment& alignme
       }
     }
   *out = std::move(s);
-  return Status::ok();
+  return okStatus();
 }
 
 double ReferenceSurface::heightAt(double x, double z) const {
@@ -119,19 +119,19 @@ Status TerrainReference::create(std::shared_ptr<TileSource> colour, TileSource& 
   const uint32_t missing = r->m_mesh->preloadCoarseLevels([&](const TileKey& key) {
     auto bytes = std::make_shared<std::vector<uint8_t>>();
     if (Status s = heights.fetch(key, bytes.get()); !s) {
-      if (failed.isOk()) failed = s;
+      if (failed.ok()) failed = s;
       return std::shared_ptr<const std::vector<uint8_t>>();
     }
     return std::shared_ptr<const std::vector<uint8_t>>(std::move(bytes));
   });
   if (missing > 0) {
-    return failed.isOk() ? Status::error(ErrorCode::kCorruptTile, "terrain reference: a height tile of the wrong size")
+    return failed.ok() ? Status::error(ErrorCode::kCorruptTile, "terrain reference: a height tile of the wrong size")
                          : failed;
   }
   if (Status s = IdealReference::create(std::move(colour), viewport, planner, &r->m_colour); !s) return s;
   if (Status s = r->resize(viewport); !s) return s;
   *out = std::move(r);
-  return Status::ok();
+  return okStatus();
 }
 
 Status TerrainReference::resize(const Viewport& viewport) {
@@ -149,7 +149,7 @@ Status TerrainReference::render(const Camera& camera, std::vector<uint8_t>* rgba
   m_target->readRgba(rgba);
   m_mesh->readPositions(camera, m_viewport, m_colour->renderer(), xyzw);
   m_target->bind();
-  return Status::ok();
+  return okStatus();
 }
 
 TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba,
@@ -262,9 +262,9 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
         }
         return px;
       });
-  if (missing > 0) return fetch_status.isOk() ? Status::error(ErrorCode::kIo, "fewest triangles: a height tile missing") : fetch_status;
+  if (missing > 0) return fetch_status.ok() ? Status::error(ErrorCode::kIo, "fewest triangles: a height tile missing") : fetch_status;
   *out = std::move(f);
-  return Status::ok();
+  return okStatus();
 }
 
 uint64_t FewestTriangles::count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,

@@ -85,7 +85,7 @@ int main(int argc, char** argv) {
   } else {
     cs::Status status;
     source = cs::openStoreSource(store_path, &status);
-    if (!source) return fail("store", status);
+    if (!status.ok()) return fail("store", status);  // and source is null
   }
   const cs::PyramidGeometry& geometry = source->geometry();
 
@@ -93,12 +93,12 @@ int main(int argc, char** argv) {
   //    makes its own context current instead; the renderer needs OpenGL 4.5
   //    core and uses whatever context is current.
   std::unique_ptr<cs::HeadlessContext> context;
-  if (cs::Status s = cs::HeadlessContext::create(&context); !s) return fail("no OpenGL 4.5 context", s);
+  if (cs::Status s = cs::HeadlessContext::create(&context); !s.ok()) return fail("no OpenGL 4.5 context", s);
 
   // 3. The host's framebuffer: here an offscreen one; a window's would do.
   const cs::Viewport viewport{640, 360};
   std::unique_ptr<cs::OffscreenTarget> target;
-  if (cs::Status s = cs::OffscreenTarget::create(viewport, &target); !s) return fail("framebuffer", s);
+  if (cs::Status s = cs::OffscreenTarget::create(viewport, &target); !s.ok()) return fail("framebuffer", s);
 
   // 4. The streamer (loader threads start here) and the renderer. The clip
   //    size and the coarse pyramid's level come from the plan of the first

@@ -46,14 +46,14 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
   const uint32_t missing = renderer->loadPyramid(
       [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
         auto px = std::make_shared<std::vector<uint8_t>>();
-        if (!source.fetch(key, px.get()).isOk()) return nullptr;  // filled from its ancestor
+        if (!source.fetch(key, px.get()).ok()) return nullptr;  // filled from its ancestor
         return px;
       });
   renderer->endUploads();
   if (failures != nullptr) *failures += missing;
   if (plan != nullptr) *plan = first;
   *out = std::move(renderer);
-  return Status::ok();
+  return okStatus();
 }
 
 Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
@@ -84,7 +84,7 @@ Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& c
   if (warnings != nullptr) {
     warnings->insert(warnings->end(), out->alignment.warnings.begin(), out->alignment.warnings.end());
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& config,
@@ -119,7 +119,7 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   f->m_before = f->m_streamer->stats();
   f->m_previous = first;
   *out = std::move(f);
-  return Status::ok();
+  return okStatus();
 }
 
 Flight::~Flight() {
@@ -146,7 +146,7 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
   m_renderer = std::move(renderer);
   m_target = std::move(target);
   m_first_plan = std::move(plan);
-  return Status::ok();
+  return okStatus();
 }
 
 Status Flight::makeTerrain() {
@@ -165,18 +165,18 @@ Status Flight::makeTerrain() {
   if (t.method == TerrainMethod::kQuadtree || t.method == TerrainMethod::kFlat) {
     // The per-tile errors the quadtree refines by (index pages, read once).
     std::shared_ptr<const TerrainBounds> bounds;
-    if (loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &bounds).isOk())
+    if (loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &bounds).ok())
       terrain->setBounds(std::move(bounds));
   }
   TileSource& source = *t.source;
   m_preload_failures += terrain->preloadCoarseLevels(
       [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {
         auto px = std::make_shared<std::vector<uint8_t>>();
-        if (!source.fetch(key, px.get()).isOk()) return nullptr;
+        if (!source.fetch(key, px.get()).ok()) return nullptr;
         return px;
       });
   m_terrain = std::move(terrain);
-  return Status::ok();
+  return okStatus();
 }
 
 bool Flight::groundHeight(const glm::dvec2& world_xz, double* height) const {
@@ -198,7 +198,7 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
     if (Status s = makeTerrain(); !s) return s;
   m_streamer->resetGpuResidency();
   ++m_resizes;
-  return Status::ok();
+  return okStatus();
 }
 
 FrameSample Flight::step(const Camera& camera) {

@@ -110,7 +110,7 @@ Status HeadlessContext::create(std::unique_ptr<HeadlessContext>* out) {
     c->m_context = ctx;
     c->m_description = std::string(platform) + ": " + currentGlDescription();
     *out = std::move(c);
-    return Status::ok();
+    return okStatus();
   };
 
   if (hasExtension(client_ext, "EGL_MESA_platform_surfaceless")) {

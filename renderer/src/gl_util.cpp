@@ -28,7 +28,7 @@ Status compile(GLenum kind, const std::string& source, GLuint* out) {
     return Status::error(ErrorCode::kUnavailable, "shader compile failed: " + log);
   }
   *out = shader;
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -77,7 +77,7 @@ Status buildProgram(const std::string& vertex, const std::string& fragment, uint
     return Status::error(ErrorCode::kUnavailable, "shader link failed: " + log);
   }
   *program = p;
-  return Status::ok();
+  return okStatus();
 }
 
 void setRayUniforms(uint32_t program, const Camera& camera, const Viewport& viewport,

@@ -64,7 +64,7 @@ Status bufferingFromName(const std::string& name, Buffering* out) {
                       Buffering::kStaged})
     if (name == bufferingName(b)) {
       *out = b;
-      return Status::ok();
+      return okStatus();
     }
   return Status::error(ErrorCode::kInvalidArgument,
                        "buffering \"" + printableText(name, 40) + "\" is not single, double-upload, double-copy or staged");
@@ -189,7 +189,7 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   r->m_pyramid_missing = uint32_t(r->m_pyramid_have.size());
   r->m_front_map = computeUsableMap(geometry, c, config.pyramid_level, {});
   *out = std::move(r);
-  return Status::ok();
+  return okStatus();
 }
 
 ClipmapRenderer::~ClipmapRenderer() {
@@ -684,7 +684,7 @@ Status OffscreenTarget::create(const Viewport& viewport, std::unique_ptr<Offscre
   if (glCheckNamedFramebufferStatus(t->m_fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
     return Status::error(ErrorCode::kUnavailable, "offscreen framebuffer incomplete");
   *out = std::move(t);
-  return Status::ok();
+  return okStatus();
 }
 
 OffscreenTarget::~OffscreenTarget() {

@@ -49,7 +49,7 @@ Status terrainMethodFromName(const std::string& name, TerrainMethod* out) {
                           TerrainMethod::kFull}) {
     if (name == terrainMethodName(m)) {
       *out = m;
-      return Status::ok();
+      return okStatus();
     }
   }
   return Status::error(ErrorCode::kInvalidArgument,
@@ -243,7 +243,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     return Status::error(ErrorCode::kUnavailable, "terrain: GL error while creating the height stack");
   }
   *out = std::move(r);
-  return Status::ok();
+  return okStatus();
 }
 
 TerrainRenderer::~TerrainRenderer() {

@@ -155,7 +155,7 @@ Status encodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
   if (constant) {
     out->location.constant = true;
     std::memcpy(out->location.constant_pixel, pixels.data(), bpp);
-    return Status::ok();
+    return okStatus();
   }
 
   std::vector<uint8_t> predicted;
@@ -190,7 +190,7 @@ Status encodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
   }
   out->location.stored_bytes = static_cast<uint32_t>(out->payload.size());
   out->location.checksum = format::tileChecksum(out->payload.data(), out->payload.size());
-  return Status::ok();
+  return okStatus();
 }
 
 Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding,
@@ -206,7 +206,7 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
     for (size_t i = 0; i < tile_bytes; i += bpp) {
       std::memcpy(pixels.data() + i, raw.location.constant_pixel, bpp);
     }
-    return Status::ok();
+    return okStatus();
   }
   const std::string where = format::keyText(raw.key);
   if (raw.payload.size() != raw.location.stored_bytes) {
@@ -253,7 +253,7 @@ Status decodeTile(const PyramidGeometry& geometry, const StoreEncoding& encoding
   if (encoding.predictor == Predictor::kLeftDelta) {
     undoLeftDelta(pixels.data(), geometry.tile_px, geometry.format);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream
@@ -584,7 +584,7 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
     std::memcpy(padded, raw.location.constant_pixel, sizeof(raw.location.constant_pixel));
     tileToRgba8<false>(padded, one, 1, geometry.format);
     for (size_t i = 0; i < pixel_count; ++i) std::memcpy(rgba.data() + 4 * i, one, 4);
-    return Status::ok();
+    return okStatus();
   }
   // Decompression and every payload check is decodeTile's, with the
   // predictor left in; the inverse then runs fused with the expansion.
@@ -594,7 +594,7 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
     Status status = decodeTile(geometry, stored, raw, rgba);
     if (!status) return status;
     if (delta) tileToRgba8<true>(rgba.data(), rgba.data(), geometry.tile_px, geometry.format);
-    return Status::ok();
+    return okStatus();
   }
   thread_local std::vector<uint8_t> scratch;
   scratch.resize(geometry.tileBytes() + kSourcePadding);
@@ -606,7 +606,7 @@ Status decodeTileRgba8(const PyramidGeometry& geometry, const StoreEncoding& enc
   } else {
     tileToRgba8<false>(scratch.data(), rgba.data(), geometry.tile_px, geometry.format);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

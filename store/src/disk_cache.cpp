@@ -84,7 +84,7 @@ bool isOurs(const std::string& full, const std::string* path) {
   if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)) {
     if (uint64_t(st.st_size) < kEntryHeaderBytes) {
       ours = true;
-    } else if (fileio::preadAll(fd, header, sizeof header, 0, full).isOk()) {
+    } else if (fileio::preadAll(fd, header, sizeof header, 0, full).ok()) {
       uint32_t magic = 0, format = 0;
       uint64_t id = 0;
       std::memcpy(&magic, header, 4);
@@ -143,13 +143,13 @@ Status DiskCache::open(const std::string& dir, uint64_t cap_bytes, std::shared_p
   std::weak_ptr<DiskCache>& slot = g_registry[resolved];
   if (std::shared_ptr<DiskCache> cache = slot.lock()) {
     *out = std::move(cache);
-    return Status::ok();
+    return okStatus();
   }
   auto cache = std::make_shared<DiskCache>(resolved, cap_bytes);
   if (Status s = cache->scan(); !s) return s;
   slot = cache;
   *out = std::move(cache);
-  return Status::ok();
+  return okStatus();
 }
 
 std::string DiskCache::storeKey(const std::string& url, const std::string& version) {
@@ -219,7 +219,7 @@ Status DiskCache::scan() {
     doomed = evict(0);
   }
   for (const std::string& path : doomed) removeEntry(path);
-  return Status::ok();
+  return okStatus();
 }
 
 void DiskCache::forget(const std::string& path) {
@@ -278,9 +278,9 @@ DiskCache::Lookup DiskCache::get(const std::string& store_key, const std::string
     out->resize(bytes);
     ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
          uint64_t(st.st_size) == kEntryHeaderBytes + bytes &&
-         fileio::preadAll(fd, header, sizeof header, 0, full).isOk() &&
+         fileio::preadAll(fd, header, sizeof header, 0, full).ok() &&
          std::memcmp(header, expected, sizeof header) == 0 &&
-         fileio::preadAll(fd, out->data(), bytes, kEntryHeaderBytes, full).isOk();
+         fileio::preadAll(fd, out->data(), bytes, kEntryHeaderBytes, full).ok();
     if (ok) ::futimens(fd, nullptr);  // recency for the next process's scan
     ::close(fd);
   }
@@ -342,8 +342,8 @@ void DiskCache::put(const std::string& store_key, const std::string& name,
   }
   uint8_t header[kEntryHeaderBytes];
   encodeHeader(path, bytes.size(), header);
-  const bool written = fileio::pwriteAll(fd, header, sizeof header, 0, temp).isOk() &&
-                       fileio::pwriteAll(fd, bytes.data(), bytes.size(), sizeof header, temp).isOk();
+  const bool written = fileio::pwriteAll(fd, header, sizeof header, 0, temp).ok() &&
+                       fileio::pwriteAll(fd, bytes.data(), bytes.size(), sizeof header, temp).ok();
   // No fsync: a torn entry fails the reader's checksum and is fetched again.
   const bool closed = ::close(fd) == 0;
   if (!written || !closed || ::rename(temp.c_str(), full.c_str()) != 0) {

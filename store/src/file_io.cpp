@@ -30,7 +30,7 @@ Status preadAll(int fd, void* data, size_t bytes, uint64_t offset, const std::st
     }
     done += static_cast<size_t>(got);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status pwriteAll(int fd, const void* data, size_t bytes, uint64_t offset,
@@ -55,7 +55,7 @@ Status pwriteAll(int fd, const void* data, size_t bytes, uint64_t offset,
     }
     done += static_cast<size_t>(put);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status copyRange(int from_fd, const std::string& from_path, uint64_t bytes, int to_fd,
@@ -73,7 +73,7 @@ Status copyRange(int from_fd, const std::string& from_path, uint64_t bytes, int 
     if (!status) return status;
     done += chunk;
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream::fileio

@@ -56,7 +56,7 @@ Status openFileSource(const std::string& path, std::unique_ptr<ByteSource>* out)
   }
   ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   *out = std::make_unique<FileSource>(path, fd, static_cast<uint64_t>(file_stat.st_size));
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -74,7 +74,7 @@ Status decodeTileHeights(const PyramidGeometry& geometry, const StoreEncoding& e
   for (size_t i = 0; i < count; ++i) {
     heights[i] = float(heightOfSample(geometry.format, elevation, scratch.data() + i * bpp));
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

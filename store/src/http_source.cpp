@@ -273,7 +273,7 @@ class TransferLoop {
     } catch (const std::system_error& e) {
       return Status::error(ErrorCode::kIo, std::string("cannot start the HTTP thread: ") + e.what());
     }
-    return Status::ok();
+    return okStatus();
   }
 
   // Runs every handle's transfer, all at once; returns when all finished,
@@ -525,7 +525,7 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
     m_size_at_open = 0;
     m_etag_at_open = t.etag;
     m_last_modified_at_open = t.last_modified;
-    *status = Status::ok();
+    *status = okStatus();
     return Outcome::kOk;
   }
   if (code == 200 || t.cut_whole_body) {
@@ -559,7 +559,7 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
     uint64_t first = 0, last = 0, total = 0;
     if (parseContentRange(t.content_range, &first, &last, &total) && total == 0) {
       *got = 0;  // an empty file: the reader reports it as too short
-      *status = Status::ok();
+      *status = okStatus();
       return Outcome::kOk;
     }
   }
@@ -615,7 +615,7 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
     m_etag_at_open = t.etag;
     m_last_modified_at_open = t.last_modified;
   }
-  *status = Status::ok();
+  *status = okStatus();
   return Outcome::kOk;
 }
 
@@ -700,7 +700,7 @@ Status HttpSource::open() {
     m_if_range = curl_slist_append(nullptr, ("If-Range: " + validator).c_str());
     m_version = validator + " " + std::to_string(m_size);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 void HttpSource::prefetch(uint64_t offset, uint64_t bytes) {
@@ -722,7 +722,7 @@ void HttpSource::readMany(std::span<const ByteRange> ranges, std::span<Status> s
   std::vector<size_t> index;
   for (size_t i = 0; i < n; ++i) {
     const ByteRange& r = ranges[i];
-    statuses[i] = Status::ok();
+    statuses[i] = okStatus();
     if (r.bytes == 0) continue;
     if (r.offset > m_size || r.bytes > m_size - r.offset) {
       statuses[i] = fail(ErrorCode::kTruncated,
@@ -775,7 +775,7 @@ Status openHttpSource(const std::string& url, const RemoteOptions& options,
   Status status = source->open();
   if (!status) return status;
   *out = std::move(source);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

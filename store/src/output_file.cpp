@@ -115,7 +115,7 @@ Status inspectPath(const std::string& path, const OutputOptions& options, bool* 
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0) {
     const int err = errno;
-    if (err == ENOENT) return Status::ok();
+    if (err == ENOENT) return okStatus();
     return errnoStatus(err, "output " + path);
   }
   if (!S_ISREG(st.st_mode)) {
@@ -128,7 +128,7 @@ Status inspectPath(const std::string& path, const OutputOptions& options, bool* 
   }
   *exists = true;
   *existing = st;
-  return Status::ok();
+  return okStatus();
 }
 
 bool processAlive(long pid) {
@@ -237,7 +237,7 @@ Status OutputFile::create(const std::string& path, const OutputOptions& options,
   // Held for the temporary's life: tells a later sweep this writer is alive.
   ::flock(file->m_fd, LOCK_EX | LOCK_NB);
   *out = std::move(file);
-  return Status::ok();
+  return okStatus();
 }
 
 OutputFile::~OutputFile() { discard(); }
@@ -260,7 +260,7 @@ Status OutputFile::append(const void* data, size_t bytes) {
   Status s = fileio::pwriteAll(m_fd, data, bytes, m_append_offset, m_path);
   if (!s) return s;
   m_append_offset += bytes;
-  return Status::ok();
+  return okStatus();
 }
 
 Status OutputFile::createScratch(const std::string& suffix, int* fd, std::string* path) {
@@ -275,7 +275,7 @@ Status OutputFile::createScratch(const std::string& suffix, int* fd, std::string
   }
   *path = scratch.path;
   m_scratch.push_back(std::move(scratch));
-  return Status::ok();
+  return okStatus();
 }
 
 Status OutputFile::commit() {
@@ -364,7 +364,7 @@ Status OutputFile::commit() {
     }
   }
   discard();
-  return Status::ok();
+  return okStatus();
 }
 
 Status writeOutputFile(const std::string& path, std::string_view contents,

@@ -452,12 +452,12 @@ Status TileStoreReader::Impl::openImpl() {
       return bad(ErrorCode::kBadHeader, "elevation record: scale, offset or bounds out of range");
     }
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreReader::Impl::readPage(uint32_t level_index, uint32_t px, uint32_t py,
                                        std::unique_ptr<Page>* out) const {
-  if (cachedPage(level_index, px, py, out)) return Status::ok();
+  if (cachedPage(level_index, px, py, out)) return okStatus();
   const LevelRead& level = levels[level_index];
   const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
   std::vector<uint8_t> bytes(dir.bytes);
@@ -506,7 +506,7 @@ Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint
     }
   }
   *out = std::move(page);
-  return Status::ok();
+  return okStatus();
 }
 
 void TileStoreReader::Impl::learnOrder(uint32_t level_index, uint32_t px, uint32_t py,
@@ -565,14 +565,14 @@ Status TileStoreReader::Impl::loadPage(uint32_t level_index, uint32_t px, uint32
   const size_t page_index = size_t(py) * level.pages_x + px;
   if (const Page* page = level.pages[page_index].load(std::memory_order_acquire)) {
     *out = page;
-    return Status::ok();
+    return okStatus();
   }
   // Read and check without any lock; concurrent first users may both read.
   std::unique_ptr<Page> page;
   Status status = readPage(level_index, px, py, &page);
   if (!status) return status;
   *out = publish(level_index, page_index, std::move(page));
-  return Status::ok();
+  return okStatus();
 }
 
 void TileStoreReader::Impl::loadPagesOf(std::span<const TileKey> keys) const {
@@ -624,12 +624,12 @@ Status TileStoreReader::Impl::peekPage(uint32_t level_index, uint32_t px, uint32
   if (const Page* page =
           level.pages[size_t(py) * level.pages_x + px].load(std::memory_order_acquire)) {
     *out = page;
-    return Status::ok();
+    return okStatus();
   }
   Status status = readPage(level_index, px, py, scratch);
   if (!status) return status;
   *out = scratch->get();
-  return Status::ok();
+  return okStatus();
 }
 
 void TileStoreReader::Impl::entryLocation(uint32_t level_index, const TileEntry& entry,
@@ -665,7 +665,7 @@ Status TileStoreReader::Impl::locate(const TileKey& key, TileLocation* out) cons
       out->min_height = out->max_height =
           float(heightOfSample(info.geometry.format, info.elevation, out->constant_pixel));
     }
-    return Status::ok();
+    return okStatus();
   }
   const Page* page = nullptr;
   Status status = loadPage(key.level, px, py, &page);
@@ -674,14 +674,14 @@ Status TileStoreReader::Impl::locate(const TileKey& key, TileLocation* out) cons
   entryLocation(key.level,
                 page->entries[size_t(key.y % format::kPageTiles) * w + key.x % format::kPageTiles],
                 out);
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) const {
   out->key = key;
   out->payload.clear();
-  if (out->location.constant) return Status::ok();
-  if (cachedPayload(key, out->location, &out->payload)) return Status::ok();
+  if (out->location.constant) return okStatus();
+  if (cachedPayload(key, out->location, &out->payload)) return okStatus();
   out->payload.resize(out->location.stored_bytes);
   Status status = read(out->payload.data(), out->payload.size(), out->location.offset);
   if (!status) {
@@ -693,7 +693,7 @@ Status TileStoreReader::Impl::readPayload(const TileKey& key, RawTile* out) cons
                          format::keyText(key) + ": payload checksum mismatch");
   }
   keepPayload(key, out->payload);
-  return Status::ok();
+  return okStatus();
 }
 
 void TileStoreReader::readRawBatch(std::span<const TileKey> keys, std::span<RawTile> out,
@@ -809,7 +809,7 @@ Status TileStoreReader::open(const std::string& path, const RemoteOptions& remot
   Status status = reader->m_impl->openImpl();
   if (!status) return status;
   *out = std::move(reader);
-  return Status::ok();
+  return okStatus();
 }
 
 const StoreInfo& TileStoreReader::info() const { return m_impl->info; }
@@ -893,7 +893,7 @@ Status TileStoreReader::levelStats(std::vector<LevelStats>* out) const {
       }
     }
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_problems,
@@ -925,7 +925,7 @@ Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_pro
   auto record = [&](const TileKey& key, const Status& status) {
     failed.fetch_add(1);
     std::lock_guard<std::mutex> lock(problems_mutex);
-    if (first_failure.isOk()) first_failure = status;
+    if (first_failure.ok()) first_failure = status;
     if (found.size() < max_problems) found.push_back({key, status});
   };
 
@@ -1011,7 +1011,7 @@ Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_pro
     return std::tie(a.key.level, a.key.y, a.key.x) < std::tie(b.key.level, b.key.y, b.key.x);
   });
   if (problems != nullptr) *problems = std::move(found);
-  if (failed.load() == 0) return Status::ok();
+  if (failed.load() == 0) return okStatus();
   return Status::error(first_failure.code,
                        std::to_string(failed.load()) + " of " + std::to_string(total) +
                            " tiles failed verification in " + m_impl->path);

@@ -134,7 +134,7 @@ const char* errorCodeName(ErrorCode code) {
 }
 
 std::string Status::toString() const {
-  if (isOk()) return "ok";
+  if (ok()) return "ok";
   std::string text = errorCodeName(code);
   if (!message.empty()) {
     text += ": ";

@@ -135,7 +135,7 @@ struct TileStoreWriter::Impl {
       if (!status) return status;
     }
     *fd = level.fd;
-    return Status::ok();
+    return okStatus();
   }
 
   bool curveOrder() const { return options.payload_order == PayloadOrder::kCurve; }
@@ -183,7 +183,7 @@ struct TileStoreWriter::Impl {
     ++page.claimed;
     *page_out = &page;
     *slot_out = slot;
-    return Status::ok();
+    return okStatus();
   }
 
   // Records a completed entry and serialises the page once full (mutex held).
@@ -193,7 +193,7 @@ struct TileStoreWriter::Impl {
     uint32_t w, h;
     pageSpan(key.level, key.x / format::kPageTiles, key.y / format::kPageTiles, &w, &h);
     if (page->stored == w * h) return sealPage(page, w * h);
-    return Status::ok();
+    return okStatus();
   }
 
   // Writes a full page to the index temporary file, or turns it into a
@@ -223,7 +223,7 @@ struct TileStoreWriter::Impl {
     }
     page->entries.reset();
     page->claimed_bits.reset();
-    return Status::ok();
+    return okStatus();
   }
 
   bool elevation() const { return options.elevation.present; }
@@ -247,7 +247,7 @@ struct TileStoreWriter::Impl {
   }
 
   Status fail(Status status) {
-    if (failure.isOk()) failure = status;
+    if (failure.ok()) failure = status;
     return status;
   }
 
@@ -356,7 +356,7 @@ Status TileStoreWriter::create(const std::string& path, const PyramidGeometry& g
   }
   if (!impl.curveOrder()) impl.levels[0].fd = impl.main_fd;
   *out = std::move(writer);
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreWriter::write(EncodedTile&& tile) {
@@ -412,7 +412,7 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
   uint64_t file_offset = 0;
   {
     std::lock_guard<std::mutex> lock(impl.mutex);
-    if (!impl.failure.isOk()) return impl.failure;
+    if (!impl.failure.ok()) return impl.failure;
     if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "write after finish");
     Status status = impl.claim(key, &page, &slot);
     if (!status) return status;
@@ -420,7 +420,7 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
       impl.constant_tiles.fetch_add(1, std::memory_order_relaxed);
       status = impl.store(key, page, slot, entry);
       if (!status) return impl.fail(status);
-      return Status::ok();
+      return okStatus();
     }
     status = impl.levelFd(key.level, &fd);
     if (!status) return impl.fail(status);
@@ -439,7 +439,7 @@ Status TileStoreWriter::write(EncodedTile&& tile) {
   impl.bytes_written.fetch_add(entry.stored_bytes, std::memory_order_relaxed);
   status = impl.store(key, page, slot, entry);
   if (!status) return impl.fail(status);
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, uint32_t y0,
@@ -467,11 +467,11 @@ Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, ui
   if (impl.elevation()) entry.min_height = entry.max_height = impl.constantHeight(entry.offset_or_value);
 
   std::lock_guard<std::mutex> lock(impl.mutex);
-  if (!impl.failure.isOk()) return impl.failure;
+  if (!impl.failure.ok()) return impl.failure;
   if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "write after finish");
   LevelBuild& level = impl.levels[level_index];
   const uint32_t kPage = format::kPageTiles;
-  if (x0 == x1 || y0 == y1) return Status::ok();
+  if (x0 == x1 || y0 == y1) return okStatus();
   for (uint32_t py = y0 / kPage; py <= (y1 - 1) / kPage; ++py) {
     for (uint32_t px = x0 / kPage; px <= (x1 - 1) / kPage; ++px) {
       PageBuild& page = level.pages[size_t(py) * level.pages_x + px];
@@ -502,7 +502,7 @@ Status TileStoreWriter::writeConstantTiles(uint32_t level_index, uint32_t x0, ui
       }
     }
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreWriter::setElevationFigures(uint64_t filled_samples, double max_error,
@@ -522,7 +522,7 @@ Status TileStoreWriter::setElevationFigures(uint64_t filled_samples, double max_
   e.max_error = max_error;
   e.min_height = min_height;
   e.max_height = max_height;
-  return Status::ok();
+  return okStatus();
 }
 
 uint64_t TileStoreWriter::bytesWritten() const {
@@ -543,7 +543,7 @@ Status TileStoreWriter::finish() {
   std::lock_guard<std::mutex> lock(impl.mutex);
   if (impl.finished) return Status::error(ErrorCode::kInvalidArgument, "finish called twice");
   impl.finished = true;
-  Status status = impl.failure.isOk() ? impl.finishLocked() : impl.failure;
+  Status status = impl.failure.ok() ? impl.finishLocked() : impl.failure;
   // Success renamed the main file away; either way no temporary remains.
   impl.removeTemps();
   return status;
@@ -613,7 +613,7 @@ Status TileStoreWriter::Impl::reorderLevel(uint32_t l, uint64_t level_start) {
                                              std::to_string(position) + " payload bytes laid out, " +
                                              std::to_string(level.payload_bytes) + " written");
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status TileStoreWriter::Impl::finishLocked() {

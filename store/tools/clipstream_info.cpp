@@ -275,9 +275,9 @@ int main(int argc, char** argv) {
     std::vector<std::string> lines;
     for (const auto& problem : problems) lines.push_back(problemLine(problem));
     if (json) {
-      json_out["verify"] = {{"ok", verify_status.isOk()},
+      json_out["verify"] = {{"ok", verify_status.ok()},
                             {"tiles", total_tiles},
-                            {"message", verify_status.isOk() ? "" : verify_status.message},
+                            {"message", verify_status.ok() ? "" : verify_status.message},
                             {"problems", lines}};
     } else {
       if (verify_status) {

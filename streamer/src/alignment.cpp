@@ -153,7 +153,7 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
                             " m); the scene is drawn with square texels and heights at their mean");
   }
   out->world_per_height = metres_per_height / metres_per_world * vertical_scale;
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -26,7 +26,7 @@ Status checkTilePx(uint32_t tile_px) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "BC1 tiles need a tile size that is a multiple of 4 (got " +
                              std::to_string(tile_px) + ")");
-  return Status::ok();
+  return okStatus();
 }
 
 // 565 -> 888 by bit replication.
@@ -56,7 +56,7 @@ Status encodeBc1Tile(std::span<const uint8_t> rgba, uint32_t tile_px, std::vecto
       stb_compress_dxt_block(blocks->data() + (size_t(by) * n + bx) * kBc1BlockBytes, texels, 0,
                              high_quality ? STB_DXT_HIGHQUAL : STB_DXT_NORMAL);
     }
-  return Status::ok();
+  return okStatus();
 }
 
 void decodeBc1Block(const uint8_t block[kBc1BlockBytes], uint8_t rgba[16 * 4]) {
@@ -101,7 +101,7 @@ Status decodeBc1Tile(std::span<const uint8_t> blocks, uint32_t tile_px, std::vec
       for (uint32_t j = 0; j < 4; ++j)
         std::memcpy(rgba->data() + (size_t(by * 4 + j) * tile_px + bx * 4) * 4, texels + j * 16, 16);
     }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

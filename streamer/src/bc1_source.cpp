@@ -25,7 +25,7 @@ Status colourTileContentFromName(const std::string& name, TileContent* out) {
   for (TileContent c : {TileContent::kRgba8, TileContent::kBc1})
     if (name == tileContentName(c)) {
       *out = c;
-      return Status::ok();
+      return okStatus();
     }
   return Status::error(ErrorCode::kInvalidArgument,
                        "tile format \"" + printableText(name, 40) + "\" is not rgba8 or bc1");
@@ -74,6 +74,7 @@ class Bc1Source final : public TileSource {
   std::string describe() const override { return "bc1:" + m_inner->describe(); }
   size_t maxBatch() const override { return m_inner->maxBatch(); }
   unsigned suggestedLoaderThreads() const override { return m_inner->suggestedLoaderThreads(); }
+  RemoteStats remoteStats() const override { return m_inner->remoteStats(); }
 
  private:
   std::shared_ptr<TileSource> m_inner;
@@ -82,7 +83,7 @@ class Bc1Source final : public TileSource {
 }  // namespace
 
 std::shared_ptr<TileSource> makeBc1Source(std::shared_ptr<TileSource> rgba8, Status* status) {
-  *status = Status::ok();
+  *status = okStatus();
   if (!rgba8) {
     *status = Status::error(ErrorCode::kInvalidArgument, "BC1 tiles: no source");
     return nullptr;

@@ -39,6 +39,7 @@ class FaultySource final : public TileSource {
 
   std::string describe() const override { return "faulty:" + m_inner->describe(); }
   unsigned suggestedLoaderThreads() const override { return m_inner->suggestedLoaderThreads(); }
+  RemoteStats remoteStats() const override { return m_inner->remoteStats(); }
 
  private:
   std::shared_ptr<TileSource> m_inner;

@@ -87,7 +87,7 @@ Status FlightPath::fromJson(const std::string& text, FlightPath* out) {
     path.keyframes.push_back(kf);
   }
   *out = std::move(path);
-  return Status::ok();
+  return okStatus();
 }
 
 Status FlightPath::load(const std::string& path, FlightPath* out) {
@@ -266,7 +266,7 @@ Status FlightPath::builtin(const std::string& name, const PyramidGeometry& geome
     return fail("unknown built-in path \"" + name + "\" (pass, dive, orbit, teleport, zoom, valley)");
   }
   *out = std::move(path);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

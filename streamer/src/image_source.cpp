@@ -50,7 +50,7 @@ class ImageSource final : public TileSource {
                     rgba->data() + (size_t(y) * tp + x) * 4);
       }
     }
-    return Status::ok();
+    return okStatus();
   }
   std::string describe() const override {
     return "image:" + std::to_string(m_geometry.width_px) + "x" +

@@ -114,7 +114,7 @@ class ProceduralHeightSource final : public TileSource {
     out->min_height = std::nextafter(float(lo), -INFINITY);
     out->max_height = std::nextafter(float(hi), INFINITY);
     out->error = key.level == 0 ? 0.0f : out->max_height - out->min_height;
-    return Status::ok();
+    return okStatus();
   }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* out) override {
@@ -134,7 +134,7 @@ class ProceduralHeightSource final : public TileSource {
         const float h = float(proceduralHeight(m_spec, i << key.level, j << key.level));
         std::memcpy(out->data() + (size_t(y) * t + x) * sizeof(float), &h, sizeof(float));
       }
-    return Status::ok();
+    return okStatus();
   }
 
   std::string describe() const override {

@@ -78,7 +78,7 @@ class ProceduralSource final : public TileSource {
         out[3] = 255;
       }
     }
-    return Status::ok();
+    return okStatus();
   }
 
   std::string describe() const override {

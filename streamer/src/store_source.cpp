@@ -93,7 +93,7 @@ class ElevationStoreSource final : public TileSource {
     TileLocation location;
     if (Status s = m_reader->locate(key, &location); !s) return s;
     *out = {location.min_height, location.max_height, location.error};
-    return Status::ok();
+    return okStatus();
   }
 
   Status fetch(const TileKey& key, std::vector<uint8_t>* heights) override {
@@ -188,7 +188,7 @@ Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t*
                            std::string("pixel format ") + pixelFormatName(format) +
                                " holds heights, not colour");
   }
-  return Status::ok();
+  return okStatus();
 }
 
 std::shared_ptr<TileSource> openStoreSource(const std::string& path, Status* status) {

@@ -194,7 +194,7 @@ Status checkLayer(const StreamLayer& l, size_t index) {
   if (!(std::isfinite(l.world_per_height) && l.world_per_height >= 0.0))
     return Status::error(ErrorCode::kInvalidArgument,
                          what + " has a height scale that is not finite and >= 0");
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -202,7 +202,7 @@ Status checkLayer(const StreamLayer& l, size_t index) {
 Status checkStreamLayers(const std::vector<StreamLayer>& layers) {
   for (size_t i = 0; i < layers.size(); ++i)
     if (Status s = checkLayer(layers[i], i); !s) return s;
-  return Status::ok();
+  return okStatus();
 }
 
 Camera layerCamera(const StreamLayer& layer, const Camera& world) {
@@ -583,7 +583,7 @@ void Streamer::Impl::workerLoop() {
     keys.resize(n);
     pixels.resize(n);
     outs.resize(n);
-    statuses.assign(n, Status::ok());
+    statuses.assign(n, okStatus());
     infos.assign(n, FetchInfo{});
     for (size_t i = 0; i < n; ++i) {
       keys[i] = tiles[i].key;
@@ -629,7 +629,7 @@ void Streamer::Impl::publishLocked(const LayerTile& key, const Status& status,
                                    std::shared_ptr<std::vector<uint8_t>> pixels, const FetchInfo& info,
                                    bool reread, std::shared_ptr<const TileDetail> tile_detail) {
   Layer& layer = layers[key.layer];
-  const bool good = status.isOk() && pixels->size() == layer.tile_bytes;
+  const bool good = status.ok() && pixels->size() == layer.tile_bytes;
   LevelCounters& level_counters = layer.counters[key.key.level];
   in_flight--;
   level_counters.bytes_read += info.bytes_read;
@@ -649,12 +649,12 @@ void Streamer::Impl::publishLocked(const LayerTile& key, const Status& status,
     cache.erase(it);
     level_counters.failures++;
     FailedTile& f = failed[key];
-    f.code = status.isOk() ? ErrorCode::kCorruptTile : status.code;
+    f.code = status.ok() ? ErrorCode::kCorruptTile : status.code;
     f.count++;
     f.retry_at_s = shared_now_s + std::min(kRetryMaxS, kRetryBaseS * double(1u << std::min(f.count, 16u)));
     if (f.count == 1 && logged_failures < kMaxLoggedFailures) {
       logged_failures++;
-      const std::string why = status.isOk() ? "tile has the wrong size" : status.toString();
+      const std::string why = status.ok() ? "tile has the wrong size" : status.toString();
       std::fprintf(stderr, "clipstream: %s: level %u tile (%u, %u) failed: %s%s\n",
                    layer.spec.source->describe().c_str(), key.key.level, key.key.x, key.key.y, why.c_str(),
                    logged_failures == kMaxLoggedFailures ? " (further failures not logged)" : "");
@@ -1007,7 +1007,7 @@ Streamer::Streamer(std::vector<StreamLayer> layers, const StreamerConfig& config
     OutputOptions trace_options;
     trace_options.existing = ExistingOutput::kReplaceRegular;
     s.trace_status = OutputFile::create(config.trace_path, trace_options, &s.trace_file);
-    s.tracing = s.trace_status.isOk();
+    s.tracing = s.trace_status.ok();
     if (s.tracing) {
       s.trace = kTraceHeader;
       s.trace += '\n';

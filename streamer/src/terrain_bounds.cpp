@@ -61,7 +61,7 @@ Status loadTerrainBounds(const TileSource& source, uint64_t max_level_tiles,
   bounds->range = top.range[0];
   for (const glm::vec2& r : top.range) bounds->range = {std::min(bounds->range.x, r.x), std::max(bounds->range.y, r.y)};
   *out = std::move(bounds);
-  return Status::ok();
+  return okStatus();
 }
 
 std::shared_ptr<const TileDetail> makeTileDetail(uint32_t tile_px, const float* heights, float error) {

@@ -182,7 +182,7 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
     events->push_back(e);
   }
   if (in.bad()) return Status::error(ErrorCode::kIo, "error reading trace " + path);
-  return Status::ok();
+  return okStatus();
 }
 
 namespace {

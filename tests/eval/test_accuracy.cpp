@@ -183,21 +183,21 @@ TEST(IdealReference, IsBitIdenticalToAFullyLoadedClipmap) {
   const Camera cam = test::obliqueCamera();
   std::unique_ptr<IdealReference> ideal;
   Status s = IdealReference::create(source, vp, {}, &ideal);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   std::vector<uint8_t> ref;
   // Render a different view first, so the second render exercises the
   // toroidal window update rather than a fresh load.
   Camera away = cam;
   away.position.x += 300;
-  ASSERT_TRUE(ideal->render(away, &ref).isOk());
-  ASSERT_TRUE(ideal->render(cam, &ref).isOk());
+  ASSERT_TRUE(ideal->render(away, &ref).ok());
+  ASSERT_TRUE(ideal->render(cam, &ref).ok());
 
   const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, {});
   std::unique_ptr<ClipmapRenderer> full;
   ASSERT_TRUE(ClipmapRenderer::create(source->geometry(), {plan.clip_tiles, plan.pyramid_level,
-                                                           Buffering::kSingle}, &full).isOk());
+                                                           Buffering::kSingle}, &full).ok());
   std::unique_ptr<OffscreenTarget> target;
-  ASSERT_TRUE(OffscreenTarget::create(vp, &target).isOk());
+  ASSERT_TRUE(OffscreenTarget::create(vp, &target).ok());
   test::loadPlan(*full, *source, plan);
   const auto gpu = test::renderFrame(*full, *target, cam);
   const FrameError e = compareFrames(ref, gpu);
@@ -209,9 +209,9 @@ TEST(IdealReference, MatchesTheCpuGroundTruth) {
   auto source = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
   const Viewport vp{256, 192};
   std::unique_ptr<IdealReference> ideal;
-  ASSERT_TRUE(IdealReference::create(source, vp, {}, &ideal).isOk());
+  ASSERT_TRUE(IdealReference::create(source, vp, {}, &ideal).ok());
   std::vector<uint8_t> ref, truth;
-  ASSERT_TRUE(ideal->render(test::obliqueCamera(), &ref).isOk());
+  ASSERT_TRUE(ideal->render(test::obliqueCamera(), &ref).ok());
   renderReference(source->geometry(), texelsFromSource(source), test::obliqueCamera(), vp, {}, &truth);
   const FrameError e = compareFrames(ref, truth);
   std::printf("  ideal reference vs CPU ground truth: %.2f dB, max abs %d\n", e.psnr_db, e.max_abs_error);
@@ -222,7 +222,7 @@ TEST(IdealReference, MatchesTheCpuGroundTruth) {
 // small view judged every 5th frame.
 void restingOrbit(std::shared_ptr<TileSource> source, FlightRunOptions* o) {
   o->source = std::move(source);
-  ASSERT_TRUE(FlightPath::builtin("orbit", o->source->geometry(), &o->path).isOk());
+  ASSERT_TRUE(FlightPath::builtin("orbit", o->source->geometry(), &o->path).ok());
   o->frames = 20;
   o->rest_frames = 40;
   o->viewport = {192, 108};
@@ -237,7 +237,7 @@ TEST(FlightRun, StreamedFrameIsBitIdenticalToTheReferenceAtRest) {
   ASSERT_NO_FATAL_FAILURE(restingOrbit(makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128), &o));
   FlightRun r;
   const Status s = runFlight(o, &r);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   ASSERT_EQ(r.frames.size(), 60u);
   EXPECT_EQ(r.final_max_abs_error, 0) << "last PSNR " << r.frames.back().accuracy.error.psnr_db;
   EXPECT_EQ(r.render_thread_fetches, 0u);
@@ -260,7 +260,7 @@ TEST(FlightRun, Bc1FlightRestsOnItsReferenceAndNearTheRgba8One) {
     if (against_rgba8) o.reference_source = rgba8;
     FlightRun r;
     const Status s = runFlight(o, &r);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
     EXPECT_EQ(r.tile_content, TileContent::kBc1);
     EXPECT_GT(r.summary.tiles_uploaded, 0u);
     EXPECT_EQ(r.render_thread_fetches, 0u);

@@ -61,7 +61,7 @@ Flown fly(uint32_t reads_per_frame, unsigned io_threads, double latency_ms) {
     o.reference_source = o.source;
     o.source = makeFaultySource(o.source, fault);
   }
-  EXPECT_TRUE(FlightPath::builtin("pass", o.source->geometry(), &o.path).isOk());
+  EXPECT_TRUE(FlightPath::builtin("pass", o.source->geometry(), &o.path).ok());
   o.frames = 48;
   o.warmup_frames = 4;
   o.viewport = {192, 108};
@@ -78,11 +78,11 @@ Flown fly(uint32_t reads_per_frame, unsigned io_threads, double latency_ms) {
     std::vector<uint8_t> rgba;
     target.readRgba(&rgba);
     hashes.push_back(fnv1a(rgba));
-    return Status::ok();
+    return okStatus();
   };
   FlightRun run;
   const Status s = runFlight(o, &run);
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   EXPECT_EQ(hashes.size(), run.frames.size());
   for (size_t i = 0; i < run.frames.size() && i < hashes.size(); ++i) {
     const FrameSample& f = run.frames[i].sample;

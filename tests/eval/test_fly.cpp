@@ -51,7 +51,7 @@ TEST(ClipstreamFly, WritesCsvJsonAndPngForATinyStore) {
   fs::create_directories(dir);
   const std::string store = (dir / "tiny.cstore").string();
   const Status s = writeTinyStore(store);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   const fs::path out = dir / "out";
   const std::string cmd = std::string(CLIPSTREAM_FLY_EXE) + " " + store +
                           " --path orbit --frames 30 --size 256x192 --io-threads 2 --save-frames 10 --out " +

@@ -88,7 +88,7 @@ void expectOnlyWholeFiles(const fs::path& dir, uint32_t width_px, uint32_t heigh
     if (path.extension() == ".png") {
       std::vector<uint8_t> rgba;
       uint32_t w = 0, h = 0;
-      EXPECT_TRUE(readImageRgba(path.string(), &rgba, &w, &h).isOk()) << name << " does not decode";
+      EXPECT_TRUE(readImageRgba(path.string(), &rgba, &w, &h).ok()) << name << " does not decode";
       EXPECT_EQ(w, width_px);
       EXPECT_EQ(h, height_px);
     }

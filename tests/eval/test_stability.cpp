@@ -46,7 +46,7 @@ const Viewport kViewport{160, 96};
 FlightRunOptions baseOptions(std::shared_ptr<TileSource> source, const std::string& path) {
   FlightRunOptions o;
   o.source = std::move(source);
-  EXPECT_TRUE(FlightPath::builtin(path, o.source->geometry(), &o.path).isOk());
+  EXPECT_TRUE(FlightPath::builtin(path, o.source->geometry(), &o.path).ok());
   o.frames = 60;
   o.rest_frames = 60;
   o.viewport = kViewport;
@@ -94,7 +94,7 @@ void checkScenario(const char* name, const FlightRunOptions& o, bool expect_iden
   FlightRun local;
   FlightRun& r = result != nullptr ? *result : local;
   const Status s = runFlight(o, &r);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   ASSERT_EQ(r.frames.size(), size_t(o.frames + o.rest_frames));
   EXPECT_EQ(r.render_thread_fetches, 0u) << "a frame waited on the source";
   EXPECT_LE(r.streamer.ram_peak_bytes, r.streamer.ram_budget_bytes) << "RAM budget exceeded";
@@ -118,7 +118,7 @@ void checkScenario(const char* name, const FlightRunOptions& o, bool expect_iden
 TEST(Stability, TeleportEveryTenFrames) {
   CLIPSTREAM_REQUIRE_GL();
   FlightRunOptions o = baseOptions(test::procedural(1 << 20), "orbit");
-  ASSERT_TRUE(FlightPath::builtin("teleport", o.source->geometry(), &o.path, 10).isOk());
+  ASSERT_TRUE(FlightPath::builtin("teleport", o.source->geometry(), &o.path, 10).ok());
   checkScenario("teleport every 10 frames", o);
 }
 
@@ -199,7 +199,7 @@ TEST(Stability, RealStoreWithDamagedTiles) {
   test::TempDir dir("damaged_store");
   const std::string path = dir.file("damaged.cstore");
   const std::shared_ptr<TileSource> clean = test::procedural(4096);
-  ASSERT_TRUE(test::writeStoreFromSource(*clean, path).isOk());
+  ASSERT_TRUE(test::writeStoreFromSource(*clean, path).ok());
   const PyramidGeometry& g = clean->geometry();
 
   FlightRunOptions o = baseOptions(clean, "pass");
@@ -267,7 +267,7 @@ TEST(Stability, RealStoreWithDamagedTiles) {
   };
   for (const Damage& d : damage) {
     const Status s = test::damageTilePayload(path, d.key, d.kind);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
   }
   Status open_status;
   const std::shared_ptr<TileSource> damaged = openStoreSource(path, &open_status);
@@ -320,12 +320,12 @@ TEST(Stability, RealStoreWithDamagedTiles) {
   // pixel some level of that ground. (At rest the streamed frame is
   // bit-identical to this reference, checked above.)
   std::unique_ptr<IdealReference> with_damage, without;
-  ASSERT_TRUE(IdealReference::create(damaged, vp, o.streamer.planner, &with_damage).isOk());
-  ASSERT_TRUE(IdealReference::create(clean, vp, o.streamer.planner, &without).isOk());
+  ASSERT_TRUE(IdealReference::create(damaged, vp, o.streamer.planner, &with_damage).ok());
+  ASSERT_TRUE(IdealReference::create(clean, vp, o.streamer.planner, &without).ok());
   for (const Camera& camera : {first, last}) {
     std::vector<uint8_t> shown, undamaged;
-    ASSERT_TRUE(with_damage->render(camera, &shown).isOk());
-    ASSERT_TRUE(without->render(camera, &undamaged).isOk());
+    ASSERT_TRUE(with_damage->render(camera, &shown).ok());
+    ASSERT_TRUE(without->render(camera, &undamaged).ok());
     const FrameError e = compareFrames(shown, undamaged);
     const uint32_t garbage = countGarbagePixels(shown, g, ground, camera, vp, o.garbage_tolerance);
     std::printf("  damaged vs undamaged store: %.2f dB, max abs error %d, %u garbage pixels\n",
@@ -419,7 +419,7 @@ TEST(Stability, SoakKeepsRssFlatAndTheBudget) {
   };
   FlightRun r;
   const Status s = runFlight(o, &r);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   EXPECT_EQ(r.render_thread_fetches, 0u) << "a frame waited on the source";
   EXPECT_LE(worst, o.streamer.ram_budget_bytes) << "RAM budget exceeded at an insert";
   EXPECT_LE(r.streamer.ram_peak_bytes, r.streamer.ram_budget_bytes) << "RAM budget exceeded";
@@ -463,16 +463,16 @@ TEST(Stability, WrongTilesAreCaughtAsGarbage) {
   const ClipmapPlan plan = planClipmap(source->geometry(), kViewport, cam, {});
   std::unique_ptr<ClipmapRenderer> wrong;
   ASSERT_TRUE(ClipmapRenderer::create(source->geometry(), {plan.clip_tiles, plan.pyramid_level,
-                                                           Buffering::kSingle}, &wrong).isOk());
+                                                           Buffering::kSingle}, &wrong).ok());
   wrong->setTestSlotBias(1);
   std::unique_ptr<OffscreenTarget> target;
-  ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).isOk());
+  ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).ok());
   test::loadPlan(*wrong, *source, plan);
   const auto bad = test::renderFrame(*wrong, *target, cam);
   std::unique_ptr<IdealReference> ideal;
-  ASSERT_TRUE(IdealReference::create(source, kViewport, {}, &ideal).isOk());
+  ASSERT_TRUE(IdealReference::create(source, kViewport, {}, &ideal).ok());
   std::vector<uint8_t> ref;
-  ASSERT_TRUE(ideal->render(cam, &ref).isOk());
+  ASSERT_TRUE(ideal->render(cam, &ref).ok());
   const FrameError e = compareFrames(bad, ref);
   const uint32_t garbage = countGarbagePixels(bad, source->geometry(), texelsFromSource(source), cam,
                                               kViewport, FlightRunOptions{}.garbage_tolerance);

@@ -77,7 +77,7 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   std::string dem = sc.dem_store;
   if (dem.empty()) {
     dem = dir.file("dem.cst");
-    ASSERT_TRUE(writeDem(dem, sc.spikes, sc.cliff, sc.rough_noise).isOk());
+    ASSERT_TRUE(writeDem(dem, sc.spikes, sc.cliff, sc.rough_noise).ok());
   }
   Status s;
   TerrainLayerConfig terrain;
@@ -94,7 +94,7 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   FlightRunOptions o;
   o.source = colour;
   if (sc.keyframes.empty()) {
-    ASSERT_TRUE(FlightPath::builtin(sc.path, colour->geometry(), &o.path, 10).isOk());
+    ASSERT_TRUE(FlightPath::builtin(sc.path, colour->geometry(), &o.path, 10).ok());
   } else {
     o.path.keyframes = sc.keyframes;
   }
@@ -109,7 +109,7 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   o.streamer.ram_budget_bytes = sc.ram_budget_bytes;
   o.terrain = terrain;
   o.on_frame = [&](const FrameSample& f, const OffscreenTarget& target, double*) -> Status {
-    if (f.frame % 10 != 9) return Status::ok();
+    if (f.frame % 10 != 9) return okStatus();
     // The camera of this frame, as runFlight placed it.
     const double t = std::min<double>(f.frame, o.frames - 1) * renderer_config::kSimulatedFrameSeconds * o.speed;
     const Camera camera = cameraAboveGround(o.path.sample(t), f.ground_height);
@@ -124,10 +124,10 @@ void flyScenario(const Scenario& sc, Outcome* out) {
     out->cracks += cracks;
     out->ground += ground;
     ++out->checked;
-    return Status::ok();
+    return okStatus();
   };
   s = runFlight(o, &out->run);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
 }
 
 // What every scenario must keep: no crack or hole, no frame waiting on I/O,
@@ -317,7 +317,7 @@ namespace {
 
 TEST(TerrainAccuracy, GeometricErrorIsZeroOnTheSurfaceAndGrowsOffIt) {
   test::TempDir dir;
-  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).ok());
   Status s;
   auto heights = openElevationSource(dir.file("dem.cst"), &s);
   ASSERT_TRUE(heights) << s.toString();
@@ -326,7 +326,7 @@ TEST(TerrainAccuracy, GeometricErrorIsZeroOnTheSurfaceAndGrowsOffIt) {
   a.sample0_world = {2.0, 2.0};
   a.world_per_height = 1.0;
   std::unique_ptr<ReferenceSurface> surface;
-  ASSERT_TRUE(ReferenceSurface::load(*heights, a, &surface).isOk());
+  ASSERT_TRUE(ReferenceSurface::load(*heights, a, &surface).ok());
   // A sample's centre is the sample; half-way between two, their mean.
   EXPECT_FLOAT_EQ(float(surface->heightAt(2.0 + 4.0 * 100, 2.0 + 4.0 * 77)), demHeight(100, 77, false));
   EXPECT_NEAR(surface->heightAt(2.0 + 4.0 * 100.5, 2.0 + 4.0 * 77),
@@ -395,7 +395,7 @@ void openTestDem(const std::string& path, TerrainLayerConfig* terrain) {
 TEST_P(TerrainFlight, AtRestTheGeometricErrorMeetsTheTarget) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
-  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).ok());
   Status s;
   TerrainLayerConfig terrain;
   ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
@@ -403,7 +403,7 @@ TEST_P(TerrainFlight, AtRestTheGeometricErrorMeetsTheTarget) {
   FlightRunOptions o;
   o.fewest_triangles = true;
   o.source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
-  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
+  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).ok());
   o.frames = 20;
   o.rest_frames = 20;
   o.viewport = kViewport;
@@ -412,7 +412,7 @@ TEST_P(TerrainFlight, AtRestTheGeometricErrorMeetsTheTarget) {
   o.terrain = terrain;  // default ring size
   FlightRun run;
   s = runFlight(o, &run);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   ASSERT_GT(run.geometry_rest_frames, 0u);
   EXPECT_LE(run.geometry_rest_mean_px, 0.5);
   EXPECT_LE(run.geometry_rest_p95_px, 1.0);
@@ -440,7 +440,7 @@ TEST_P(TerrainStability, NoDataHolesFlownTwoUnitsAboveTheGround) {
   t.fsync = false;
   TilerSummary summary;
   Status s = tileImage(t, &summary);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   Status o;
   auto store = openElevationSource(t.output_path, &o);
   ASSERT_TRUE(store) << o.toString();
@@ -498,13 +498,13 @@ std::shared_ptr<TileSource> detailedTexture() {
 void flyOverTestDem(const std::shared_ptr<TileSource>& source, const std::shared_ptr<TileSource>& reference,
                     FlightRun* run) {
   test::TempDir dir;
-  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).isOk());
+  ASSERT_TRUE(writeDem(dir.file("dem.cst"), false).ok());
   TerrainLayerConfig terrain;
   ASSERT_NO_FATAL_FAILURE(openTestDem(dir.file("dem.cst"), &terrain));
   FlightRunOptions o;
   o.source = source;
   o.reference_source = reference;
-  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).isOk());
+  ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).ok());
   o.frames = 10;
   o.rest_frames = 20;
   o.viewport = kViewport;
@@ -512,7 +512,7 @@ void flyOverTestDem(const std::shared_ptr<TileSource>& source, const std::shared
   o.sample_tiles = false;
   o.terrain = terrain;  // default ring size
   const Status s = runFlight(o, run);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   ASSERT_GT(run->geometry_rest_frames, 0u);
 }
 

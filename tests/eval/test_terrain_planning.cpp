@@ -64,7 +64,7 @@ Orbit flyOrbit(const std::string& dem, bool terrain_planning) {
   TerrainLayerConfig tl;
   std::vector<std::string> warnings;
   Status s = openTerrainLayer("", colour->geometry(), dem, 1.0, true, 64, &tl, &warnings);
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   if (!s) return out;
   FlightConfig fc;
   fc.viewport = {320, 180};
@@ -88,7 +88,7 @@ Orbit flyOrbit(const std::string& dem, bool terrain_planning) {
   };
   std::unique_ptr<Flight> flight;
   s = Flight::create(colour, fc, cameraAt(0.0, 2600.0, 2000.0, -0.1, nullptr), &flight);
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   if (!s) return out;
   EXPECT_EQ(flight->streamer().plansOnTerrain(), terrain_planning);
   std::vector<float> xyzw;
@@ -125,7 +125,7 @@ std::string tileDem(const test::TempDir& dir) {
   opt.fsync = false;
   TilerSummary summary;
   const Status s = tileImage(opt, &summary);
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   return opt.output_path;
 }
 
@@ -163,7 +163,7 @@ TEST(TerrainPlanning, EveryTileSampledOverMountainSlopesIsPlanned) {
 TEST(TerrainPlanning, SampledTilesOfFlatTerrainAreThePlanes) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
-  ASSERT_TRUE(test::writeElevationStore(dir.file("flat.cst"), 256, 256, [](uint64_t, uint64_t) { return 0.0f; }).isOk());
+  ASSERT_TRUE(test::writeElevationStore(dir.file("flat.cst"), 256, 256, [](uint64_t, uint64_t) { return 0.0f; }).ok());
   auto colour = test::procedural(4096, 128);
   TerrainLayerConfig tl;
   Status s;
@@ -183,7 +183,7 @@ TEST(TerrainPlanning, SampledTilesOfFlatTerrainAreThePlanes) {
   c.heading_rad = 0.4;
   c.pitch_rad = -0.5;
   std::unique_ptr<Flight> flight;
-  ASSERT_TRUE(Flight::create(colour, fc, c, &flight).isOk());
+  ASSERT_TRUE(Flight::create(colour, fc, c, &flight).ok());
   for (int k = 0; k < 5; ++k) flight->step(c);
   std::vector<float> xyzw;
   flight->terrain()->readPositions(c, flight->viewport(), flight->renderer(), &xyzw);

@@ -15,7 +15,10 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <map>
+#include <sstream>
 
 namespace clipstream {
 namespace {
@@ -63,7 +66,7 @@ Status fly(std::shared_ptr<TileSource> source, const FlightPath& path,
   o.on_frame = [&](const FrameSample& frame, const OffscreenTarget& target, double*) {
     if (at_frame) at_frame(frame.frame);
     target.readRgba(&out->frames.emplace_back());
-    return Status::ok();
+    return okStatus();
   };
   return runFlight(o, &out->run);
 }
@@ -78,9 +81,9 @@ class HttpFlight : public ::testing::Test {
     ProceduralSpec spec;
     spec.width_px = spec.height_px = 4096;
     spec.tile_px = 128;
-    ASSERT_TRUE(test::writeStoreFromSource(*makeProceduralSource(spec), s_store).isOk());
+    ASSERT_TRUE(test::writeStoreFromSource(*makeProceduralSource(spec), s_store).ok());
     spec.seed = 2;  // the "new version": another texture of the same size
-    ASSERT_TRUE(test::writeStoreFromSource(*makeProceduralSource(spec), s_other).isOk());
+    ASSERT_TRUE(test::writeStoreFromSource(*makeProceduralSource(spec), s_other).ok());
   }
   static void TearDownTestSuite() {
     delete s_local;
@@ -95,15 +98,15 @@ class HttpFlight : public ::testing::Test {
                                std::filesystem::copy_options::overwrite_existing);
     const Status s =
         NginxServer::start(m_work.path().string(), s_dir->file("www"), &m_server);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
     Status open_status;
     const std::shared_ptr<TileSource> local = openStoreSource(s_store, &open_status);
     ASSERT_TRUE(local) << open_status.toString();
-    ASSERT_TRUE(FlightPath::builtin("pass", local->geometry(), &m_path).isOk());
+    ASSERT_TRUE(FlightPath::builtin("pass", local->geometry(), &m_path).ok());
     if (s_local == nullptr) {
       auto captured = std::make_unique<CapturedFlight>();
       const Status fs = fly(local, m_path, {}, true, captured.get());
-      ASSERT_TRUE(fs.isOk()) << fs.toString();
+      ASSERT_TRUE(fs.ok()) << fs.toString();
       ASSERT_EQ(captured->run.final_max_abs_error, 0) << "the local flight did not converge";
       ASSERT_EQ(captured->run.render_thread_fetches, 0u);
       s_local = captured.release();
@@ -149,7 +152,7 @@ CapturedFlight* HttpFlight::s_local = nullptr;
 TEST_F(HttpFlight, FramesEqualTheLocalFlight) {
   CapturedFlight http;
   const Status s = fly(openUrl(m_server->url("store.cstore")), m_path, {}, false, &http);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   checkFlight(http, true);
   EXPECT_EQ(http.run.tile_failures, 0u);
   EXPECT_EQ(http.run.streamer.loader_threads, RemoteOptions{}.connections);
@@ -176,6 +179,62 @@ TEST_F(HttpFlight, ClipstreamFlyFliesAStoreByUrl) {
   EXPECT_FALSE(m_server->requests().empty());
 }
 
+// summary.tsv as key -> value (its two lines: the keys, the values).
+std::map<std::string, std::string> readSummary(const std::string& path) {
+  std::ifstream in(path);
+  std::string keys, values;
+  std::getline(in, keys);
+  std::getline(in, values);
+  std::map<std::string, std::string> summary;
+  std::stringstream k(keys), v(values);
+  for (std::string key, value; std::getline(k, key, '\t');) {
+    value.clear();
+    std::getline(v, value, '\t');
+    summary[key] = value;
+  }
+  return summary;
+}
+
+// The summary says what the network and the disk cache did: a first run
+// with --disk-cache sends requests and misses; a second, identical one is
+// served by the cache (the same bytes were read before either way, so
+// nothing else told the two runs apart). A local store leaves the fields
+// empty.
+TEST_F(HttpFlight, ClipstreamFlySummaryHasTheNetworkAndDiskCacheFigures) {
+  const std::string cache = m_work.file("disk-cache");
+  auto flyUrl = [&](const std::string& out) {
+    const std::string command = std::string("'") + CLIPSTREAM_FLY_EXE + "' '" +
+                                m_server->url("store.cstore") + "' --frames 20 --size 160x96 --save-frames 0 "
+                                "--disk-cache '" + cache + "' --out '" + out + "' > '" + out + ".log' 2>&1";
+    EXPECT_EQ(std::system(command.c_str()), 0) << command;
+    return readSummary(out + "/summary.tsv");
+  };
+  const auto first = flyUrl(m_work.file("first"));
+  const auto second = flyUrl(m_work.file("second"));
+  for (const char* key : {"http_requests", "http_bytes", "http_retries", "disk_cache_hits", "disk_cache_misses"}) {
+    ASSERT_EQ(first.count(key), 1u) << key;
+    ASSERT_FALSE(first.at(key).empty()) << key;
+    ASSERT_FALSE(second.at(key).empty()) << key;
+  }
+  EXPECT_GT(std::stoull(first.at("http_requests")), 0u);
+  EXPECT_GT(std::stoull(first.at("http_bytes")), 0u);
+  EXPECT_GT(std::stoull(first.at("disk_cache_misses")), 0u);
+  // The first run hits too (a range read earlier in the run serves a later
+  // tile); the second is served by what the first left.
+  EXPECT_GT(std::stoull(second.at("disk_cache_hits")), std::stoull(first.at("disk_cache_hits")));
+  EXPECT_LT(std::stoull(second.at("disk_cache_misses")), std::stoull(first.at("disk_cache_misses")));
+  EXPECT_LT(std::stoull(second.at("http_requests")), std::stoull(first.at("http_requests")));
+  EXPECT_LT(std::stoull(second.at("http_bytes")), std::stoull(first.at("http_bytes")));
+
+  const std::string local_out = m_work.file("local");
+  const std::string command = std::string("'") + CLIPSTREAM_FLY_EXE + "' '" + s_store +
+                              "' --frames 5 --size 160x96 --save-frames 0 --out '" + local_out + "' > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  const auto local = readSummary(local_out + "/summary.tsv");
+  EXPECT_EQ(local.at("http_requests"), "");
+  EXPECT_EQ(local.at("disk_cache_hits"), "");
+}
+
 TEST_F(HttpFlight, NginxStoppedMidFlightDegradesAndRecovers) {
   CapturedFlight http;
   const auto at_frame = [&](uint32_t frame) {
@@ -184,11 +243,11 @@ TEST_F(HttpFlight, NginxStoppedMidFlightDegradesAndRecovers) {
     // (at least kRestFrameMs each), then the server returns.
     if (frame == 0) m_server->stop();
     if (frame == kMovingFrames + kOutageRestFrames) {
-      ASSERT_TRUE(m_server->restart().isOk());
+      ASSERT_TRUE(m_server->restart().ok());
     }
   };
   const Status s = fly(openUrl(m_server->url("store.cstore")), m_path, at_frame, false, &http);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   EXPECT_GT(http.run.tile_failures, 0u) << "the outage was never seen";
   checkFlight(http, true);
   std::printf("  %llu tile reads failed; identical frames: %zu of %zu\n",
@@ -205,7 +264,7 @@ TEST_F(HttpFlight, StoreReplacedMidFlightIsNotMixedIn) {
     std::filesystem::rename(tmp, s_dir->file("www/store.cstore"));
   };
   const Status s = fly(openUrl(m_server->url("store.cstore")), m_path, at_frame, false, &http);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   checkFlight(http, false);
   EXPECT_GT(http.run.tile_failures, 0u) << "the new version was never noticed";
   // Detected by If-Range: the server answered with the whole (new) file,
@@ -217,16 +276,16 @@ TEST_F(HttpFlight, StoreReplacedMidFlightIsNotMixedIn) {
   // final frame is not the one the new store would give.
   CapturedFlight other;
   Status open_status;
-  ASSERT_TRUE(fly(openStoreSource(s_other, &open_status), m_path, {}, false, &other).isOk());
+  ASSERT_TRUE(fly(openStoreSource(s_other, &open_status), m_path, {}, false, &other).ok());
   EXPECT_FALSE(http.frames.back() == other.frames.back());
 }
 
 TEST_F(HttpFlight, SlowServerNeverHoldsAFrame) {
   std::unique_ptr<test::DelayProxy> proxy;
-  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 50.0, &proxy).isOk());
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 50.0, &proxy).ok());
   CapturedFlight http;
   const Status s = fly(openUrl(proxy->url("store.cstore")), m_path, {}, false, &http);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   checkFlight(http, true);
   EXPECT_EQ(http.run.tile_failures, 0u);
   std::printf("  identical frames at 50 ms: %zu of %zu\n", identicalFrames(http, *s_local),

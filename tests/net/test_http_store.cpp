@@ -47,9 +47,9 @@ class HttpStore : public ::testing::Test {
   void SetUp() override {
     std::filesystem::create_directories(m_dir.file("www"));
     m_local = m_dir.file("www/store.cstore");
-    ASSERT_TRUE(test::writeSyntheticStore(m_local, storeSpec()).isOk());
+    ASSERT_TRUE(test::writeSyntheticStore(m_local, storeSpec()).ok());
     const Status s = NginxServer::start(m_dir.path().string(), m_dir.file("www"), &m_server);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
   }
 
   std::vector<TileKey> allKeys(const PyramidGeometry& g) const {
@@ -79,9 +79,9 @@ class HttpStore : public ::testing::Test {
 
 TEST_F(HttpStore, TilesReadOverHttpEqualTheLocalFile) {
   std::unique_ptr<TileStoreReader> local, remote;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const Status s = TileStoreReader::open(m_server->url("store.cstore"), &remote);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   EXPECT_EQ(remote->info().file_bytes, local->info().file_bytes);
   EXPECT_EQ(remote->geometry().levelCount(), local->geometry().levelCount());
   EXPECT_EQ(remote->suggestedReadThreads(), RemoteOptions{}.connections);
@@ -89,16 +89,16 @@ TEST_F(HttpStore, TilesReadOverHttpEqualTheLocalFile) {
   size_t payloads = 0;
   for (const TileKey& key : allKeys(local->geometry())) {
     RawTile a, b;
-    ASSERT_TRUE(local->readRaw(key, &a).isOk());
+    ASSERT_TRUE(local->readRaw(key, &a).ok());
     const Status rs = remote->readRaw(key, &b);
-    ASSERT_TRUE(rs.isOk()) << rs.toString();
+    ASSERT_TRUE(rs.ok()) << rs.toString();
     EXPECT_EQ(a.location.offset, b.location.offset);
     EXPECT_EQ(a.location.constant, b.location.constant);
     ASSERT_EQ(a.payload, b.payload) << "level " << key.level << " tile " << key.x << "," << key.y;
     if (!a.payload.empty()) ++payloads;
     std::vector<uint8_t> pixels_a, pixels_b;
-    ASSERT_TRUE(local->readTile(key, &pixels_a).isOk());
-    ASSERT_TRUE(remote->readTile(key, &pixels_b).isOk());
+    ASSERT_TRUE(local->readTile(key, &pixels_a).ok());
+    ASSERT_TRUE(remote->readTile(key, &pixels_b).ok());
     ASSERT_EQ(pixels_a, pixels_b);
   }
   EXPECT_GT(payloads, 10u);
@@ -121,8 +121,8 @@ TEST_F(HttpStore, TilesReadOverHttpEqualTheLocalFile) {
 
 TEST_F(HttpStore, BatchReadCoalescesNeighboursIntoOneRequestWithTheSameBytes) {
   std::unique_ptr<TileStoreReader> local, remote;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).ok());
   EXPECT_EQ(remote->suggestedBatchTiles(), RemoteOptions{}.batch_tiles);
   EXPECT_EQ(local->suggestedBatchTiles(), 1u);
   // The last row of level 0 (beyond the first 64 KiB the open read).
@@ -132,22 +132,22 @@ TEST_F(HttpStore, BatchReadCoalescesNeighboursIntoOneRequestWithTheSameBytes) {
   size_t payloads = 0;
   for (const TileKey& key : keys) {
     TileLocation location;
-    ASSERT_TRUE(local->locate(key, &location).isOk());
+    ASSERT_TRUE(local->locate(key, &location).ok());
     if (!location.constant) ++payloads;
   }
   ASSERT_GE(payloads, 3u);
   {
     RawTile warm;  // loads the row's index page
-    ASSERT_TRUE(remote->readRaw(keys[0], &warm).isOk());
+    ASSERT_TRUE(remote->readRaw(keys[0], &warm).ok());
   }
   const uint64_t before = remote->remoteStats().requests;
   std::vector<RawTile> raws(keys.size());
   std::vector<Status> statuses(keys.size());
   remote->readRawBatch(keys, raws, statuses);
   for (size_t i = 0; i < keys.size(); ++i) {
-    ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+    ASSERT_TRUE(statuses[i].ok()) << statuses[i].toString();
     RawTile expected;
-    ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+    ASSERT_TRUE(local->readRaw(keys[i], &expected).ok());
     EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
   }
   // The row lies together in the file: one request for all its payloads.
@@ -157,28 +157,28 @@ TEST_F(HttpStore, BatchReadCoalescesNeighboursIntoOneRequestWithTheSameBytes) {
   apart.coalesce_gap_bytes = 0;
   apart.coalesce_max_bytes = 1;
   std::unique_ptr<TileStoreReader> separate;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), apart, &separate).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), apart, &separate).ok());
   {
     RawTile warm;
-    ASSERT_TRUE(separate->readRaw(keys[0], &warm).isOk());
+    ASSERT_TRUE(separate->readRaw(keys[0], &warm).ok());
   }
   const uint64_t separate_before = separate->remoteStats().requests;
   separate->readRawBatch(keys, raws, statuses);
-  for (const Status& st : statuses) EXPECT_TRUE(st.isOk()) << st.toString();
+  for (const Status& st : statuses) EXPECT_TRUE(st.ok()) << st.toString();
   EXPECT_EQ(separate->remoteStats().requests - separate_before, payloads);
 }
 
 TEST_F(HttpStore, BatchReadOfADamagedTileFailsThatTileOnly) {
   // Flip a byte inside one payload of the last row: only that tile fails.
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const PyramidGeometry& g = local->geometry();
   std::vector<TileKey> keys;
   for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) keys.push_back({0, x, g.levels[0].tiles_y - 1});
   size_t damaged = keys.size();
   TileLocation location;
   for (size_t i = 0; i < keys.size() && damaged == keys.size(); ++i) {
-    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    ASSERT_TRUE(local->locate(keys[i], &location).ok());
     if (!location.constant) damaged = i;
   }
   ASSERT_LT(damaged, keys.size());
@@ -187,7 +187,7 @@ TEST_F(HttpStore, BatchReadOfADamagedTileFailsThatTileOnly) {
   bytes[location.offset + location.stored_bytes / 2] ^= 0x40;
   test::writeBytes(m_local, bytes);
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).ok());
   std::vector<RawTile> raws(keys.size());
   std::vector<Status> statuses(keys.size());
   remote->readRawBatch(keys, raws, statuses);
@@ -195,14 +195,14 @@ TEST_F(HttpStore, BatchReadOfADamagedTileFailsThatTileOnly) {
     if (i == damaged) {
       EXPECT_EQ(statuses[i].code, ErrorCode::kCorruptTile) << statuses[i].toString();
     } else {
-      EXPECT_TRUE(statuses[i].isOk()) << i << ": " << statuses[i].toString();
+      EXPECT_TRUE(statuses[i].ok()) << i << ": " << statuses[i].toString();
     }
   }
 }
 
 TEST_F(HttpStore, OpeningReadsTheHeaderTableAndDirectoriesOnly) {
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).ok());
   const std::vector<LoggedRequest> log = m_server->requests(remote->remoteStats().requests);
   EXPECT_EQ(log.size(), remote->remoteStats().requests);
   // The first 64 KiB (the header), the level table with the metadata, and
@@ -216,7 +216,7 @@ TEST_F(HttpStore, OpeningReadsTheHeaderTableAndDirectoriesOnly) {
   const PyramidGeometry& g = remote->geometry();
   const TileKey key{0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1};
   RawTile raw;
-  ASSERT_TRUE(remote->readRaw(key, &raw).isOk());
+  ASSERT_TRUE(remote->readRaw(key, &raw).ok());
   ASSERT_FALSE(raw.location.constant);
   EXPECT_GT(raw.location.offset, uint64_t(64) << 10);
   EXPECT_EQ(remote->remoteStats().requests, log.size() + 2);
@@ -313,14 +313,14 @@ TEST_F(HttpStore, EmptyFileOnTheServerIsReported) {
 // the server holds "another version" and every later read must refuse it.
 TEST_F(HttpStore, StoreReplacedOnTheServerIsDetectedAndNeverMixed) {
   std::unique_ptr<TileStoreReader> local, remote;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   const size_t half = keys.size() / 2;
   for (size_t i = 0; i < half; ++i) {
     std::vector<uint8_t> a, b;
-    ASSERT_TRUE(local->readTile(keys[i], &a).isOk());
-    ASSERT_TRUE(remote->readTile(keys[i], &b).isOk());
+    ASSERT_TRUE(local->readTile(keys[i], &a).ok());
+    ASSERT_TRUE(remote->readTile(keys[i], &b).ok());
     ASSERT_EQ(a, b);
   }
   publish(m_local, "store.cstore", 100);
@@ -334,7 +334,7 @@ TEST_F(HttpStore, StoreReplacedOnTheServerIsDetectedAndNeverMixed) {
       // a loaded page, the first 64 KiB) may still succeed: from the old
       // version, equal to the local file.
       RawTile expected;
-      ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+      ASSERT_TRUE(local->readRaw(keys[i], &expected).ok());
       EXPECT_EQ(raw.payload, expected.payload);
       continue;
     }
@@ -354,11 +354,11 @@ TEST_F(HttpStore, StoreReplacedOnTheServerIsDetectedAndNeverMixed) {
 
 TEST_F(HttpStore, StoreReplacedByAnotherStoreIsDetected) {
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), &remote).ok());
   test::SyntheticStoreSpec other = storeSpec();
   other.constant = test::ConstantTiles::kNone;
   const std::string other_path = m_dir.file("other.cstore");
-  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).ok());
   publish(other_path, "store.cstore", 100);
   const PyramidGeometry& g = remote->geometry();
   RawTile raw;
@@ -367,19 +367,19 @@ TEST_F(HttpStore, StoreReplacedByAnotherStoreIsDetected) {
   EXPECT_NE(s.message.find("changed on the server"), std::string::npos) << s.message;
   // Putting the old version back does not make the reader trust it again.
   publish(m_local, "store.cstore", 200);
-  EXPECT_FALSE(remote->readRaw({0, 0, 0}, &raw).isOk());
+  EXPECT_FALSE(remote->readRaw({0, 0, 0}, &raw).ok());
 }
 
 TEST_F(HttpStore, ConnectionsAreKeptAlive) {
   std::unique_ptr<test::DelayProxy> proxy;
-  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).isOk());
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).ok());
   RemoteOptions options;
   options.connections = 1;
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(proxy->url("store.cstore"), options, &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(proxy->url("store.cstore"), options, &remote).ok());
   for (const TileKey& key : allKeys(remote->geometry())) {
     RawTile raw;
-    ASSERT_TRUE(remote->readRaw(key, &raw).isOk());
+    ASSERT_TRUE(remote->readRaw(key, &raw).ok());
   }
   EXPECT_GT(remote->remoteStats().requests, 10u);
   EXPECT_EQ(proxy->connections(), 1u) << "every request on one kept-alive connection";
@@ -389,7 +389,7 @@ TEST_F(HttpStore, ConnectionsAreKeptAlive) {
 
 TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
   std::unique_ptr<test::DelayProxy> proxy;
-  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).isOk());
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).ok());
   // The first connection dies 600 bytes into its answer (the headers and
   // part of the first 64 KiB): a retry on a new connection completes it.
   proxy->cutConnections(1, 600);
@@ -398,15 +398,15 @@ TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
   options.retry_base_ms = 10;
   std::unique_ptr<TileStoreReader> local, remote;
   const Status s = TileStoreReader::open(proxy->url("store.cstore"), options, &remote);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   EXPECT_EQ(remote->remoteStats().retries, 1u);
   EXPECT_EQ(proxy->connections(), 2u);
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const PyramidGeometry& g = local->geometry();
   const TileKey key{0, g.levels[0].tiles_x - 1, g.levels[0].tiles_y - 1};
   RawTile a, b;
-  ASSERT_TRUE(local->readRaw(key, &a).isOk());
-  ASSERT_TRUE(remote->readRaw(key, &b).isOk());
+  ASSERT_TRUE(local->readRaw(key, &a).ok());
+  ASSERT_TRUE(remote->readRaw(key, &b).ok());
   EXPECT_EQ(a.payload, b.payload);
   // With no retries left, the same cut is a transient failure.
   proxy->cutConnections(1, 600);
@@ -441,9 +441,9 @@ void expectSamePayloads(const TileStoreReader& reader, const TileStoreReader& lo
                         const std::vector<TileKey>& keys) {
   for (const TileKey& key : keys) {
     RawTile a, b;
-    ASSERT_TRUE(local.readRaw(key, &a).isOk());
+    ASSERT_TRUE(local.readRaw(key, &a).ok());
     const Status s = reader.readRaw(key, &b);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
     ASSERT_EQ(a.payload, b.payload) << "level " << key.level << " tile " << key.x << "," << key.y;
   }
 }
@@ -453,13 +453,13 @@ TEST_F(HttpStore, DiskCacheServesASecondOpenEvenWithTheServerStopped) {
   options.disk_cache_dir = m_dir.file("cache");  // made by the reader
   options.retries = 0;
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   const std::vector<TileKey> cached(keys.begin(), keys.begin() + keys.size() / 2);
   uint64_t first_requests = 0;
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, cached);
     const RemoteStats stats = remote->remoteStats();
     EXPECT_EQ(stats.disk_cache_hits, 0u);
@@ -470,7 +470,7 @@ TEST_F(HttpStore, DiskCacheServesASecondOpenEvenWithTheServerStopped) {
   // A second open (a new cache instance: the folder is scanned again) reads
   // the same tiles from the folder: no request beyond the open's.
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
   const uint64_t open_requests = remote->remoteStats().requests;
   EXPECT_LT(open_requests, first_requests);
   expectSamePayloads(*remote, *local, cached);
@@ -499,8 +499,8 @@ TEST_F(HttpStore, DiskCacheKeepsItsCapByEvictingTheLeastRecentlyUsed) {
   options.disk_cache_dir = m_dir.file("cache");
   options.disk_cache_bytes = 100 << 10;  // a sixth of the store
   std::unique_ptr<TileStoreReader> local, remote;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   expectSamePayloads(*remote, *local, keys);
   const CacheFolder folder = cacheFolder(options.disk_cache_dir);
@@ -512,12 +512,12 @@ TEST_F(HttpStore, DiskCacheKeepsItsCapByEvictingTheLeastRecentlyUsed) {
   std::vector<TileKey> last, first;
   for (size_t i = keys.size(); i-- > 0 && last.size() < 3;) {
     TileLocation location;
-    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    ASSERT_TRUE(local->locate(keys[i], &location).ok());
     if (!location.constant) last.push_back(keys[i]);
   }
   for (size_t i = 0; i < keys.size() && first.size() < 2; ++i) {
     TileLocation location;
-    ASSERT_TRUE(local->locate(keys[i], &location).isOk());
+    ASSERT_TRUE(local->locate(keys[i], &location).ok());
     if (!location.constant && location.offset >= (64 << 10)) first.push_back(keys[i]);
   }
   const RemoteStats before = remote->remoteStats();
@@ -535,11 +535,11 @@ TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
   RemoteOptions options;
   options.disk_cache_dir = m_dir.file("cache");
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
   }
   // Damage two tile entries the way a crash or a bad disk would: one cut
@@ -549,7 +549,7 @@ TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
   std::vector<std::string> names;
   for (uint32_t x = g.levels[0].tiles_x; x-- > 0 && names.size() < 2;) {
     TileLocation location;
-    ASSERT_TRUE(local->locate({0, x, g.levels[0].tiles_y - 1}, &location).isOk());
+    ASSERT_TRUE(local->locate({0, x, g.levels[0].tiles_y - 1}, &location).ok());
     if (!location.constant) {
       names.push_back("t0-" + std::to_string(x) + "-" + std::to_string(g.levels[0].tiles_y - 1));
     }
@@ -570,7 +570,7 @@ TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
   test::writeBytes(tiles[1], bytes);
 
   std::unique_ptr<TileStoreReader> remote;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
   const uint64_t open_requests = remote->remoteStats().requests;
   expectSamePayloads(*remote, *local, keys);
   const RemoteStats stats = remote->remoteStats();
@@ -579,7 +579,7 @@ TEST_F(HttpStore, DiskCacheDropsATruncatedOrDamagedEntryAndFetchesItAgain) {
   // The cut entry is whole again in the folder.
   EXPECT_EQ(test::readBytes(tiles[0]).size(), whole_size);
   std::unique_ptr<TileStoreReader> again;
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &again).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &again).ok());
   expectSamePayloads(*again, *local, keys);
   EXPECT_EQ(again->remoteStats().disk_cache_dropped, 0u);
 }
@@ -588,11 +588,11 @@ TEST_F(HttpStore, DiskCacheNeverServesTheEntriesOfAReplacedStore) {
   RemoteOptions options;
   options.disk_cache_dir = m_dir.file("cache");
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
   }
   // Another store of the same shape under the same name: other bytes at
@@ -600,11 +600,11 @@ TEST_F(HttpStore, DiskCacheNeverServesTheEntriesOfAReplacedStore) {
   test::SyntheticStoreSpec other = storeSpec();
   other.constant = test::ConstantTiles::kNone;
   const std::string other_path = m_dir.file("other.cstore");
-  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(other_path, other).ok());
   publish(other_path, "store.cstore", 100);
   std::unique_ptr<TileStoreReader> other_local, remote;
-  ASSERT_TRUE(TileStoreReader::open(other_path, &other_local).isOk());
-  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+  ASSERT_TRUE(TileStoreReader::open(other_path, &other_local).ok());
+  ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
   expectSamePayloads(*remote, *other_local, keys);
   EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u);
   EXPECT_GT(remote->remoteStats().disk_cache_misses, 0u);
@@ -627,11 +627,11 @@ TEST_F(HttpStore, DiskCacheEvictsOnlyTheEntriesItWrote) {
   options.disk_cache_dir = m_dir.file("cache");
   options.disk_cache_bytes = 100 << 10;
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
   }
   const std::string sub = storeSubFolder(options.disk_cache_dir);
@@ -650,7 +650,7 @@ TEST_F(HttpStore, DiskCacheEvictsOnlyTheEntriesItWrote) {
   // the scan sees the user's files, the evictions never take them.
   for (int run = 0; run < 2; ++run) {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     std::vector<TileKey> order = keys;
     if (run == 1) std::reverse(order.begin(), order.end());
     expectSamePayloads(*remote, *local, order);
@@ -680,11 +680,11 @@ TEST_F(HttpStore, DiskCacheNeverFollowsASymlinkedStoreFolder) {
   options.disk_cache_dir = m_dir.file("cache");
   options.disk_cache_bytes = 100 << 10;
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(m_local, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_local, &local).ok());
   const std::vector<TileKey> keys = allKeys(local->geometry());
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
   }
   const std::string sub = storeSubFolder(options.disk_cache_dir);
@@ -701,7 +701,7 @@ TEST_F(HttpStore, DiskCacheNeverFollowsASymlinkedStoreFolder) {
   std::sort(before.begin(), before.end());
   {
     std::unique_ptr<TileStoreReader> remote;
-    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
     EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u) << "entries read through the symlink";
   }
@@ -811,10 +811,10 @@ TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
   test::TempDir dir("https-store");
   std::filesystem::create_directories(dir.file("www"));
   const std::string local_path = dir.file("www/store.cstore");
-  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).ok());
   std::unique_ptr<NginxServer> server;
   const Status started = NginxServer::start(dir.path().string(), dir.file("www"), &server, true);
-  ASSERT_TRUE(started.isOk()) << started.toString();
+  ASSERT_TRUE(started.ok()) << started.toString();
   const std::string url = server->url("store.cstore");
   ASSERT_EQ(url.rfind("https://", 0), 0u);
 
@@ -830,16 +830,16 @@ TEST(HttpsStore, UntrustedCertificateFailsAndATrustedOneReadsTheSameTiles) {
   RemoteOptions trusted;
   trusted.ca_file = server->certificateFile();
   const Status opened = TileStoreReader::open(url, trusted, &remote);
-  ASSERT_TRUE(opened.isOk()) << opened.toString();
+  ASSERT_TRUE(opened.ok()) << opened.toString();
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).ok());
   const PyramidGeometry& g = local->geometry();
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
     const TileKey key{l, g.levels[l].tiles_x - 1, g.levels[l].tiles_y - 1};
     std::vector<uint8_t> a, b;
-    ASSERT_TRUE(local->readTile(key, &a).isOk());
+    ASSERT_TRUE(local->readTile(key, &a).ok());
     const Status rs = remote->readTile(key, &b);
-    ASSERT_TRUE(rs.isOk()) << rs.toString();
+    ASSERT_TRUE(rs.ok()) << rs.toString();
     EXPECT_EQ(a, b);
   }
 }
@@ -852,13 +852,13 @@ TEST(HttpsStore, Http2MultiplexesABatchOnOneConnectionWithTheSameBytes) {
   test::TempDir dir("http2-store");
   std::filesystem::create_directories(dir.file("www"));
   const std::string local_path = dir.file("www/store.cstore");
-  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(local_path, storeSpec()).ok());
   std::unique_ptr<NginxServer> server;
   const Status started =
       NginxServer::start(dir.path().string(), dir.file("www"), &server, true, true);
-  ASSERT_TRUE(started.isOk()) << started.toString();
+  ASSERT_TRUE(started.ok()) << started.toString();
   std::unique_ptr<TileStoreReader> local;
-  ASSERT_TRUE(TileStoreReader::open(local_path, &local).isOk());
+  ASSERT_TRUE(TileStoreReader::open(local_path, &local).ok());
   const PyramidGeometry& g = local->geometry();
   std::vector<TileKey> keys;
   for (uint32_t l = 0; l < g.levelCount(); ++l)
@@ -876,15 +876,15 @@ TEST(HttpsStore, Http2MultiplexesABatchOnOneConnectionWithTheSameBytes) {
     server->clearLog();
     std::unique_ptr<TileStoreReader> remote;
     const Status opened = TileStoreReader::open(server->url("store.cstore"), options, &remote);
-    ASSERT_TRUE(opened.isOk()) << opened.toString();
+    ASSERT_TRUE(opened.ok()) << opened.toString();
     std::vector<RawTile> raws(keys.size());
     std::vector<Status> statuses(keys.size());
     remote->readRawBatch(keys, raws, statuses);
     size_t payloads = 0;
     for (size_t i = 0; i < keys.size(); ++i) {
-      ASSERT_TRUE(statuses[i].isOk()) << statuses[i].toString();
+      ASSERT_TRUE(statuses[i].ok()) << statuses[i].toString();
       RawTile expected;
-      ASSERT_TRUE(local->readRaw(keys[i], &expected).isOk());
+      ASSERT_TRUE(local->readRaw(keys[i], &expected).ok());
       EXPECT_EQ(raws[i].payload, expected.payload) << "tile " << i;
       payloads += expected.payload.empty() ? 0 : 1;
     }

@@ -51,7 +51,7 @@ TEST(Flight, FollowsTheClockWarmUpAndCutRules) {
   config.streamer.io_threads = 2;
   config.warmup_frames = 2;
   std::unique_ptr<Flight> flight;
-  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).isOk());
+  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).ok());
   ASSERT_NE(flight->target(), nullptr);
   const double dt = renderer_config::kSimulatedFrameSeconds;
   for (uint32_t w = 0; w < 2; ++w) {
@@ -81,7 +81,7 @@ TEST(Flight, FirstFrameWithoutWarmUpIsACut) {
   config.viewport = {160, 96};
   config.streamer.io_threads = 2;
   std::unique_ptr<Flight> flight;
-  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).isOk());
+  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).ok());
   EXPECT_TRUE(flight->step(overTheMiddle()).cut);
   EXPECT_FALSE(flight->step(overTheMiddle()).cut);
   flight->finish();
@@ -96,7 +96,7 @@ TEST(Flight, DeltasAddUpAndAStillCameraTurnsGpuMissesIntoHits) {
   config.streamer.io_threads = 2;
   config.upload_tiles = 64;
   std::unique_ptr<Flight> flight;
-  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).isOk());
+  ASSERT_TRUE(Flight::create(test::procedural(uint64_t(1) << 20), config, overTheMiddle(), &flight).ok());
   uint64_t loads = 0, ram_hits = 0, ram_misses = 0;
   FrameSample first, last;
   for (int i = 0; i < 400; ++i) {

@@ -39,9 +39,9 @@ Scene makeScene(std::shared_ptr<TileSource> source, const Camera& camera,
   s.plan = planClipmap(s.source->geometry(), kViewport, camera, {});
   RendererConfig config{s.plan.clip_tiles, s.plan.pyramid_level, buffering, s.source->content()};
   Status st = ClipmapRenderer::create(s.source->geometry(), config, &s.renderer);
-  EXPECT_TRUE(st.isOk()) << st.toString();
+  EXPECT_TRUE(st.ok()) << st.toString();
   st = OffscreenTarget::create(kViewport, &s.target);
-  EXPECT_TRUE(st.isOk()) << st.toString();
+  EXPECT_TRUE(st.ok()) << st.toString();
   return s;
 }
 
@@ -147,7 +147,7 @@ TEST_P(ToroidalUpdate, EqualsAFreshRenderAfterTheCameraMoves) {
         if (moved.plan.stack[l].window.contains(x, y)) continue;
         auto px = std::make_shared<std::vector<uint8_t>>();
         const TileKey key{uint32_t(l), uint32_t(x), uint32_t(y)};
-        ASSERT_TRUE(moved.source->fetch(key, px.get()).isOk());
+        ASSERT_TRUE(moved.source->fetch(key, px.get()).ok());
         moved.renderer->uploadTile(key, px);
         ++entered;
       }
@@ -200,7 +200,7 @@ TEST(ClipmapRender, StagedUploadsGoThroughTheRingAndDrawAsSingleBuffered) {
       s->renderer->beginFrame();
       for (size_t i = first; i < std::min(stack.size(), first + renderer_config::kDefaultUploadTilesPerFrame); ++i) {
         auto px = std::make_shared<std::vector<uint8_t>>();
-        ASSERT_TRUE(s->source->fetch(stack[i], px.get()).isOk());
+        ASSERT_TRUE(s->source->fetch(stack[i], px.get()).ok());
         s->renderer->uploadTile(stack[i], px);
       }
       s->renderer->setResidency(test::fullResidency(s->plan));
@@ -313,7 +313,7 @@ TEST(ClipmapRender, MatchesCpuReferenceOnRealImagery) {
   const std::string path = test::bundledDataPath("autzen.jpg");
   std::vector<uint8_t> full;
   uint32_t w = 0, h = 0;
-  ASSERT_TRUE(readImageRgba(path, &full, &w, &h).isOk()) << path;
+  ASSERT_TRUE(readImageRgba(path, &full, &w, &h).ok()) << path;
   ASSERT_GE(w, 2048u);
   ASSERT_GE(h, 2048u);
   std::vector<uint8_t> crop(size_t(2048) * 2048 * 4);
@@ -362,7 +362,7 @@ class Bc1Rewrite final : public TileSource {
       for (uint32_t bx = 0; bx < n; ++bx)
         std::copy_n(blocks.data() + (size_t(by) * n + bx) * kBc1BlockBytes, kBc1BlockBytes,
                     out->data() + (size_t(by) * n + (n - 1 - bx)) * kBc1BlockBytes);
-    return Status::ok();
+    return okStatus();
   }
   std::string describe() const override { return "bc1-rewrite"; }
 

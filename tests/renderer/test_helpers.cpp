@@ -114,12 +114,12 @@ Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDam
   // would get.
   std::vector<uint8_t> pixels(geometry.tileBytes());
   auto decodes = [&]() {
-    return decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).isOk() &&
+    return decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).ok() &&
            pixels != clean_pixels;
   };
   if (damage == PayloadDamage::kBreakFrame) {
     for (size_t i = 0; i < 4; ++i) raw.payload[i] ^= 0xFF;  // the zstd magic number
-    if (decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).isOk())
+    if (decodeTile(geometry, encoding, raw, std::span<uint8_t>(pixels)).ok())
       return Status::error(ErrorCode::kInvalidArgument, "damageTilePayload: frame still decodes");
   } else {
     // Entropy-coded bytes usually break the frame when flipped; search from
@@ -140,7 +140,7 @@ Status damageTilePayload(const std::string& path, const TileKey& key, PayloadDam
   out.flush();
   if (!out)
     return Status::error(ErrorCode::kIo, "damageTilePayload: cannot write the payload back");
-  return Status::ok();
+  return okStatus();
 }
 
 size_t terrainCracks(const std::vector<uint8_t>& rgba, const Camera& camera, const Viewport& viewport,

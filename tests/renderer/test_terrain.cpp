@@ -113,7 +113,7 @@ TerrainScene makeScene(const Camera& camera, uint32_t ring_cells = 64,
   s.colour_source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
   s.plan = planClipmap(s.colour_source->geometry(), kViewport, camera, {});
   RendererConfig rc{s.plan.clip_tiles, s.plan.pyramid_level, Buffering::kSingle};
-  EXPECT_TRUE(ClipmapRenderer::create(s.colour_source->geometry(), rc, &s.colour).isOk());
+  EXPECT_TRUE(ClipmapRenderer::create(s.colour_source->geometry(), rc, &s.colour).ok());
   test::loadPlan(*s.colour, *s.colour_source, s.plan);
   TerrainConfig tc;
   tc.ring_cells = ring_cells;
@@ -125,8 +125,8 @@ TerrainScene makeScene(const Camera& camera, uint32_t ring_cells = 64,
   tc.mapping.sample0_world = {1.0, 1.0};
   tc.mapping.world_per_height = 1.0;
   const Status st = TerrainRenderer::create(s.field.geometry, tc, &s.terrain);
-  EXPECT_TRUE(st.isOk()) << st.toString();
-  EXPECT_TRUE(OffscreenTarget::create(kViewport, &s.target).isOk());
+  EXPECT_TRUE(st.ok()) << st.toString();
+  EXPECT_TRUE(OffscreenTarget::create(kViewport, &s.target).ok());
   return s;
 }
 
@@ -405,7 +405,7 @@ TEST(Terrain, GroundHeightIsAboveEverySurfaceTheNextFrameMayDraw) {
 void uploadRingsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera& camera) {
   uploadRingTiles(terrain, heights.geometry(), camera, [&heights](const TileKey& key) {
     std::vector<uint8_t> bytes;
-    EXPECT_TRUE(heights.fetch(key, &bytes).isOk());
+    EXPECT_TRUE(heights.fetch(key, &bytes).ok());
     std::vector<float> out(bytes.size() / sizeof(float));
     std::memcpy(out.data(), bytes.data(), out.size() * sizeof(float));
     return out;
@@ -436,17 +436,17 @@ void planetNearItsFarCorner(TerrainMethod method) {
   tc.mapping.sample0_world = {0.5, 0.5};
   tc.mapping.world_per_height = 1.0;
   std::unique_ptr<TerrainRenderer> terrain;
-  ASSERT_TRUE(TerrainRenderer::create(heights->geometry(), tc, &terrain).isOk());
+  ASSERT_TRUE(TerrainRenderer::create(heights->geometry(), tc, &terrain).ok());
   std::shared_ptr<const TerrainBounds> bounds;
-  ASSERT_TRUE(loadTerrainBounds(*heights, kTerrainBoundsMaxLevelTiles, &bounds).isOk());
+  ASSERT_TRUE(loadTerrainBounds(*heights, kTerrainBoundsMaxLevelTiles, &bounds).ok());
   terrain->setBounds(bounds);
   const ClipmapPlan plan = planClipmap(colour->geometry(), kViewport, world, {});
   std::unique_ptr<ClipmapRenderer> colour_renderer;
   ASSERT_TRUE(ClipmapRenderer::create(colour->geometry(), {plan.clip_tiles, plan.pyramid_level, Buffering::kSingle},
-                                      &colour_renderer).isOk());
+                                      &colour_renderer).ok());
   test::loadPlan(*colour_renderer, *colour, plan);
   std::unique_ptr<OffscreenTarget> target;
-  ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).isOk());
+  ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).ok());
   if (method == TerrainMethod::kClipmap) {
     uploadRingsFrom(*terrain, *heights, world);
   } else {
@@ -459,7 +459,7 @@ void planetNearItsFarCorner(TerrainMethod method) {
         for (int64_t tx = std::max<int64_t>(cx - 1, 0); tx <= std::min<int64_t>(cx + 1, info.tiles_x - 1); ++tx) {
           std::vector<uint8_t> bytes;
           const TileKey key{l, uint32_t(tx), uint32_t(ty)};
-          ASSERT_TRUE(heights->fetch(key, &bytes).isOk());
+          ASSERT_TRUE(heights->fetch(key, &bytes).ok());
           terrain->uploadTile(key, reinterpret_cast<const float*>(bytes.data()));
         }
     }
@@ -723,7 +723,7 @@ TEST(TerrainQuadtree, FlatGroundStaysCoarseAndRoughGroundIsRefined) {
     TerrainConfig tc = s.terrain->config();
     tc.error_px = error_px;
     std::unique_ptr<TerrainRenderer> t;
-    EXPECT_TRUE(TerrainRenderer::create(s.field.geometry, tc, &t).isOk());
+    EXPECT_TRUE(TerrainRenderer::create(s.field.geometry, tc, &t).ok());
     t->setBounds(bounds);
     uploadAll(*t, s.field);
     s.target->bind();
@@ -793,9 +793,9 @@ TEST(TerrainQuadtree, FlatMethodDrawsThePlaneAndRejectsBadSettings) {
   tc.error_px = 0.0;
   EXPECT_EQ(TerrainRenderer::create(s.field.geometry, tc, &t).code, ErrorCode::kInvalidArgument);
   TerrainMethod m;
-  EXPECT_TRUE(terrainMethodFromName("quadtree", &m).isOk());
+  EXPECT_TRUE(terrainMethodFromName("quadtree", &m).ok());
   EXPECT_EQ(m, TerrainMethod::kQuadtree);
-  EXPECT_FALSE(terrainMethodFromName("mesh", &m).isOk());
+  EXPECT_FALSE(terrainMethodFromName("mesh", &m).ok());
 }
 
 }  // namespace

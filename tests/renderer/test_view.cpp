@@ -43,7 +43,7 @@ TEST(ClipstreamView, FliesOverTerrainUnderXvfb) {
   test::TempDir dir;
   ASSERT_TRUE(test::writeElevationStore(dir.file("dem.cst"), 300, 200, [](uint64_t x, uint64_t y) {
                 return float(100.0 + 50.0 * std::sin(x * 0.05) * std::cos(y * 0.04));
-              }).isOk());
+              }).ok());
   for (const char* method : {"clipmap", "quadtree"}) {
     const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(CLIPSTREAM_VIEW_EXE) +
                             " --procedural 4096 --elevation " + dir.file("dem.cst") + " --terrain " + method +

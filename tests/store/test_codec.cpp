@@ -79,19 +79,19 @@ TEST(StoreDecodeRgba8, FusedPathEqualsPlainDecodeForEveryFormatAndEncoding) {
             const TileKey key{0, 1, 0};
             const std::vector<uint8_t> pixels = makeContent(g, content, uint32_t(checked));
             EncodedTile encoded;
-            ASSERT_TRUE(encodeTile(g, enc, key, pixels, &encoded).isOk());
+            ASSERT_TRUE(encodeTile(g, enc, key, pixels, &encoded).ok());
             RawTile raw;
             raw.key = key;
             raw.location = encoded.location;
             raw.payload = encoded.payload;
 
             std::vector<uint8_t> plain(g.tileBytes());
-            ASSERT_TRUE(decodeTile(g, enc, raw, plain).isOk());
+            ASSERT_TRUE(decodeTile(g, enc, raw, plain).ok());
             ASSERT_EQ(plain, pixels);
             const std::vector<uint8_t> want = expandReference(plain, format);
             std::vector<uint8_t> got(size_t(tile_px) * tile_px * 4, 0xCD);
             const Status status = decodeTileRgba8(g, enc, raw, got);
-            ASSERT_TRUE(status.isOk()) << status.toString();
+            ASSERT_TRUE(status.ok()) << status.toString();
             ASSERT_EQ(got, want) << "format " << int(format) << " tile " << tile_px
                                  << " predictor " << int(predictor) << " compression "
                                  << int(compression) << " content " << int(content);
@@ -108,7 +108,7 @@ TEST(StoreDecodeRgba8, RejectsWhatDecodeTileRejects) {
   std::vector<uint8_t> pixels(g.tileBytes());
   for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t(i * 31 / 7);
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, enc, key, pixels, &encoded).isOk());
+  ASSERT_TRUE(encodeTile(g, enc, key, pixels, &encoded).ok());
   RawTile raw{key, encoded.location, encoded.payload};
   std::vector<uint8_t> rgba(32 * 32 * 4);
 
@@ -121,7 +121,7 @@ TEST(StoreDecodeRgba8, RejectsWhatDecodeTileRejects) {
   std::vector<uint8_t> plain(g.tileBytes());
   const Status want = decodeTile(g, enc, truncated, plain);
   const Status got = decodeTileRgba8(g, enc, truncated, rgba);
-  EXPECT_FALSE(got.isOk());
+  EXPECT_FALSE(got.ok());
   EXPECT_EQ(got.code, want.code);
   EXPECT_EQ(got.code, ErrorCode::kCorruptTile);
 }
@@ -136,14 +136,14 @@ TEST(StoreEncode, ConstantTilesHaveNoPayloadAndKeepTheirValue) {
     pixels[i + 2] = 30;
   }
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
+  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).ok());
   EXPECT_TRUE(encoded.location.constant);
   EXPECT_TRUE(encoded.payload.empty());
   EXPECT_EQ(encoded.location.constant_pixel[0], 10);
   EXPECT_EQ(encoded.location.constant_pixel[1], 20);
   EXPECT_EQ(encoded.location.constant_pixel[2], 30);
   pixels[pixels.size() - 1] = 31;  // one sample differs: no longer constant
-  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).isOk());
+  ASSERT_TRUE(encodeTile(g, StoreEncoding{}, TileKey{0, 1, 2}, pixels, &encoded).ok());
   EXPECT_FALSE(encoded.location.constant);
   EXPECT_FALSE(encoded.payload.empty());
 }
@@ -156,12 +156,12 @@ TEST(StoreDecode, RejectsBytesAfterTheZstdFrame) {
   ASSERT_TRUE(makePyramidGeometry(16, 16, 16, PixelFormat::kRGB8, &g));
   StoreEncoding encoding;  // zstd + left delta
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, encoding, {}, test::syntheticTile(g, {}, test::ConstantTiles::kNone), &encoded).isOk());
+  ASSERT_TRUE(encodeTile(g, encoding, {}, test::syntheticTile(g, {}, test::ConstantTiles::kNone), &encoded).ok());
   RawTile raw;
   raw.location = encoded.location;
   raw.payload = encoded.payload;
   std::vector<uint8_t> pixels(g.tileBytes());
-  ASSERT_TRUE(decodeTile(g, encoding, raw, pixels).isOk());
+  ASSERT_TRUE(decodeTile(g, encoding, raw, pixels).ok());
   // Skippable frame: magic 0x184D2A50, zero-length body.
   for (uint8_t b : {0x50, 0x2A, 0x4D, 0x18, 0x00, 0x00, 0x00, 0x00}) raw.payload.push_back(b);
   raw.location.stored_bytes = static_cast<uint32_t>(raw.payload.size());
@@ -189,12 +189,12 @@ TEST(StoreEncode, PredictorRoundTripsEveryFormatAtWrapAround) {
       encoding.compression = compression;
       encoding.predictor = Predictor::kLeftDelta;
       EncodedTile encoded;
-      ASSERT_TRUE(encodeTile(g, encoding, {}, pixels, &encoded).isOk());
+      ASSERT_TRUE(encodeTile(g, encoding, {}, pixels, &encoded).ok());
       RawTile raw;
       raw.location = encoded.location;
       raw.payload = encoded.payload;
       std::vector<uint8_t> decoded(g.tileBytes());
-      ASSERT_TRUE(decodeTile(g, encoding, raw, decoded).isOk());
+      ASSERT_TRUE(decodeTile(g, encoding, raw, decoded).ok());
       EXPECT_EQ(decoded, pixels) << pixelFormatName(format);
     }
   }

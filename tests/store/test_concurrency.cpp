@@ -21,9 +21,9 @@ TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
   ASSERT_TRUE(makePyramidGeometry(1100, 1100, 16, PixelFormat::kRGB8, &g));
   WriterOptions options;
   options.fsync = false;
-  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
 
   std::vector<TileKey> keys;
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
@@ -42,7 +42,7 @@ TEST(TileStoreReader, ManyThreadsReadEveryTileCorrectly) {
       // Each thread walks all keys from a different start.
       for (size_t i = 0; i < keys.size(); ++i) {
         const TileKey& key = keys[(i + size_t(t) * 997) % keys.size()];
-        if (reader->readTile(key, &pixels).isOk() && pixels == test::syntheticTile(g, key)) {
+        if (reader->readTile(key, &pixels).ok() && pixels == test::syntheticTile(g, key)) {
           good.fetch_add(1);
         } else {
           bad.fetch_add(1);
@@ -73,27 +73,27 @@ class HugeStore : public ::testing::Test {
     WriterOptions options;
     options.fsync = false;
     std::unique_ptr<TileStoreWriter> writer;
-    ASSERT_TRUE(TileStoreWriter::create(m_path, m_geometry, options, &writer).isOk());
+    ASSERT_TRUE(TileStoreWriter::create(m_path, m_geometry, options, &writer).ok());
     const uint8_t ocean[4] = {10, 40, 90, 255};
     m_real = TileKey{0, 4000, 5000};
     EncodedTile encoded;
     ASSERT_TRUE(encodeTile(m_geometry, options.encoding, m_real,
-                           test::syntheticTile(m_geometry, m_real, test::ConstantTiles::kNone), &encoded).isOk());
-    ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+                           test::syntheticTile(m_geometry, m_real, test::ConstantTiles::kNone), &encoded).ok());
+    ASSERT_TRUE(writer->write(std::move(encoded)).ok());
     for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
       const LevelInfo& level = m_geometry.levels[l];
       if (l == 0) {
         // Everything except the real tile: around it in four rectangles.
         const uint32_t x = m_real.x, y = m_real.y;
-        ASSERT_TRUE(writer->writeConstantTiles(0, 0, 0, level.tiles_x, y, ocean).isOk());
-        ASSERT_TRUE(writer->writeConstantTiles(0, 0, y + 1, level.tiles_x, level.tiles_y, ocean).isOk());
-        ASSERT_TRUE(writer->writeConstantTiles(0, 0, y, x, y + 1, ocean).isOk());
-        ASSERT_TRUE(writer->writeConstantTiles(0, x + 1, y, level.tiles_x, y + 1, ocean).isOk());
+        ASSERT_TRUE(writer->writeConstantTiles(0, 0, 0, level.tiles_x, y, ocean).ok());
+        ASSERT_TRUE(writer->writeConstantTiles(0, 0, y + 1, level.tiles_x, level.tiles_y, ocean).ok());
+        ASSERT_TRUE(writer->writeConstantTiles(0, 0, y, x, y + 1, ocean).ok());
+        ASSERT_TRUE(writer->writeConstantTiles(0, x + 1, y, level.tiles_x, y + 1, ocean).ok());
       } else {
-        ASSERT_TRUE(writer->writeConstantTiles(l, 0, 0, level.tiles_x, level.tiles_y, ocean).isOk());
+        ASSERT_TRUE(writer->writeConstantTiles(l, 0, 0, level.tiles_x, level.tiles_y, ocean).ok());
       }
     }
-    ASSERT_TRUE(writer->finish().isOk());
+    ASSERT_TRUE(writer->finish().ok());
   }
 
   test::TempDir m_dir{"huge"};
@@ -104,7 +104,7 @@ class HugeStore : public ::testing::Test {
 
 TEST_F(HugeStore, OpenReadsOnlyHeaderTablesAndDirectories) {
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(m_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_path, &reader).ok());
   uint64_t tiles = 0;
   for (const LevelInfo& level : m_geometry.levels) tiles += uint64_t(level.tiles_x) * level.tiles_y;
   EXPECT_GT(tiles, 87'000'000u);
@@ -117,29 +117,29 @@ TEST_F(HugeStore, OpenReadsOnlyHeaderTablesAndDirectories) {
   // A constant page answers without reading anything.
   const uint64_t after_open = reader->bytesRead();
   std::vector<uint8_t> pixels;
-  ASSERT_TRUE(reader->readTile(TileKey{0, 100, 100}, &pixels).isOk());
+  ASSERT_TRUE(reader->readTile(TileKey{0, 100, 100}, &pixels).ok());
   EXPECT_EQ(pixels[0], 10);
   EXPECT_EQ(pixels[pixels.size() - 2], 90);
   EXPECT_EQ(reader->bytesRead(), after_open);
-  ASSERT_TRUE(reader->readTile(TileKey{13, 0, 0}, &pixels).isOk());
+  ASSERT_TRUE(reader->readTile(TileKey{13, 0, 0}, &pixels).ok());
   EXPECT_EQ(reader->bytesRead(), after_open);
 
   // The real tile loads exactly its one index page (64 KiB) and payload.
   TileLocation location;
-  ASSERT_TRUE(reader->locate(m_real, &location).isOk());
+  ASSERT_TRUE(reader->locate(m_real, &location).ok());
   ASSERT_FALSE(location.constant);
   EXPECT_EQ(reader->indexPagesLoaded(), 1u);
   EXPECT_EQ(reader->bytesRead(), after_open + 64 * 64 * 16);
-  ASSERT_TRUE(reader->readTile(m_real, &pixels).isOk());
+  ASSERT_TRUE(reader->readTile(m_real, &pixels).ok());
   EXPECT_EQ(pixels, test::syntheticTile(m_geometry, m_real, test::ConstantTiles::kNone));
   EXPECT_EQ(reader->bytesRead(), after_open + 64 * 64 * 16 + location.stored_bytes);
   // Its page neighbours are constant entries inside that page.
-  ASSERT_TRUE(reader->readTile(TileKey{0, 4001, 5000}, &pixels).isOk());
+  ASSERT_TRUE(reader->readTile(TileKey{0, 4001, 5000}, &pixels).ok());
   EXPECT_EQ(pixels[1], 40);
   EXPECT_EQ(reader->indexPagesLoaded(), 1u);
 
   std::vector<LevelStats> stats;
-  ASSERT_TRUE(reader->levelStats(&stats).isOk());
+  ASSERT_TRUE(reader->levelStats(&stats).ok());
   EXPECT_EQ(stats[0].tiles, uint64_t(8192) * 8192);
   EXPECT_EQ(stats[0].constant_tiles, uint64_t(8192) * 8192 - 1);
   EXPECT_EQ(stats[0].stored_bytes, location.stored_bytes);

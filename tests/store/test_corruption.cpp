@@ -32,7 +32,7 @@ Status openAndReadAll(const std::string& path, const PyramidGeometry& g, bool* w
         const TileKey key{l, x, y};
         status = reader->readTile(key, &pixels);
         if (!status) {
-          if (first_failure.isOk()) first_failure = status;
+          if (first_failure.ok()) first_failure = status;
           continue;
         }
         if (pixels != test::syntheticTile(g, key)) *wrong_pixels = true;
@@ -43,7 +43,7 @@ Status openAndReadAll(const std::string& path, const PyramidGeometry& g, bool* w
   // verifyAll must agree with the per-tile reads.
   std::vector<TileStoreReader::Problem> problems;
   const Status verify = reader->verifyAll(&problems, 1000, {}, 2);
-  EXPECT_EQ(verify.isOk(), first_failure.isOk()) << verify.toString();
+  EXPECT_EQ(verify.ok(), first_failure.ok()) << verify.toString();
   return first_failure;
 }
 
@@ -59,7 +59,7 @@ class StoreCorruption : public ::testing::Test {
     options.geo.present = true;
     options.geo.crs = "EPSG:2992";
     options.geo.transform[0] = 100.0;
-    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).isOk());
+    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).ok());
     m_bytes = test::readBytes(m_path);
     ASSERT_GT(m_bytes.size(), 1000u);
     m_damaged = m_dir.file("damaged.cst");
@@ -74,12 +74,12 @@ class StoreCorruption : public ::testing::Test {
 
 TEST_F(StoreCorruption, EveryTruncatedPrefixFailsToOpenWithAMessage) {
   bool wrong_pixels = false;
-  ASSERT_TRUE(openAndReadAll(m_path, m_geometry, &wrong_pixels).isOk());
+  ASSERT_TRUE(openAndReadAll(m_path, m_geometry, &wrong_pixels).ok());
   for (size_t length = 0; length < m_bytes.size(); ++length) {
     writeBytes(m_damaged, std::span(m_bytes).first(length));
     std::unique_ptr<TileStoreReader> reader;
     const Status status = TileStoreReader::open(m_damaged, &reader);
-    ASSERT_FALSE(status.isOk()) << "prefix of " << length << " bytes opened";
+    ASSERT_FALSE(status.ok()) << "prefix of " << length << " bytes opened";
     EXPECT_EQ(reader, nullptr);
     EXPECT_FALSE(status.message.empty());
     // Every prefix that still has the magic is reported as truncated.
@@ -131,7 +131,7 @@ TEST_F(StoreCorruption, EverySingleByteFlipIsDetected) {
     // to keep the test quick under ThreadSanitizer.
     const Status status = openAndReadAll(m_damaged, m_geometry, &wrong_pixels, i % 8 == 0);
     ASSERT_FALSE(wrong_pixels) << "flip at byte " << position << " gave wrong pixels";
-    ASSERT_FALSE(status.isOk()) << "flip at byte " << position << " (mask " << int(mask)
+    ASSERT_FALSE(status.ok()) << "flip at byte " << position << " (mask " << int(mask)
                                 << ") went undetected";
     ++detected_at_read;
   }
@@ -143,17 +143,17 @@ TEST_F(StoreCorruption, EverySingleByteFlipIsDetected) {
 
 TEST_F(StoreCorruption, FlippedPayloadNamesTheTile) {
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(m_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_path, &reader).ok());
   TileLocation location;
   TileKey key{0, 2, 1};
   ASSERT_FALSE(test::isConstantTile(key));
-  ASSERT_TRUE(reader->locate(key, &location).isOk());
+  ASSERT_TRUE(reader->locate(key, &location).ok());
   ASSERT_FALSE(location.constant);
   reader.reset();
   std::vector<uint8_t> bytes = m_bytes;
   bytes[location.offset + location.stored_bytes / 2] ^= 0x40;
   writeBytes(m_damaged, bytes);
-  ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).ok());
   std::vector<uint8_t> pixels;
   const Status status = reader->readTile(key, &pixels);
   EXPECT_EQ(status.code, ErrorCode::kCorruptTile);
@@ -163,7 +163,7 @@ TEST_F(StoreCorruption, FlippedPayloadNamesTheTile) {
   ASSERT_EQ(problems.size(), 1u);
   EXPECT_EQ(problems[0].key, key);
   // Neighbours still read.
-  EXPECT_TRUE(reader->readTile(TileKey{0, 3, 1}, &pixels).isOk());
+  EXPECT_TRUE(reader->readTile(TileKey{0, 3, 1}, &pixels).ok());
 }
 
 TEST_F(StoreCorruption, CorruptIndexPageFailsEveryTileOfThatPageOnly) {
@@ -173,7 +173,7 @@ TEST_F(StoreCorruption, CorruptIndexPageFailsEveryTileOfThatPageOnly) {
   bytes[index_offset + 3] ^= 0x01;  // inside the first index page written
   writeBytes(m_damaged, bytes);
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).isOk());  // pages load lazily
+  ASSERT_TRUE(TileStoreReader::open(m_damaged, &reader).ok());  // pages load lazily
   std::vector<TileStoreReader::Problem> problems;
   const Status status = reader->verifyAll(&problems, 1000, {}, 2);
   EXPECT_EQ(status.code, ErrorCode::kCorruptIndex) << status.toString();

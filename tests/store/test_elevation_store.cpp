@@ -79,7 +79,7 @@ Written writeElevationStore(const TempDir& dir) {
   w.options.elevation.nodata = -32768;
   w.options.fsync = false;
   std::unique_ptr<TileStoreWriter> writer;
-  EXPECT_TRUE(TileStoreWriter::create(w.path, w.geometry, w.options, &writer).isOk());
+  EXPECT_TRUE(TileStoreWriter::create(w.path, w.geometry, w.options, &writer).ok());
   const PyramidGeometry& g = w.geometry;
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
@@ -93,16 +93,16 @@ Written writeElevationStore(const TempDir& dir) {
             std::memcpy(pixels.data() + (size_t(j) * g.tile_px + i) * 2, &v, 2);
           }
         EncodedTile encoded;
-        EXPECT_TRUE(encodeTile(g, w.options.encoding, key, pixels, &encoded).isOk());
+        EXPECT_TRUE(encodeTile(g, w.options.encoding, key, pixels, &encoded).ok());
         encoded.location.min_height = float(l) - 10.0f;
         encoded.location.max_height = float(l) + float(x) + float(y) + 10.0f;
         encoded.location.error = float(l) * 0.5f;
-        EXPECT_TRUE(writer->write(std::move(encoded)).isOk());
+        EXPECT_TRUE(writer->write(std::move(encoded)).ok());
       }
     }
   }
-  EXPECT_TRUE(writer->setElevationFigures(12, 0.0, -150.0, 600.0).isOk());
-  EXPECT_TRUE(writer->finish().isOk());
+  EXPECT_TRUE(writer->setElevationFigures(12, 0.0, -150.0, 600.0).ok());
+  EXPECT_TRUE(writer->finish().ok());
   return w;
 }
 
@@ -110,7 +110,7 @@ TEST(ElevationStore, HeightsBoundsAndTheRecordRoundTrip) {
   TempDir dir;
   const Written w = writeElevationStore(dir);
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(w.path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(w.path, &reader).ok());
   const StoreInfo& info = reader->info();
   EXPECT_EQ(info.format_version, 2u);
   EXPECT_EQ(info.encoding.filter, DownsampleFilter::kDecimate);
@@ -132,11 +132,11 @@ TEST(ElevationStore, HeightsBoundsAndTheRecordRoundTrip) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         const TileKey key{l, x, y};
         RawTile raw;
-        ASSERT_TRUE(reader->readRaw(key, &raw).isOk());
+        ASSERT_TRUE(reader->readRaw(key, &raw).ok());
         EXPECT_EQ(raw.location.min_height, float(l) - 10.0f);
         EXPECT_EQ(raw.location.max_height, float(l + x + y) + 10.0f);
         EXPECT_EQ(raw.location.error, float(l) * 0.5f);
-        ASSERT_TRUE(decodeTileHeights(g, info.encoding, e, raw, heights).isOk());
+        ASSERT_TRUE(decodeTileHeights(g, info.encoding, e, raw, heights).ok());
         const bool flat = l == 1 && x == 0 && y == 0;
         EXPECT_EQ(raw.location.constant, flat);
         for (uint32_t j = 0; j < g.tile_px; j += 7)
@@ -148,7 +148,7 @@ TEST(ElevationStore, HeightsBoundsAndTheRecordRoundTrip) {
   }
   // A colour decode of heights is refused, not garbage.
   RawTile raw;
-  ASSERT_TRUE(reader->readRaw(TileKey{0, 0, 0}, &raw).isOk());
+  ASSERT_TRUE(reader->readRaw(TileKey{0, 0, 0}, &raw).ok());
   std::vector<uint8_t> rgba(size_t(g.tile_px) * g.tile_px * 4);
   EXPECT_EQ(decodeTileRgba8(g, info.encoding, raw, rgba).code, ErrorCode::kUnsupported);
 }
@@ -196,32 +196,32 @@ TEST(ElevationStore, ConstantPagesStandForFlatGroundOnly) {
   options.elevation.present = true;
   options.fsync = false;
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(dir.file("c.cst"), g, options, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(dir.file("c.cst"), g, options, &writer).ok());
   // Level 0: all four tiles constant 7 m and flat: one constant page.
   const float seven = 7.0f;
   ASSERT_TRUE(writer->writeConstantTiles(0, 0, 0, 2, 2, std::span<const uint8_t>(
-      reinterpret_cast<const uint8_t*>(&seven), 4)).isOk());
+      reinterpret_cast<const uint8_t*>(&seven), 4)).ok());
   // Level 1: constant 7 m samples over ground from 3 to 9 m.
   std::vector<uint8_t> pixels(g.tileBytes());
   for (size_t i = 0; i < pixels.size(); i += 4) std::memcpy(pixels.data() + i, &seven, 4);
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(g, options.encoding, {1, 0, 0}, pixels, &encoded).isOk());
+  ASSERT_TRUE(encodeTile(g, options.encoding, {1, 0, 0}, pixels, &encoded).ok());
   ASSERT_TRUE(encoded.location.constant);
   encoded.location.min_height = 3.0f;
   encoded.location.max_height = 9.0f;
   encoded.location.error = 2.0f;
-  ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
-  ASSERT_TRUE(writer->setElevationFigures(0, 0.0, 3.0, 9.0).isOk());
-  ASSERT_TRUE(writer->finish().isOk());
+  ASSERT_TRUE(writer->write(std::move(encoded)).ok());
+  ASSERT_TRUE(writer->setElevationFigures(0, 0.0, 3.0, 9.0).ok());
+  ASSERT_TRUE(writer->finish().ok());
 
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("c.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("c.cst"), &reader).ok());
   TileLocation loc;
-  ASSERT_TRUE(reader->locate({0, 1, 1}, &loc).isOk());
+  ASSERT_TRUE(reader->locate({0, 1, 1}, &loc).ok());
   EXPECT_TRUE(loc.constant);
   EXPECT_EQ(loc.min_height, 7.0f);
   EXPECT_EQ(loc.max_height, 7.0f);
-  ASSERT_TRUE(reader->locate({1, 0, 0}, &loc).isOk());
+  ASSERT_TRUE(reader->locate({1, 0, 0}, &loc).ok());
   EXPECT_TRUE(loc.constant);
   EXPECT_EQ(loc.min_height, 3.0f);
   EXPECT_EQ(loc.max_height, 9.0f);
@@ -245,11 +245,11 @@ TEST(ElevationStore, WriterRefusesFormatsAndBoundsThatDoNotFit) {
   bad_scale.elevation.scale = 0.0;
   EXPECT_EQ(TileStoreWriter::create(dir.file("a.cst"), f32, bad_scale, &writer).code,
             ErrorCode::kInvalidArgument);
-  ASSERT_TRUE(TileStoreWriter::create(dir.file("a.cst"), f32, elevation, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(dir.file("a.cst"), f32, elevation, &writer).ok());
   std::vector<uint8_t> pixels(f32.tileBytes());
   for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t(i % 251);
   EncodedTile encoded;
-  ASSERT_TRUE(encodeTile(f32, elevation.encoding, {0, 0, 0}, pixels, &encoded).isOk());
+  ASSERT_TRUE(encodeTile(f32, elevation.encoding, {0, 0, 0}, pixels, &encoded).ok());
   encoded.location.min_height = NAN;
   EXPECT_EQ(writer->write(EncodedTile(encoded)).code, ErrorCode::kInvalidArgument);
   encoded.location.min_height = 5.0f;
@@ -265,17 +265,17 @@ TEST(ElevationStore, VersionOneStoresStillOpenAndCannotClaimHeights) {
   WriterOptions options;
   options.fsync = false;
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(dir.file("v.cst"), g, options, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(dir.file("v.cst"), g, options, &writer).ok());
   for (uint32_t l = 0; l < g.levelCount(); ++l)
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         std::vector<uint8_t> pixels(g.tileBytes());
         for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t(i * 3 + l + x + y);
         EncodedTile encoded;
-        ASSERT_TRUE(encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded).isOk());
-        ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+        ASSERT_TRUE(encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded).ok());
+        ASSERT_TRUE(writer->write(std::move(encoded)).ok());
       }
-  ASSERT_TRUE(writer->finish().isOk());
+  ASSERT_TRUE(writer->finish().ok());
   // A colour store of version 2 has version 1's layout: only the number differs.
   std::vector<uint8_t> bytes = readAll(dir.file("v.cst"));
   auto reseal = [](std::vector<uint8_t>* b) {
@@ -286,12 +286,12 @@ TEST(ElevationStore, VersionOneStoresStillOpenAndCannotClaimHeights) {
   reseal(&bytes);
   writeAll(dir.file("v1.cst"), bytes);
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("v1.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("v1.cst"), &reader).ok());
   EXPECT_EQ(reader->info().format_version, 1u);
   std::vector<uint8_t> pixels;
-  EXPECT_TRUE(reader->readTile({0, 2, 1}, &pixels).isOk());
+  EXPECT_TRUE(reader->readTile({0, 2, 1}, &pixels).ok());
   std::vector<LevelStats> stats;
-  EXPECT_TRUE(reader->levelStats(&stats).isOk());
+  EXPECT_TRUE(reader->levelStats(&stats).ok());
 
   // Version 1 knows no elevation flag, height format or decimate filter.
   std::vector<uint8_t> flagged = bytes;

@@ -174,7 +174,7 @@ std::vector<uint8_t> writeKnownStore(const PyramidGeometry& g, const WriterOptio
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "known.cst").string();
   std::unique_ptr<TileStoreWriter> writer;
-  EXPECT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  EXPECT_TRUE(TileStoreWriter::create(path, g, options, &writer).ok());
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
@@ -184,12 +184,12 @@ std::vector<uint8_t> writeKnownStore(const PyramidGeometry& g, const WriterOptio
           for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t(pixels[i] + i * 7 + (i >> 9));
         }
         EncodedTile encoded;
-        EXPECT_TRUE(encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded).isOk());
-        EXPECT_TRUE(writer->write(std::move(encoded)).isOk());
+        EXPECT_TRUE(encodeTile(g, options.encoding, {l, x, y}, pixels, &encoded).ok());
+        EXPECT_TRUE(writer->write(std::move(encoded)).ok());
       }
     }
   }
-  EXPECT_TRUE(writer->finish().isOk());
+  EXPECT_TRUE(writer->finish().ok());
   std::ifstream in(path, std::ios::binary);
   std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
   std::filesystem::remove_all(dir);

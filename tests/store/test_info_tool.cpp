@@ -48,7 +48,7 @@ class InfoTool : public ::testing::Test {
     options.geo.crs = "EPSG:2992";
     options.geo.transform[0] = 635000.0;
     options.geo.transform[3] = 849000.0;
-    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).isOk());
+    ASSERT_TRUE(test::writeSyntheticStore(m_path, m_geometry, options).ok());
   }
 
   test::TempDir m_dir{"info"};
@@ -77,8 +77,8 @@ TEST_F(InfoTool, VerifyNamesTheTileWithAFlippedPayloadByte) {
   ASSERT_FALSE(test::isConstantTile(key));
   {
     std::unique_ptr<TileStoreReader> reader;
-    ASSERT_TRUE(TileStoreReader::open(m_path, &reader).isOk());
-    ASSERT_TRUE(reader->locate(key, &location).isOk());
+    ASSERT_TRUE(TileStoreReader::open(m_path, &reader).ok());
+    ASSERT_TRUE(reader->locate(key, &location).ok());
     ASSERT_FALSE(location.constant);
   }
   std::vector<uint8_t> bytes = test::readBytes(m_path);
@@ -174,7 +174,7 @@ TEST_F(InfoTool, CrsTextThatIsNotUtf8OrHasControlBytesIsPrintedSafely) {
   options.geo.present = true;
   options.geo.crs = "EPSG:\xff\xfe\n\x1b[2Jx";
   const std::string path = m_dir.file("odd_crs.cst");
-  ASSERT_TRUE(test::writeSyntheticStore(path, m_geometry, options).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(path, m_geometry, options).ok());
   const RunResult json = runInfo("--json '" + path + "'");
   EXPECT_EQ(json.exit_code, 0) << json.output;
   EXPECT_NE(json.output.find("\"crs\": \"EPSG:"), std::string::npos) << json.output;

@@ -36,11 +36,11 @@ class OutputFileTest : public ::testing::Test {
 TEST_F(OutputFileTest, PublishesOnlyAtCommitAndLeavesNoTemporary) {
   const std::string path = file("out.txt");
   std::unique_ptr<OutputFile> out;
-  ASSERT_TRUE(OutputFile::create(path, {}, &out).isOk());
-  ASSERT_TRUE(out->append("hello ").isOk());
-  ASSERT_TRUE(out->append("world").isOk());
+  ASSERT_TRUE(OutputFile::create(path, {}, &out).ok());
+  ASSERT_TRUE(out->append("hello ").ok());
+  ASSERT_TRUE(out->append("world").ok());
   EXPECT_FALSE(std::filesystem::exists(path)) << "visible before commit";
-  ASSERT_TRUE(out->commit().isOk());
+  ASSERT_TRUE(out->commit().ok());
   EXPECT_EQ(readText(path), "hello world");
   EXPECT_EQ(entries(), std::vector<std::string>{"out.txt"});
 }
@@ -49,11 +49,11 @@ TEST_F(OutputFileTest, DestroyingAnUncommittedOutputRemovesEverything) {
   const std::string path = file("out.txt");
   {
     std::unique_ptr<OutputFile> out;
-    ASSERT_TRUE(OutputFile::create(path, {}, &out).isOk());
-    ASSERT_TRUE(out->append("partial").isOk());
+    ASSERT_TRUE(OutputFile::create(path, {}, &out).ok());
+    ASSERT_TRUE(out->append("partial").ok());
     int fd = -1;
     std::string scratch;
-    ASSERT_TRUE(out->createScratch("idx", &fd, &scratch).isOk());
+    ASSERT_TRUE(out->createScratch("idx", &fd, &scratch).ok());
     ::close(fd);
     EXPECT_EQ(entries().size(), 2u);
   }
@@ -80,7 +80,7 @@ TEST_F(OutputFileTest, NeverReplacesAFifoADeviceOrASymlink) {
       const Status s = OutputFile::create(path, options, &out);
       EXPECT_EQ(s.code, ErrorCode::kInvalidArgument) << path << ": " << s.toString();
       EXPECT_NE(s.message.find("not a regular file"), std::string::npos) << s.message;
-      EXPECT_FALSE(writeOutputFile(path, "x", options).isOk()) << path;
+      EXPECT_FALSE(writeOutputFile(path, "x", options).ok()) << path;
     }
   }
   struct stat st {};
@@ -100,8 +100,8 @@ TEST_F(OutputFileTest, NeverReplacesAFifoADeviceOrASymlink) {
 TEST_F(OutputFileTest, AFileThatAppearsDuringTheWriteIsNotReplaced) {
   const std::string path = file("out.cst");
   std::unique_ptr<OutputFile> out;
-  ASSERT_TRUE(OutputFile::create(path, {}, &out).isOk());
-  ASSERT_TRUE(out->append("store bytes").isOk());
+  ASSERT_TRUE(OutputFile::create(path, {}, &out).ok());
+  ASSERT_TRUE(out->append("store bytes").ok());
   { std::ofstream(path) << "precious"; }
   const Status s = out->commit();
   EXPECT_EQ(s.code, ErrorCode::kAlreadyExists) << s.toString();
@@ -115,27 +115,27 @@ TEST_F(OutputFileTest, ReplaceTakesOnlyTheFileSeenAtCreate) {
   const std::string path = file("out.cst");
   // Unchanged: replaced.
   { std::ofstream(path) << "old"; }
-  ASSERT_TRUE(writeOutputFile(path, "new", replace).isOk());
+  ASSERT_TRUE(writeOutputFile(path, "new", replace).ok());
   EXPECT_EQ(readText(path), "new");
   // Rewritten in place while the output was being written: kept.
   std::unique_ptr<OutputFile> out;
-  ASSERT_TRUE(OutputFile::create(path, replace, &out).isOk());
-  ASSERT_TRUE(out->append("mine").isOk());
+  ASSERT_TRUE(OutputFile::create(path, replace, &out).ok());
+  ASSERT_TRUE(out->append("mine").ok());
   { std::ofstream(path) << "someone else's, longer"; }
   EXPECT_EQ(out->commit().code, ErrorCode::kAlreadyExists);
   EXPECT_EQ(readText(path), "someone else's, longer");
   // Replaced by another file (another inode) meanwhile: kept.
-  ASSERT_TRUE(OutputFile::create(path, replace, &out).isOk());
-  ASSERT_TRUE(out->append("mine").isOk());
+  ASSERT_TRUE(OutputFile::create(path, replace, &out).ok());
+  ASSERT_TRUE(out->append("mine").ok());
   { std::ofstream(file("other")) << "other"; }
   std::filesystem::rename(file("other"), path);
   EXPECT_EQ(out->commit().code, ErrorCode::kAlreadyExists);
   EXPECT_EQ(readText(path), "other");
   // Removed meanwhile: the output is published into the empty place.
-  ASSERT_TRUE(OutputFile::create(path, replace, &out).isOk());
-  ASSERT_TRUE(out->append("mine").isOk());
+  ASSERT_TRUE(OutputFile::create(path, replace, &out).ok());
+  ASSERT_TRUE(out->append("mine").ok());
   std::filesystem::remove(path);
-  EXPECT_TRUE(out->commit().isOk());
+  EXPECT_TRUE(out->commit().ok());
   EXPECT_EQ(readText(path), "mine");
   EXPECT_EQ(entries(), std::vector<std::string>{"out.cst"});
 }
@@ -163,8 +163,8 @@ TEST_F(OutputFileTest, TemporariesOfAKilledWriterAreSweptAndReported) {
     std::unique_ptr<OutputFile> out;
     int fd = -1;
     std::string scratch;
-    if (!OutputFile::create(path, {}, &out).isOk() || !out->append(std::string(4096, 'x')).isOk() ||
-        !out->createScratch("L1", &fd, &scratch).isOk())
+    if (!OutputFile::create(path, {}, &out).ok() || !out->append(std::string(4096, 'x')).ok() ||
+        !out->createScratch("L1", &fd, &scratch).ok())
       ::_exit(1);
     (void)!::write(ready[1], "r", 1);
     ::pause();  // killed here
@@ -185,12 +185,12 @@ TEST_F(OutputFileTest, TemporariesOfAKilledWriterAreSweptAndReported) {
   EXPECT_EQ(entries().size(), 2u) << "SIGKILL leaves the temporaries";
   // A live writer of the same output in this process is left alone too.
   std::unique_ptr<OutputFile> live;
-  ASSERT_TRUE(OutputFile::create(path, {}, &live).isOk());
+  ASSERT_TRUE(OutputFile::create(path, {}, &live).ok());
   ASSERT_EQ(live->swept().size(), 1u);
   EXPECT_NE(live->swept()[0].find("(2 files, 0.0 MB)"), std::string::npos) << live->swept()[0];
   EXPECT_EQ(entries().size(), 1u) << "only the live writer's temporary is left";
   std::unique_ptr<OutputFile> second;
-  ASSERT_TRUE(OutputFile::create(path, {}, &second).isOk());
+  ASSERT_TRUE(OutputFile::create(path, {}, &second).ok());
   EXPECT_TRUE(second->swept().empty());
   EXPECT_EQ(entries().size(), 2u);
 }
@@ -225,8 +225,8 @@ TEST_F(OutputFileTest, TheSignalPathRemovesEveryLiveTemporary) {
     std::unique_ptr<OutputFile> a, b;
     int fd = -1;
     std::string scratch;
-    if (!OutputFile::create(path, {}, &a).isOk() || !OutputFile::create(file("b.txt"), {}, &b).isOk() ||
-        !a->createScratch("idx", &fd, &scratch).isOk())
+    if (!OutputFile::create(path, {}, &a).ok() || !OutputFile::create(file("b.txt"), {}, &b).ok() ||
+        !a->createScratch("idx", &fd, &scratch).ok())
       ::_exit(1);
     removeOutputTemporaries();
     ::_exit(0);  // no destructors: as after a signal
@@ -249,7 +249,7 @@ TEST_F(OutputFileTest, AFullDiskLeavesNothingBehind) {
     rlimit limit{4096, 4096};
     ::setrlimit(RLIMIT_FSIZE, &limit);
     const Status s = writeOutputFile(path, std::string(100000, 'x'), {});
-    ::_exit(s.isOk() ? 0 : s.code == ErrorCode::kNoSpace ? 2 : 3);
+    ::_exit(s.ok() ? 0 : s.code == ErrorCode::kNoSpace ? 2 : 3);
   }
   int status = 0;
   ASSERT_EQ(::waitpid(pid, &status, 0), pid);

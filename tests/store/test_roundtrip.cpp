@@ -39,11 +39,11 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
   options.encoding.compression = c.compression;
   options.encoding.predictor = c.predictor;
   options.encoding.zstd_level = 3;
-  ASSERT_TRUE(writeSyntheticStore(path, g, options).isOk());
+  ASSERT_TRUE(writeSyntheticStore(path, g, options).ok());
 
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(path, &reader);
-  ASSERT_TRUE(status.isOk()) << status.toString();
+  ASSERT_TRUE(status.ok()) << status.toString();
   EXPECT_EQ(reader->geometry().width_px, c.width);
   EXPECT_EQ(reader->geometry().height_px, c.height);
   EXPECT_EQ(reader->geometry().tile_px, c.tile_px);
@@ -59,10 +59,10 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         const TileKey key{l, x, y};
         status = reader->readTile(key, &pixels);
-        ASSERT_TRUE(status.isOk()) << status.toString();
+        ASSERT_TRUE(status.ok()) << status.toString();
         ASSERT_EQ(pixels, syntheticTile(g, key)) << "level " << l << " tile " << x << "," << y;
         TileLocation location;
-        ASSERT_TRUE(reader->locate(key, &location).isOk());
+        ASSERT_TRUE(reader->locate(key, &location).ok());
         EXPECT_EQ(location.constant, isConstantTile(key));
         TileKey stamped;
         EXPECT_EQ(syntheticTileKey(c.format, pixels, &stamped), !location.constant);
@@ -75,7 +75,7 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
     }
   }
   std::vector<LevelStats> stats;
-  ASSERT_TRUE(reader->levelStats(&stats).isOk());
+  ASSERT_TRUE(reader->levelStats(&stats).ok());
   uint64_t stat_tiles = 0, stat_constant = 0;
   for (const LevelStats& s : stats) {
     stat_tiles += s.tiles;
@@ -84,7 +84,7 @@ TEST_P(StoreRoundTrip, EveryTileReadsBackBitExact) {
   EXPECT_EQ(stat_tiles, tiles);
   EXPECT_EQ(stat_constant, constant_tiles);
   std::vector<TileStoreReader::Problem> problems;
-  EXPECT_TRUE(reader->verifyAll(&problems, 10, {}, 2).isOk());
+  EXPECT_TRUE(reader->verifyAll(&problems, 10, {}, 2).ok());
   EXPECT_TRUE(problems.empty());
 }
 
@@ -139,7 +139,7 @@ TEST(StoreEncode, ConstantTilesCostNoPayloadBytesInTheFile) {
   const TempDir dir("constant");
   const std::string path = dir.file("flat.cst");
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).ok());
   const std::vector<uint8_t> flat = [&] {
     std::vector<uint8_t> p(g.tileBytes());
     for (size_t i = 0; i < p.size(); ++i) p[i] = uint8_t(i % 4 == 3 ? 255 : 7);
@@ -150,22 +150,22 @@ TEST(StoreEncode, ConstantTilesCostNoPayloadBytesInTheFile) {
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         EncodedTile encoded;
-        ASSERT_TRUE(encodeTile(g, {}, TileKey{l, x, y}, flat, &encoded).isOk());
-        ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+        ASSERT_TRUE(encodeTile(g, {}, TileKey{l, x, y}, flat, &encoded).ok());
+        ASSERT_TRUE(writer->write(std::move(encoded)).ok());
         ++tiles;
       }
     }
   }
   EXPECT_EQ(writer->constantTiles(), tiles);
   EXPECT_EQ(writer->bytesWritten(), 0u);
-  ASSERT_TRUE(writer->finish().isOk());
+  ASSERT_TRUE(writer->finish().ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   // Whole constant pages need no index page either: the file is header,
   // directories, level table and metadata only.
   EXPECT_LT(reader->info().file_bytes, 1024u);
   std::vector<uint8_t> pixels;
-  ASSERT_TRUE(reader->readTile(TileKey{1, 3, 5}, &pixels).isOk());
+  ASSERT_TRUE(reader->readTile(TileKey{1, 3, 5}, &pixels).ok());
   EXPECT_EQ(pixels, flat);
 }
 
@@ -181,9 +181,9 @@ TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   options.geo.crs = "PROJCS[\"NAD83 / Oregon GIC Lambert (ft)\",UNIT[\"foot\",0.3048]]";
   options.encoding.linear_light = true;
   options.encoding.filter = DownsampleFilter::kLanczos3;
-  ASSERT_TRUE(writeSyntheticStore(path, g, options).isOk());
+  ASSERT_TRUE(writeSyntheticStore(path, g, options).ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   const GeoReference& geo = reader->info().geo;
   EXPECT_TRUE(geo.present);
   for (int i = 0; i < 6; ++i) EXPECT_EQ(geo.transform[i], transform[i]) << i;
@@ -195,8 +195,8 @@ TEST(StoreGeoReference, TransformAndCrsRoundTrip) {
   WriterOptions no_geo;
   no_geo.geo.crs = "EPSG:4326";  // ignored: present is false
   no_geo.geo.transform[0] = 5.0;
-  ASSERT_TRUE(writeSyntheticStore(plain, g, no_geo).isOk());
-  ASSERT_TRUE(TileStoreReader::open(plain, &reader).isOk());
+  ASSERT_TRUE(writeSyntheticStore(plain, g, no_geo).ok());
+  ASSERT_TRUE(TileStoreReader::open(plain, &reader).ok());
   EXPECT_FALSE(reader->info().geo.present);
   EXPECT_TRUE(reader->info().geo.crs.empty());
   EXPECT_EQ(reader->info().geo.transform[0], 0.0);

@@ -62,14 +62,14 @@ std::string writePart(const TempDir& dir, const ShardInfo& shard, bool geo = tru
   options.geo.crs = "EPSG:2992";
   const std::string path = dir.file("part.cst");
   std::unique_ptr<TileStoreWriter> writer;
-  EXPECT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  EXPECT_TRUE(TileStoreWriter::create(path, g, options, &writer).ok());
   const uint8_t pixel[3] = {1, 2, 3};
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
     EXPECT_TRUE(writer->writeConstantTiles(l, 0, 0, g.levels[l].tiles_x, g.levels[l].tiles_y, pixel)
-                    .isOk());
+                    .ok());
   }
   const Status s = writer->finish();
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   return path;
 }
 
@@ -92,7 +92,7 @@ TEST(ShardRecord, SitsWhereTheDocumentSaysAndReadsBack) {
   EXPECT_EQ(get<uint64_t>(b, r + 56), 0u);
 
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("part.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("part.cst"), &reader).ok());
   const ShardInfo& s = reader->info().shard;
   EXPECT_TRUE(s.present);
   EXPECT_EQ(s.index, 2u);

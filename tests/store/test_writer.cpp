@@ -30,14 +30,14 @@ TEST(TileStoreWriter, MissingTileFailsFinishAndLeavesNoFile) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(100, 100, 16, PixelFormat::kR8, &g));
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).ok());
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y) {
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
         if (l == 1 && x == 2 && y == 3) continue;
         EncodedTile encoded;
-        ASSERT_TRUE(encodeTile(g, {}, {l, x, y}, syntheticTile(g, {l, x, y}), &encoded).isOk());
-        ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+        ASSERT_TRUE(encodeTile(g, {}, {l, x, y}, syntheticTile(g, {l, x, y}), &encoded).ok());
+        ASSERT_TRUE(writer->write(std::move(encoded)).ok());
       }
     }
   }
@@ -56,12 +56,12 @@ TEST(TileStoreWriter, DestroyingUnfinishedWriterRemovesEveryTemporary) {
   ASSERT_TRUE(makePyramidGeometry(200, 200, 16, PixelFormat::kRGBA8, &g));
   {
     std::unique_ptr<TileStoreWriter> writer;
-    ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
+    ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).ok());
     // Tiles on several levels so that spill files exist.
     for (uint32_t l = 0; l < g.levelCount(); ++l) {
       EncodedTile encoded;
-      ASSERT_TRUE(encodeTile(g, {}, {l, 0, 0}, syntheticTile(g, {l, 0, 0}, ConstantTiles::kNone), &encoded).isOk());
-      ASSERT_TRUE(writer->write(std::move(encoded)).isOk());
+      ASSERT_TRUE(encodeTile(g, {}, {l, 0, 0}, syntheticTile(g, {l, 0, 0}, ConstantTiles::kNone), &encoded).ok());
+      ASSERT_TRUE(writer->write(std::move(encoded)).ok());
     }
     EXPECT_FALSE(dir.entries().empty());
     for (const std::string& name : dir.entries()) {
@@ -90,11 +90,11 @@ TEST(TileStoreWriter, RejectsDuplicateTilesAndBadGeometry) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(64, 64, 16, PixelFormat::kR8, &g));
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, {}, &writer).ok());
   EncodedTile a, b;
-  ASSERT_TRUE(encodeTile(g, {}, {0, 1, 1}, syntheticTile(g, {0, 1, 1}), &a).isOk());
+  ASSERT_TRUE(encodeTile(g, {}, {0, 1, 1}, syntheticTile(g, {0, 1, 1}), &a).ok());
   b = a;
-  EXPECT_TRUE(writer->write(std::move(a)).isOk());
+  EXPECT_TRUE(writer->write(std::move(a)).ok());
   const Status status = writer->write(std::move(b));
   EXPECT_EQ(status.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(status.message.find("written twice"), std::string::npos);
@@ -121,10 +121,10 @@ TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
   WriterOptions options;
   options.encoding.compression = Compression::kNone;
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).ok());
   EncodedTile encoded;
   ASSERT_TRUE(encodeTile(g, options.encoding, {0, 1, 1}, syntheticTile(g, {0, 1, 1}, ConstantTiles::kNone),
-                         &encoded).isOk());
+                         &encoded).ok());
   ASSERT_EQ(encoded.payload.size(), g.tileBytes());
   EncodedTile shorter = encoded;
   shorter.payload.resize(g.tileBytes() - 3);
@@ -132,7 +132,7 @@ TEST(TileStoreWriter, RejectsAnUncompressedPayloadThatIsNotOneRawTile) {
   shorter.location.checksum = format::tileChecksum(shorter.payload.data(), shorter.payload.size());
   EXPECT_EQ(writer->write(std::move(shorter)).code, ErrorCode::kInvalidArgument);
   // The slot was not taken: the real tile still goes in.
-  EXPECT_TRUE(writer->write(std::move(encoded)).isOk());
+  EXPECT_TRUE(writer->write(std::move(encoded)).ok());
   writer.reset();
   EXPECT_TRUE(dir.entries().empty());
 }
@@ -152,7 +152,7 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
   std::unique_ptr<TileStoreWriter> writer;
   WriterOptions options;
   options.fsync = false;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).ok());
   std::atomic<size_t> next{0};
   std::atomic<int> failures{0};
   std::vector<std::thread> threads;
@@ -169,12 +169,12 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
   }
   for (auto& thread : threads) thread.join();
   EXPECT_EQ(failures.load(), 0);
-  ASSERT_TRUE(writer->finish().isOk());
+  ASSERT_TRUE(writer->finish().ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   std::vector<uint8_t> pixels;
   for (const TileKey& key : keys) {
-    ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
+    ASSERT_TRUE(reader->readTile(key, &pixels).ok());
     ASSERT_EQ(pixels, syntheticTile(g, key));
   }
 }
@@ -202,7 +202,7 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
           for (uint32_t y = by; y < by + side; ++y) {
             for (uint32_t x = bx; x < bx + side; ++x) {
               TileLocation location;
-              ASSERT_TRUE(reader.locate({l, x, y}, &location).isOk());
+              ASSERT_TRUE(reader.locate({l, x, y}, &location).ok());
               if (location.constant) continue;
               first = std::min(first, location.offset);
               end = std::max(end, location.offset + location.stored_bytes);
@@ -222,14 +222,14 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
     WriterOptions options;
     options.fsync = false;
     options.payload_order = order;
-    ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
+    ASSERT_TRUE(test::writeSyntheticStore(path, g, options).ok());
     std::unique_ptr<TileStoreReader> reader;
-    ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+    ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
     // The reader tells the order from the first index page it loads.
     EXPECT_EQ(reader->suggestedBatchShape(), BatchShape::kRow) << "nothing loaded yet";
     std::vector<uint8_t> pixels;
     for (const TileKey& key : keys) {
-      ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
+      ASSERT_TRUE(reader->readTile(key, &pixels).ok());
       ASSERT_EQ(pixels, syntheticTile(g, key));
     }
     EXPECT_EQ(reader->suggestedBatchShape(),
@@ -257,7 +257,7 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
   options.fsync = false;
   options.payload_order = PayloadOrder::kCurve;
   std::unique_ptr<TileStoreWriter> writer;
-  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).isOk());
+  ASSERT_TRUE(TileStoreWriter::create(path, g, options, &writer).ok());
   std::atomic<size_t> next{0};
   std::atomic<int> failures{0};
   std::vector<std::thread> threads;
@@ -274,12 +274,12 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
   }
   for (auto& thread : threads) thread.join();
   EXPECT_EQ(failures.load(), 0);
-  ASSERT_TRUE(writer->finish().isOk());
+  ASSERT_TRUE(writer->finish().ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   std::vector<uint8_t> pixels;
   for (const TileKey& key : keys) {
-    ASSERT_TRUE(reader->readTile(key, &pixels).isOk());
+    ASSERT_TRUE(reader->readTile(key, &pixels).ok());
     ASSERT_EQ(pixels, syntheticTile(g, key));
   }
   size_t together = 0, apart = 0;
@@ -299,9 +299,9 @@ TEST(TileStoreWriter, FinishReplacesAnExistingFileAtomically) {
   EXPECT_EQ(test::readBytes(path), std::vector<uint8_t>(10, 'x'));
   WriterOptions options;
   options.replace = true;
-  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(path, g, options).ok());
   std::unique_ptr<TileStoreReader> reader;
-  EXPECT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  EXPECT_TRUE(TileStoreReader::open(path, &reader).ok());
   EXPECT_EQ(dir.entries().size(), 1u);
 }
 

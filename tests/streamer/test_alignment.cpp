@@ -31,7 +31,7 @@ TEST(Alignment, ByGeoreferenceACoarserLargerDemUnderA1mImage) {
   const StoreInfo c = store(2000, 1000, image, "EPSG:32633", false);
   const StoreInfo e = store(100, 60, dem, "EPSG:32633", true);
   LayerAlignment a;
-  ASSERT_TRUE(alignElevation(c, e, 1.0, false, &a).isOk());
+  ASSERT_TRUE(alignElevation(c, e, 1.0, false, &a).ok());
   EXPECT_FALSE(a.stretched);
   EXPECT_DOUBLE_EQ(a.world_per_sample.x, 30.0);
   EXPECT_DOUBLE_EQ(a.world_per_sample.y, 30.0);
@@ -39,7 +39,7 @@ TEST(Alignment, ByGeoreferenceACoarserLargerDemUnderA1mImage) {
   EXPECT_DOUBLE_EQ(a.sample0_world.x, -300.0 + 15.0);
   EXPECT_DOUBLE_EQ(a.sample0_world.y, -600.0 + 15.0);
   EXPECT_DOUBLE_EQ(a.world_per_height, 1.0);  // metres over 1 m texels (EPSG projected: assumed m)
-  ASSERT_TRUE(alignElevation(c, e, 3.0, false, &a).isOk());
+  ASSERT_TRUE(alignElevation(c, e, 3.0, false, &a).ok());
   EXPECT_DOUBLE_EQ(a.world_per_height, 3.0);
 }
 
@@ -49,14 +49,14 @@ TEST(Alignment, FeetAndDegreesReachTheVerticalScale) {
   const double dem[6] = {635000.0, 10.0, 0.0, 854000.0, 0.0, -10.0};
   LayerAlignment a;
   ASSERT_TRUE(alignElevation(store(3248, 4385, image, feet, false), store(400, 600, dem, feet, true),
-                             1.0, false, &a).isOk());
+                             1.0, false, &a).ok());
   EXPECT_NEAR(a.metres_per_world.x, 0.3048, 1e-12);
   EXPECT_NEAR(a.world_per_height, 1.0 / 0.3048, 1e-9);  // metres of height in 1-ft texels
 
   // Geographic: 1/1200 degree texels at 47 N are about 63 x 92 m.
   const double geo[6] = {-122.0, 1.0 / 1200, 0.0, 47.0, 0.0, -1.0 / 1200};
   ASSERT_TRUE(alignElevation(store(1201, 1201, geo, "EPSG:4326", false),
-                             store(1201, 1201, geo, "EPSG:4326", true), 1.0, false, &a).isOk());
+                             store(1201, 1201, geo, "EPSG:4326", true), 1.0, false, &a).ok());
   EXPECT_NEAR(a.metres_per_world.x, 111320.0 * std::cos(46.5 * M_PI / 180.0) / 1200.0, 0.5);
   EXPECT_NEAR(a.metres_per_world.y, 110574.0 / 1200.0, 0.01);
   EXPECT_FALSE(a.warnings.empty());  // non-square texels are said
@@ -66,7 +66,7 @@ TEST(Alignment, WithoutGeoreferenceTheDemIsStretchedAndSaidSo) {
   const double dem[6] = {557805.0, 30.0, 0.0, 5122005.0, 0.0, -30.0};
   LayerAlignment a;
   ASSERT_TRUE(alignElevation(store(3248, 4385, nullptr, "", false),
-                             store(327, 468, dem, "EPSG:26710", true), 1.0, false, &a).isOk());
+                             store(327, 468, dem, "EPSG:26710", true), 1.0, false, &a).ok());
   EXPECT_TRUE(a.stretched);
   EXPECT_DOUBLE_EQ(a.world_per_sample.x, 3248.0 / 327.0);
   EXPECT_DOUBLE_EQ(a.sample0_world.x, 0.5 * 3248.0 / 327.0);

@@ -90,7 +90,7 @@ TEST(Bc1, EachBlockOfATileHoldsItsOwnTexels) {
       rgba[(size_t(y) * tp + x) * 4 + 3] = 255;
     }
   std::vector<uint8_t> blocks;
-  ASSERT_TRUE(encodeBc1Tile(rgba, tp, &blocks).isOk());
+  ASSERT_TRUE(encodeBc1Tile(rgba, tp, &blocks).ok());
   ASSERT_EQ(blocks.size(), bc1TileBytes(tp));
   ASSERT_EQ(blocks.size(), size_t(n) * n * 8);
   for (uint32_t by = 0; by < n; ++by)
@@ -103,7 +103,7 @@ TEST(Bc1, EachBlockOfATileHoldsItsOwnTexels) {
           EXPECT_NEAR(texels[t * 4 + c], want[c], 4) << "block " << bx << "," << by;
     }
   std::vector<uint8_t> decoded;
-  ASSERT_TRUE(decodeBc1Tile(blocks, tp, &decoded).isOk());
+  ASSERT_TRUE(decodeBc1Tile(blocks, tp, &decoded).ok());
   EXPECT_GE(psnr(rgba, decoded), 40.0);
 }
 
@@ -111,8 +111,8 @@ TEST(Bc1, EncodingASmoothAndBlockyImageCostsAFewDecibels) {
   const uint32_t tp = 128;
   const std::vector<uint8_t> rgba = test::patternImage(tp, tp);
   std::vector<uint8_t> blocks, decoded;
-  ASSERT_TRUE(encodeBc1Tile(rgba, tp, &blocks).isOk());
-  ASSERT_TRUE(decodeBc1Tile(blocks, tp, &decoded).isOk());
+  ASSERT_TRUE(encodeBc1Tile(rgba, tp, &blocks).ok());
+  ASSERT_TRUE(decodeBc1Tile(blocks, tp, &decoded).ok());
   const double db = psnr(rgba, decoded);
   std::printf("  BC1 PSNR of the pattern tile: %.2f dB\n", db);
   EXPECT_GE(db, 32.0);
@@ -136,9 +136,9 @@ TEST(Bc1Source, HandsOutTheInnerTilesEncoded) {
   EXPECT_EQ(tileContentBytes(TileContent::kBc1, 128), 128u * 128u / 2u);
   const TileKey key{2, 3, 5};
   std::vector<uint8_t> rgba, blocks, want;
-  ASSERT_TRUE(inner->fetch(key, &rgba).isOk());
-  ASSERT_TRUE(bc1->fetch(key, &blocks).isOk());
-  ASSERT_TRUE(encodeBc1Tile(rgba, 128, &want).isOk());
+  ASSERT_TRUE(inner->fetch(key, &rgba).ok());
+  ASSERT_TRUE(bc1->fetch(key, &blocks).ok());
+  ASSERT_TRUE(encodeBc1Tile(rgba, 128, &want).ok());
   EXPECT_EQ(blocks, want);
   // Failures pass through, named by the inner source.
   auto failing = makeBc1Source(makeFaultySource(inner, FaultSpec{0.0, 1.0, ErrorCode::kCorruptTile, 7}), &s);
@@ -162,10 +162,10 @@ TEST(Bc1Source, BatchesEncodeEachTileWhereItLanded) {
     std::vector<uint8_t> one;
     const Status alone = bc1->fetch(keys[i], &one);
     EXPECT_EQ(statuses[i].code, alone.code) << i;
-    if (alone.isOk()) {
+    if (alone.ok()) {
       EXPECT_EQ(out[i], one) << i;
     }
-    failed += !alone.isOk();
+    failed += !alone.ok();
   }
   EXPECT_GT(failed, 0u) << "the batch must mix failures and tiles";
   EXPECT_LT(failed, keys.size());
@@ -182,7 +182,7 @@ TEST(Bc1Source, RefusesHeightsAndTilesThatAreNotWholeBlocks) {
   EXPECT_NE(s.message.find("multiple of 4"), std::string::npos) << s.message;
   EXPECT_FALSE(makeBc1Source(nullptr, &s));
   TileContent c = TileContent::kRgba8;
-  EXPECT_TRUE(colourTileContentFromName("bc1", &c).isOk());
+  EXPECT_TRUE(colourTileContentFromName("bc1", &c).ok());
   EXPECT_EQ(c, TileContent::kBc1);
   EXPECT_EQ(colourTileContentFromName("bc7", &c).code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(colourTileContentFromName("f32", &c).code, ErrorCode::kInvalidArgument);

@@ -51,7 +51,7 @@ TEST(FlightPath, TurnsTheShortWayRound) {
 TEST(FlightPath, RoundTripsThroughJson) {
   const FlightPath p = threeKeys();
   FlightPath q;
-  ASSERT_TRUE(FlightPath::fromJson(p.toJson(), &q).isOk());
+  ASSERT_TRUE(FlightPath::fromJson(p.toJson(), &q).ok());
   ASSERT_EQ(q.keyframes.size(), p.keyframes.size());
   for (double t : {0.0, 0.4, 1.7, 3.0})
     EXPECT_NEAR(glm::length(q.sample(t).position - p.sample(t).position), 0.0, 1e-9);
@@ -72,7 +72,7 @@ TEST(FlightPath, RejectsMalformedJsonWithAStatus) {
   };
   for (const char* text : bad) {
     const Status s = FlightPath::fromJson(text, &p);
-    EXPECT_FALSE(s.isOk()) << text;
+    EXPECT_FALSE(s.ok()) << text;
     EXPECT_EQ(s.code, ErrorCode::kInvalidArgument) << text;
   }
   EXPECT_EQ(FlightPath::load("/nonexistent/path.json", &p).code, ErrorCode::kNotFound);
@@ -83,7 +83,7 @@ TEST(FlightPath, BuiltinsStayOverTheTextureAndAboveGround) {
   ASSERT_TRUE(makePyramidGeometry(uint64_t(1) << 26, uint64_t(1) << 26, 128, PixelFormat::kRGB8, &g));
   for (const std::string& name : FlightPath::builtinNames()) {
     FlightPath p;
-    ASSERT_TRUE(FlightPath::builtin(name, g, &p).isOk()) << name;
+    ASSERT_TRUE(FlightPath::builtin(name, g, &p).ok()) << name;
     ASSERT_GT(p.durationS(), 0.0) << name;
     for (double t = 0.0; t <= p.durationS(); t += p.durationS() / 50.0) {
       const Camera c = p.sample(t);
@@ -102,7 +102,7 @@ TEST(FlightPath, TeleportJumpsEveryNFrames) {
   PyramidGeometry g;
   ASSERT_TRUE(makePyramidGeometry(100000, 100000, 128, PixelFormat::kRGB8, &g));
   FlightPath p;
-  ASSERT_TRUE(FlightPath::builtin("teleport", g, &p, /*teleport_frames=*/10).isOk());
+  ASSERT_TRUE(FlightPath::builtin("teleport", g, &p, /*teleport_frames=*/10).ok());
   const double frame = 1.0 / 60.0;
   // Within a hold the camera is still; across the boundary it jumps.
   EXPECT_EQ(p.sample(1 * frame).position, p.sample(9 * frame).position);

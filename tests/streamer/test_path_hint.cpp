@@ -92,8 +92,8 @@ TEST(PathHint, OrbitKeepsTheTilesTheNextLapNeeds) {
   EXPECT_EQ(hinted.total.ram_hits + hinted.total.ram_misses, accesses);
 
   std::vector<TraceEvent> plain_events, hinted_events;
-  ASSERT_TRUE(readTrace(plain_trace, &plain_events).isOk());
-  ASSERT_TRUE(readTrace(hinted_trace, &hinted_events).isOk());
+  ASSERT_TRUE(readTrace(plain_trace, &plain_events).ok());
+  ASSERT_TRUE(readTrace(hinted_trace, &hinted_events).ok());
   ReplayHint replay_hint;
   replay_hint.path = hint;
   replay_hint.geometry = source->geometry();
@@ -151,7 +151,7 @@ TEST(PathHint, AHintThatDisagreesWithTheCameraIsIgnored) {
   EXPECT_EQ(wrong.total.ram_hits, plain.total.ram_hits);
   EXPECT_EQ(wrong.total.ram_misses, plain.total.ram_misses);
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(wrong_trace, &events).isOk());
+  ASSERT_TRUE(readTrace(wrong_trace, &events).ok());
   size_t time_lines = 0;
   for (const TraceEvent& e : events) {
     if (e.window != 't') continue;

@@ -66,9 +66,9 @@ std::string writeElevationStore(const TempDir& dir, const std::string& name, uin
           std::memcpy(p, &h, 4);
         }
       }
-    return Status::ok();
+    return okStatus();
   });
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   return path;
 }
 
@@ -98,7 +98,7 @@ TEST(ElevationSource, HandsOutTheStoresHeightsAsFloat32) {
     EXPECT_EQ(makeFaultySource(source, {})->content(), TileContent::kHeightF32);
 
     std::unique_ptr<TileStoreReader> reader;
-    ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+    ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
     const PyramidGeometry& g = source->geometry();
     std::vector<float> decoded(size_t(g.tile_px) * g.tile_px);
     uint64_t tiles = 0;
@@ -108,7 +108,7 @@ TEST(ElevationSource, HandsOutTheStoresHeightsAsFloat32) {
           const TileKey key{l, x, y};
           std::vector<uint8_t> bytes;
           FetchInfo info;
-          ASSERT_TRUE(source->fetchWithInfo(key, &bytes, &info).isOk());
+          ASSERT_TRUE(source->fetchWithInfo(key, &bytes, &info).ok());
           ASSERT_EQ(bytes.size(), size_t(g.tile_px) * g.tile_px * 4);
           const std::vector<float> heights = asFloats(bytes);
           // What was written, computed here...
@@ -118,8 +118,8 @@ TEST(ElevationSource, HandsOutTheStoresHeightsAsFloat32) {
                   << "level " << l << " tile (" << x << ", " << y << ") sample (" << i << ", " << j << ")";
           // ... and what the store's own decoder gives, bit for bit.
           RawTile raw;
-          ASSERT_TRUE(reader->readRaw(key, &raw).isOk());
-          ASSERT_TRUE(decodeTileHeights(g, reader->info().encoding, reader->info().elevation, raw, decoded).isOk());
+          ASSERT_TRUE(reader->readRaw(key, &raw).ok());
+          ASSERT_TRUE(decodeTileHeights(g, reader->info().encoding, reader->info().elevation, raw, decoded).ok());
           EXPECT_EQ(std::memcmp(decoded.data(), bytes.data(), bytes.size()), 0);
         }
     EXPECT_GT(tiles, 20u);
@@ -129,7 +129,7 @@ TEST(ElevationSource, HandsOutTheStoresHeightsAsFloat32) {
 TEST(ElevationSource, ColourAndElevationStoresOpenOnlyAsWhatTheyAre) {
   TempDir dir("scene");
   const std::string colour = dir.file("c.cst");
-  ASSERT_TRUE(test::writeSyntheticStore(colour, test::SyntheticStoreSpec{}).isOk());
+  ASSERT_TRUE(test::writeSyntheticStore(colour, test::SyntheticStoreSpec{}).ok());
   const std::string elevation = writeElevationStore(dir, "e.cst", 100, 100, 32, PixelFormat::kI16);
 
   Status status;
@@ -186,17 +186,17 @@ TEST(SceneLayers, CheckNamesTheBadLayerAndTheStreamerLeavesItEmpty) {
   ASSERT_NE(dem, nullptr);
   auto colour = procedural(4096);
 
-  EXPECT_TRUE(checkStreamLayers({{colour}, {dem, LayerRole::kElevation, {0.5, 0.5}}}).isOk());
+  EXPECT_TRUE(checkStreamLayers({{colour}, {dem, LayerRole::kElevation, {0.5, 0.5}}}).ok());
   const Status no_source = checkStreamLayers({{colour}, {nullptr}});
   EXPECT_EQ(no_source.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(no_source.message.find("layer 1"), std::string::npos) << no_source.message;
-  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {0.0, 1.0}}}).isOk());
-  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {1.0, NAN}}}).isOk());
-  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {1.0, 1.0}, {INFINITY, 0.0}}}).isOk());
+  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {0.0, 1.0}}}).ok());
+  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {1.0, NAN}}}).ok());
+  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kColour, {1.0, 1.0}, {INFINITY, 0.0}}}).ok());
   const Status wrong_role = checkStreamLayers({{colour}, {dem, LayerRole::kColour}});
-  EXPECT_FALSE(wrong_role.isOk());
+  EXPECT_FALSE(wrong_role.ok());
   EXPECT_NE(wrong_role.message.find("heights"), std::string::npos) << wrong_role.message;
-  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kElevation}}).isOk());
+  EXPECT_FALSE(checkStreamLayers({{colour, LayerRole::kElevation}}).ok());
 
   // The bad layer streams nothing; the good one streams as usual.
   StreamerConfig cfg;
@@ -307,7 +307,7 @@ TEST(SceneStreamer, PlansEachLayerInItsTexelsAndHandsOffBothLayersTiles) {
           ASSERT_EQ(h[33], float(kOffset + kScale * sampleOf(t.key, 1, 1)));
         } else {
           std::vector<uint8_t> expect;
-          ASSERT_TRUE(scene.colour->fetch(t.key, &expect).isOk());
+          ASSERT_TRUE(scene.colour->fetch(t.key, &expect).ok());
           ASSERT_EQ(*t.rgba, expect);
         }
       }

@@ -26,7 +26,7 @@ TEST(ProceduralSource, TilesMatchProceduralTexelEverywhereIncludingFarCorner) {
                           {g.levelCount() - 1, 0, 0}};
   std::vector<uint8_t> rgba;
   for (const TileKey& key : keys) {
-    ASSERT_TRUE(source->fetch(key, &rgba).isOk());
+    ASSERT_TRUE(source->fetch(key, &rgba).ok());
     ASSERT_EQ(rgba.size(), 128u * 128u * 4u);
     size_t mismatches = 0;
     for (uint32_t y = 0; y < 128; ++y)
@@ -98,7 +98,7 @@ TEST_P(StoreSourceFormats, ConvertsEveryTexelToRgba8) {
   const std::string path = dir.file("store.cst");
   ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 200, .height_px = 150, .tile_px = 64,
                                                .format = format})
-                  .isOk());
+                  .ok());
   Status status;
   auto source = openStoreSource(path, &status);
   ASSERT_TRUE(source) << status.toString();
@@ -110,7 +110,7 @@ TEST_P(StoreSourceFormats, ConvertsEveryTexelToRgba8) {
     for (uint32_t ty = 0; ty < g.levels[level].tiles_y; ++ty)
       for (uint32_t tx = 0; tx < g.levels[level].tiles_x; ++tx) {
         const TileKey key{level, tx, ty};
-        ASSERT_TRUE(source->fetch(key, &rgba).isOk());
+        ASSERT_TRUE(source->fetch(key, &rgba).ok());
         ASSERT_EQ(rgba.size(), 64u * 64u * 4u);
         for (uint32_t y = 0; y < 64; ++y)
           for (uint32_t x = 0; x < 64; ++x) {
@@ -131,7 +131,7 @@ TEST_P(StoreSourceFormats, ConvertsEveryTexelToRgba8) {
   const TileKey stored{0, 2, 1};
   ASSERT_FALSE(test::isConstantTile(stored));
   FetchInfo info;
-  ASSERT_TRUE(source->fetchWithInfo(stored, &rgba, &info).isOk());
+  ASSERT_TRUE(source->fetchWithInfo(stored, &rgba, &info).ok());
   EXPECT_GT(info.bytes_read, 0u);
   EXPECT_NE(source->describe().find(path), std::string::npos);
 }
@@ -145,11 +145,11 @@ TEST(StoreSource, CorruptTileIsAStatusNotACrash) {
   const std::string path = dir.file("store.cst");
   ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 256, .height_px = 256, .tile_px = 64,
                                                .format = PixelFormat::kRGB8})
-                  .isOk());
+                  .ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   TileLocation loc;
-  ASSERT_TRUE(reader->locate({0, 2, 1}, &loc).isOk());
+  ASSERT_TRUE(reader->locate({0, 2, 1}, &loc).ok());
   ASSERT_FALSE(loc.constant);
   reader.reset();
   {
@@ -166,16 +166,16 @@ TEST(StoreSource, CorruptTileIsAStatusNotACrash) {
   ASSERT_TRUE(source) << status.toString();
   std::vector<uint8_t> rgba;
   const Status bad = source->fetch({0, 2, 1}, &rgba);
-  EXPECT_FALSE(bad.isOk());
+  EXPECT_FALSE(bad.ok());
   EXPECT_EQ(bad.code, ErrorCode::kCorruptTile) << bad.toString();
-  EXPECT_TRUE(source->fetch({0, 1, 1}, &rgba).isOk());
+  EXPECT_TRUE(source->fetch({0, 1, 1}, &rgba).ok());
   EXPECT_EQ(source->fetch({0, 9, 9}, &rgba).code, ErrorCode::kOutOfRange);
 }
 
 TEST(StoreSource, MissingFileReturnsNullAndAStatus) {
   Status status;
   EXPECT_EQ(openStoreSource("/nonexistent/dir/none.cts", &status), nullptr);
-  EXPECT_FALSE(status.isOk());
+  EXPECT_FALSE(status.ok());
 }
 
 TEST(FaultySource, FailsExactlyTheTilesFailsTileNames) {
@@ -191,8 +191,8 @@ TEST(FaultySource, FailsExactlyTheTilesFailsTileNames) {
     for (uint32_t x = 0; x < 32; ++x) {
       const TileKey key{0, x, y};
       const Status s = source->fetch(key, &rgba);
-      EXPECT_EQ(s.isOk(), !failsTile(fault, key));
-      if (!s.isOk()) {
+      EXPECT_EQ(s.ok(), !failsTile(fault, key));
+      if (!s.ok()) {
         EXPECT_EQ(s.code, ErrorCode::kUnavailable);
         ++failed;
       }

@@ -239,11 +239,11 @@ TEST(Streamer, CorruptTileInAStoreIsCountedOnceAndTheRestArrives) {
   const std::string path = dir.file("store.cst");
   ASSERT_TRUE(test::writeSyntheticStore(path, {.width_px = 512, .height_px = 512, .tile_px = 64,
                                                .format = PixelFormat::kRGB8})
-                  .isOk());
+                  .ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(path, &reader).ok());
   TileLocation loc;
-  ASSERT_TRUE(reader->locate({0, 3, 4}, &loc).isOk());
+  ASSERT_TRUE(reader->locate({0, 3, 4}, &loc).ok());
   ASSERT_FALSE(loc.constant) << "the damaged tile needs a payload";
   reader.reset();
   {

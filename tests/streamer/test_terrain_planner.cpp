@@ -64,7 +64,7 @@ class FieldSource final : public TileSource {
     // The decimated samples' surface lies within the bounds: their width
     // bounds its distance to the ground.
     *out = {b.x, b.y, key.level == 0 ? 0.0f : b.y - b.x};
-    return Status::ok();
+    return okStatus();
   }
   Status fetch(const TileKey& key, std::vector<uint8_t>* out) override {
     if (!m_g.contains(key)) return Status::error(ErrorCode::kOutOfRange, "outside");
@@ -77,7 +77,7 @@ class FieldSource final : public TileSource {
         const float v = m_f(x, y);
         std::memcpy(out->data() + (size_t(j) * t + i) * 4, &v, 4);
       }
-    return Status::ok();
+    return okStatus();
   }
   std::string describe() const override { return "field"; }
 
@@ -95,7 +95,7 @@ class NoBoundsSource final : public TileSource {
   TileContent content() const override { return TileContent::kHeightF32; }
   Status fetch(const TileKey&, std::vector<uint8_t>* out) override {
     out->assign(size_t(m_g.tile_px) * m_g.tile_px * 4, 0);
-    return Status::ok();
+    return okStatus();
   }
   std::string describe() const override { return "no-bounds"; }
 
@@ -114,7 +114,7 @@ PyramidGeometry colourGeometry(uint64_t side) {
 // world units: the TerrainView of a colour layer with the identity map.
 TerrainView viewOf(const TileSource& source, double spacing) {
   TerrainView v;
-  EXPECT_TRUE(loadTerrainBounds(source, kTerrainBoundsMaxLevelTiles, &v.bounds).isOk());
+  EXPECT_TRUE(loadTerrainBounds(source, kTerrainBoundsMaxLevelTiles, &v.bounds).ok());
   v.sample_origin = {0.5 * spacing, 0.5 * spacing};
   v.units_per_sample = {spacing, spacing};
   v.units_per_height = 1.0;
@@ -154,14 +154,14 @@ TEST(TerrainBounds, LoadedFromAnElevationStoreAreItsIndex) {
   TempDir dir;
   // Heights that differ in every tile, so a neighbour's range shows.
   auto height = [](uint64_t x, uint64_t y) { return float(std::sin(x * 0.05) * 40.0 + y * 0.25 + (x > 300 ? 90.0 : 0.0)); };
-  ASSERT_TRUE(test::writeElevationStore(dir.file("dem.cst"), 500, 300, height).isOk());
+  ASSERT_TRUE(test::writeElevationStore(dir.file("dem.cst"), 500, 300, height).ok());
   Status s;
   auto source = openElevationSource(dir.file("dem.cst"), &s);
   ASSERT_TRUE(source) << s.toString();
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("dem.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("dem.cst"), &reader).ok());
   std::shared_ptr<const TerrainBounds> b;
-  ASSERT_TRUE(loadTerrainBounds(*source, kTerrainBoundsMaxLevelTiles, &b).isOk());
+  ASSERT_TRUE(loadTerrainBounds(*source, kTerrainBoundsMaxLevelTiles, &b).ok());
   const PyramidGeometry& g = source->geometry();
   ASSERT_EQ(b->levels.size(), g.levelCount());
   EXPECT_EQ(b->finest_level, 0u);
@@ -173,7 +173,7 @@ TEST(TerrainBounds, LoadedFromAnElevationStoreAreItsIndex) {
     for (uint32_t y = 0; y < lv.tiles_y; ++y)
       for (uint32_t x = 0; x < lv.tiles_x; ++x) {
         TileLocation loc;
-        ASSERT_TRUE(reader->locate({l, x, y}, &loc).isOk());
+        ASSERT_TRUE(reader->locate({l, x, y}, &loc).ok());
         EXPECT_EQ(lv.range[size_t(y) * lv.tiles_x + x], glm::vec2(loc.min_height, loc.max_height))
             << l << " " << x << " " << y;
         EXPECT_EQ(lv.error[size_t(y) * lv.tiles_x + x], loc.error) << l << " " << x << " " << y;
@@ -189,7 +189,7 @@ TEST(TerrainBounds, LoadedFromAnElevationStoreAreItsIndex) {
   EXPECT_EQ(b->range, b->levels.back().range[0]);
   // Levels over the tile limit are left to their ancestors'.
   std::shared_ptr<const TerrainBounds> coarse;
-  ASSERT_TRUE(loadTerrainBounds(*source, 2, &coarse).isOk());
+  ASSERT_TRUE(loadTerrainBounds(*source, 2, &coarse).ok());
   EXPECT_EQ(coarse->finest_level, 2u);
   EXPECT_TRUE(coarse->levels[0].range.empty());
   EXPECT_EQ(coarse->levels[2].range, b->levels[2].range);
@@ -215,7 +215,7 @@ TEST(TerrainBounds, ProceduralHeightsLieWithinTheirTilesBounds) {
     for (uint64_t x0 : {uint64_t(0), (uint64_t(1) << 14) - span / 2, uint64_t(300000), (uint64_t(1) << 20) - span}) {
       const TileKey key{level, uint32_t(x0 / span), uint32_t(x0 / span / 2)};
       TileHeightBounds b;
-      ASSERT_TRUE(source->tileHeightBounds(key, &b).isOk());
+      ASSERT_TRUE(source->tileHeightBounds(key, &b).ok());
       const float lo = b.min_height, hi = b.max_height;
       EXPECT_GE(lo, float(info.min_height) - 1.0f);
       EXPECT_LE(hi, float(info.max_height) + 1.0f);
@@ -390,11 +390,11 @@ TEST(TerrainPlanner, DetailOfReadTilesRefinesCoarseBounds) {
     for (uint32_t y = 0; y < hg.levels[l].tiles_y; ++y)
       for (uint32_t x = 0; x < hg.levels[l].tiles_x; ++x) {
         std::vector<uint8_t> px;
-        ASSERT_TRUE(dem.fetch({l, x, y}, &px).isOk());
+        ASSERT_TRUE(dem.fetch({l, x, y}, &px).ok());
         std::vector<float> f(px.size() / 4);
         std::memcpy(f.data(), px.data(), px.size());
         TileHeightBounds b;
-        ASSERT_TRUE(dem.tileHeightBounds({l, x, y}, &b).isOk());
+        ASSERT_TRUE(dem.tileHeightBounds({l, x, y}, &b).ok());
         detail->tiles[{l, x, y}] = makeTileDetail(hg.tile_px, f.data(), b.error);
       }
   cfg.terrain.detail = detail;
@@ -467,7 +467,7 @@ TEST(TerrainPlanner, StreamerPlansEveryLayerAgainstTheTerrain) {
   streamer.update(c, vp, 0.0);
   // The expected plans, computed here from the bounds and the maps.
   TerrainView world;
-  ASSERT_TRUE(loadTerrainBounds(*dem, kTerrainBoundsMaxLevelTiles, &world.bounds).isOk());
+  ASSERT_TRUE(loadTerrainBounds(*dem, kTerrainBoundsMaxLevelTiles, &world.bounds).ok());
   PlannerConfig colour_cfg;
   colour_cfg.terrain = world;
   colour_cfg.terrain.sample_origin = {16.0, 16.0};

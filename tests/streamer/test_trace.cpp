@@ -55,7 +55,7 @@ TEST(Streamer, TraceRecordsEveryAccessAndReplays) {
     gpu_reentries = st.total.gpu_reentries;
   }
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(path, &events).isOk());
+  ASSERT_TRUE(readTrace(path, &events).ok());
   uint64_t enters = 0, leaves = 0, windows = 0;
   for (const TraceEvent& e : events) {
     if (e.window) windows++;
@@ -141,7 +141,7 @@ TEST(PathHint, TraceTimeLinesParseAndBadOnesAreNamed) {
     return readTrace(path, events);
   };
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readText("t 3 0.10000000000000001 1 800 600\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).isOk());
+  ASSERT_TRUE(readText("t 3 0.10000000000000001 1 800 600\nw 3 0 0 0 2 2 1\n3 0 1 1\n", &events).ok());
   ASSERT_EQ(events.size(), 3u);
   EXPECT_EQ(events[0].window, 't');
   EXPECT_EQ(events[0].frame, 3u);
@@ -170,8 +170,8 @@ TEST(Trace, EmptyTruncatedForeignOrNonRegularTracesAreRefused) {
     return readTrace(path, &events);
   };
   const std::string header = std::string(kTraceHeader) + "\n";
-  EXPECT_TRUE(readText(header).isOk()) << "a header alone is a trace of no frames";
-  EXPECT_TRUE(readText(header + "1 0 2 3\n").isOk());
+  EXPECT_TRUE(readText(header).ok()) << "a header alone is a trace of no frames";
+  EXPECT_TRUE(readText(header + "1 0 2 3\n").ok());
   Status st = readText("");
   EXPECT_EQ(st.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(st.message.find("empty"), std::string::npos) << st.message;
@@ -240,10 +240,10 @@ TEST(Trace, TheTraceAppearsWholeAtShutdownAndFailuresAreReported) {
     for (int f = 0; f < 5; ++f) streamer.update(lookingDown(2048, 2048, 300.0 + f), vp, f / 60.0);
     EXPECT_FALSE(std::filesystem::exists(path)) << "visible before shutdown";
     streamer.shutdown();
-    EXPECT_TRUE(streamer.traceStatus().isOk()) << streamer.traceStatus().toString();
+    EXPECT_TRUE(streamer.traceStatus().ok()) << streamer.traceStatus().toString();
   }
   std::vector<TraceEvent> events;
-  ASSERT_TRUE(readTrace(path, &events).isOk());
+  ASSERT_TRUE(readTrace(path, &events).ok());
   EXPECT_GT(events.size(), 5u);
   StreamerConfig cfg;
   cfg.trace_path = "/nonexistent-dir/streamer.trace";

@@ -130,7 +130,7 @@ TEST(TileCli, AbsurdArgumentsAreRejected) {
                                   "--no-fsync", "--force", out});
     EXPECT_EQ(r.exit_code, 0) << order << ": " << r.output;
     std::unique_ptr<TileStoreReader> reader;
-    EXPECT_TRUE(TileStoreReader::open(out, &reader).isOk()) << order;
+    EXPECT_TRUE(TileStoreReader::open(out, &reader).ok()) << order;
   }
 }
 
@@ -146,7 +146,7 @@ TEST(TileCli, RefusesToOverwriteWithoutForce) {
   const RunResult r = runTiler({"--synthetic", "64x64", "--force", "--quiet", out});
   EXPECT_EQ(r.exit_code, 0) << r.output;
   std::unique_ptr<TileStoreReader> reader;
-  EXPECT_TRUE(TileStoreReader::open(out, &reader).isOk());
+  EXPECT_TRUE(TileStoreReader::open(out, &reader).ok());
 }
 
 TEST(TileCli, InterruptRemovesTemporaryFiles) {
@@ -213,7 +213,7 @@ TEST(TileCli, PeakMemoryStaysUnderBudgetForLargeSyntheticImage) {
   EXPECT_GT(peak, 0u);
   EXPECT_LT(peak, uint64_t(64) << 20) << "peak RSS " << peak / (1 << 20) << " MiB";
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("big.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("big.cst"), &reader).ok());
   EXPECT_EQ(reader->geometry().levelCount(), 8u);
 }
 
@@ -243,7 +243,7 @@ TEST(TileCli, NarrowBudgetSplitsIntoPanelsAndStillMatchesReference) {
     }
   }
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("p.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("p.cst"), &reader).ok());
   for (uint32_t l = 0; l < reader->geometry().levelCount(); ++l) {
     EXPECT_EQ(maxTileError(*reader, l, level), 0u) << "level " << l;
     level = referenceBoxDownsample(level);
@@ -262,10 +262,10 @@ TEST(TileCli, RealFilesTileAndVerify) {
     const RunResult r = runTiler({input, out, "--no-fsync", "--quiet"});
     ASSERT_EQ(r.exit_code, 0) << r.output;
     std::unique_ptr<TileStoreReader> reader;
-    ASSERT_TRUE(TileStoreReader::open(out, &reader).isOk());
+    ASSERT_TRUE(TileStoreReader::open(out, &reader).ok());
     std::vector<TileStoreReader::Problem> problems;
     const Status s = reader->verifyAll(&problems);
-    EXPECT_TRUE(s.isOk()) << name << ": " << s.toString();
+    EXPECT_TRUE(s.ok()) << name << ": " << s.toString();
     EXPECT_TRUE(problems.empty());
     RefImage level;
     ASSERT_TRUE(readImage8(input, &level)) << input;

@@ -264,7 +264,7 @@ TEST(TileCliHardening, NumbersAreDecimalAndMessagesArePrintable) {
   RunResult r = runTiler({"--synthetic", "64x64", "-q", "--zstd-level", "010", dir.file("a.cst")});
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(dir.file("a.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(dir.file("a.cst"), &reader).ok());
   EXPECT_EQ(reader->info().encoding.zstd_level, 10);
   r = runTiler({"--synthetic", "64x64", "-q", "--tile-size", "0100", dir.file("b.cst")});
   EXPECT_EQ(r.exit_code, 2) << "100 is not a power of two (octal 0100 would be 64): " << r.output;

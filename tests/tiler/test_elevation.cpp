@@ -25,8 +25,8 @@ std::vector<float> levelHeights(const TileStoreReader& reader, uint32_t level) {
   for (uint32_t ty = 0; ty < info.tiles_y; ++ty) {
     for (uint32_t tx = 0; tx < info.tiles_x; ++tx) {
       RawTile raw;
-      EXPECT_TRUE(reader.readRaw(TileKey{level, tx, ty}, &raw).isOk());
-      EXPECT_TRUE(decodeTileHeights(g, reader.info().encoding, reader.info().elevation, raw, tile).isOk());
+      EXPECT_TRUE(reader.readRaw(TileKey{level, tx, ty}, &raw).ok());
+      EXPECT_TRUE(decodeTileHeights(g, reader.info().encoding, reader.info().elevation, raw, tile).ok());
       for (uint32_t y = 0; y < g.tile_px; ++y) {
         const uint64_t gy = uint64_t(ty) * g.tile_px + y;
         if (gy >= info.height_px) break;
@@ -68,7 +68,7 @@ std::vector<double> readInput(const std::string& path, uint64_t* w, uint64_t* h)
 std::unique_ptr<TileStoreReader> openStore(const std::string& path) {
   std::unique_ptr<TileStoreReader> reader;
   const Status s = TileStoreReader::open(path, &reader);
-  EXPECT_TRUE(s.isOk()) << s.toString();
+  EXPECT_TRUE(s.ok()) << s.toString();
   return reader;
 }
 
@@ -98,7 +98,7 @@ void checkPyramid(const TileStoreReader& reader) {
     for (uint32_t ty = 0; ty < info.tiles_y; ++ty) {
       for (uint32_t tx = 0; tx < info.tiles_x; ++tx) {
         TileLocation loc;
-        ASSERT_TRUE(reader.locate(TileKey{l, tx, ty}, &loc).isOk());
+        ASSERT_TRUE(reader.locate(TileKey{l, tx, ty}, &loc).ok());
         if (l == 0) {
           EXPECT_EQ(loc.error, 0.0f);
         }

@@ -45,7 +45,7 @@ TEST(GeoReference, GeoTiffTagsGiveTransformAndEpsg) {
   }
   GeoReference geo;
   const Status s = readGeoTiffTags(dir.file("g.tif"), &geo);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   ASSERT_TRUE(geo.present);
   EXPECT_DOUBLE_EQ(geo.transform[0], 500000.0);
   EXPECT_DOUBLE_EQ(geo.transform[1], 30.0);
@@ -104,9 +104,9 @@ TEST(GeoReference, WorldFileCentreIsMovedToPixelCorner) {
   opt.output_path = dir.file("out.cst");
   opt.fsync = false;
   TilerSummary summary;
-  ASSERT_TRUE(tileImage(opt, &summary).isOk());
+  ASSERT_TRUE(tileImage(opt, &summary).ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).ok());
   const GeoReference& geo = reader->info().geo;
   ASSERT_TRUE(geo.present);
   EXPECT_DOUBLE_EQ(geo.transform[0], 999.0);
@@ -130,7 +130,7 @@ TEST(GeoReference, MalformedWorldFileIsAnError) {
 
 TEST(GeoReference, RealFilesKeepTransformAndCrs) {
   GeoReference geo;
-  ASSERT_TRUE(findGeoReference(bundledDataPath("autzen.jpg"), &geo).isOk());
+  ASSERT_TRUE(findGeoReference(bundledDataPath("autzen.jpg"), &geo).ok());
   ASSERT_TRUE(geo.present);
   // autzen.wld: 1 ft pixels, centre of pixel (0, 0) at (635615.9278659122, 853362.1430851521).
   EXPECT_DOUBLE_EQ(geo.transform[0], 635615.9278659122 - 0.5);
@@ -140,7 +140,7 @@ TEST(GeoReference, RealFilesKeepTransformAndCrs) {
 
   // RGB.byte.tif, values as gdalinfo prints them.
   CLIPSTREAM_REQUIRE_SHARED_DATA("RGB.byte.tif");
-  ASSERT_TRUE(findGeoReference(sharedDataPath("RGB.byte.tif"), &geo).isOk());
+  ASSERT_TRUE(findGeoReference(sharedDataPath("RGB.byte.tif"), &geo).ok());
   ASSERT_TRUE(geo.present);
   EXPECT_NEAR(geo.transform[0], 101985.0, 1e-6);
   EXPECT_NEAR(geo.transform[1], 300.0379266750948, 1e-9);
@@ -149,7 +149,7 @@ TEST(GeoReference, RealFilesKeepTransformAndCrs) {
   EXPECT_EQ(geo.crs, "EPSG:32618");
 
   CLIPSTREAM_REQUIRE_SHARED_DATA("mt_rainier_90m.tif");
-  ASSERT_TRUE(findGeoReference(sharedDataPath("mt_rainier_90m.tif"), &geo).isOk());
+  ASSERT_TRUE(findGeoReference(sharedDataPath("mt_rainier_90m.tif"), &geo).ok());
   ASSERT_TRUE(geo.present);
   EXPECT_EQ(geo.crs, "EPSG:4326");
 }

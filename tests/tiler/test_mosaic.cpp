@@ -113,7 +113,7 @@ class Mosaic : public ::testing::Test {
   void tile(const TilerOptions& o, TilerSummary* summary = nullptr) {
     TilerSummary local;
     const Status s = tileImage(o, summary ? summary : &local);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
   }
 
   void expectFailure(const std::vector<std::string>& args, const std::string& needle) {
@@ -138,8 +138,8 @@ TEST_F(Mosaic, SheetsGiveTheStoreOfTheWholeImage) {
   EXPECT_EQ(summary.gap_px, 0u);
   expectSameTiles(m_dir.file("whole.cst"), m_dir.file("mosaic.cst"));
   std::unique_ptr<TileStoreReader> whole, mosaic;
-  ASSERT_TRUE(TileStoreReader::open(m_dir.file("whole.cst"), &whole).isOk());
-  ASSERT_TRUE(TileStoreReader::open(m_dir.file("mosaic.cst"), &mosaic).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_dir.file("whole.cst"), &whole).ok());
+  ASSERT_TRUE(TileStoreReader::open(m_dir.file("mosaic.cst"), &mosaic).ok());
   ASSERT_TRUE(mosaic->info().geo.present);
   for (int i = 0; i < 6; ++i) {
     EXPECT_NEAR(mosaic->info().geo.transform[i], whole->info().geo.transform[i], 1e-6) << i;
@@ -279,7 +279,7 @@ TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
   std::unique_ptr<ImageSource> source;
   MosaicInfo info;
   const size_t base = openFiles();
-  ASSERT_TRUE(openMosaic(m_dir.file("many.txt"), std::nullopt, 0, &source, &info).isOk());
+  ASSERT_TRUE(openMosaic(m_dir.file("many.txt"), std::nullopt, 0, &source, &info).ok());
   EXPECT_EQ(openFiles(), base) << "sheets stay open after the mosaic is opened";
   ASSERT_EQ(source->info().width_px, 120u);
   ASSERT_EQ(source->info().height_px, 400u);
@@ -287,7 +287,7 @@ TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
   size_t most = 0;
   for (uint64_t y = 0; y < 400; y += 32) {
     const uint32_t rows = uint32_t(std::min<uint64_t>(32, 400 - y));
-    ASSERT_TRUE(source->readRows(y, rows, 0, 120, strip.data(), 120 * 3).isOk());
+    ASSERT_TRUE(source->readRows(y, rows, 0, 120, strip.data(), 120 * 3).ok());
     most = std::max(most, openFiles() - base);
     // The strip holds the sheets' pixels (row y + 5 of the image).
     EXPECT_EQ(strip[(5 * 120 + 50) * 3], m_image.at(50, y + 5, 0)) << y;
@@ -303,7 +303,7 @@ TEST_F(Mosaic, OnlyTheSheetsUnderAStripAreOpen) {
     const uint64_t bw = std::min<uint64_t>(64, 120 - bx);
     for (uint64_t y = 0; y < 400; y += 32) {
       const uint32_t rows = uint32_t(std::min<uint64_t>(32, 400 - y));
-      ASSERT_TRUE(source->readRows(y, rows, bx, bw, block.data(), 64 * 3).isOk());
+      ASSERT_TRUE(source->readRows(y, rows, bx, bw, block.data(), 64 * 3).ok());
       EXPECT_LE(openFiles() - base, 9u);
       for (uint64_t r = 0; r < rows; r += 7) {
         for (uint64_t x = 0; x < bw; x += 13) {
@@ -352,7 +352,7 @@ TEST_F(Mosaic, DemSheetsGiveTheWholeDemsElevationStore) {
   tile(run("whole.tif", "whole.cst", false));
   tile(run("dem.txt", "mosaic.cst", true));
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(m_dir.file("mosaic.cst"), &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(m_dir.file("mosaic.cst"), &reader).ok());
   EXPECT_TRUE(reader->info().elevation.present);
   EXPECT_EQ(reader->geometry().format, PixelFormat::kI16);
   expectSameTiles(m_dir.file("whole.cst"), m_dir.file("mosaic.cst"));
@@ -388,7 +388,7 @@ TEST_F(Mosaic, ShardedMosaicMergesToTheSingleRun) {
   m.fsync = false;
   MergeSummary ms;
   const Status s = mergeShards(m, &ms);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   expectSameTiles(single.output_path, m.output_path);
 }
 

@@ -49,7 +49,7 @@ TilerSummary tileWith(const std::string& in, const std::string& out, ImageReader
   o.memory_budget_bytes = budget_mb << 20;
   TilerSummary summary;
   const Status s = tileImage(o, &summary);
-  EXPECT_TRUE(s.isOk()) << in << ": " << s.toString();
+  EXPECT_TRUE(s.ok()) << in << ": " << s.toString();
   return summary;
 }
 
@@ -183,16 +183,16 @@ TEST(Readers, SpilledCoefficientsDecodeLikeHeldOnes) {
     read.memory_budget_bytes = budget_bytes;
     std::unique_ptr<ImageSource> src;
     const Status s = openImageFile(in, std::nullopt, &src, read);
-    EXPECT_TRUE(s.isOk()) << s.toString();
+    EXPECT_TRUE(s.ok()) << s.toString();
     std::vector<uint8_t> px(1600 * 2800 * 3);
     if (!s) return px;
     *decoder = src->info().decoder;
     for (uint64_t y = 0; y < 2800; y += 100) {
-      EXPECT_TRUE(src->readRows(y, 100, 0, 1600, px.data() + y * 4800, 4800).isOk());
+      EXPECT_TRUE(src->readRows(y, 100, 0, 1600, px.data() + y * 4800, 4800).ok());
     }
     // Back to the top: decoded again from the start, same rows.
     std::vector<uint8_t> again(4800 * 10);
-    EXPECT_TRUE(src->readRows(5, 10, 0, 1600, again.data(), 4800).isOk());
+    EXPECT_TRUE(src->readRows(5, 10, 0, 1600, again.data(), 4800).ok());
     EXPECT_TRUE(std::equal(again.begin(), again.end(), px.begin() + 5 * 4800));
     return px;
   };
@@ -258,7 +258,7 @@ TEST(Readers, DamagedTiffStripFailsTheRunNamingTheFile) {
   o.fsync = false;
   TilerSummary summary;
   const Status s = tileImage(o, &summary);
-  ASSERT_FALSE(s.isOk());
+  ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message.find("d.tif"), std::string::npos) << s.message;
   EXPECT_FALSE(std::filesystem::exists(dir.file("d.cst")));
 }

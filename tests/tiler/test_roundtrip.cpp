@@ -80,10 +80,10 @@ TEST_P(RoundTrip, EveryLevelMatchesReferenceBoxPyramid) {
   opt.fsync = false;
   TilerSummary summary;
   const Status s = tileImage(opt, &summary);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
 
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).ok());
   RefImage level = expectedLevel0(k);
   const uint32_t levels = reader->geometry().levelCount();
   ASSERT_EQ(levels, summary.levels);
@@ -130,7 +130,7 @@ TEST(Tiler, FloatInputIsClampedToUnitRangeAndScaled) {
   opt.tile_px = 64;
   opt.fsync = false;
   TilerSummary summary;
-  ASSERT_TRUE(tileImage(opt, &summary).isOk());
+  ASSERT_TRUE(tileImage(opt, &summary).ok());
   EXPECT_GT(summary.clamped_samples, 0u);
   RefImage ref;
   ref.width = 33, ref.height = 17, ref.channels = 3;
@@ -143,7 +143,7 @@ TEST(Tiler, FloatInputIsClampedToUnitRangeAndScaled) {
     }
   }
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).ok());
   EXPECT_LE(maxTileError(*reader, 0, ref), 1u);  // float rounding at .5 boundaries
 }
 
@@ -166,9 +166,9 @@ TEST(Tiler, LanczosLevelOneMatchesReferenceWithinOneCode) {
     opt.fsync = false;
     TilerSummary summary;
     const Status s = tileImage(opt, &summary);
-    ASSERT_TRUE(s.isOk()) << s.toString();
+    ASSERT_TRUE(s.ok()) << s.toString();
     std::unique_ptr<TileStoreReader> reader;
-    ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).isOk());
+    ASSERT_TRUE(TileStoreReader::open(opt.output_path, &reader).ok());
     EXPECT_EQ(reader->info().encoding.filter, DownsampleFilter::kLanczos3);
     RefImage l0;
     l0.width = 257, l0.height = 130, l0.channels = 3;

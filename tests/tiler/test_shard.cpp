@@ -34,7 +34,7 @@ std::vector<std::string> tileShards(const TilerOptions& base, uint32_t count, co
     o.shard_count = count;
     TilerSummary summary;
     const Status s = tileImage(o, &summary);
-    EXPECT_TRUE(s.isOk()) << s.toString();
+    EXPECT_TRUE(s.ok()) << s.toString();
     EXPECT_TRUE(summary.shard.present);
     parts.push_back(o.output_path);
   }
@@ -56,7 +56,7 @@ TEST(ShardPlan, BandsCoverTheImageInOrderAndDifferByAtMostOneBlockRow) {
     uint64_t smallest = UINT64_MAX, largest = 0;
     for (uint32_t k = 1; k <= n; ++k) {
       ShardPlan p;
-      ASSERT_TRUE(planShard(900, 1000, 64, k, n, &p).isOk()) << k << "/" << n;
+      ASSERT_TRUE(planShard(900, 1000, 64, k, n, &p).ok()) << k << "/" << n;
       EXPECT_EQ(p.y0_px, next_y) << k << "/" << n;
       EXPECT_EQ(p.y0_px % (uint64_t(64) << (p.owned_levels - 1)), 0u);
       next_y = p.y0_px + p.height_px;
@@ -68,7 +68,7 @@ TEST(ShardPlan, BandsCoverTheImageInOrderAndDifferByAtMostOneBlockRow) {
     EXPECT_EQ(next_y, 1000u) << n;
     if (n > 2) {
       ShardPlan p;
-      ASSERT_TRUE(planShard(900, 1000, 64, 1, n, &p).isOk());
+      ASSERT_TRUE(planShard(900, 1000, 64, 1, n, &p).ok());
       EXPECT_LE(largest - smallest, uint64_t(64) << (p.owned_levels - 1)) << n;
     }
   }
@@ -76,8 +76,8 @@ TEST(ShardPlan, BandsCoverTheImageInOrderAndDifferByAtMostOneBlockRow) {
   const Status s = planShard(900, 100, 64, 1, 3, &p);  // two tile rows
   EXPECT_EQ(s.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(s.message.find("only 2 tile rows"), std::string::npos) << s.message;
-  EXPECT_FALSE(planShard(900, 1000, 64, 0, 3, &p).isOk());
-  EXPECT_FALSE(planShard(900, 1000, 64, 4, 3, &p).isOk());
+  EXPECT_FALSE(planShard(900, 1000, 64, 0, 3, &p).ok());
+  EXPECT_FALSE(planShard(900, 1000, 64, 4, 3, &p).ok());
 }
 
 // N = 1..4 over 900x1000 in 64-px tiles (16 tile rows): N = 3 deals 4 block
@@ -86,12 +86,12 @@ TEST(ShardMerge, MergedShardsEqualTheSingleRunTileForTile) {
   TempDir dir("shard");
   const TilerOptions base = syntheticRun(900, 1000, dir.file("whole.cst"));
   TilerSummary whole;
-  ASSERT_TRUE(tileImage(base, &whole).isOk());
+  ASSERT_TRUE(tileImage(base, &whole).ok());
   for (uint32_t n = 1; n <= 4; ++n) {
     const std::vector<std::string> parts = tileShards(base, n, dir, "n" + std::to_string(n) + "_");
     const std::string merged = dir.file("merged" + std::to_string(n) + ".cst");
     const Status s = merge(parts, merged);
-    ASSERT_TRUE(s.isOk()) << n << ": " << s.toString();
+    ASSERT_TRUE(s.ok()) << n << ": " << s.toString();
     expectSameTiles(base.output_path, merged);
   }
 }
@@ -112,9 +112,9 @@ TEST(ShardMerge, FileInputEqualsTheSingleRun) {
   base.fsync = false;
   TilerSummary whole;
   const Status s = tileImage(base, &whole);
-  ASSERT_TRUE(s.isOk()) << s.toString();
+  ASSERT_TRUE(s.ok()) << s.toString();
   const std::vector<std::string> parts = tileShards(base, 3, dir);
-  ASSERT_TRUE(merge(parts, dir.file("merged.cst")).isOk());
+  ASSERT_TRUE(merge(parts, dir.file("merged.cst")).ok());
   expectSameTiles(base.output_path, dir.file("merged.cst"));
 }
 
@@ -122,7 +122,7 @@ TEST(ShardMerge, ProgramJoinsPartsInAnyOrder) {
   TempDir dir("shard");
   const TilerOptions base = syntheticRun(300, 700, dir.file("whole.cst"), 32);
   TilerSummary whole;
-  ASSERT_TRUE(tileImage(base, &whole).isOk());
+  ASSERT_TRUE(tileImage(base, &whole).ok());
   for (int k = 1; k <= 3; ++k) {
     const RunResult r = runTiler({"--synthetic", "300x700", "--tile-size", "32", "--no-fsync", "-q",
                                   "--shard", std::to_string(k) + "/3",
@@ -140,7 +140,7 @@ void expectMergeFails(const std::vector<std::string>& parts, const TempDir& dir,
                       const std::string& needle) {
   const std::vector<std::string> before = dir.entries();
   const Status s = merge(parts, dir.file("out.cst"));
-  EXPECT_FALSE(s.isOk());
+  EXPECT_FALSE(s.ok());
   EXPECT_NE(s.toString().find(needle), std::string::npos) << s.toString();
   EXPECT_EQ(dir.entries(), before) << "left behind in " << dir.path();
 }
@@ -178,11 +178,11 @@ TEST(ShardMerge, MissingDuplicateAndForeignShardsAreNamed) {
   const std::vector<std::string> a = tileShards(image("a.tif", 0), 3, dir, "a");
   const std::vector<std::string> b = tileShards(image("b.tif", 1), 3, dir, "b");
   expectMergeFails({a[0], b[1], a[2]}, dir, "different input");
-  ASSERT_TRUE(merge(a, dir.file("a_merged.cst")).isOk());
+  ASSERT_TRUE(merge(a, dir.file("a_merged.cst")).ok());
 
   // A whole store is not a part.
   TilerSummary summary;
-  ASSERT_TRUE(tileImage(base, &summary).isOk());
+  ASSERT_TRUE(tileImage(base, &summary).ok());
   expectMergeFails({parts[0], base.output_path, parts[2]}, dir, "not a partial store");
   // The output may not be one of the parts, even with overwrite.
   MergeOptions m;
@@ -211,7 +211,7 @@ TEST(ShardMerge, CorruptOrTruncatedShardFailsNamingIt) {
   expectMergeFails(parts, dir, "part2.cst");
 
   writeBytes(parts[1], good);
-  ASSERT_TRUE(merge(parts, dir.file("out.cst")).isOk());
+  ASSERT_TRUE(merge(parts, dir.file("out.cst")).ok());
 }
 
 TEST(ShardMerge, CancelledMergeLeavesNothingAndProgressCountsEveryTile) {
@@ -234,7 +234,7 @@ TEST(ShardMerge, CancelledMergeLeavesNothingAndProgressCountsEveryTile) {
     last = done;
     total = all;
   };
-  ASSERT_TRUE(mergeShards(m, &summary).isOk());
+  ASSERT_TRUE(mergeShards(m, &summary).ok());
   EXPECT_EQ(last, total);
   EXPECT_EQ(summary.copied_tiles + summary.built_tiles, total);
   EXPECT_GT(summary.built_tiles, 0u);
@@ -269,12 +269,12 @@ TEST(ShardStore, ShardRecordRoundTripsThroughTheStore) {
   o.shard_index = 2;
   o.shard_count = 3;
   TilerSummary summary;
-  ASSERT_TRUE(tileImage(o, &summary).isOk());
+  ASSERT_TRUE(tileImage(o, &summary).ok());
   std::unique_ptr<TileStoreReader> reader;
-  ASSERT_TRUE(TileStoreReader::open(o.output_path, &reader).isOk());
+  ASSERT_TRUE(TileStoreReader::open(o.output_path, &reader).ok());
   const ShardInfo& sh = reader->info().shard;
   ShardPlan plan;
-  ASSERT_TRUE(planShard(300, 500, 64, 2, 3, &plan).isOk());
+  ASSERT_TRUE(planShard(300, 500, 64, 2, 3, &plan).ok());
   EXPECT_TRUE(sh.present);
   EXPECT_EQ(sh.index, 2u);
   EXPECT_EQ(sh.count, 3u);
@@ -289,7 +289,7 @@ TEST(ShardStore, ShardRecordRoundTripsThroughTheStore) {
   for (size_t n = 0; n < bytes.size(); n += std::max<size_t>(1, bytes.size() / 97)) {
     writeBytes(dir.file("cut.cst"), std::span(bytes).first(n));
     std::unique_ptr<TileStoreReader> cut;
-    EXPECT_FALSE(TileStoreReader::open(dir.file("cut.cst"), &cut).isOk()) << n;
+    EXPECT_FALSE(TileStoreReader::open(dir.file("cut.cst"), &cut).ok()) << n;
   }
 }
 

@@ -150,7 +150,7 @@ uint32_t maxTileError(const TileStoreReader& reader, uint32_t level, const RefIm
   for (uint32_t ty = 0; ty < info.tiles_y; ++ty) {
     for (uint32_t tx = 0; tx < info.tiles_x; ++tx) {
       const Status s = reader.readTile({level, tx, ty}, &px);
-      EXPECT_TRUE(s.isOk()) << s.toString();
+      EXPECT_TRUE(s.ok()) << s.toString();
       if (!s) return UINT32_MAX;
       for (uint32_t y = 0; y < t; ++y) {
         for (uint32_t x = 0; x < t; ++x) {
@@ -203,8 +203,8 @@ RunResult runMerge(const std::vector<std::string>& args) {
 
 void expectSameTiles(const std::string& expected_path, const std::string& actual_path) {
   std::unique_ptr<TileStoreReader> a, b;
-  ASSERT_TRUE(TileStoreReader::open(expected_path, &a).isOk()) << expected_path;
-  ASSERT_TRUE(TileStoreReader::open(actual_path, &b).isOk()) << actual_path;
+  ASSERT_TRUE(TileStoreReader::open(expected_path, &a).ok()) << expected_path;
+  ASSERT_TRUE(TileStoreReader::open(actual_path, &b).ok()) << actual_path;
   const PyramidGeometry& ga = a->geometry();
   const PyramidGeometry& gb = b->geometry();
   ASSERT_EQ(ga.width_px, gb.width_px);
@@ -217,8 +217,8 @@ void expectSameTiles(const std::string& expected_path, const std::string& actual
     for (uint32_t y = 0; y < ga.levels[l].tiles_y; ++y) {
       for (uint32_t x = 0; x < ga.levels[l].tiles_x; ++x) {
         RawTile ra, rb;
-        ASSERT_TRUE(a->readRaw({l, x, y}, &ra).isOk());
-        ASSERT_TRUE(b->readRaw({l, x, y}, &rb).isOk());
+        ASSERT_TRUE(a->readRaw({l, x, y}, &ra).ok());
+        ASSERT_TRUE(b->readRaw({l, x, y}, &rb).ok());
         const bool same =
             ra.location.constant == rb.location.constant &&
             std::memcmp(ra.location.constant_pixel, rb.location.constant_pixel, 8) == 0 &&

@@ -97,7 +97,7 @@ Status readWorldFile(const std::string& path, GeoReference* out) {
   out->transform[3] = f - 0.5 * d - 0.5 * e;
   out->transform[4] = d;
   out->transform[5] = e;
-  return Status::ok();
+  return okStatus();
 }
 
 namespace {
@@ -146,13 +146,13 @@ Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* 
   } else if (head[0] == 'M' && head[1] == 'M') {
     be = true;
   } else {
-    return Status::ok();  // not a TIFF: no tags
+    return okStatus();  // not a TIFF: no tags
   }
   in.clear();
   TiffBytes tb(in, size, be);
   const uint64_t magic = tb.decode(head + 2, 2);
   const bool big = magic == 43;
-  if (magic != 42 && !big) return Status::ok();
+  if (magic != 42 && !big) return okStatus();
   const uint64_t ifd = big ? tb.decode(head + 8, 8) : tb.decode(head + 4, 4);
   uint8_t count_bytes[8];
   if (!tb.read(ifd, count_bytes, big ? 8 : 2)) return bad(path, "first IFD offset past end of file");
@@ -252,7 +252,7 @@ Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* 
     t[0] = x - i * scale[0];
     t[3] = y + j * scale[1];
   } else {
-    return Status::ok();  // no transform tags
+    return okStatus();  // no transform tags
   }
   if (raster_type == 2) {
     // PixelIsPoint: tie points name pixel centres; move to the corner as GDAL does.
@@ -266,7 +266,7 @@ Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* 
   } else if (model_type == 2 && geographic != 0 && geographic != kUserDefined) {
     out->crs = "EPSG:" + std::to_string(geographic);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -321,7 +321,7 @@ Status findGeoReference(const std::string& path, GeoReference* out) {
       out->crs = wkt;
     }
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -59,7 +59,7 @@ Status HeightSource::readHeights(uint64_t y0, uint64_t h, uint64_t x0, uint64_t 
     (*valid)[i] = !isNodata(m_conversion, v);
     (*out)[i] = float(v);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 double HeightSource::fill(const std::vector<float>& heights, const std::vector<uint8_t>& valid,
@@ -147,7 +147,7 @@ Status HeightSource::readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t 
       ++m_filled;
     }
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status scanHeightRange(ImageSource* source, const HeightConversion& conversion, double* min,
@@ -173,7 +173,7 @@ Status scanHeightRange(ImageSource* source, const HeightConversion& conversion, 
   }
   *min = lo;
   *max = hi;
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -37,7 +37,7 @@ Status loadOiioModule(OpenImageFileFn* out) {
   std::lock_guard lock(mutex);
   if (cached != nullptr) {
     *out = cached;
-    return Status::ok();
+    return okStatus();
   }
   std::vector<std::string> candidates;
   if (const char* env = std::getenv("CLIPSTREAM_TILER_OIIO_MODULE"); env != nullptr && *env) {
@@ -66,7 +66,7 @@ Status loadOiioModule(OpenImageFileFn* out) {
     }
     cached = fn;  // the module stays loaded for the life of the process
     *out = fn;
-    return Status::ok();
+    return okStatus();
   }
   return Status::error(ErrorCode::kUnsupported,
                        std::string("cannot load the image reader module ") + kOiioModuleFileName +
@@ -98,7 +98,7 @@ class SyntheticSource final : public ImageSource {
       uint8_t* out = dst + size_t(r) * dst_stride;
       for (uint64_t x = 0; x < width; ++x) syntheticPixel(x0 + x, y0 + r, m_info.format, out + x * bpp);
     }
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -166,7 +166,7 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
   info.tiled = true;
   info.format = format;
   *out = std::make_unique<SyntheticSource>(info);
-  return Status::ok();
+  return okStatus();
 }
 
 Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,

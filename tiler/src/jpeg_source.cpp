@@ -254,7 +254,7 @@ class Decoder {
       return failure("cannot open image");
     }
     if (m_err.warned) return damaged();
-    return Status::ok();
+    return okStatus();
   }
 
   jpeg_decompress_struct& cinfo() { return m_cinfo; }
@@ -276,7 +276,7 @@ class Decoder {
                                                 : std::string("cannot decode image"));
     }
     if (m_err.warned) return damaged();
-    return Status::ok();
+    return okStatus();
   }
 
   uint64_t nextRow() const { return m_cinfo.output_scanline; }
@@ -288,7 +288,7 @@ class Decoder {
       return failure("cannot read row " + std::to_string(m_cinfo.output_scanline));
     }
     if (m_err.warned) return damaged();
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -333,7 +333,7 @@ Status openJpegImage(const std::string& path, std::optional<PixelFormat> forced,
     space = JCS_RGB;
   } else {
     *covered = false;  // CMYK, YCCK: OpenImageIO's
-    return Status::ok();
+    return okStatus();
   }
   if (c.image_width == 0 || c.image_height == 0) {
     return Status::error(ErrorCode::kInvalidArgument,
@@ -373,7 +373,7 @@ Status openJpegImage(const std::string& path, std::optional<PixelFormat> forced,
   };
   *out = std::make_unique<SequentialSource<Decoder>>(path, std::move(info), SampleKind::kU8,
                                                      std::move(decoder), restart);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

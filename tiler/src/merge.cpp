@@ -289,7 +289,7 @@ Status mergeImpl(const MergeOptions& o, MergeSummary* summary) {
   summary->output_bytes = std::filesystem::file_size(o.output_path, ec);
   summary->geo = first.geo;
   summary->wall_s = std::chrono::duration<double>(Clock::now() - start).count();
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace

@@ -123,7 +123,7 @@ class MosaicSource final : public ImageSource {
         close(s);
       }
     }
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -241,7 +241,7 @@ Status parseVrt(const std::string& path, const std::string& text, std::vector<Li
     }
   }
   *out = std::move(first_band);
-  return Status::ok();
+  return okStatus();
 }
 
 Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
@@ -272,7 +272,7 @@ Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
         return Status::error(ErrorCode::kInvalidArgument,
                              list_path + ": the VRT has no SimpleSource, so no sheets");
       }
-      return Status::ok();
+      return okStatus();
     }
     in.clear();
     in.seekg(0);
@@ -303,7 +303,7 @@ Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
     return Status::error(ErrorCode::kInvalidArgument,
                          list_path + ": the mosaic list names no sheets (one image path a line)");
   }
-  return Status::ok();
+  return okStatus();
 }
 
 // The gap pixel in the mosaic's format, or an error for a value it cannot hold.
@@ -431,7 +431,7 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   for (const Sheet& sh : sheets) mosaic->sheets.push_back(sh.path);
   *out = std::make_unique<MosaicSource>(std::move(sheets), std::move(info), format,
                                         std::move(fill_pixel), read);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -453,7 +453,7 @@ Status openMosaic(const std::string& list_path, std::optional<PixelFormat> force
       std::fill(px->begin(), px->end(), uint8_t(fill));
       if (format == PixelFormat::kRGBA8) (*px)[3] = 0;
     }
-    return Status::ok();
+    return okStatus();
   }, out, mosaic, read);
 }
 
@@ -481,7 +481,7 @@ Status openHeightMosaic(const std::string& list_path, PixelFormat native, double
     } else {
       return Status::error(ErrorCode::kInvalidArgument, "heights are I16, R16 or F32");
     }
-    return Status::ok();
+    return okStatus();
   }, out, mosaic, read);
 }
 

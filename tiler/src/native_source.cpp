@@ -12,7 +12,7 @@ namespace clipstream {
 Status openInputFile(const std::string& path, std::FILE** out) {
   *out = std::fopen(path.c_str(), "rb");
   if (*out == nullptr) return Status::error(ErrorCode::kIo, path + ": cannot open: " + std::strerror(errno));
-  return Status::ok();
+  return okStatus();
 }
 
 uint16_t exifOrientation(const uint8_t* data, size_t size) {
@@ -49,7 +49,7 @@ Status openNativeImage(const std::string& path, std::optional<PixelFormat> force
     std::ifstream in(path, std::ios::binary);
     if (!in) return Status::error(ErrorCode::kIo, path + ": cannot open: " + std::strerror(errno));
     in.read(reinterpret_cast<char*>(head.data()), head.size());
-    if (in.gcount() < 4) return Status::ok();  // too short for any signature: OpenImageIO says why
+    if (in.gcount() < 4) return okStatus();  // too short for any signature: OpenImageIO says why
   }
   const auto starts = [&](std::initializer_list<uint8_t> sig) {
     return std::equal(sig.begin(), sig.end(), head.begin());
@@ -63,7 +63,7 @@ Status openNativeImage(const std::string& path, std::optional<PixelFormat> force
   if (starts({0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'})) {
     return openPngImage(path, forced, read, out, covered);
   }
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

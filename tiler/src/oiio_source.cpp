@@ -58,7 +58,7 @@ class OiioSource final : public ImageSource {
         return readError(yb, yb + int(rows));
       }
       if (m_input->has_error()) return damaged();
-      return Status::ok();
+      return okStatus();
     }
     for (uint32_t done = 0; done < rows;) {
       const uint32_t n = std::min(chunk_rows, rows - done);
@@ -75,7 +75,7 @@ class OiioSource final : public ImageSource {
       }
       done += n;
     }
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -129,7 +129,7 @@ class OiioSource final : public ImageSource {
                            ((y - band_y0) * (ax1 - ax0) + (x0 - ax0)) * native_pixel;
       convertInto(src, width, fast_copy, dst + size_t(y - y0) * dst_stride);
     }
-    return Status::ok();
+    return okStatus();
   }
 
   uint64_t m_band_y0 = UINT64_MAX, m_band_x0 = 0, m_band_x1 = 0;
@@ -208,7 +208,7 @@ Status openOiio(const std::string& path, std::optional<PixelFormat> forced,
   const std::string fmt_name = input->format_name();
   info.sequential_only = !info.tiled && fmt_name != "tiff";
   *out = std::make_unique<OiioSource>(path, std::move(input), info, kind, read_type);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace

@@ -60,7 +60,7 @@ class Decoder {
         })) {
       return failure("cannot open image");
     }
-    return Status::ok();
+    return okStatus();
   }
 
   png_structp png() { return m_png; }
@@ -74,7 +74,7 @@ class Decoder {
         })) {
       return failure("cannot decode image");
     }
-    return Status::ok();
+    return okStatus();
   }
 
   uint64_t nextRow() const { return m_next_row; }
@@ -84,7 +84,7 @@ class Decoder {
       return failure("cannot read row " + std::to_string(m_next_row));
     }
     ++m_next_row;
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -135,7 +135,7 @@ Status openPngImage(const std::string& path, std::optional<PixelFormat> forced,
       png_get_interlace_type(png, pinfo) != PNG_INTERLACE_NONE ||
       png_get_valid(png, pinfo, PNG_INFO_tRNS) != 0) {
     *covered = false;
-    return Status::ok();
+    return okStatus();
   }
   const SampleKind kind = depth == 16 ? SampleKind::kU16 : SampleKind::kU8;
   SourceInfo info;
@@ -165,7 +165,7 @@ Status openPngImage(const std::string& path, std::optional<PixelFormat> forced,
   };
   *out = std::make_unique<SequentialSource<Decoder>>(path, std::move(info), kind, std::move(decoder),
                                                      restart);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

@@ -62,7 +62,7 @@ class SequentialSource final : public ImageSource {
                          &m_info.clamped_samples);
       }
     }
-    return Status::ok();
+    return okStatus();
   }
 
  private:

@@ -37,7 +37,7 @@ Status planShard(uint64_t width_px, uint64_t height_px, uint32_t tile_px, uint32
   out->owned_levels = a + 1;
   out->y0_px = r0 * block_px;
   out->height_px = std::min(r1 * block_px, height_px) - out->y0_px;
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

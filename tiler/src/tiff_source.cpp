@@ -75,7 +75,7 @@ Status openHandle(const std::string& path, Handle* h) {
                                              decoderMessage(h->messages, "not a TIFF libtiff can read"));
   }
   h->messages.clear();
-  return Status::ok();
+  return okStatus();
 }
 
 // Runs tasks on the calling thread and up to `extra` threads of its own,
@@ -189,7 +189,7 @@ class TiffSource final : public ImageSource {
     if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
       return Status::error(ErrorCode::kOutOfRange, m_path + ": row request outside the image");
     }
-    if (rows == 0 || width == 0) return Status::ok();
+    if (rows == 0 || width == 0) return okStatus();
     const size_t np = m_layout.native_pixel;
     if (m_layout.scanlines) {
       m_row.resize(size_t(m_info.width_px) * np);
@@ -200,7 +200,7 @@ class TiffSource final : public ImageSource {
         }
         convert(m_row.data() + x0 * np, width, dst + size_t(r) * dst_stride);
       }
-      return Status::ok();
+      return okStatus();
     }
     Status s = ensureBand(y0, y0 + rows, x0, x0 + width);
     if (!s) return s;
@@ -209,7 +209,7 @@ class TiffSource final : public ImageSource {
       const uint8_t* src = m_band.data() + size_t(y0 + r - m_band_y0) * stride + (x0 - m_band_x0) * np;
       convert(src, width, dst + size_t(r) * dst_stride);
     }
-    return Status::ok();
+    return okStatus();
   }
 
  private:
@@ -244,7 +244,7 @@ class TiffSource final : public ImageSource {
     const uint64_t bx0 = m_layout.tiled ? x0 / cw * cw : 0;
     const uint64_t bx1 = m_layout.tiled ? std::min((x1 + cw - 1) / cw * cw, W) : W;
     if (m_band_valid && by0 >= m_band_y0 && by1 <= m_band_y1 && bx0 == m_band_x0 && bx1 == m_band_x1) {
-      return Status::ok();
+      return okStatus();
     }
     const size_t np = m_layout.native_pixel;
     const size_t stride = size_t(bx1 - bx0) * np;
@@ -277,7 +277,7 @@ class TiffSource final : public ImageSource {
     for (Status& s : results)
       if (!s) return std::move(s);
     m_band_valid = true;
-    return Status::ok();
+    return okStatus();
   }
 
   // Decodes the strip or tile whose first pixel is (x, y) into the band.
@@ -304,7 +304,7 @@ class TiffSource final : public ImageSource {
         return readError(h, "strip " + std::to_string(strip) + " (rows " + std::to_string(y) + "-" +
                                 std::to_string(y + rows - 1) + ")");
       }
-      return Status::ok();
+      return okStatus();
     }
     const size_t tile_bytes = size_t(m_layout.chunk_w) * m_layout.chunk_h * np;
     std::vector<uint8_t>& scratch = m_scratch[worker];
@@ -320,7 +320,7 @@ class TiffSource final : public ImageSource {
     for (uint64_t r = 0; r < rows; ++r) {
       std::memcpy(at + r * stride, scratch.data() + r * m_layout.chunk_w * np, cols * np);
     }
-    return Status::ok();
+    return okStatus();
   }
 
   std::string m_path;
@@ -388,7 +388,7 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
   }
   if (!ok) {
     *covered = false;
-    return Status::ok();
+    return okStatus();
   }
   if (layout.jpeg_rgb) TIFFSetField(t, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
   layout.native_pixel = size_t(bits / 8) * spp;
@@ -400,7 +400,7 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
     if (tw == 0 || th == 0 || size_t(tw) * th * layout.native_pixel > kMaxChunkBytes ||
         TIFFTileSize64(t) != uint64_t(tw) * th * layout.native_pixel) {
       *covered = false;
-      return Status::ok();
+      return okStatus();
     }
     layout.chunk_w = tw, layout.chunk_h = th;
   } else {
@@ -411,7 +411,7 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
     layout.scanlines = uint64_t(rps) * w * layout.native_pixel > kMaxChunkBytes;
     if (TIFFScanlineSize64(t) != uint64_t(w) * layout.native_pixel) {
       *covered = false;
-      return Status::ok();
+      return okStatus();
     }
   }
 
@@ -432,7 +432,7 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
   threads = std::clamp(threads, 1u, kMaxDecodeThreads);
   if (layout.scanlines) threads = 1;
   *out = std::make_unique<TiffSource>(path, std::move(info), layout, std::move(first), threads);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace clipstream

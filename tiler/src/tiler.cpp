@@ -115,7 +115,7 @@ class ErrorSlot {
  public:
   void set(Status s) {
     std::lock_guard lock(m_mutex);
-    if (m_status.isOk()) m_status = std::move(s);
+    if (m_status.ok()) m_status = std::move(s);
     m_failed.store(true, std::memory_order_release);
   }
   bool failed() const { return m_failed.load(std::memory_order_acquire); }
@@ -180,7 +180,7 @@ Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned thre
       out->blocks_x = (g.width_px + panel - 1) / panel;
       out->blocks_y = (g.height_px + panel - 1) / panel;
       out->estimate_bytes = need;
-      return Status::ok();
+      return okStatus();
     }
     if (need_single) break;
   }
@@ -257,7 +257,7 @@ Status hashFileSample(const std::string& path, Fnv1a* h) {
   const bool failed = std::ferror(f) != 0;
   std::fclose(f);
   if (failed) return Status::error(ErrorCode::kIo, path + ": read failed while fingerprinting it");
-  return Status::ok();
+  return okStatus();
 }
 
 // What a shard's tiles depend on: the input (sampled, above), its size and
@@ -294,7 +294,7 @@ Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoRef
   h.text(geo.crs);
   h.u64(o.shard_count);
   *out = h.h;
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace
@@ -389,7 +389,7 @@ Status validateOptions(const TilerOptions& o) {
                          std::string("--format ") + pixelFormatName(*o.format) +
                              " holds heights, not colour");
   }
-  return Status::ok();
+  return okStatus();
 }
 
 namespace {
@@ -449,7 +449,7 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
                            o.input_path + ": --height-step applies to elevation stores, and this "
                                           "input is tiled as colour (use --layer elevation)");
     }
-    return Status::ok();
+    return okStatus();
   }
   if (first.input_channels != 1) {
     return Status::error(ErrorCode::kUnsupported,
@@ -548,7 +548,7 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
                                 ": the DEM has no georeference; a scene will stretch it over the "
                                 "colour layer's extent");
   }
-  return Status::ok();
+  return okStatus();
 }
 
 Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
@@ -966,7 +966,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   summary->encode_s = encode_s;
   summary->peak_rss_bytes = peakRssBytes();
   summary->wall_s = secondsSince(start);
-  return Status::ok();
+  return okStatus();
 }
 
 }  // namespace

@@ -44,7 +44,7 @@ Status freePort(uint16_t* port) {
   }
   *port = ntohs(addr.sin_port);
   ::close(fd);
-  return Status::ok();
+  return okStatus();
 }
 
 int connectLoopback(uint16_t port) {
@@ -121,7 +121,7 @@ Status NginxServer::start(const std::string& work_dir, const std::string& root_d
   }
   if (!status) return status;
   *out = std::move(server);
-  return Status::ok();
+  return okStatus();
 }
 
 Status NginxServer::launch() {
@@ -184,7 +184,7 @@ Status NginxServer::launch() {
     const int fd = connectLoopback(m_port);
     if (fd >= 0) {
       ::close(fd);
-      return Status::ok();
+      return okStatus();
     }
     ::usleep(10000);
   }
@@ -205,7 +205,7 @@ void NginxServer::stop() {
 }
 
 Status NginxServer::restart() {
-  if (m_pid > 0) return Status::ok();
+  if (m_pid > 0) return okStatus();
   return launch();
 }
 
@@ -278,7 +278,7 @@ Status DelayProxy::start(uint16_t upstream_port, double delay_ms, std::unique_pt
   DelayProxy* self = proxy.get();
   proxy->m_acceptor = std::thread([self] { self->acceptLoop(); });
   *out = std::move(proxy);
-  return Status::ok();
+  return okStatus();
 }
 
 DelayProxy::~DelayProxy() {

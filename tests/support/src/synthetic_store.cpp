@@ -188,7 +188,7 @@ Status writeSyntheticStore(const std::string& path, const PyramidGeometry& geome
                            const WriterOptions& options, ConstantTiles constant) {
   return writeStore(path, geometry, options, [&](const TileKey& key, std::vector<uint8_t>* pixels) {
     *pixels = syntheticTile(geometry, key, constant);
-    return Status::ok();
+    return okStatus();
   });
 }
 

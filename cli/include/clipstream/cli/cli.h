@@ -30,9 +30,14 @@ constexpr int kExitCorrupt = 3;  // clipstream-info: corruption found
 constexpr int kExitSignalBase = 128;  // 128 + N: stopped by signal N (INT 130, TERM 143, HUP 129)
 
 // Parses the command line. Returns nullopt to go on, or the exit code to
-// return now: 0 after --help, kExitUsage after a mistake (printed on stderr
-// as "PROGRAM: <problem>" with a pointer to --help).
+// return now: 0 after --help or --version, kExitUsage after a mistake
+// (printed on stderr as "PROGRAM: <problem>" with a pointer to --help).
+// Adds --version (versionText()) and shows every option's default in
+// --help: the value its variable holds when parse() is called.
 std::optional<int> parse(CLI::App& app, int argc, char** argv);
+
+// "PROGRAM VERSION", e.g. "clipstream-fly 0.1.0": the project's version.
+std::string versionText(const CLI::App& app);
 
 // "PROGRAM: <message>" on stderr, one line: control bytes (from file names,
 // file contents, option values) shown as '?', cut at kMaxMessageBytes.

@@ -142,6 +142,10 @@ struct FlightRun {
   uint32_t garbage_pixels_max = 0;       // worst checked frame
   int final_max_abs_error = -1;          // last frame against the reference (-1: not compared)
   uint64_t tile_failures = 0;            // streamer failures + preload failures
+  // The stores read over HTTP (colour and elevation; the reference's reads
+  // of the same store included): requests, bytes, retries, disk cache.
+  // All zero for local stores.
+  RemoteStats remote;
   Status trace_status;                   // Streamer::traceStatus() after the streamer stopped
   uint32_t frames_with_holes = 0;        // judged frames with hole pixels
   uint32_t ground_truth_frames = 0;

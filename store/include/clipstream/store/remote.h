@@ -90,6 +90,20 @@ struct RemoteStats {
   uint64_t disk_cache_hits = 0;     // served from the folder, checksum verified
   uint64_t disk_cache_misses = 0;   // not there: read from the server, then kept
   uint64_t disk_cache_dropped = 0;  // there but torn or damaged: removed, read again
+
+  // The sum of two stores' figures (a colour and an elevation store).
+  RemoteStats& operator+=(const RemoteStats& o) {
+    requests += o.requests;
+    retries += o.retries;
+    bytes += o.bytes;
+    failures += o.failures;
+    http2_requests += o.http2_requests;
+    connections += o.connections;
+    disk_cache_hits += o.disk_cache_hits;
+    disk_cache_misses += o.disk_cache_misses;
+    disk_cache_dropped += o.disk_cache_dropped;
+    return *this;
+  }
 };
 
 }  // namespace clipstream

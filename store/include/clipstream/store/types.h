@@ -115,17 +115,23 @@ enum class ErrorCode : uint32_t {
 const char* errorCodeName(ErrorCode code);
 
 // Result of a fallible call: a code plus a message that names the problem
-// (file, tile, field) in words a user can act on.
+// (file, tile, field) in words a user can act on. Check it with ok() (or
+// in a condition: `if (!status)`); a success is okStatus(), a failure
+// Status::error(). No static member reads like a query: `status.ok()` is
+// always the question "did it succeed" (tests/store/test_format.cpp pins
+// it at compile time).
 struct [[nodiscard]] Status {
   ErrorCode code = ErrorCode::kOk;
   std::string message;
 
-  static Status ok() { return {}; }
   static Status error(ErrorCode c, std::string msg) { return {c, std::move(msg)}; }
-  bool isOk() const { return code == ErrorCode::kOk; }
-  explicit operator bool() const { return isOk(); }
+  [[nodiscard]] bool ok() const { return code == ErrorCode::kOk; }
+  explicit operator bool() const { return ok(); }
   std::string toString() const;  // "corrupt tile: level 3 tile (4, 7): checksum mismatch"
 };
+
+// A success.
+inline Status okStatus() { return {}; }
 
 // Untrusted text (from a file, a command line) made safe to show on a
 // terminal or in a message: C0 and C1 controls (newlines, escapes, NUL),
