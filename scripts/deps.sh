@@ -6,7 +6,8 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config
-  dpkg-dev file  # the Debian package: dpkg-shlibdeps, and CPack finds ELF files with file
+  dpkg-dev file  # the Debian packages: dpkg-shlibdeps, and CPack finds ELF files with file
+  help2man lintian bash-completion  # manual pages, the packages' check, the completion's test
   libopenimageio-dev libzstd-dev libxxhash-dev
   libtiff-dev libjpeg62-turbo-dev libpng-dev  # the tiler reads TIFF, JPEG and PNG without OpenImageIO
   libcurl4-openssl-dev  # stores read over HTTP(S)
@@ -17,6 +18,7 @@ packages=(
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libgtest-dev libgmock-dev libbenchmark-dev
   gnuplot-nox xvfb xauth
+  xdotool               # clipstream-view's keys, pressed in the virtual X server by its test
   clang libclang-rt-dev
 )
 if [[ "${1:-}" == "--bench" ]]; then

@@ -25,7 +25,8 @@ cmake --build build -j "$jobs" --target installables
 # again in two shards and join them with the installed clipstream-merge; build
 # examples/embed against the prefix with find_package(clipstream) and fly it
 # headless over that store; link it again from pkg-config's flags alone and
-# fly it over the procedural texture; build the Debian package and list it.
+# fly it over the procedural texture; build the Debian packages and check
+# their layout, the unpacked programs and lintian (scripts/check_packages.sh).
 echo "== Install, embedding example (find_package, pkg-config), Debian package =="
 prefix=$(mktemp -d)
 trap 'rm -rf "$prefix"' EXIT
@@ -42,15 +43,13 @@ cmake -S examples/embed -B build/embed -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInf
   -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
 cmake --build build/embed
 build/embed/clipstream-embed "$prefix/autzen.cst"
-pc_flags=$(PKG_CONFIG_PATH="$prefix/lib/pkgconfig" pkg-config --cflags --libs clipstream)
+pc_flags=$(PKG_CONFIG_PATH="$prefix/lib/$(dpkg-architecture -qDEB_HOST_MULTIARCH)/pkgconfig" \
+  pkg-config --cflags --libs clipstream)
 echo "pkg-config --cflags --libs clipstream: $pc_flags"
 # shellcheck disable=SC2086  # the flags are words
 c++ -std=c++20 examples/embed/main.cpp $pc_flags -o build/embed/clipstream-embed-pkgconfig
 build/embed/clipstream-embed-pkgconfig --frames 60
-rm -f build/clipstream_*.deb
-(cd build && cpack -G DEB) | grep -F 'package:'
-dpkg-deb --field build/clipstream_*.deb Package Version Maintainer Depends
-dpkg-deb --contents build/clipstream_*.deb
+scripts/check_packages.sh build
 rm -rf "$prefix"
 trap - EXIT
 

@@ -60,6 +60,21 @@ bool plainNumber(const std::string& text) {
 
 std::string quotedValue(const std::string& text) { return "'" + printableText(text, 40) + "'"; }
 
+// CLI11's help, except that a positional taking one or two words ("INPUT
+// OUTPUT", expected(1, 2)) reads as its name in the usage line, not
+// "INPUT OUTPUT(1x)"; its description says which word may be left out.
+class Formatter : public CLI::Formatter {
+ public:
+  std::string make_option_usage(const CLI::Option* opt) const override {
+    const int most = opt->get_expected_max();
+    if (most > 1 && most < CLI::detail::expected_max_vector_size) {
+      const std::string name = make_option_name(opt, true);
+      return opt->get_required() ? name : "[" + name + "]";
+    }
+    return CLI::Formatter::make_option_usage(opt);
+  }
+};
+
 }  // namespace
 
 std::string versionText(const CLI::App& app) {
@@ -71,8 +86,11 @@ std::optional<int> parse(CLI::App& app, int argc, char** argv) {
   // value its variable holds before parsing; flags and empty values show
   // none).
   if (app.get_option_no_throw("--version") == nullptr) app.set_version_flag("--version", versionText(app));
+  app.formatter(std::make_shared<Formatter>());
   for (CLI::Option* option : app.get_options()) {
-    if (option->get_type_size() != 0) option->capture_default_str();
+    if (option->get_type_size() == 0 || !option->nonpositional()) continue;  // flags, positionals
+    option->capture_default_str();
+    if (option->get_default_str() == "[]") option->default_str("");  // an empty list says nothing
   }
   try {
     app.parse(argc, argv);

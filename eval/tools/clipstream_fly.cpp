@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
       ->transform(cli::inRange(0.0, 1.0));
   app.add_option("--max-failed-reads", o.max_failed_reads_percent,
                  "Fail the run (exit 1, after writing its statistics) when more than this per cent of "
-                 "the tile reads failed, or reads failed and none loaded (default 1)")
+                 "the tile reads failed, or reads failed and none loaded")
       ->transform(cli::inRange(0.0, 100.0));
   app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
   app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames")

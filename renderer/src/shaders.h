@@ -8,4 +8,6 @@ extern const char* const k_ground_clipmap_frag;
 extern const char* const k_terrain_vert;
 extern const char* const k_terrain_ground_glsl;
 extern const char* const k_terrain_position_frag;
+extern const char* const k_hud_vert;
+extern const char* const k_hud_frag;
 }  // namespace clipstream::shaders

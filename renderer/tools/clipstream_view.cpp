@@ -1,10 +1,12 @@
 // clipstream-view: interactive viewer. GLFW window, mouse look + WASD,
-// wheel/shift for speed, O toggles the overlay, R records the flown path to
-// JSON for clipstream-fly. Usage: docs/renderer.md.
+// wheel/shift for speed, the statistics on screen, keys for the overlay and
+// its legend, recording the flown path to JSON for clipstream-fly, going
+// home and screenshots (kKeys below). Usage: docs/renderer.md.
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight.h>
+#include <clipstream/renderer/hud.h>
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/output_file.h>
 #include <clipstream/streamer/flight_path.h>
@@ -14,6 +16,20 @@
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
+// PNG encoding of screenshots (stb, header-only: its implementation here).
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wshadow"
+#endif
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_STATIC
+#include <stb/stb_image_write.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
 #include <algorithm>
 #include <chrono>
 #include <optional>
@@ -22,21 +38,141 @@
 #include <filesystem>
 #include <iostream>
 #include <numbers>
+#include <sstream>
 
 using namespace clipstream;
 
 namespace {
 
+// The keys, in --help and on screen (F1) alike.
+constexpr const char* kKeys =
+    "W A S D      move (Shift: 10x faster)\n"
+    "Q E          down, up\n"
+    "drag         look around (left mouse button)\n"
+    "wheel        slower, faster\n"
+    "H, Home      back to the starting view\n"
+    "O            overlay: clipmap levels, missing tiles, throttling\n"
+    "I            statistics on screen, on and off\n"
+    "P, F12       screenshot (PNG in --screenshot-dir; Shift: with this text)\n"
+    "R            record the flown path (again: write --record-out)\n"
+    "F1, ?        this help\n"
+    "Esc          quit";
+
+// Speed: this fraction of the height above the ground per second (the
+// ground seems to move at the same pace at any height), at most a tenth of
+// the scene's larger side per second; the wheel scales the fraction.
+constexpr double kDefaultSpeedPerHeight = 0.5;
+constexpr double kMinSpeedPerHeight = 0.01, kMaxSpeedPerHeight = 50.0;
+constexpr double kMaxSceneFractionPerSecond = 0.1;
+// The camera stays within this many scene sides around the scene.
+constexpr double kBoundsMargin = 0.5;
+
 struct Input {
-  double speed_texels_s = 200.0;
+  double speed_per_height = kDefaultSpeedPerHeight;
   bool overlay_toggled = false;
   bool record_toggled = false;
+  bool home = false;
+  bool screenshot = false;
+  bool screenshot_hud = false;  // with the HUD drawn over the frame
+  bool help_toggled = false;
+  bool stats_toggled = false;
   bool dragging = false;
   double last_x = 0, last_y = 0;
   double d_heading = 0, d_pitch = 0;
 };
 
 Input* inputOf(GLFWwindow* w) { return static_cast<Input*>(glfwGetWindowUserPointer(w)); }
+
+// Writes the window's current back buffer to the first free
+// DIR/clipstream-view-NNN.png, never replacing a file. The path, or a Status.
+Status saveScreenshot(const std::string& dir, uint32_t width_px, uint32_t height_px, std::string* path) {
+  std::vector<uint8_t> rgba;
+  readWindowPixels(width_px, height_px, &rgba);
+  for (uint8_t* a = rgba.data() + 3; a < rgba.data() + rgba.size(); a += 4) *a = 255;  // opaque
+  std::string png;
+  const auto append = [](void* context, void* data, int size) {
+    static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
+  };
+  if (!stbi_write_png_to_func(append, &png, int(width_px), int(height_px), 4, rgba.data(), int(width_px * 4)))
+    return Status::error(ErrorCode::kIo, "screenshot: PNG encoding failed");
+  OutputOptions options;
+  options.existing = ExistingOutput::kRefuse;
+  options.fsync = false;
+  for (int n = 1; n < 100000; ++n) {
+    char name[64];
+    std::snprintf(name, sizeof name, "clipstream-view-%03d.png", n);
+    *path = (std::filesystem::path(dir) / name).string();
+    std::error_code ec;
+    if (std::filesystem::symlink_status(*path, ec).type() != std::filesystem::file_type::not_found) continue;
+    Status s = writeOutputFile(*path, png, options);
+    if (s.code != ErrorCode::kAlreadyExists) return s;  // written, or a real failure
+  }
+  return Status::error(ErrorCode::kAlreadyExists, "screenshot: no free name left in " + dir);
+}
+
+HudColour levelColour(uint32_t level) {
+  // levelTint() of renderer/shaders/ground_clipmap.frag, as bytes.
+  static constexpr HudColour k[8] = {{255, 51, 51, 255},  {255, 153, 26, 255}, {255, 255, 51, 255},
+                                     {77, 255, 77, 255},  {51, 255, 255, 255}, {77, 128, 255, 255},
+                                     {179, 77, 255, 255}, {255, 102, 204, 255}};
+  return k[level & 7];
+}
+
+// Lines of text on a dark translucent panel at (x, y); the panel's height.
+float panel(Hud& hud, float x, float y, const std::string& text, float scale) {
+  int lines = 1;
+  for (char c : text) lines += c == '\n';
+  const float pad = 4.0f * scale, height = float(lines) * Hud::kLinePx * scale + 2 * pad;
+  hud.box(x, y, Hud::textWidth(text, scale) + 2 * pad, height, {0, 0, 0, 160});
+  hud.text(x + pad, y + pad, text, {255, 255, 255, 255}, scale);
+  return height;
+}
+
+// kKeys as two columns (the glyphs are not all of one width, so the
+// spaces that align it in --help do not on screen), on a panel at (x, y).
+void keysPanel(Hud& hud, float x, float y, float scale) {
+  constexpr size_t kKeyColumn = 13;  // where kKeys' descriptions start
+  std::vector<std::pair<std::string, std::string>> rows{{"Keys", ""}};
+  std::istringstream lines(kKeys);
+  for (std::string line; std::getline(lines, line);)
+    rows.push_back({line.substr(0, line.find_last_not_of(' ', kKeyColumn - 1) + 1), line.substr(kKeyColumn)});
+  float key_width = 0, text_width = 0;
+  for (const auto& [key, text] : rows) {
+    key_width = std::max(key_width, Hud::textWidth(key, scale));
+    text_width = std::max(text_width, Hud::textWidth(text, scale));
+  }
+  const float pad = 4.0f * scale, gap = 3 * pad, row = Hud::kLinePx * scale;
+  hud.box(x, y, key_width + gap + text_width + 2 * pad, float(rows.size()) * row + 2 * pad, {0, 0, 0, 160});
+  for (const auto& [key, text] : rows) {
+    hud.text(x + pad, y + pad, key, {255, 255, 160, 255}, scale);
+    hud.text(x + pad + key_width + gap, y + pad, text, {255, 255, 255, 255}, scale);
+    y += row;
+  }
+}
+
+// The overlay's legend (what O tints and stripes mean), bottom left.
+void legend(Hud& hud, float x, float bottom, uint32_t levels, bool terrain, float scale) {
+  const float row = Hud::kLinePx * scale, swatch = row * 0.8f, pad = 4.0f * scale;
+  std::vector<std::pair<HudColour, std::string>> rows;
+  for (uint32_t l = 0; l < std::min(levels, 8u); ++l)
+    rows.push_back({levelColour(l), "level " + std::to_string(l) + (l + 8 < levels ? " (and " + std::to_string(l + 8) + ")" : "") +
+                                        (l == 0 ? ": the finest" : "")});
+  rows.push_back({{255, 0, 0, 255}, "red stripes: finer level wanted, not loaded yet"});
+  rows.push_back({{0, 0, 255, 255}, "blue stripes: finest level lowered (MaxTextureLOD)"});
+  rows.push_back({{77, 77, 77, 255}, "dark lines: tile edges"});
+  if (terrain) rows.push_back({{255, 0, 255, 255}, "magenta: terrain transition bands"});
+  float width = 0;
+  for (const auto& r : rows) width = std::max(width, Hud::textWidth(r.second, scale));
+  const float height = float(rows.size()) * row + 2 * pad;
+  float y = bottom - height;
+  hud.box(x, y, width + swatch + 3 * pad, height, {0, 0, 0, 160});
+  y += pad;
+  for (const auto& [colour, label] : rows) {
+    hud.box(x + pad, y + (row - swatch) * 0.5f, swatch, swatch, colour);
+    hud.text(x + 2 * pad + swatch, y, label, {255, 255, 255, 255}, scale);
+    y += row;
+  }
+}
 
 }  // namespace
 
@@ -61,6 +197,8 @@ int main(int argc, char** argv) {
   app.add_option("--tile-format", tile_format,
                  "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
+  std::string screenshot_dir = ".";
+  app.add_option("--screenshot-dir", screenshot_dir, "Where P writes clipstream-view-NNN.png");
   app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
       ->transform(cli::wholeInRange(0, UINT32_MAX));
   app.add_option("--elevation", elevation_path, "Elevation store under the texture: fly over terrain");
@@ -75,7 +213,8 @@ int main(int argc, char** argv) {
   app.add_option("--terrain-error", terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
-  app.footer("Exit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
+  app.footer(std::string("Keys:\n") + kKeys +
+             "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
   TerrainMethod method = TerrainMethod::kClipmap;
   if (Status s = terrainMethodFromName(terrain_method, &method); !s)
@@ -165,15 +304,24 @@ int main(int argc, char** argv) {
   glfwSwapInterval(1);
   Input input;
   glfwSetWindowUserPointer(window, &input);
-  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int mods) {
     if (action != GLFW_PRESS) return;
-    if (key == GLFW_KEY_O) inputOf(w)->overlay_toggled = true;
-    if (key == GLFW_KEY_R) inputOf(w)->record_toggled = true;
+    Input* in = inputOf(w);
+    if (key == GLFW_KEY_O) in->overlay_toggled = true;
+    if (key == GLFW_KEY_R) in->record_toggled = true;
+    if (key == GLFW_KEY_H || key == GLFW_KEY_HOME) in->home = true;
+    if (key == GLFW_KEY_P || key == GLFW_KEY_F12) {
+      in->screenshot = true;
+      in->screenshot_hud = (mods & GLFW_MOD_SHIFT) != 0;
+    }
+    if (key == GLFW_KEY_I) in->stats_toggled = true;
+    if (key == GLFW_KEY_F1 || (key == GLFW_KEY_SLASH && (mods & GLFW_MOD_SHIFT))) in->help_toggled = true;
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
   });
   glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
     Input* in = inputOf(w);
-    in->speed_texels_s = std::clamp(in->speed_texels_s * std::pow(1.25, dy), 1.0, 1e9);
+    in->speed_per_height =
+        std::clamp(in->speed_per_height * std::pow(1.25, dy), kMinSpeedPerHeight, kMaxSpeedPerHeight);
   });
   glfwSetMouseButtonCallback(window, [](GLFWwindow* w, int button, int action, int) {
     if (button != GLFW_MOUSE_BUTTON_LEFT) return;
@@ -199,7 +347,8 @@ int main(int argc, char** argv) {
     // Start above the highest ground; each frame then keeps above the ground.
     camera.position.y += terrain->source->elevationInfo().max_height * terrain->alignment.world_per_height;
   }
-  input.speed_texels_s = camera.position.y;
+  const Camera home = camera;
+  const double scene_side = double(std::max(g.width_px, g.height_px));
 
   // The one frame loop's step, drawing into the window. The coarse pyramid
   // is loaded before any frame, so there is always something correct to draw.
@@ -221,6 +370,18 @@ int main(int argc, char** argv) {
     glfwTerminate();
     return cli::kExitFailure;
   }
+  std::unique_ptr<Hud> hud;
+  if (Status s = Hud::create(&hud); !s) {
+    cli::printError(app, s.toString());
+    flight.reset();
+    glfwDestroyWindow(window);
+    glfwTerminate();
+    return cli::kExitFailure;
+  }
+  // Text a little larger on larger windows (2 at 1280 wide).
+  const float hud_scale = std::max(1.0f, std::round(float(fc.framebuffer.width_px) / 640.0f));
+  bool show_stats = true, show_help = false;
+  int code = cli::kExitOk;
   FlightPath recording;
   bool recording_on = false;
   double last_key_s = -1.0;
@@ -235,11 +396,21 @@ int main(int argc, char** argv) {
     const double t = std::chrono::duration<double>(now - start).count();
     last = now;
 
+    if (input.home) {
+      input.home = false;
+      camera = home;
+      input.speed_per_height = kDefaultSpeedPerHeight;
+    }
     camera.heading_rad += input.d_heading;
     camera.pitch_rad = std::clamp(camera.pitch_rad + input.d_pitch, -1.55, 1.2);
     input.d_heading = input.d_pitch = 0;
-    double speed = input.speed_texels_s;
-    if (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS) speed *= 10.0;
+    double ground_below = 0.0;
+    const bool over_ground = flight->groundHeight({camera.position.x, camera.position.z}, &ground_below);
+    double speed = std::clamp(input.speed_per_height * std::max(camera.position.y - ground_below, 1.0), 1.0,
+                              kMaxSceneFractionPerSecond * scene_side);
+    if (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ||
+        glfwGetKey(window, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS)
+      speed *= 10.0;
     const glm::dvec3 fwd{std::sin(camera.heading_rad), 0.0, -std::cos(camera.heading_rad)};
     const glm::dvec3 right = camera.right();
     glm::dvec3 move{0.0};
@@ -250,7 +421,12 @@ int main(int argc, char** argv) {
     if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) move.y += 1.0;
     if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
     camera.position += move * (speed * dt);
-    camera.position.y = std::max(camera.position.y, 1.0);
+    // Within the scene's neighbourhood: a key held too long never loses it.
+    camera.position.x = std::clamp(camera.position.x, -kBoundsMargin * scene_side,
+                                   double(g.width_px) + kBoundsMargin * scene_side);
+    camera.position.z = std::clamp(camera.position.z, -kBoundsMargin * scene_side,
+                                   double(g.height_px) + kBoundsMargin * scene_side);
+    camera.position.y = std::clamp(camera.position.y, 1.0, (over_ground ? ground_below : 0.0) + 2.0 * scene_side);
     if (double ground = 0.0; flight->groundHeight({camera.position.x, camera.position.z}, &ground)) {
       // Over terrain the camera never goes under the ground (nor closer
       // than the clearance, where the near plane would cut the slope).
@@ -286,6 +462,42 @@ int main(int argc, char** argv) {
     // Wall-clock time drives the streamer (an interactive flight).
     const FrameSample frame = flight->step(camera, t);
     frame_ms_avg = frame_ms_avg * 0.9 + frame.frame_ms * 0.1;
+    const auto screenshot = [&] {
+      input.screenshot = false;
+      std::string path;
+      Status s = saveScreenshot(screenshot_dir, fc.framebuffer.width_px, fc.framebuffer.height_px, &path);
+      char where[160];
+      std::snprintf(where, sizeof where, " (camera %.2f %.2f %.2f, heading %.2f, pitch %.2f degrees)",
+                    camera.position.x, camera.position.y, camera.position.z,
+                    camera.heading_rad * 180.0 / std::numbers::pi, camera.pitch_rad * 180.0 / std::numbers::pi);
+      cli::printError(app, s ? "screenshot written to " + path + where : s.toString());
+    };
+    if (input.screenshot && !input.screenshot_hud) screenshot();  // the frame itself
+    if (input.stats_toggled) show_stats = !show_stats;
+    if (input.help_toggled) show_help = !show_help;
+    input.stats_toggled = input.help_toggled = false;
+    hud->clear();
+    const float margin = 8.0f * hud_scale;
+    float y = margin;
+    if (show_stats) {
+      const StreamerStats st = flight->streamer().stats();
+      char text[512];
+      std::snprintf(text, sizeof text,
+                    "%.1f ms a frame   LOD %u (finest level drawn)   queue %llu   RAM %.0f MiB   GPU %.0f MiB\n"
+                    "speed %.0f texels/s   height %.0f above the ground%s%s\nF1: keys",
+                    frame_ms_avg, st.max_texture_lod, (unsigned long long)st.queue_depth,
+                    double(st.ram_bytes) / (1 << 20),
+                    double(flight->renderer().textureBytes().total()) / (1 << 20), speed,
+                    camera.position.y - ground_below, recording_on ? "   REC" : "",
+                    flight->renderer().overlay() == Overlay::kOff ? "" : "   overlay");
+      y += panel(*hud, margin, y, text, hud_scale) + margin;
+    }
+    if (show_help) keysPanel(*hud, margin, y, hud_scale);
+    if (flight->renderer().overlay() != Overlay::kOff)
+      legend(*hud, margin, float(fc.framebuffer.height_px) - margin, g.levelCount(), terrain.has_value(),
+             hud_scale);
+    hud->draw(fc.framebuffer.width_px, fc.framebuffer.height_px);
+    if (input.screenshot) screenshot();  // Shift: as the window shows it
     glfwSwapBuffers(window);
     ++frames;
 
@@ -303,13 +515,13 @@ int main(int argc, char** argv) {
       glfwSetWindowTitle(window, title);
     }
   }
-  int code = cli::kExitOk;
   if (recording_on) {
     Status s = recording.save(record_path);
     cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
     if (!s) code = cli::kExitFailure;
   }
   flight->finish();
+  hud.reset();
   flight.reset();  // GL objects go before the context
   glfwDestroyWindow(window);
   glfwTerminate();

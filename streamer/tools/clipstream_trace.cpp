@@ -18,7 +18,7 @@ int main(int argc, char** argv) {
   app.add_option("--budget-mb", budget_mb, "RAM budget in MiB")
       ->required()
       ->transform(cli::inRange(0.001, 16.0 * 1024 * 1024));
-  app.add_option("--tile-bytes", tile_bytes, "decoded bytes per tile (default 128*128*4)")
+  app.add_option("--tile-bytes", tile_bytes, "decoded bytes per tile")
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.footer("Exit codes: 0 success, 1 the trace cannot be read or is damaged, 2 command-line mistake.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;

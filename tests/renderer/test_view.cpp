@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace clipstream {
 namespace {
@@ -60,6 +61,65 @@ TEST(ClipstreamView, FliesOverTerrainUnderXvfb) {
                           " --terrain mesh > " + dir.file("bad.txt") + " 2>&1";
   const int rc = std::system(bad.c_str());
   EXPECT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 2) << rc;
+}
+
+// The keys, pressed as a person would: real X events (xdotool, through
+// XTEST) in a virtual X server. P writes a screenshot of the window's size
+// and says where the camera was; W moves; H returns to the starting view,
+// where the third screenshot's camera equals the first's.
+TEST(ClipstreamView, KeysTakeScreenshotsAndGoHome) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1 && command -v xdotool > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "no xvfb-run or xdotool (scripts/deps.sh installs them)";
+  test::TempDir dir("view_keys");
+  const std::string script = dir.file("keys.sh");
+  std::ofstream(script) << R"(set -u
+view=$1 out=$2
+"$view" --procedural 65536 --size 320x240 --screenshot-dir "$out" > "$out/log.txt" 2>&1 &
+pid=$!
+win=$(timeout 60 xdotool search --sync --onlyvisible --name clipstream-view | head -n 1)
+if [ -z "$win" ]; then kill $pid; echo "no window"; exit 1; fi
+xdotool mousemove --window "$win" 160 120
+sleep 1
+xdotool key p; sleep 0.5
+xdotool keydown w; sleep 1; xdotool keyup w; sleep 0.3
+xdotool key p; sleep 0.5
+xdotool key h; sleep 0.3
+xdotool key p; sleep 0.5
+xdotool key F1 o; sleep 0.5
+xdotool key Escape
+wait $pid
+)";
+  const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' bash '" + script + "' '" +
+                          std::string(CLIPSTREAM_VIEW_EXE) + "' '" + dir.path().string() + "' > '" + dir.file("run.txt") +
+                          "' 2>&1";
+  const int rc = std::system(cmd.c_str());
+  std::stringstream log;
+  log << std::ifstream(dir.file("log.txt")).rdbuf() << std::ifstream(dir.file("run.txt")).rdbuf();
+  ASSERT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 0) << log.str();
+  // "screenshot written to PATH (camera X Y Z, heading H, pitch P degrees)"
+  std::vector<std::string> cameras;
+  std::istringstream lines(log.str());
+  for (std::string line; std::getline(lines, line);) {
+    const size_t at = line.find("screenshot written to ");
+    if (at == std::string::npos) continue;
+    cameras.push_back(line.substr(line.find(" (camera ")));
+  }
+  ASSERT_EQ(cameras.size(), 3u) << log.str();
+  EXPECT_NE(cameras[1], cameras[0]) << "W did not move the camera\n" << log.str();
+  EXPECT_EQ(cameras[2], cameras[0]) << "H did not return to the starting view\n" << log.str();
+  for (int n = 1; n <= 3; ++n) {
+    const std::string png = dir.file("clipstream-view-00" + std::to_string(n) + ".png");
+    std::ifstream in(png, std::ios::binary);
+    std::string head(24, '\0');
+    ASSERT_TRUE(in.read(head.data(), 24)) << png;
+    EXPECT_EQ(head.substr(1, 3), "PNG") << png;
+    const auto be32 = [&](size_t at) {
+      return uint32_t(uint8_t(head[at])) << 24 | uint32_t(uint8_t(head[at + 1])) << 16 |
+             uint32_t(uint8_t(head[at + 2])) << 8 | uint32_t(uint8_t(head[at + 3]));
+    };
+    EXPECT_EQ(be32(16), 320u) << png;  // IHDR: the window's size
+    EXPECT_EQ(be32(20), 240u) << png;
+  }
 }
 
 // Third pass: clipstream-view --record-out naming the store being viewed

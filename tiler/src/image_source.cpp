@@ -20,6 +20,15 @@
 #ifndef CLIPSTREAM_TILER_OIIO_MODULE_PATH
 #define CLIPSTREAM_TILER_OIIO_MODULE_PATH ""
 #endif
+#ifndef CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR
+#define CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR "../lib/clipstream"
+#endif
+#ifndef CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED
+#define CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED ""
+#endif
+#ifndef CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED
+#define CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED ""
+#endif
 
 namespace clipstream {
 namespace {
@@ -47,9 +56,12 @@ Status loadOiioModule(OpenImageFileFn* out) {
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (!ec) {
     candidates.push_back((exe.parent_path() / kOiioModuleFileName).string());
-    candidates.push_back((exe.parent_path() / ".." / "lib" / kOiioModuleFileName).string());
+    candidates.push_back(
+        (exe.parent_path() / CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR / kOiioModuleFileName).string());
   }
   if (*CLIPSTREAM_TILER_OIIO_MODULE_PATH) candidates.push_back(CLIPSTREAM_TILER_OIIO_MODULE_PATH);
+  for (const char* folder : {CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED, CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED})
+    if (*folder) candidates.push_back((fs::path(folder) / kOiioModuleFileName).string());
   candidates.push_back(kOiioModuleFileName);  // the loader's search path
   std::string errors;
   for (const std::string& c : candidates) {

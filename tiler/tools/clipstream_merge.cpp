@@ -26,7 +26,7 @@ int main(int argc, char** argv) {
   app.add_option("OUTPUT PARTS", positional, "the output store, then every partial store (any order)")
       ->required()
       ->expected(2, -1);
-  app.add_option("--memory-mb", memory_mb, "bound on the coarse levels' row buffers in MiB (default 256)")
+  app.add_option("--memory-mb", memory_mb, "bound on the coarse levels' row buffers in MiB")
       ->transform(cli::wholeInRange(int64_t(kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
   app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never a part)");

@@ -169,7 +169,7 @@ int main(int argc, char** argv) {
                  "later sheets win where they overlap");
   app.add_option("--fill", fill,
                  "mosaic: value of every channel but alpha (alpha 0) where no sheet covers "
-                 "(default 0; 0..255, 0..65535 for R16)")
+                 "(0..255, 0..65535 for R16)")
       ->transform(cli::wholeInRange(0, 65535));
   app.add_option("--format", format_text,
                  "force the store format: R8, R16, RGB8, RGBA8 (colour), I16, R16, F32 (heights)");
@@ -195,7 +195,7 @@ int main(int argc, char** argv) {
                  "cover, OpenImageIO for the rest) or openimageio (every file)");
   app.add_option("--threads", threads, "encoder threads, and TIFF decode threads (default: all cores)")
       ->transform(cli::wholeInRange(0, kMaxThreads));
-  app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB (default 256)")
+  app.add_option("--memory-mb", memory_mb, "bound on peak memory in MiB")
       ->transform(cli::wholeInRange(int64_t(kMinMemoryBudgetBytes >> 20), int64_t(1) << 30));
   app.add_flag("--quiet,-q", quiet, "no progress bar and no summary");
   app.add_flag("--force,-f", force, "overwrite an existing OUTPUT (a regular file, never the input)");
