@@ -2,6 +2,7 @@
 // decodes every tile. Thin: all format knowledge lives in clipstream_store.
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
+#include <clipstream/cli/store_json.h>
 #include <clipstream/store/tile_store.h>
 
 #include <nlohmann/json.hpp>
@@ -157,40 +158,10 @@ nlohmann::json toJson(const std::string& path, const StoreInfo& info,
   out["predictor"] = predictorName(info.encoding.predictor);
   out["filter"] = downsampleFilterName(info.encoding.filter);
   out["linear_light"] = info.encoding.linear_light;
-  if (info.geo.present) {
-    out["georeference"] = {
-        {"transform", std::vector<double>(info.geo.transform, info.geo.transform + 6)},
-        {"origin", {info.geo.transform[0], info.geo.transform[3]}},
-        {"pixel_size", {info.geo.transform[1], info.geo.transform[5]}},
-        {"crs", info.geo.crs}};
-  } else {
-    out["georeference"] = nullptr;
-  }
-  out["layer"] = info.elevation.present ? "elevation" : "colour";
-  if (info.elevation.present) {
-    const ElevationInfo& e = info.elevation;
-    out["elevation"] = {{"min_height", e.min_height},
-                        {"max_height", e.max_height},
-                        {"units", heightUnitsName(e.units)},
-                        {"units_assumed", e.units_assumed},
-                        {"scale", e.scale},
-                        {"offset", e.offset},
-                        {"quantised", e.quantised},
-                        {"error_bound", e.quantised ? e.scale / 2 : 0.0},
-                        {"max_error", e.max_error},
-                        {"nodata", e.has_nodata ? nlohmann::json(e.nodata) : nlohmann::json()},
-                        {"filled_samples", e.filled_samples}};
-  }
-  if (info.shard.present) {
-    const ShardInfo& sh = info.shard;
-    out["shard"] = {{"index", sh.index},
-                    {"count", sh.count},
-                    {"full_width_px", sh.full_width_px},
-                    {"full_height_px", sh.full_height_px},
-                    {"x0_px", sh.x0_px},
-                    {"y0_px", sh.y0_px},
-                    {"owned_levels", sh.owned_levels}};
-  }
+  out["georeference"] = cli::georeferenceJson(info.geo);
+  out["layer"] = cli::layerName(info.elevation);
+  if (info.elevation.present) out["elevation"] = cli::elevationJson(info.elevation);
+  if (info.shard.present) out["shard"] = cli::shardJson(info.shard);
   if (stats != nullptr) {
     nlohmann::json levels = nlohmann::json::array();
     for (uint32_t l = 0; l < stats->size(); ++l) {

@@ -208,7 +208,7 @@ TEST(TileCli, PeakMemoryStaysUnderBudgetForLargeSyntheticImage) {
   std::ifstream in(dir.file("s.json"));
   const nlohmann::json j = nlohmann::json::parse(in);
   EXPECT_EQ(j["width_px"].get<uint64_t>(), 16384u);
-  EXPECT_EQ(j["format"].get<std::string>(), "RGBA8");
+  EXPECT_EQ(j["pixel_format"].get<std::string>(), "RGBA8");
   const uint64_t peak = j["peak_rss_bytes"].get<uint64_t>();
   EXPECT_GT(peak, 0u);
   EXPECT_LT(peak, uint64_t(64) << 20) << "peak RSS " << peak / (1 << 20) << " MiB";

@@ -140,7 +140,22 @@ TEST(Elevation, RealDemWithNoDataTilesExactlyAndFillsTheHoles) {
   std::ifstream in(dir.file("s.json"));
   const nlohmann::json j = nlohmann::json::parse(in);
   EXPECT_EQ(j["layer"], "elevation");
-  EXPECT_EQ(j["format"], "I16");
+  EXPECT_EQ(j["pixel_format"], "I16");
+
+  // One vocabulary (docs/cli.md, "JSON outputs"): clipstream-info describes
+  // the store it wrote under the same keys with the same values.
+  const RunResult info = runInfo({"--json", dir.file("h.cst")}, ">" + dir.file("info.json"));
+  ASSERT_EQ(info.exit_code, 0) << info.output;
+  std::ifstream info_in(dir.file("info.json"));
+  const nlohmann::json i = nlohmann::json::parse(info_in);
+  for (const char* key : {"pixel_format", "layer", "levels", "width_px", "height_px", "georeference",
+                          "elevation"}) {
+    EXPECT_EQ(j[key], i[key]) << key;
+  }
+  ASSERT_TRUE(j["georeference"].is_object());
+  EXPECT_FALSE(j["georeference"]["crs"].get<std::string>().empty());
+  EXPECT_EQ(j["georeference"]["pixel_size"].size(), 2u);
+  EXPECT_TRUE(j["elevation"]["nodata"].is_number());
 
   auto reader = openStore(dir.file("h.cst"));
   ASSERT_TRUE(reader);

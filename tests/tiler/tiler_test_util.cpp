@@ -201,6 +201,10 @@ RunResult runMerge(const std::vector<std::string>& args) {
   return runProgram(CLIPSTREAM_MERGE_EXE, args, "");
 }
 
+RunResult runInfo(const std::vector<std::string>& args, const std::string& stdout_redirect) {
+  return runProgram(CLIPSTREAM_INFO_EXE, args, stdout_redirect);
+}
+
 void expectSameTiles(const std::string& expected_path, const std::string& actual_path) {
   std::unique_ptr<TileStoreReader> a, b;
   ASSERT_TRUE(TileStoreReader::open(expected_path, &a).ok()) << expected_path;

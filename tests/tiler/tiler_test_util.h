@@ -66,6 +66,9 @@ RunResult runTiler(const std::vector<std::string>& args, const std::string& stdo
 // Runs clipstream-merge the same way.
 RunResult runMerge(const std::vector<std::string>& args);
 
+// Runs clipstream-info the same way.
+RunResult runInfo(const std::vector<std::string>& args, const std::string& stdout_redirect = "");
+
 // Every tile of the store at `actual_path` equals the one at `expected_path`
 // (same geometry; same constant value, or same checksum and payload bytes;
 // same height bounds and error in an elevation store).

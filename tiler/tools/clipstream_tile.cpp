@@ -2,6 +2,7 @@
 // parsing, signal handling and the summary; the work is in the tiler library (tiler.h).
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
+#include <clipstream/cli/store_json.h>
 #include <clipstream/store/output_file.h>
 #include <clipstream/tiler/shard.h>
 #include <clipstream/tiler/tiler.h>
@@ -82,7 +83,7 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["output"] = output;
   j["width_px"] = s.width_px;
   j["height_px"] = s.height_px;
-  j["format"] = clipstream::pixelFormatName(s.format);
+  j["pixel_format"] = clipstream::pixelFormatName(s.format);
   j["input_type"] = s.input_type;
   j["decoder"] = s.decoder;
   j["input_channels"] = s.input_channels;
@@ -102,42 +103,14 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["build_s"] = s.build_s;
   j["encode_s"] = s.encode_s;
   j["megapixels_per_s"] = s.wall_s > 0 ? double(s.width_px * s.height_px) / 1e6 / s.wall_s : 0.0;
-  nlohmann::json geo;
-  geo["present"] = s.geo.present;
-  geo["transform"] = std::vector<double>(s.geo.transform, s.geo.transform + 6);
-  geo["crs"] = s.geo.crs;
-  j["geo"] = geo;
-  j["layer"] = s.elevation.present ? "elevation" : "colour";
-  if (s.elevation.present) {
-    const clipstream::ElevationInfo& e = s.elevation;
-    nlohmann::json el;
-    el["units"] = clipstream::heightUnitsName(e.units);
-    el["units_assumed"] = e.units_assumed;
-    el["scale"] = e.scale;
-    el["offset"] = e.offset;
-    el["nodata"] = e.has_nodata ? nlohmann::json(e.nodata) : nlohmann::json();
-    el["filled_samples"] = e.filled_samples;
-    el["quantised"] = e.quantised;
-    el["error_bound"] = e.quantised ? e.scale / 2 : 0.0;
-    el["max_error"] = e.max_error;
-    el["min_height"] = e.min_height;
-    el["max_height"] = e.max_height;
-    j["elevation"] = el;
-  }
+  j["georeference"] = clipstream::cli::georeferenceJson(s.geo);
+  j["layer"] = clipstream::cli::layerName(s.elevation);
+  if (s.elevation.present) j["elevation"] = clipstream::cli::elevationJson(s.elevation);
   if (s.mosaic_sheets > 0) {
     j["mosaic_sheets"] = s.mosaic_sheets;
     j["gap_px"] = s.gap_px;
   }
-  if (s.shard.present) {
-    nlohmann::json sh;
-    sh["index"] = s.shard.index;
-    sh["count"] = s.shard.count;
-    sh["full_width_px"] = s.shard.full_width_px;
-    sh["full_height_px"] = s.shard.full_height_px;
-    sh["y0_px"] = s.shard.y0_px;
-    sh["owned_levels"] = s.shard.owned_levels;
-    j["shard"] = sh;
-  }
+  if (s.shard.present) j["shard"] = clipstream::cli::shardJson(s.shard);
   j["warnings"] = s.warnings;
   return j;
 }
