@@ -5,9 +5,58 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <limits>
 
 namespace clipstream {
+namespace {
+
+// Metres per degree of longitude and latitude (WGS84 mean, good to 0.5 %).
+constexpr double kMetresPerDegreeLat = 110574.0;
+constexpr double kMetresPerDegreeLonAtEquator = 111320.0;
+
+bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
+
+// The factor of the last UNIT["...", f] or LENGTHUNIT["...", f] in WKT.
+bool lastUnitFactor(const std::string& wkt, double* factor) {
+  size_t at = std::string::npos;
+  for (const char* key : {"LENGTHUNIT[", "UNIT["}) {
+    const size_t k = wkt.rfind(key);
+    if (k != std::string::npos && (at == std::string::npos || k > at)) at = k;
+  }
+  if (at == std::string::npos) return false;
+  const size_t comma = wkt.find(',', at);
+  if (comma == std::string::npos) return false;
+  char* end = nullptr;
+  const double v = std::strtod(wkt.c_str() + comma + 1, &end);
+  if (end == wkt.c_str() + comma + 1 || !(v > 0.0) || !std::isfinite(v)) return false;
+  *factor = v;
+  return true;
+}
+
+bool isGeographic(const std::string& crs) {
+  if (startsWith(crs, "GEOGCS[") || startsWith(crs, "GEOGCRS[")) return true;
+  if (startsWith(crs, "EPSG:")) {
+    const long code = std::strtol(crs.c_str() + 5, nullptr, 10);
+    return code >= 4000 && code < 5000;
+  }
+  return false;
+}
+
+}  // namespace
+
+CrsUnitMetres metresPerCrsUnit(const std::string& crs, double latitude_deg) {
+  if (isGeographic(crs)) {
+    const double lat = std::clamp(latitude_deg, -89.0, 89.0) * (3.14159265358979323846 / 180.0);
+    return {kMetresPerDegreeLonAtEquator * std::cos(lat), kMetresPerDegreeLat, false};
+  }
+  double factor = 1.0;
+  if ((startsWith(crs, "PROJCS[") || startsWith(crs, "PROJCRS[")) && lastUnitFactor(crs, &factor)) {
+    return {factor, factor, false};
+  }
+  return {};
+}
 
 uint32_t channelCount(PixelFormat format) {
   switch (format) {

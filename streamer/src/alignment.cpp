@@ -1,62 +1,21 @@
 #include <clipstream/streamer/alignment.h>
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
-#include <cstdlib>
 
 namespace clipstream {
 namespace {
 
-// Metres per degree of longitude and latitude (WGS84 mean, good to 0.5 %).
-constexpr double kMetresPerDegreeLat = 110574.0;
-constexpr double kMetresPerDegreeLonAtEquator = 111320.0;
-
-bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
-
-// The factor of the last UNIT["...", f] or LENGTHUNIT["...", f] in WKT.
-bool lastUnitFactor(const std::string& wkt, double* factor) {
-  size_t at = std::string::npos;
-  for (const char* key : {"LENGTHUNIT[", "UNIT["}) {
-    const size_t k = wkt.rfind(key);
-    if (k != std::string::npos && (at == std::string::npos || k > at)) at = k;
-  }
-  if (at == std::string::npos) return false;
-  const size_t comma = wkt.find(',', at);
-  if (comma == std::string::npos) return false;
-  char* end = nullptr;
-  const double v = std::strtod(wkt.c_str() + comma + 1, &end);
-  if (end == wkt.c_str() + comma + 1 || !(v > 0.0) || !std::isfinite(v)) return false;
-  *factor = v;
-  return true;
-}
-
-bool isGeographic(const std::string& crs) {
-  if (startsWith(crs, "GEOGCS[") || startsWith(crs, "GEOGCRS[")) return true;
-  if (startsWith(crs, "EPSG:")) {
-    const long code = std::strtol(crs.c_str() + 5, nullptr, 10);
-    return code >= 4000 && code < 5000;
-  }
-  return false;
-}
-
 bool rotated(const GeoReference& g) { return g.transform[2] != 0.0 || g.transform[4] != 0.0; }
 
-}  // namespace
-
-glm::dvec2 metresPerCrsUnit(const std::string& crs, double latitude_deg, bool* assumed) {
-  *assumed = false;
-  if (isGeographic(crs)) {
-    const double lat = std::clamp(latitude_deg, -89.0, 89.0) * (3.14159265358979323846 / 180.0);
-    return {kMetresPerDegreeLonAtEquator * std::cos(lat), kMetresPerDegreeLat};
-  }
-  double factor = 1.0;
-  if ((startsWith(crs, "PROJCS[") || startsWith(crs, "PROJCRS[")) && lastUnitFactor(crs, &factor)) {
-    return {factor, factor};
-  }
-  *assumed = true;
-  return {1.0, 1.0};
+// The ground size of a CRS unit as a vector; *assumed when not known here.
+glm::dvec2 unitMetres(const std::string& crs, double latitude_deg, bool* assumed) {
+  const CrsUnitMetres u = metresPerCrsUnit(crs, latitude_deg);
+  *assumed = u.assumed;
+  return {u.x, u.y};
 }
+
+}  // namespace
 
 Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, double vertical_scale,
                       bool stretch, LayerAlignment* out) {
@@ -109,7 +68,7 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
     }
     const double lat = cg.transform[3] + cg.transform[5] * ch * 0.5;
     bool assumed = false;
-    const glm::dvec2 unit = metresPerCrsUnit(cg.crs, lat, &assumed);
+    const glm::dvec2 unit = unitMetres(cg.crs, lat, &assumed);
     out->metres_per_world = {std::abs(t[1]) * unit.x, std::abs(t[5]) * unit.y};
     if (assumed) {
       out->warnings.push_back("the coordinate system's unit is not known here (" +
@@ -126,11 +85,11 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
     bool assumed = true;
     if (eg.present) {
       const double lat = eg.transform[3] + eg.transform[5] * eh * 0.5;
-      const glm::dvec2 unit = metresPerCrsUnit(eg.crs, lat, &assumed);
+      const glm::dvec2 unit = unitMetres(eg.crs, lat, &assumed);
       sample_metres = {std::abs(eg.transform[1]) * unit.x, std::abs(eg.transform[5]) * unit.y};
     } else if (cg.present) {
       const double lat = cg.transform[3] + cg.transform[5] * ch * 0.5;
-      const glm::dvec2 unit = metresPerCrsUnit(cg.crs, lat, &assumed);
+      const glm::dvec2 unit = unitMetres(cg.crs, lat, &assumed);
       sample_metres = glm::dvec2(std::abs(cg.transform[1]) * unit.x, std::abs(cg.transform[5]) * unit.y) *
                       out->world_per_sample;
     }

@@ -74,6 +74,21 @@ struct GeoReference {
   std::string crs;  // coordinate system text (WKT or "EPSG:nnnn"); may be empty
 };
 
+// Metres one unit of a CRS spans on the ground, along x and y.
+struct CrsUnitMetres {
+  double x = 1.0;
+  double y = 1.0;
+  bool assumed = true;  // the unit is not known here: metres taken
+};
+
+// The ground size of a CRS unit at `latitude_deg` (which matters for
+// geographic CRSs only). WKT: the projected CRS's last UNIT/LENGTHUNIT, or
+// degrees for a geographic one; "EPSG:4xxx": geographic; any other EPSG
+// code, or an empty CRS: metres, assumed. The one place the programs turn
+// georeferences into ground distances (the tiler's relief shading, the
+// streamer's layer alignment).
+CrsUnitMetres metresPerCrsUnit(const std::string& crs, double latitude_deg);
+
 // Geometry of a pyramid: everything a reader needs to address tiles.
 struct PyramidGeometry {
   uint64_t width_px = 0;   // level 0

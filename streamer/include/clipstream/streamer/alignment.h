@@ -28,11 +28,6 @@ struct LayerAlignment {
   std::vector<std::string> warnings;  // what the user should know (assumed units, stretching)
 };
 
-// Metres per unit of a CRS along x and y at `latitude_deg` (used for
-// geographic CRSs only). WKT: the projected CRS's last UNIT/LENGTHUNIT, or
-// degrees for a geographic one; "EPSG:4xxx": geographic; any other EPSG
-// code, or an empty CRS: metres, with *assumed set.
-glm::dvec2 metresPerCrsUnit(const std::string& crs, double latitude_deg, bool* assumed);
 
 // Aligns `elevation` under `colour`. Both georeferenced in the same CRS:
 // by their transforms (an elevation store larger or smaller than the image,
