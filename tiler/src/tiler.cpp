@@ -14,6 +14,7 @@
 
 #include "height_bounds.h"
 #include "height_source.h"
+#include "relief_source.h"
 #include "pyramid_builder.h"
 
 #include <algorithm>
@@ -325,6 +326,24 @@ Status validateOptions(const TilerOptions& o) {
                              " is more than this machine's " + std::to_string(physical >> 20) +
                              " MB of memory");
   }
+  if (o.relief_scale > 0) {
+    if (o.relief_scale > kMaxReliefScale) {
+      return Status::error(ErrorCode::kInvalidArgument, "--relief-scale " + std::to_string(o.relief_scale) +
+                                                            " must be from 1 to " +
+                                                            std::to_string(kMaxReliefScale));
+    }
+    const char* conflict = o.input_path.empty()         ? "--synthetic"
+                           : o.layer != LayerKind::kAuto ? "--layer"
+                           : o.format                    ? "--format"
+                           : o.height_step > 0.0         ? "--height-step"
+                           : o.shard_count != 0          ? "--shard"
+                                                         : nullptr;
+    if (conflict != nullptr) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           std::string("--relief draws a DEM as an RGB8 picture; it does not go "
+                                       "with ") + conflict);
+    }
+  }
   if (o.input_path.empty() && (o.synthetic_width_px == 0 || o.synthetic_height_px == 0)) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "synthetic image size " + std::to_string(o.synthetic_width_px) + "x" +
@@ -551,6 +570,36 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
   return okStatus();
 }
 
+// Replaces the source of heights by the shaded relief drawn from them
+// (relief_source.h): a colour store, georeferenced like the DEM with pixels
+// relief_scale times smaller.
+Status makeRelief(const TilerOptions& o, GeoReference* geo, std::unique_ptr<ImageSource>* source,
+                  ElevationInfo* elevation) {
+  const SourceInfo& dem = (*source)->info();
+  ReliefOptions relief;
+  relief.scale = o.relief_scale;
+  relief.metres_per_height = metresPerUnit(elevation->units);
+  if (geo->present) {
+    const double* t = geo->transform;
+    const double latitude = t[3] + t[5] * double(dem.height_px) * 0.5;
+    const CrsUnitMetres unit = metresPerCrsUnit(geo->crs, latitude);
+    relief.sample_x_metres = std::hypot(t[1], t[4]) * unit.x;
+    relief.sample_y_metres = std::hypot(t[2], t[5]) * unit.y;
+    // A CRS unit not known here is taken as a metre (unit.assumed).
+    for (int i : {1, 2, 4, 5}) geo->transform[i] /= double(o.relief_scale);
+  }
+  if (!(relief.sample_x_metres > 0.0) || !(relief.sample_y_metres > 0.0)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         o.input_path + ": the georeference gives samples no size; cannot shade it");
+  }
+  std::unique_ptr<ImageSource> shaded;
+  Status s = ReliefSource::open(std::move(*source), relief, &shaded);
+  if (!s) return Status::error(s.code, o.input_path + ": " + s.message);
+  *source = std::move(shaded);
+  *elevation = ElevationInfo{};
+  return okStatus();
+}
+
 Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   const auto start = Clock::now();
   *summary = TilerSummary{};
@@ -592,6 +641,15 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   if (!s) return s;
   HeightSource* heights = nullptr;
   ElevationInfo elevation;
+  // A relief is drawn from the input's heights: read them as for an
+  // elevation store, exactly (F32), before shading.
+  TilerOptions elevation_options = o;
+  if (o.relief_scale > 0) {
+    elevation_options.layer = LayerKind::kElevation;
+    elevation_options.format = PixelFormat::kF32;
+    elevation_options.filter = DownsampleFilter::kBox;
+    elevation_options.linear_light = false;
+  }
   if (o.mosaic) {
     // DEM sheets: gaps hold the no-data value (NaN for float samples when
     // the sheets declare none), so they are filled like any void.
@@ -611,14 +669,22 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
       MosaicInfo again;
       return openHeightMosaic(o.input_path, native, gap, out, &again, read);
     };
-    s = openElevation(o, geo, mosaic.sheets.front(), reopen, &source, &heights, &elevation, summary);
+    s = openElevation(elevation_options, geo, mosaic.sheets.front(), reopen, &source, &heights,
+                      &elevation, summary);
     if (!s) return s;
   } else if (!o.input_path.empty()) {
     auto reopen = [&](PixelFormat native, const HeightConversion&, std::unique_ptr<ImageSource>* out) {
       return openImageFile(o.input_path, native, out, read);
     };
-    s = openElevation(o, geo, o.input_path, reopen, &source, &heights, &elevation, summary);
+    s = openElevation(elevation_options, geo, o.input_path, reopen, &source, &heights, &elevation,
+                      summary);
     if (!s) return s;
+  }
+  if (o.relief_scale > 0) {
+    s = makeRelief(o, &geo, &source, &elevation);
+    if (!s) return s;
+    heights = nullptr;  // a colour store: no height statistics
+    summary->relief_scale = o.relief_scale;
   }
   ShardInfo shard;
   if (o.shard_count != 0) {

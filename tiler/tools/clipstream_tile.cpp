@@ -105,6 +105,7 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["megapixels_per_s"] = s.wall_s > 0 ? double(s.width_px * s.height_px) / 1e6 / s.wall_s : 0.0;
   j["georeference"] = clipstream::cli::georeferenceJson(s.geo);
   j["layer"] = clipstream::cli::layerName(s.elevation);
+  j["relief_scale"] = s.relief_scale > 0 ? nlohmann::json(s.relief_scale) : nlohmann::json();
   if (s.elevation.present) j["elevation"] = clipstream::cli::elevationJson(s.elevation);
   if (s.mosaic_sheets > 0) {
     j["mosaic_sheets"] = s.mosaic_sheets;
@@ -153,6 +154,16 @@ int main(int argc, char** argv) {
                  "elevation: store float heights as R16 steps of this size (error <= step/2); "
                  "default: exactly (F32)")
       ->transform(cli::inRange(0.0, kMaxHeightStep));
+  bool relief = false;
+  uint32_t relief_scale = 4;
+  CLI::Option* relief_scale_option = nullptr;
+  app.add_flag("--relief", relief,
+               "draw the input DEM as a shaded colour relief (RGB8: height tint and hillshade lit "
+               "from the north-west) instead of storing its heights");
+  relief_scale_option =
+      app.add_option("--relief-scale", relief_scale, "with --relief: pixels per DEM sample along each axis (1..64)")
+          ->capture_default_str()
+          ->transform(cli::wholeInRange(1, kMaxReliefScale));
   app.add_option("--nodata", nodata_text, "elevation: the no-data value (overrides the file's; 'nan' allowed)");
   app.add_option("--vertical-units", units_text, "elevation: metre, foot or us-foot (overrides the file's)");
   app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
@@ -242,6 +253,10 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "--filter is for colour: heights are decimated, never filtered");
   }
   options.height_step = height_step;
+  if (relief_scale_option->count() > 0 && !relief) {
+    return cli::usageError(app, "--relief-scale goes with --relief");
+  }
+  options.relief_scale = relief ? relief_scale : 0;
   if (!nodata_text.empty()) {
     char* end = nullptr;
     const double v = std::strtod(nodata_text.c_str(), &end);
@@ -356,6 +371,9 @@ int main(int argc, char** argv) {
       std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",
                   t[0], t[3], t[1], t[5], t[2], t[4],
                   summary.geo.crs.empty() ? "(unknown)" : printableText(summary.geo.crs, 300).c_str());
+    }
+    if (options.relief_scale > 0) {
+      std::printf("relief: shaded from the DEM's heights, %u px per sample\n", options.relief_scale);
     }
     if (summary.mosaic_sheets > 0) {
       std::printf("mosaic: %llu sheets, %llu px covered by none (filled with %u, alpha 0)\n",

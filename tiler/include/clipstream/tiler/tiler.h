@@ -37,6 +37,10 @@ constexpr uint64_t kMaxSyntheticSidePx = uint64_t(1) << 32;
 // a colour store otherwise.
 enum class LayerKind { kAuto, kColour, kElevation };
 
+// Largest --relief-scale: 64 pixels per DEM sample already draws a 30 m DEM
+// at half a metre a pixel, finer than the heights can show.
+constexpr uint32_t kMaxReliefScale = 64;
+
 // Largest quantisation step for heights (--height-step), in height units.
 constexpr double kMaxHeightStep = 1000.0;
 
@@ -89,6 +93,11 @@ struct TilerOptions {
   // elevation fill and height bounds too).
   uint32_t shard_index = 0;
   uint32_t shard_count = 0;
+  // Shaded relief (--relief, docs/tiler.md "Shaded relief"): > 0 makes a
+  // colour store (RGB8) of the input DEM drawn as a hypsometric tint with a
+  // hillshade, relief_scale pixels per DEM sample along each axis (1..64),
+  // georeferenced like the DEM. 0: the input is tiled as it is.
+  uint32_t relief_scale = 0;
 };
 
 // What a run did, for the one-line summary and --json-summary.
@@ -119,6 +128,7 @@ struct TilerSummary {
   ShardInfo shard;               // present for a partial store (width/height are the band's)
   uint64_t mosaic_sheets = 0;    // sheets of a mosaic input (0: not a mosaic)
   uint64_t gap_px = 0;           // mosaic pixels no sheet covers, filled with TilerOptions::fill
+  uint32_t relief_scale = 0;     // TilerOptions::relief_scale: a shaded relief of a DEM (0: none)
   std::vector<std::string> warnings;  // things the user should know (budget exceeded, ...)
 };
 
