@@ -44,6 +44,15 @@ bool isGeographic(const std::string& crs) {
   return false;
 }
 
+// EPSG codes of projected CRSs in metres that DEMs and photos commonly
+// come in: UTM zones on WGS 84 (326xx north, 327xx south), NAD27 (267xx)
+// and NAD83 (269xx), ETRS89 (258xx), and Web Mercator.
+bool isMetreEpsg(long code) {
+  return (code >= 32601 && code <= 32660) || (code >= 32701 && code <= 32760) ||
+         (code >= 26701 && code <= 26722) || (code >= 26901 && code <= 26923) ||
+         (code >= 25828 && code <= 25838) || code == 3857;
+}
+
 }  // namespace
 
 CrsUnitMetres metresPerCrsUnit(const std::string& crs, double latitude_deg) {
@@ -54,6 +63,9 @@ CrsUnitMetres metresPerCrsUnit(const std::string& crs, double latitude_deg) {
   double factor = 1.0;
   if ((startsWith(crs, "PROJCS[") || startsWith(crs, "PROJCRS[")) && lastUnitFactor(crs, &factor)) {
     return {factor, factor, false};
+  }
+  if (startsWith(crs, "EPSG:") && isMetreEpsg(std::strtol(crs.c_str() + 5, nullptr, 10))) {
+    return {1.0, 1.0, false};
   }
   return {};
 }

@@ -38,9 +38,23 @@ TEST(Alignment, ByGeoreferenceACoarserLargerDemUnderA1mImage) {
   // Sample (0, 0)'s centre: 15 m in from the DEM's corner.
   EXPECT_DOUBLE_EQ(a.sample0_world.x, -300.0 + 15.0);
   EXPECT_DOUBLE_EQ(a.sample0_world.y, -600.0 + 15.0);
-  EXPECT_DOUBLE_EQ(a.world_per_height, 1.0);  // metres over 1 m texels (EPSG projected: assumed m)
+  EXPECT_DOUBLE_EQ(a.world_per_height, 1.0);  // metres over 1 m texels (UTM: metres)
+  EXPECT_TRUE(a.warnings.empty());  // UTM's unit is known: nothing assumed
   ASSERT_TRUE(alignElevation(c, e, 3.0, false, &a).ok());
   EXPECT_DOUBLE_EQ(a.world_per_height, 3.0);
+}
+
+TEST(Alignment, KnownEpsgCodesAreMetresAndOthersAssumed) {
+  for (const char* crs : {"EPSG:32633", "EPSG:32755", "EPSG:26710", "EPSG:26910", "EPSG:25832", "EPSG:3857"}) {
+    const CrsUnitMetres u = metresPerCrsUnit(crs, 45.0);
+    EXPECT_FALSE(u.assumed) << crs;
+    EXPECT_EQ(u.x, 1.0) << crs;
+  }
+  EXPECT_TRUE(metresPerCrsUnit("EPSG:2992", 45.0).assumed);  // Oregon Lambert, in feet
+  EXPECT_TRUE(metresPerCrsUnit("", 45.0).assumed);
+  const CrsUnitMetres degrees = metresPerCrsUnit("EPSG:4326", 60.0);
+  EXPECT_FALSE(degrees.assumed);
+  EXPECT_NEAR(degrees.x, 111320.0 * 0.5, 1.0);
 }
 
 TEST(Alignment, FeetAndDegreesReachTheVerticalScale) {

@@ -147,10 +147,10 @@ TEST(Elevation, RealDemWithNoDataTilesExactlyAndFillsTheHoles) {
   const RunResult info = runInfo({"--json", dir.file("h.cst")}, ">" + dir.file("info.json"));
   ASSERT_EQ(info.exit_code, 0) << info.output;
   std::ifstream info_in(dir.file("info.json"));
-  const nlohmann::json i = nlohmann::json::parse(info_in);
+  const nlohmann::json info_json = nlohmann::json::parse(info_in);
   for (const char* key : {"pixel_format", "layer", "levels", "width_px", "height_px", "georeference",
                           "elevation"}) {
-    EXPECT_EQ(j[key], i[key]) << key;
+    EXPECT_EQ(j[key], info_json[key]) << key;
   }
   ASSERT_TRUE(j["georeference"].is_object());
   EXPECT_FALSE(j["georeference"]["crs"].get<std::string>().empty());

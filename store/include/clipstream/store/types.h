@@ -83,8 +83,9 @@ struct CrsUnitMetres {
 
 // The ground size of a CRS unit at `latitude_deg` (which matters for
 // geographic CRSs only). WKT: the projected CRS's last UNIT/LENGTHUNIT, or
-// degrees for a geographic one; "EPSG:4xxx": geographic; any other EPSG
-// code, or an empty CRS: metres, assumed. The one place the programs turn
+// degrees for a geographic one; "EPSG:4xxx": geographic; the UTM, ETRS89
+// and Web Mercator EPSG codes: metres; any other EPSG code, or an empty
+// CRS: metres, assumed. The one place the programs turn
 // georeferences into ground distances (the tiler's relief shading, the
 // streamer's layer alignment).
 CrsUnitMetres metresPerCrsUnit(const std::string& crs, double latitude_deg);
