@@ -15,9 +15,15 @@ scripts/deps.sh
 jobs=$(nproc)
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
 # First what scripts/demo.sh builds (the `installables` target: the programs
-# and libraries, no tests), then the README's install step right after it,
-# as a user who ran the demo would; the tests are built after that.
+# and libraries, no tests), then the README's commands in order on it (the
+# demo, nginx, the install step right after the demo's build, the Debian
+# packages), as a user who ran the demo would; the tests are built after that.
 cmake --build build -j "$jobs" --target installables
+
+# The README walked as written, in order, from the demo to the Debian
+# package (scripts/readme_walk.sh: what it changes to run as a test).
+echo "== The README, walked =="
+scripts/readme_walk.sh
 
 # clipstream as another program sees it (docs/api.md): install build/ into a
 # temporary prefix; tile the sample image with the installed clipstream-tile
