@@ -254,10 +254,14 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   const double path_frames =
       std::ceil(r.path.durationS() / (r.speed * renderer_config::kSimulatedFrameSeconds)) + 1.0;
   if (o.frames == 0 && !(path_frames <= double(kMaxFlyFrames)))
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "the path lasts " + std::to_string(r.path.durationS()) + " s: at speed " +
-                             std::to_string(r.speed) + " that is more than " + std::to_string(kMaxFlyFrames) +
-                             " frames; give a higher speed or --frames");
+  {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "the path lasts %.6g s: at speed %.6g that is more than %u frames; give a higher "
+                  "speed or --frames",
+                  r.path.durationS(), r.speed, unsigned(kMaxFlyFrames));
+    return Status::error(ErrorCode::kInvalidArgument, text);
+  }
   r.frames = o.frames > 0 ? o.frames : uint32_t(path_frames);
   r.warmup_frames = o.warmup_frames;
   r.rest_frames = o.rest_frames;

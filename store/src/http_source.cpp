@@ -578,8 +578,17 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
     return isTransient(rc) ? Outcome::kTransient : Outcome::kFailed;
   }
   uint64_t first = 0, last = 0, total = 0;
-  if (!parseContentRange(t.content_range, &first, &last, &total) || first != offset ||
-      total == UINT64_MAX) {
+  const bool parsed = parseContentRange(t.content_range, &first, &last, &total);
+  if (parsed && first == offset && total == UINT64_MAX) {
+    // "bytes 0-65535/*": allowed by RFC 9110, but a store is read by offsets
+    // from its end too, and a changed file is told by its size.
+    *status = fail(ErrorCode::kUnsupported,
+                   "HTTP 206 with a Content-Range \"" + printableText(t.content_range, 100) +
+                       "\" that gives no total size (\"*\"); the server must report the file's "
+                       "size (" + what + ")");
+    return Outcome::kFailed;
+  }
+  if (!parsed || first != offset || total == UINT64_MAX) {
     *status = fail(ErrorCode::kIo, "HTTP 206 with a Content-Range \"" +
                                        printableText(t.content_range, 100) + "\" that does not "
                                        "match the request (" + what + ")");

@@ -252,7 +252,14 @@ TEST(FlyHardening, APathThatIsAFifoOrTooLongIsRefused) {
                dir.file("log"));
   EXPECT_EQ(run.exit_code, 1) << run.output;
   EXPECT_NE(run.output.find("--frames"), std::string::npos) << run.output;
-  EXPECT_EQ(namesIn(dir.path().string()), (std::vector<std::string>{"log", "long.json", "path.fifo"}));
+  // An absurd duration is written as a number a person reads, not 300 digits.
+  const std::string absurd = writePathJson(dir.file("absurd.json"), 1e300);
+  run = runFly({"--procedural", "65536", "--path", absurd, "--out", dir.file("out")}, dir.file("log"));
+  EXPECT_EQ(run.exit_code, 1) << run.output;
+  EXPECT_NE(run.output.find("the path lasts 1e+300 s"), std::string::npos) << run.output;
+  EXPECT_LT(run.output.size(), 400u) << run.output;
+  EXPECT_EQ(namesIn(dir.path().string()),
+            (std::vector<std::string>{"absurd.json", "log", "long.json", "path.fifo"}));
 }
 
 // Second pass: --trace naming an input (the path file) replaced it, and

@@ -417,6 +417,20 @@ TEST_F(HttpStore, AnswerCutMidBodyIsRetriedAndArrivesWhole) {
   EXPECT_NE(cut.message.find(proxy->url("store.cstore")), std::string::npos) << cut.message;
 }
 
+TEST_F(HttpStore, AContentRangeWithoutATotalSizeIsNamedAsSuch) {
+  // "bytes 0-65535/*" is allowed by RFC 9110 but gives no file size, which
+  // the reader needs (offsets from the end, a changed file told by its size).
+  std::unique_ptr<test::DelayProxy> proxy;
+  ASSERT_TRUE(test::DelayProxy::start(m_server->port(), 0.0, &proxy).ok());
+  const std::string size = std::to_string(std::filesystem::file_size(m_local));
+  proxy->rewriteAnswers("/" + size + "\r\n", "/*\r\n");
+  std::unique_ptr<TileStoreReader> remote;
+  const Status s = TileStoreReader::open(proxy->url("store.cstore"), RemoteOptions{}, &remote);
+  EXPECT_EQ(s.code, ErrorCode::kUnsupported) << s.toString();
+  EXPECT_NE(s.message.find("gives no total size"), std::string::npos) << s.message;
+  EXPECT_EQ(s.message.find("does not match the request"), std::string::npos) << s.message;
+}
+
 // ---- Disk cache (RemoteOptions::disk_cache_dir) ----
 
 // The files of a disk cache folder: entries only, their total size.

@@ -322,7 +322,24 @@ TEST(Elevation, CommandLineRefusesWhatHeightsCannotMean) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   r = runTiler({"--synthetic", "64x64", "--format", "F32", dir.file("x.cst")});
   EXPECT_EQ(r.exit_code, 2) << r.output;
+  // A no-data value no int16 sample can hold would turn no-data off unsaid.
+  for (const char* nodata : {"1e30", "40000", "-32769", "2.5"}) {
+    r = runTiler({grey16, dir.file("x.cst"), "--nodata", nodata, "--no-fsync"});
+    EXPECT_EQ(r.exit_code, 1) << nodata << ": " << r.output;
+    EXPECT_NE(r.output.find("no int16 sample can hold it"), std::string::npos) << r.output;
+  }
+  r = runTiler({grey16, dir.file("n.cst"), "--nodata", "-32768", "--no-fsync"});
+  EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_FALSE(std::filesystem::exists(dir.file("x.cst")));
+  // Float heights cannot go into I16: the one format that holds them is named once.
+  const std::string f32 = dir.file("f.tif");
+  ASSERT_TRUE(writeImage(f32, 64, 64, 1, OIIO::TypeDesc::FLOAT, [](uint64_t x, uint64_t, int) {
+    return double(x) * 0.5;
+  }));
+  r = runTiler({f32, dir.file("x.cst"), "--layer", "elevation", "--format", "I16", "--no-fsync"});
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("exactly (use F32)"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("F32 or F32"), std::string::npos) << r.output;
 }
 
 }  // namespace

@@ -417,6 +417,7 @@ TEST_F(Mosaic, SheetsThatDoNotFitTogetherAreNamed) {
   expectFailure({"--mosaic", with("bare.txt", "bare.tif"), out}, "bare.tif has no georeference");
   expectFailure({"--mosaic", with("missing.txt", "nope.tif"), out}, "missing.txt line 9: ");
   expectFailure({"--mosaic", m_dir.file("missing.txt"), out}, "nope.tif");
+  expectFailure({"--mosaic", with("self.txt", "self.txt"), out}, "self.txt is the mosaic list itself");
   writeList("empty.txt", {"# nothing yet", ""});
   expectFailure({"--mosaic", m_dir.file("empty.txt"), out}, "names no sheets");
   expectFailure({"--mosaic", m_dir.file("absent.txt"), out}, "absent.txt");

@@ -316,6 +316,8 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   std::vector<ListEntry> paths;
   Status s = readList(list_path, &paths);
   if (!s) return s;
+  struct stat list_st{};
+  const bool list_known = ::stat(list_path.c_str(), &list_st) == 0;
 
   std::vector<Sheet> sheets;
   SourceInfo first_info;
@@ -326,6 +328,11 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   for (const ListEntry& entry : paths) {
     const std::string& path = entry.path;
     const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
+    if (struct stat st{}; list_known && ::stat(path.c_str(), &st) == 0 && st.st_dev == list_st.st_dev &&
+                          st.st_ino == list_st.st_ino) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           where + path + " is the mosaic list itself, not an image");
+    }
     std::unique_ptr<ImageSource> src;
     s = openImageFile(path, forced, &src, read);
     if (!s) return Status::error(s.code, where + s.message);

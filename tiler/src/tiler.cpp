@@ -500,10 +500,22 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
                            std::string("--format ") + pixelFormatName(*o.format) + " cannot hold " +
                                type + " heights " +
                                (o.height_step > 0.0 ? "quantised (R16 does)"
-                                                    : "exactly (use " + std::string(pixelFormatName(stored)) +
-                                                          " or F32)"));
+                                : stored == PixelFormat::kF32
+                                    ? "exactly (use F32)"
+                                    : "exactly (use " + std::string(pixelFormatName(stored)) + " or F32)"));
     }
     stored = *o.format;
+  }
+  // A no-data value no sample of an integer DEM can hold would turn no-data
+  // off without a word.
+  if (integer && o.nodata && !std::isnan(*o.nodata)) {
+    const double lo = int16 ? -32768.0 : 0.0, hi = int16 ? 32767.0 : uint16 ? 65535.0 : 255.0;
+    if (*o.nodata < lo || *o.nodata > hi || *o.nodata != std::floor(*o.nodata)) {
+      char text[160];
+      std::snprintf(text, sizeof text, "--nodata %.9g: no %s sample can hold it (whole numbers %.0f to %.0f)",
+                    *o.nodata, type.c_str(), lo, hi);
+      return Status::error(ErrorCode::kInvalidArgument, o.input_path + ": " + text);
+    }
   }
   ElevationTags tags;
   Status s = readElevationTags(tags_path, &tags);

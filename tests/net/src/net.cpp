@@ -352,6 +352,21 @@ void DelayProxy::serve(int client_fd) {
     if (ready > 0 && (fds[1].revents & (POLLIN | POLLHUP | POLLERR))) {
       const ssize_t got = ::recv(upstream_fd, buffer.data(), buffer.size(), 0);
       if (got <= 0) break;
+      std::string from, to;
+      {
+        std::lock_guard<std::mutex> lock(m_mutex);
+        from = m_rewrite_from, to = m_rewrite_to;
+      }
+      if (!from.empty()) {
+        std::string chunk(buffer.data(), size_t(got));
+        for (size_t at = chunk.find(from); at != std::string::npos; at = chunk.find(from, at + to.size()))
+          chunk.replace(at, from.size(), to);
+        const size_t pass = size_t(std::min<uint64_t>(chunk.size(), answer_budget));
+        if (!writeAll(client_fd, chunk.data(), pass)) break;
+        if (answer_budget != UINT64_MAX) answer_budget -= pass;
+        if (answer_budget == 0) break;
+        continue;
+      }
       const size_t pass = size_t(std::min<uint64_t>(uint64_t(got), answer_budget));
       if (!writeAll(client_fd, buffer.data(), pass)) break;
       if (answer_budget != UINT64_MAX) answer_budget -= pass;

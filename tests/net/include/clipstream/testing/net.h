@@ -103,6 +103,13 @@ class DelayProxy {
     m_cuts_left.store(connections);
   }
   uint64_t connections() const { return m_connections.load(); }
+  // Every later answer chunk has `from` replaced by `to` (a header
+  // rewritten: a server that answers differently). Set before requests.
+  void rewriteAnswers(std::string from, std::string to) {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_rewrite_from = std::move(from);
+    m_rewrite_to = std::move(to);
+  }
 
  private:
   DelayProxy() = default;
@@ -117,8 +124,9 @@ class DelayProxy {
   std::atomic<uint64_t> m_cuts_left{0}, m_cut_after_bytes{0};
   std::atomic<bool> m_stopping{false};
   std::thread m_acceptor;
-  std::mutex m_mutex;  // guards m_threads
+  std::mutex m_mutex;  // guards m_threads, m_rewrite_*
   std::vector<std::thread> m_threads;
+  std::string m_rewrite_from, m_rewrite_to;
 };
 
 }  // namespace clipstream::test
