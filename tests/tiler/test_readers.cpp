@@ -263,5 +263,91 @@ TEST(Readers, DamagedTiffStripFailsTheRunNamingTheFile) {
   EXPECT_FALSE(std::filesystem::exists(dir.file("d.cst")));
 }
 
+// The (count, value) of tag `tag` in the first directory of a classic
+// little-endian TIFF: where the entry lies, for a test to damage it.
+size_t tiffEntry(const std::vector<uint8_t>& b, uint16_t tag) {
+  auto u16 = [&](size_t at) { return uint16_t(b[at] | (b[at + 1] << 8)); };
+  auto u32 = [&](size_t at) { return uint32_t(u16(at) | (uint32_t(u16(at + 2)) << 16)); };
+  if (b.size() < 8 || b[0] != 'I' || u16(2) != 42) return 0;
+  const size_t ifd = u32(4);
+  for (size_t i = 0, n = u16(ifd); i < n; ++i) {
+    const size_t at = ifd + 2 + 12 * i;
+    if (u16(at) == tag) return at;
+  }
+  return 0;
+}
+
+// Damage libtiff only warns about: a StripOffsets tag with one value where
+// the image needs one a row. libtiff ignores the tag and reads zeros; the
+// run tiled 1,999 rows of zeros with exit 0. Now it is refused at open.
+TEST(Readers, ATiffWhoseStripOffsetsTagIsIgnoredIsRefused) {
+  TempDir dir;
+  const std::string in = dir.file("s.tif");
+  ASSERT_TRUE(writeImage(in, 300, 200, 1, kI16, pattern, 0, [](OIIO::ImageSpec& spec) {
+    spec.attribute("compression", "none");
+    spec.attribute("tiff:RowsPerStrip", 1);
+  }));
+  std::vector<uint8_t> bytes = readBytes(in);
+  const size_t entry = tiffEntry(bytes, 273);  // StripOffsets
+  ASSERT_NE(entry, 0u);
+  const uint32_t count = 1;
+  std::vector<uint8_t> first(bytes.begin() + long(entry) + 8, bytes.begin() + long(entry) + 12);
+  uint32_t array = 0;
+  std::memcpy(&array, first.data(), 4);
+  std::memcpy(bytes.data() + entry + 4, &count, 4);
+  std::memcpy(bytes.data() + entry + 8, bytes.data() + array, 4);  // the one value inline
+  writeBytes(in, bytes);
+  TilerOptions o;
+  o.input_path = in;
+  o.output_path = dir.file("s.cst");
+  o.fsync = false;
+  TilerSummary summary;
+  const Status s = tileImage(o, &summary);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message.find("s.tif: damaged TIFF"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("StripOffsets"), std::string::npos) << s.message;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("s.cst")));
+}
+
+// A file cut short declares more data than it holds: refused before any
+// work, naming the first strip or tile that is missing, compressed or not.
+TEST(Readers, ATiffCutShortIsRefusedBeforeTheWorkStarts) {
+  TempDir dir;
+  for (const char* compression : {"none", "zip"}) {
+    for (int tile : {0, 64}) {
+      SCOPED_TRACE(std::string(compression) + (tile ? " tiled" : " strips"));
+      const std::string in = dir.file("c.tif");
+      ASSERT_TRUE(writeImage(in, 400, 300, 3, kU8, pattern, tile, set("compression", compression)));
+      std::vector<uint8_t> bytes = readBytes(in);
+      // The directory and its arrays come first (OpenImageIO writes them so):
+      // keep them, and two thirds of the data.
+      auto u16 = [&](size_t at) { return uint16_t(bytes[at] | (bytes[at + 1] << 8)); };
+      auto u32 = [&](size_t at) { return uint32_t(u16(at) | (uint32_t(u16(at + 2)) << 16)); };
+      const size_t ifd = u32(4);
+      size_t header_end = ifd + 2 + 12 * size_t(u16(ifd)) + 4;
+      for (size_t i = 0, n = u16(ifd); i < n; ++i) {
+        const size_t at = ifd + 2 + 12 * i;
+        const uint16_t type = u16(at + 2);
+        const size_t size = (type == 3 ? 2 : type == 4 ? 4 : type == 5 || type == 12 ? 8 : 1) * size_t(u32(at + 4));
+        if (size > 4) header_end = std::max(header_end, size_t(u32(at + 8)) + size);
+      }
+      const size_t keep = bytes.size() * 2 / 3;
+      ASSERT_LT(header_end, keep);
+      std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(keep));
+      writeBytes(in, cut);
+      TilerOptions o;
+      o.input_path = in;
+      o.output_path = dir.file("c.cst");
+      o.fsync = false;
+      TilerSummary summary;
+      const Status s = tileImage(o, &summary);
+      ASSERT_FALSE(s.ok());
+      EXPECT_NE(s.message.find("c.tif: damaged TIFF: "), std::string::npos) << s.message;
+      EXPECT_NE(s.message.find("beyond the end of the file"), std::string::npos) << s.message;
+      EXPECT_FALSE(std::filesystem::exists(dir.file("c.cst")));
+    }
+  }
+}
+
 }  // namespace
 }  // namespace clipstream::test

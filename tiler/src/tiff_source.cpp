@@ -37,10 +37,12 @@ constexpr tmsize_t kMaxTiffAllocBytes = tmsize_t(1) << 30;
 // More decode threads than this gain nothing on one file's bands.
 constexpr unsigned kMaxDecodeThreads = 16;
 
-// One libtiff handle and the errors it reported since they were last taken.
+// One libtiff handle and the errors and warnings it reported since they
+// were last taken.
 struct Handle {
   TIFF* tiff = nullptr;
   std::string messages;
+  std::string warnings;
   ~Handle() {
     if (tiff != nullptr) TIFFClose(tiff);
   }
@@ -56,9 +58,32 @@ int onTiffError(TIFF*, void* user, const char* module, const char* fmt, va_list 
   return 1;  // handled: nothing reaches libtiff's default (stderr)
 }
 
-// Warnings (tags libtiff does not know, such as GDAL's metadata) are not
-// the user's concern: the pixels decide.
-int onTiffWarning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
+// Warnings are kept, but for tags libtiff does not know (GDAL's metadata,
+// GeoTIFF keys), which are not the user's concern. What a kept warning
+// means is decided where it is raised: about the file's layout at open
+// (strip or tile offsets and byte counts ignored or recomputed: libtiff
+// would read zeros where the data should be), the file is refused; during
+// a decode, the chunk is (a decoder that ran out of data fills the rest);
+// any other at open goes into the run's warnings.
+int onTiffWarning(TIFF*, void* user, const char* module, const char* fmt, va_list ap) {
+  auto* h = static_cast<Handle*>(user);
+  char text[512];
+  std::vsnprintf(text, sizeof text, fmt, ap);
+  if (std::strstr(text, "Unknown field with tag") != nullptr) return 1;
+  if (!h->warnings.empty()) h->warnings += '\n';
+  if (module != nullptr && *module) h->warnings += std::string(module) + ": ";
+  h->warnings += text;
+  return 1;
+}
+
+// Whether a libtiff warning says the strip or tile layout was not as the
+// file declares it.
+bool isLayoutWarning(const std::string& text) {
+  for (const char* tag : {"StripOffsets", "StripByteCounts", "TileOffsets", "TileByteCounts"}) {
+    if (text.find(tag) != std::string::npos) return true;
+  }
+  return false;
+}
 
 Status openHandle(const std::string& path, Handle* h) {
   TIFFOpenOptions* opts = TIFFOpenOptionsAlloc();
@@ -75,6 +100,50 @@ Status openHandle(const std::string& path, Handle* h) {
                                              decoderMessage(h->messages, "not a TIFF libtiff can read"));
   }
   h->messages.clear();
+  if (isLayoutWarning(h->warnings)) {
+    return Status::error(ErrorCode::kTruncated,
+                         path + ": damaged TIFF: " + decoderMessage(h->warnings, "layout warning"));
+  }
+  return okStatus();
+}
+
+// Every strip or tile must lie inside the file, and hold something; an
+// uncompressed one, all its bytes. A file that declares far more data than
+// it holds is refused here, before the work starts, instead of tiling the
+// missing data as zeros for minutes.
+Status checkChunks(const std::string& path, TIFF* t, bool tiled, uint16_t compression,
+                   uint64_t chunk_bytes, uint64_t last_chunk_bytes) {
+  std::error_code ec;
+  const uint64_t file_bytes = fs::file_size(path, ec);
+  if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
+  const uint32_t n = tiled ? TIFFNumberOfTiles(t) : TIFFNumberOfStrips(t);
+  const char* what = tiled ? "tile" : "strip";
+  for (uint32_t i = 0; i < n; ++i) {
+    int err = 0;
+    const uint64_t offset = TIFFGetStrileOffsetWithErr(t, i, &err);
+    const uint64_t bytes = err == 0 ? TIFFGetStrileByteCountWithErr(t, i, &err) : 0;
+    std::string problem;
+    if (err != 0) {
+      problem = "its offset or byte count cannot be read";
+    } else if (bytes == 0) {
+      problem = "it holds no bytes (a damaged file, or a sparse one, which is not read)";
+    } else if (offset > file_bytes || bytes > file_bytes - offset) {
+      problem = "it lies beyond the end of the file (" + std::to_string(bytes) + " bytes at " +
+                std::to_string(offset) + ", the file has " + std::to_string(file_bytes) + ")";
+    } else if (compression == COMPRESSION_NONE && !tiled &&
+               bytes < (i + 1 == n ? last_chunk_bytes : chunk_bytes)) {
+      problem = "it holds " + std::to_string(bytes) + " bytes of the " +
+                std::to_string(i + 1 == n ? last_chunk_bytes : chunk_bytes) + " its rows need";
+    } else if (compression == COMPRESSION_NONE && tiled && bytes < chunk_bytes) {
+      problem = "it holds " + std::to_string(bytes) + " bytes of the " + std::to_string(chunk_bytes) +
+                " a tile needs";
+    }
+    if (!problem.empty()) {
+      return Status::error(ErrorCode::kTruncated, path + ": damaged TIFF: " + what + " " +
+                                                      std::to_string(i) + " of " + std::to_string(n) +
+                                                      ": " + problem);
+    }
+  }
   return okStatus();
 }
 
@@ -198,6 +267,7 @@ class TiffSource final : public ImageSource {
         if (TIFFReadScanline(h.tiff, m_row.data(), uint32_t(y0 + r), 0) < 0) {
           return readError(h, "row " + std::to_string(y0 + r));
         }
+        if (!h.warnings.empty()) return damagedChunk(h, "row " + std::to_string(y0 + r));
         convert(m_row.data() + x0 * np, width, dst + size_t(r) * dst_stride);
       }
       return okStatus();
@@ -227,6 +297,14 @@ class TiffSource final : public ImageSource {
     const bool fast_copy = m_layout.kind == SampleKind::kU8 && formatChannels(m_info.format) == nch;
     convertNativeRow(m_layout.kind, src, nch, width, m_info.format, fast_copy, out,
                      &m_info.clamped_samples);
+  }
+
+  // A chunk the decoder read whole but warned about (data ran out, a
+  // corrupt code): its pixels are partly the decoder's filling.
+  Status damagedChunk(Handle& h, const std::string& what) {
+    std::string why = decoderMessage(h.warnings, "decoder warning");
+    h.warnings.clear();
+    return Status::error(ErrorCode::kTruncated, m_path + ": damaged image data in " + what + ": " + why);
   }
 
   Status readError(Handle& h, const std::string& what) {
@@ -287,6 +365,7 @@ class TiffSource final : public ImageSource {
       auto h = std::make_unique<Handle>();
       Status s = openHandle(m_path, h.get());
       if (!s) return s;
+      h->warnings.clear();  // the first handle's, reported at open
       if (m_layout.jpeg_rgb) TIFFSetField(h->tiff, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
       slot = std::move(h);
     }
@@ -299,6 +378,7 @@ class TiffSource final : public ImageSource {
       const uint32_t strip = TIFFComputeStrip(h.tiff, uint32_t(y), 0);
       const tmsize_t want = tmsize_t(rows * W * np);
       const tmsize_t got = TIFFReadEncodedStrip(h.tiff, strip, at, want);
+      if (got == want && !h.warnings.empty()) return damagedChunk(h, "strip " + std::to_string(strip));
       if (got != want) {
         if (got >= 0 && h.messages.empty()) h.messages = "strip holds fewer pixels than its rows";
         return readError(h, "strip " + std::to_string(strip) + " (rows " + std::to_string(y) + "-" +
@@ -311,6 +391,7 @@ class TiffSource final : public ImageSource {
     scratch.resize(tile_bytes);
     const uint32_t tile = TIFFComputeTile(h.tiff, uint32_t(x), uint32_t(y), 0, 0);
     const tmsize_t got = TIFFReadEncodedTile(h.tiff, tile, scratch.data(), tmsize_t(tile_bytes));
+    if (got == tmsize_t(tile_bytes) && !h.warnings.empty()) return damagedChunk(h, "tile " + std::to_string(tile));
     if (got != tmsize_t(tile_bytes)) {
       if (got >= 0 && h.messages.empty()) h.messages = "tile holds fewer pixels than its size";
       return readError(h, "tile " + std::to_string(tile) + " at (" + std::to_string(x) + ", " +
@@ -415,10 +496,25 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
     }
   }
 
+  {
+    const uint64_t chunk = uint64_t(layout.chunk_w) * layout.chunk_h * layout.native_pixel;
+    const uint64_t last_rows = layout.tiled ? layout.chunk_h : h - (uint64_t(h) - 1) / layout.chunk_h * layout.chunk_h;
+    s = checkChunks(path, t, layout.tiled, compression, chunk,
+                    uint64_t(layout.chunk_w) * last_rows * layout.native_pixel);
+    if (!s) return s;
+  }
+
   SourceInfo info;
   info.width_px = w;
   info.height_px = h;
   info.input_channels = spp;
+  // What libtiff said of the file at open that does not stop the run.
+  for (size_t at = 0; at < first->warnings.size();) {
+    const size_t end = std::min(first->warnings.find('\n', at), first->warnings.size());
+    info.warnings.push_back(path + ": libtiff: " + first->warnings.substr(at, end - at));
+    at = end + 1;
+  }
+  first->warnings.clear();
   info.input_type = layout.doubles ? "double" : sampleKindName(layout.kind);
   info.decoder = "libtiff";
   info.tiled = layout.tiled;
