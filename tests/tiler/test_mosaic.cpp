@@ -116,12 +116,15 @@ class Mosaic : public ::testing::Test {
     ASSERT_TRUE(s.ok()) << s.toString();
   }
 
-  void expectFailure(const std::vector<std::string>& args, const std::string& needle) {
+  // Runs the tiler expecting exit 1 with `needle` in its output and nothing
+  // left behind; returns the output.
+  std::string expectFailure(const std::vector<std::string>& args, const std::string& needle) {
     const std::vector<std::string> before = m_dir.entries();
     const RunResult r = runTiler(args);
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_NE(r.output.find(needle), std::string::npos) << r.output;
     EXPECT_EQ(m_dir.entries(), before) << "left behind in " << m_dir.path();
+    return r.output;
   }
 
   TempDir m_dir{"mosaic"};
@@ -255,6 +258,34 @@ TEST_F(Mosaic, VrtOfSimpleSourcesIsTheSameMosaic) {
                 "complex.vrt line 3: ComplexSource is not a simple source");
   { std::ofstream(m_dir.file("part.vrt")) << vrtText(sheets, "SimpleSource", 5); }
   expectFailure({"--mosaic", m_dir.file("part.vrt"), m_dir.file("o.cst")}, "draws part of");
+
+  // Valid XML however it starts: a declaration, a comment, a byte order mark.
+  const std::string vrt = vrtText(sheets);
+  { std::ofstream(m_dir.file("prolog.vrt")) << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<!-- by hand -->\n" << vrt; }
+  { std::ofstream(m_dir.file("bom.vrt")) << "\xEF\xBB\xBF" << vrt; }
+  for (const char* name : {"prolog.vrt", "bom.vrt"}) {
+    tile(run(name, std::string(name) + ".cst", true));
+    expectSameTiles(m_dir.file("whole.cst"), m_dir.file(std::string(name) + ".cst"));
+  }
+  // Malformed XML is named as such, with libxml2's complaint and line.
+  auto lineAt = [&](size_t at) { return std::to_string(std::count(vrt.begin(), vrt.begin() + long(at), '\n') + 1); };
+  std::string mismatched = vrt;
+  const size_t wrong = mismatched.find("</VRTRasterBand>");
+  mismatched.replace(wrong, 16, "</VRTRasterBnad>");
+  { std::ofstream(m_dir.file("mismatched.vrt")) << mismatched; }
+  expectFailure({"--mosaic", m_dir.file("mismatched.vrt"), m_dir.file("o.cst")},
+                "mismatched.vrt line " + lineAt(wrong) + ": not a well-formed VRT: Opening and ending tag mismatch");
+  { std::ofstream(m_dir.file("unclosed.vrt")) << vrt.substr(0, vrt.rfind("</VRTDataset>")); }
+  expectFailure({"--mosaic", m_dir.file("unclosed.vrt"), m_dir.file("o.cst")},
+                ": not a well-formed VRT: Premature end of data in tag VRTDataset");
+  { std::ofstream(m_dir.file("truncated.vrt")) << vrt.substr(0, vrt.size() / 2); }
+  const std::string truncated =
+      expectFailure({"--mosaic", m_dir.file("truncated.vrt"), m_dir.file("o.cst")}, "not a well-formed VRT");
+  EXPECT_EQ(truncated.find("other sources"), std::string::npos) << truncated;
+  { std::ofstream(m_dir.file("other.vrt")) << "<?xml version=\"1.0\"?>\n<svg/>\n"; }
+  expectFailure({"--mosaic", m_dir.file("other.vrt"), m_dir.file("o.cst")},
+                "other.vrt line 2: not a well-formed VRT: the root element is <svg>, not <VRTDataset>");
+  EXPECT_FALSE(std::filesystem::exists(m_dir.file("o.cst")));
 }
 
 size_t openFiles() {

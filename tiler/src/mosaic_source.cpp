@@ -15,8 +15,12 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <memory>
+#include <optional>
 #include <sstream>
 
+#include <libxml/parser.h>
+#include <libxml/tree.h>
 #include <sys/stat.h>
 
 namespace clipstream {
@@ -150,84 +154,112 @@ struct ListEntry {
   double dst[2] = {0, 0};        // DstRect xSize, ySize
 };
 
-// The value of attribute `name` in the XML start tag `tag`, or "".
-std::string attribute(const std::string& tag, const std::string& name) {
-  const std::string key = name + "=\"";
-  const size_t at = tag.find(key);
-  if (at == std::string::npos) return {};
-  const size_t end = tag.find('"', at + key.size());
-  return end == std::string::npos ? std::string() : tag.substr(at + key.size(), end - at - key.size());
+// A libxml2 element's text content, trimmed, and attributes.
+std::string textOf(xmlNode* n) {
+  xmlChar* c = xmlNodeGetContent(n);
+  std::string t = c != nullptr ? reinterpret_cast<const char*>(c) : "";
+  xmlFree(c);
+  const size_t a = t.find_first_not_of(" \t\r\n"), b = t.find_last_not_of(" \t\r\n");
+  return a == std::string::npos ? std::string() : t.substr(a, b - a + 1);
 }
-
-std::string unescapeXml(std::string t) {
-  const std::pair<const char*, const char*> entities[] = {
-      {"&lt;", "<"}, {"&gt;", ">"}, {"&quot;", "\""}, {"&apos;", "'"}, {"&amp;", "&"}};
-  for (const auto& [from, to] : entities) {
-    for (size_t at = t.find(from); at != std::string::npos; at = t.find(from, at + 1)) {
-      t.replace(at, std::strlen(from), to);
-    }
-  }
+std::optional<std::string> attributeOf(xmlNode* n, const char* name) {
+  xmlChar* v = xmlGetProp(n, reinterpret_cast<const xmlChar*>(name));
+  if (v == nullptr) return std::nullopt;
+  std::string t = reinterpret_cast<const char*>(v);
+  xmlFree(v);
   return t;
 }
+bool named(xmlNode* n, const char* name) {
+  return n->type == XML_ELEMENT_NODE && xmlStrcmp(n->name, reinterpret_cast<const xmlChar*>(name)) == 0;
+}
+std::string nameOf(xmlNode* n) { return reinterpret_cast<const char*>(n->name); }
 
 // The sheets of a GDAL VRT of simple sources: each band's <SimpleSource>s,
 // which must name the same files in every band, each file's band n feeding
 // band n. Anything a VRT can do beyond placing whole files (other source
-// kinds, band reordering, cropping, scaling) is refused, naming its line.
+// kinds, derived bands, band reordering, cropping, scaling) is refused,
+// naming its line. Parsed by libxml2: a malformed file is an error naming
+// libxml2's first complaint and its line; no network, no external entities.
 Status parseVrt(const std::string& path, const std::string& text, std::vector<ListEntry>* out) {
   const fs::path dir = fs::path(path).parent_path();
-  auto lineOf = [&](size_t at) { return size_t(std::count(text.begin(), text.begin() + long(at), '\n')) + 1; };
-  auto refuse = [&](size_t at, const std::string& what) {
+  auto refuse = [&](xmlNode* at, const std::string& what) {
     return Status::error(ErrorCode::kUnsupported,
-                         path + " line " + std::to_string(lineOf(at)) + ": " + what +
+                         path + " line " + std::to_string(xmlGetLineNo(at)) + ": " + what +
                              "; a mosaic takes a VRT of whole sheets (SimpleSource), else a list "
                              "file of the sheets");
   };
+  auto malformed = [&](long line, const std::string& what) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         path + (line > 0 ? " line " + std::to_string(line) : std::string()) +
+                             ": not a well-formed VRT: " + what);
+  };
+  if (text.size() > size_t(INT32_MAX)) return malformed(0, "too large");
+  std::unique_ptr<xmlParserCtxt, void (*)(xmlParserCtxtPtr)> ctxt(xmlNewParserCtxt(), xmlFreeParserCtxt);
+  if (!ctxt) return Status::error(ErrorCode::kOutOfMemory, path + ": cannot parse the VRT");
+  // NONET: never fetch a DTD or entity from the network; entities are not
+  // substituted (no XML_PARSE_NOENT), so none is read from a file either.
+  std::unique_ptr<xmlDoc, void (*)(xmlDocPtr)> doc(
+      xmlCtxtReadMemory(ctxt.get(), text.data(), int(text.size()), path.c_str(), nullptr,
+                        XML_PARSE_NONET | XML_PARSE_NOERROR | XML_PARSE_NOWARNING),
+      xmlFreeDoc);
+  if (!doc || !ctxt->wellFormed) {
+    const xmlError* e = xmlCtxtGetLastError(ctxt.get());
+    std::string why = e != nullptr && e->message != nullptr ? e->message : "libxml2 cannot parse it";
+    while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+    return malformed(e != nullptr ? e->line : 0, why);
+  }
+  xmlNode* root = xmlDocGetRootElement(doc.get());
+  if (root == nullptr || !named(root, "VRTDataset")) {
+    return malformed(root != nullptr ? xmlGetLineNo(root) : 0,
+                     "the root element is <" + (root != nullptr ? nameOf(root) : std::string()) +
+                         ">, not <VRTDataset>");
+  }
   std::vector<ListEntry> first_band;
   uint32_t band = 0;
-  for (size_t b = text.find("<VRTRasterBand"); b != std::string::npos;
-       b = text.find("<VRTRasterBand", b + 1)) {
+  for (xmlNode* b = root->children; b != nullptr; b = b->next) {
+    if (!named(b, "VRTRasterBand")) continue;
     ++band;
-    const size_t band_end = std::min(text.find("</VRTRasterBand>", b), text.size());
-    const std::string body = text.substr(b, band_end - b);
-    for (const char* kind : {"<ComplexSource", "<AveragedSource", "<KernelFilteredSource",
-                             "<NoDataFromMaskSource"}) {
-      const size_t at = body.find(kind);
-      if (at != std::string::npos) return refuse(b + at, std::string(kind + 1) + " is not a simple source");
-    }
+    if (const auto sub = attributeOf(b, "subClass")) return refuse(b, "a " + *sub + " band");
     std::vector<ListEntry> sources;
-    for (size_t at = body.find("<SimpleSource"); at != std::string::npos;
-         at = body.find("<SimpleSource", at + 1)) {
-      const size_t end = std::min(body.find("</SimpleSource>", at), body.size());
-      const std::string src = body.substr(at, end - at);
-      const size_t name_at = src.find("<SourceFilename");
-      const size_t name_open = name_at == std::string::npos ? name_at : src.find('>', name_at);
-      const size_t name_close = src.find("</SourceFilename>");
-      if (name_open == std::string::npos || name_close == std::string::npos || name_close < name_open) {
-        return refuse(b + at, "a SimpleSource without a SourceFilename");
+    for (xmlNode* src = b->children; src != nullptr; src = src->next) {
+      if (src->type != XML_ELEMENT_NODE) continue;
+      const std::string kind = nameOf(src);
+      if (kind.size() > 6 && kind.compare(kind.size() - 6, 6, "Source") == 0 && kind != "SimpleSource") {
+        return refuse(src, kind + " is not a simple source");
       }
+      if (kind != "SimpleSource") continue;  // ColorInterp, NoDataValue, ...: the sheets say
       ListEntry e;
-      e.line = lineOf(b + at);
-      const std::string tag = src.substr(name_at, name_open - name_at);
-      const fs::path name(unescapeXml(src.substr(name_open + 1, name_close - name_open - 1)));
-      e.path = attribute(tag, "relativeToVRT") == "1" && !name.is_absolute() && !dir.empty()
-                   ? (dir / name).string()
-                   : name.string();
-      const size_t band_at = src.find("<SourceBand>");
-      const std::string source_band =
-          band_at == std::string::npos ? "1" : src.substr(band_at + 12, src.find('<', band_at + 12) - band_at - 12);
-      if (source_band != std::to_string(band)) {
-        return refuse(b + at, "band " + std::to_string(band) + " reads band " + source_band +
-                                  " of " + e.path);
+      e.line = size_t(std::max(1L, xmlGetLineNo(src)));
+      xmlNode *name = nullptr, *source_band = nullptr, *sr = nullptr, *dr = nullptr;
+      for (xmlNode* c = src->children; c != nullptr; c = c->next) {
+        if (named(c, "SourceFilename")) name = c;
+        if (named(c, "SourceBand")) source_band = c;
+        if (named(c, "SrcRect")) sr = c;
+        if (named(c, "DstRect")) dr = c;
       }
-      const size_t sr = src.find("<SrcRect"), dr = src.find("<DstRect");
-      if (sr != std::string::npos && dr != std::string::npos) {
-        const std::string st = src.substr(sr, src.find('>', sr) - sr);
-        const std::string dt = src.substr(dr, src.find('>', dr) - dr);
+      if (name == nullptr || textOf(name).empty()) return refuse(src, "a SimpleSource without a SourceFilename");
+      const fs::path file(textOf(name));
+      e.path = attributeOf(name, "relativeToVRT").value_or("0") == "1" && !file.is_absolute() && !dir.empty()
+                   ? (dir / file).string()
+                   : file.string();
+      const std::string reads = source_band != nullptr ? textOf(source_band) : "1";
+      if (reads != std::to_string(band)) {
+        return refuse(src, "band " + std::to_string(band) + " reads band " + reads + " of " + e.path);
+      }
+      if (sr != nullptr && dr != nullptr) {
+        auto number = [&](xmlNode* rect, const char* key, double* v) {
+          const std::string t = attributeOf(rect, key).value_or("");
+          char* end = nullptr;
+          *v = std::strtod(t.c_str(), &end);
+          return !t.empty() && end != nullptr && *end == '\0' && std::isfinite(*v);
+        };
         const char* keys[] = {"xOff", "yOff", "xSize", "ySize"};
-        for (int i = 0; i < 4; ++i) e.src[i] = std::atof(attribute(st, keys[i]).c_str());
-        e.dst[0] = std::atof(attribute(dt, "xSize").c_str());
-        e.dst[1] = std::atof(attribute(dt, "ySize").c_str());
+        for (int i = 0; i < 4; ++i) {
+          if (!number(sr, keys[i], &e.src[i])) return refuse(sr, std::string("a SrcRect without a number ") + keys[i]);
+        }
+        if (!number(dr, "xSize", &e.dst[0]) || !number(dr, "ySize", &e.dst[1])) {
+          return refuse(dr, "a DstRect without a number xSize and ySize");
+        }
         e.has_rects = true;
       }
       sources.push_back(std::move(e));
@@ -264,8 +296,11 @@ Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
   {
     std::string text((std::istreambuf_iterator<char>(in)), {});
     if (in.bad()) return Status::error(ErrorCode::kIo, list_path + ": read failed");
-    const size_t start = text.find_first_not_of(" \t\r\n");
-    if (start != std::string::npos && text.compare(start, 11, "<VRTDataset") == 0) {
+    // XML (a VRT) starts with '<' after an optional UTF-8 byte order mark and
+    // blanks (a declaration, a comment or the element); a list line is a path.
+    size_t start = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+    start = text.find_first_not_of(" \t\r\n", start);
+    if (start != std::string::npos && text[start] == '<') {
       Status s = parseVrt(list_path, text, out);
       if (!s) return s;
       if (out->empty()) {
