@@ -173,10 +173,14 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   // Returns the planner's level for the nearest ground the frame shows
   // (-1: none, or not sampled).
   std::unordered_set<uint64_t> terrain_sampled;
+  Status sample_error;  // a failed readPositions(), returned after the frame
   auto sampleTerrainTiles = [&](const Camera& camera) -> int32_t {
     if (!o.terrain || !o.sample_tiles || !flight->terrain()) return -1;
     std::vector<float> xyzw;
-    flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw);
+    if (Status s = flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw); !s) {
+      sample_error = s;
+      return -1;
+    }
     sampledTilesOfPositions(geometry, xyzw, camera, flight->viewport(), &terrain_sampled);
     const double nearest = nearestPositionDistance(xyzw);
     if (!std::isfinite(nearest)) return -1;
@@ -233,6 +237,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     const Camera camera = onGround(o.path.sample(0.0));
     flight->step(camera);
     (void)sampleTerrainTiles(camera);
+    if (!sample_error) return sample_error;
     AccuracyFrame ignored;
     if (accuracy)
       if (Status s = accuracy->measure(camera, *flight->target(), false, false, &ignored); !s) return s;
@@ -259,6 +264,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     if (o.on_frame)
       if (Status s = o.on_frame(f.sample, *flight->target(), &f.readback_ms); !s) return s;
     f.seen_level = sampleTerrainTiles(camera);
+    if (!sample_error) return sample_error;
     if (f.seen_level >= 0) {
       run->seen_frames += 1;
       run->needed_coarser_frames += int32_t(f.sample.finest_needed) > f.seen_level;
@@ -267,7 +273,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     if (surface && flight->terrain() &&
         (i % o.reference_every == 0 || i >= o.frames || i + 1 == total)) {
       std::vector<float> xyzw;
-      flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw);
+      if (Status s = flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw); !s)
+        return s;
       f.geometry = geometricError(xyzw, camera, flight->viewport(), *surface);
       flight->target()->readRgba(&streamed_rgba);
       if (Status s = terrain_reference->render(camera, &reference_rgba, &reference_xyzw); !s) return s;
@@ -276,8 +283,12 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
       f.accuracy.error = te.error;
       f.terrain_agree_pixels = te.agree_pixels;
       f.terrain_agree_mismatched = te.agree_mismatched;
-      if (fewest)
-        f.fewest_triangles = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx);
+      if (fewest) {
+        if (Status s = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx,
+                                     &f.fewest_triangles);
+            !s)
+          return s;
+      }
       if (!previous_streamed.empty() && previous_judged + 1 == i && !f.sample.cut) {
         run->change_pairs += 1;
         run->change_mean += change(streamed_rgba, previous_streamed);

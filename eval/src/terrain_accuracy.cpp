@@ -147,7 +147,7 @@ Status TerrainReference::render(const Camera& camera, std::vector<uint8_t>* rgba
   ClipmapRenderer::clearSky();
   m_mesh->draw(camera, m_viewport, m_colour->renderer());
   m_target->readRgba(rgba);
-  m_mesh->readPositions(camera, m_viewport, m_colour->renderer(), xyzw);
+  if (Status s = m_mesh->readPositions(camera, m_viewport, m_colour->renderer(), xyzw); !s) return s;
   m_target->bind();
   return okStatus();
 }
@@ -267,41 +267,52 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
   return okStatus();
 }
 
-uint64_t FewestTriangles::count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
-                                const ReferenceSurface& surface, double p95_px) {
+Status FewestTriangles::count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
+                              const ReferenceSurface& surface, double p95_px, uint64_t* triangles) {
   if (m_last_camera && m_last_camera->position == camera.position &&
       m_last_camera->heading_rad == camera.heading_rad && m_last_camera->pitch_rad == camera.pitch_rad &&
       m_last_camera->vfov_rad == camera.vfov_rad && m_last_viewport.width_px == viewport.width_px &&
-      m_last_viewport.height_px == viewport.height_px && m_last_p95 == p95_px)
-    return m_last_count;
-  m_last_camera = camera;
-  m_last_viewport = viewport;
-  m_last_p95 = p95_px;
+      m_last_viewport.height_px == viewport.height_px && m_last_p95 == p95_px) {
+    *triangles = m_last_count;
+    return okStatus();
+  }
+  m_last_camera.reset();  // set again once this count is whole
   // The p95 error grows with the bound (coarser nodes); bisect the bound
   // on a log scale for the largest whose frame is within p95_px.
   std::vector<float> xyzw;
-  auto measure = [&](double bound_px, uint64_t* triangles) {
+  Status failed;
+  auto measure = [&](double bound_px, uint64_t* count) {
     m_quadtree->setErrorBound(bound_px);
-    m_quadtree->readPositions(camera, viewport, colour, &xyzw);
-    *triangles = m_quadtree->lastFrame().triangles;
+    if (Status s = m_quadtree->readPositions(camera, viewport, colour, &xyzw); !s) {
+      failed = s;
+      return 0.0;
+    }
+    *count = m_quadtree->lastFrame().triangles;
     const GeometryError e = geometricError(xyzw, camera, viewport, surface);
     return e.pixels == 0 ? 0.0 : e.p95_px;
   };
   double lo = std::log(kMinTerrainErrorPx), hi = std::log(kMaxTerrainErrorPx);
-  uint64_t& best = m_last_count;
-  if (measure(std::exp(hi), &best) <= p95_px) return best;
-  if (measure(std::exp(lo), &best) > p95_px) return best;  // even the finest misses: count it
-  for (int k = 0; k < 10; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    uint64_t t = 0;
-    if (measure(std::exp(mid), &t) <= p95_px) {
-      lo = mid;
-      best = t;
-    } else {
-      hi = mid;
+  uint64_t best = 0;
+  if (measure(std::exp(hi), &best) > p95_px && failed.ok() && measure(std::exp(lo), &best) <= p95_px) {
+    // Even the finest missing counts the finest; else bisect.
+    for (int k = 0; k < 10 && failed.ok(); ++k) {
+      const double mid = 0.5 * (lo + hi);
+      uint64_t t = 0;
+      if (measure(std::exp(mid), &t) <= p95_px) {
+        lo = mid;
+        best = t;
+      } else {
+        hi = mid;
+      }
     }
   }
-  return best;
+  if (!failed) return failed;
+  m_last_camera = camera;
+  m_last_viewport = viewport;
+  m_last_p95 = p95_px;
+  m_last_count = best;
+  *triangles = best;
+  return okStatus();
 }
 
 }  // namespace clipstream

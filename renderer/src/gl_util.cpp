@@ -6,6 +6,7 @@
 #include <clipstream/renderer/config.h>
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,31 @@ Status compile(GLenum kind, const std::string& source, GLuint* out) {
 }
 
 }  // namespace
+
+void clearErrors() {
+  // Bounded: a lost context may keep returning an error.
+  for (int i = 0; i < 32 && glGetError() != GL_NO_ERROR; ++i) {
+  }
+}
+
+Status checkCreated(const std::string& what, const std::string& hint) {
+  const GLenum first = glGetError();
+  if (first == GL_NO_ERROR) return okStatus();
+  clearErrors();
+  char code[16];
+  std::snprintf(code, sizeof code, "0x%04x", unsigned(first));
+  if (first == GL_OUT_OF_MEMORY) {
+    return Status::error(ErrorCode::kOutOfMemory,
+                         "the GL driver cannot allocate " + what + " (GL_OUT_OF_MEMORY)" +
+                             (hint.empty() ? "" : ": " + hint));
+  }
+  const char* name = first == GL_INVALID_VALUE       ? "GL_INVALID_VALUE"
+                     : first == GL_INVALID_OPERATION ? "GL_INVALID_OPERATION"
+                     : first == GL_INVALID_ENUM      ? "GL_INVALID_ENUM"
+                                                     : code;
+  return Status::error(ErrorCode::kUnavailable, "the GL driver refused to create " + what + " (" + name + ")" +
+                                                   (hint.empty() ? "" : ": " + hint));
+}
 
 std::string shaderHeader(const std::string& extra_defines) {
   return "#version 450 core\n#define MAX_LEVELS " + std::to_string(renderer_config::kMaxLevels) +

@@ -26,6 +26,19 @@ Status buildProgram(const std::string& vertex, const std::string& fragment, uint
                     const std::string& extra_defines = {},
                     const std::vector<const char*>& feedback = {});
 
+// Clears GL's error flags: call before creating resources that
+// checkCreated() then checks, so an earlier, unrelated error is not blamed
+// on them.
+void clearErrors();
+
+// Whether the resources created since clearErrors() were made: kOk, or
+// kOutOfMemory (GL_OUT_OF_MEMORY) / kUnavailable (any other GL error)
+// naming `what` (e.g. "the clip stack, 2207.6 MiB of RGBA8") and the error.
+// Every GL resource creation is checked by one of these: a texture the
+// driver cannot allocate would otherwise draw as black with exit 0.
+// `hint`, if any, follows: what the user can change.
+Status checkCreated(const std::string& what, const std::string& hint = {});
+
 // The "#version" line and renderer_config's #defines every program starts with.
 std::string shaderHeader(const std::string& extra_defines);
 

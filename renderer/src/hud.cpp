@@ -28,6 +28,7 @@ Status Hud::create(std::unique_ptr<Hud>* out) {
   if (Status s = gl_util::buildProgram(shaders::k_hud_vert, shaders::k_hud_frag, &hud->m_program); !s)
     return s;
   hud->m_window_px_uniform = glGetUniformLocation(hud->m_program, "uWindowPx");
+  gl_util::clearErrors();
   glCreateVertexArrays(1, &hud->m_vao);
   glCreateBuffers(1, &hud->m_vbo);
   glVertexArrayVertexBuffer(hud->m_vao, 0, hud->m_vbo, 0, sizeof(Vertex));
@@ -37,6 +38,7 @@ Status Hud::create(std::unique_ptr<Hud>* out) {
   glEnableVertexArrayAttrib(hud->m_vao, 1);
   glVertexArrayAttribFormat(hud->m_vao, 1, 4, GL_UNSIGNED_BYTE, GL_TRUE, offsetof(Vertex, colour));
   glVertexArrayAttribBinding(hud->m_vao, 1, 0);
+  if (Status s = gl_util::checkCreated("the HUD's vertex buffer"); !s) return s;
   *out = std::move(hud);
   return okStatus();
 }

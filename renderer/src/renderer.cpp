@@ -70,6 +70,16 @@ Status bufferingFromName(const std::string& name, Buffering* out) {
                        "buffering \"" + printableText(name, 40) + "\" is not single, double-upload, double-copy or staged");
 }
 
+namespace {
+// The clip stack named in an allocation failure.
+std::string stackDescription(uint64_t set_bytes, bool bc1, uint32_t sets) {
+  char text[160];
+  std::snprintf(text, sizeof text, "the clip stack (%u set%s of %.1f MiB of %s)", unsigned(sets),
+                sets == 1 ? "" : "s", double(set_bytes) / 1048576.0, bc1 ? "BC1" : "RGBA8");
+  return text;
+}
+}  // namespace
+
 Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererConfig& config,
                                std::unique_ptr<ClipmapRenderer>* out) {
   out->reset();
@@ -129,6 +139,7 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   const GLsizei usable_layers = GLsizei(std::max(config.pyramid_level, 1u));
   const uint32_t c = r->m_slots;
   const bool bc1 = config.tile_content == TileContent::kBc1;
+  gl_util::clearErrors();
   for (uint32_t set = 0; set < r->stackSets(); ++set) {
     glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_stack[set]);
     glTextureStorage3D(r->m_stack[set], GLsizei(r->m_mips), bc1 ? kBc1Format : GL_RGBA8,
@@ -154,6 +165,11 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
       }
       r->m_texture_bytes.stack += imageBytes(size, config.tile_content) * uint64_t(layers);
     }
+    if (Status s = gl_util::checkCreated(stackDescription(r->m_texture_bytes.stack / (set + 1), bc1, r->stackSets()),
+                                         bc1 ? "a smaller viewport needs less"
+                                             : "BC1 tiles (--tile-format bc1) need 1/8 of it, a smaller viewport less");
+        !s)
+      return s;
     r->m_mip0_tile[set].assign(config.pyramid_level, std::vector<uint64_t>(size_t(c) * c, kNoTile));
     r->m_mip1_tile[set].assign(config.pyramid_level,
                                std::vector<uint64_t>(size_t(c / 2) * (c / 2), kNoTile));
@@ -168,6 +184,7 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
     glTextureParameteri(r->m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     glClearTexImage(r->m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, zero);
     r->m_texture_bytes.usable += uint64_t(c) * c * uint64_t(usable_layers) * 2;
+    if (Status s = gl_util::checkCreated("the clip stack's usable-tile map"); !s) return s;
   }
   if (r->staged()) {
     r->m_staging_region_bytes = size_t(std::max(config.staging_tiles, 1u)) * r->tileBytes();
@@ -175,6 +192,8 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
     const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
     glCreateBuffers(1, &r->m_staging);
     glNamedBufferStorage(r->m_staging, GLsizeiptr(bytes), nullptr, flags);
+    if (Status s = gl_util::checkCreated("the staging buffer (" + std::to_string(bytes >> 20) + " MiB)"); !s)
+      return s;
     r->m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(r->m_staging, 0, GLsizeiptr(bytes), flags));
     if (r->m_staging_map == nullptr)
       return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
@@ -672,6 +691,7 @@ Status OffscreenTarget::create(const Viewport& viewport, std::unique_ptr<Offscre
     return Status::error(ErrorCode::kInvalidArgument, "offscreen target: empty viewport");
   std::unique_ptr<OffscreenTarget> t(new OffscreenTarget());
   t->m_viewport = viewport;
+  gl_util::clearErrors();
   glCreateRenderbuffers(1, &t->m_color);
   glNamedRenderbufferStorage(t->m_color, GL_RGBA8, GLsizei(viewport.width_px),
                              GLsizei(viewport.height_px));
@@ -681,6 +701,10 @@ Status OffscreenTarget::create(const Viewport& viewport, std::unique_ptr<Offscre
   glCreateFramebuffers(1, &t->m_fbo);
   glNamedFramebufferRenderbuffer(t->m_fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t->m_color);
   glNamedFramebufferRenderbuffer(t->m_fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->m_depth);
+  if (Status s = gl_util::checkCreated("the offscreen target (" + std::to_string(viewport.width_px) + "x" +
+                                       std::to_string(viewport.height_px) + ")");
+      !s)
+    return s;
   if (glCheckNamedFramebufferStatus(t->m_fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
     return Status::error(ErrorCode::kUnavailable, "offscreen framebuffer incomplete");
   *out = std::move(t);

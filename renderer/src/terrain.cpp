@@ -181,6 +181,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
         indices.push_back(base + uint32_t(std::lower_bound(used.begin(), used.end(), v) - used.begin()));
     }
   }
+  gl_util::clearErrors();
   glCreateBuffers(1, &r->m_vertices);
   glNamedBufferStorage(r->m_vertices, GLsizeiptr(grid.size() * sizeof(int32_t)), grid.data(), 0);
   glCreateBuffers(1, &r->m_indices);
@@ -194,6 +195,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     glVertexArrayAttribBinding(*vao, 0, 0);
   };
   makeVao(r->m_vertices, r->m_indices, &r->m_vao);
+  if (Status s = gl_util::checkCreated("the terrain's ring meshes"); !s) return s;
   if (patches) {
     // The quadtree's patch: one (P + 1)^2 grid, its 16 edge patterns.
     std::vector<int32_t> patch_grid;
@@ -213,6 +215,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
     glNamedBufferStorage(r->m_patch_indices, GLsizeiptr(patch_indices.size() * sizeof(uint32_t)),
                          patch_indices.data(), 0);
     makeVao(r->m_patch_vertices, r->m_patch_indices, &r->m_patch_vao);
+    if (Status s = gl_util::checkCreated("the quadtree's patch meshes"); !s) return s;
   }
 
   const uint32_t period = r->m_slots * tile;
@@ -224,6 +227,7 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                                                       " texels exceeds GL_MAX_TEXTURE_SIZE");
   }
   const GLsizei layers = full ? 1 : GLsizei(heights.levelCount());
+  gl_util::clearErrors();
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &r->m_heights);
   glTextureStorage3D(r->m_heights, 1, GL_R32F, GLsizei(period), GLsizei(period), layers);
   glTextureParameteri(r->m_heights, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
@@ -239,9 +243,10 @@ Status TerrainRenderer::create(const PyramidGeometry& heights, const TerrainConf
                          std::vector<std::vector<float>>(size_t(r->m_slots) * r->m_slots));
   r->m_slot_bounds.assign(heights.levelCount(),
                           std::vector<glm::vec2>(size_t(r->m_slots) * r->m_slots, glm::vec2(0.0f)));
-  if (glGetError() != GL_NO_ERROR) {
-    return Status::error(ErrorCode::kUnavailable, "terrain: GL error while creating the height stack");
-  }
+  if (Status s = gl_util::checkCreated("the terrain's height stack (" +
+                                       std::to_string(r->m_texture_bytes >> 20) + " MiB of R32F)");
+      !s)
+    return s;
   *out = std::move(r);
   return okStatus();
 }
@@ -567,9 +572,10 @@ void TerrainRenderer::draw(const Camera& camera, const Viewport& viewport,
   drawRings(p, camera, viewport);
 }
 
-void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewport,
-                                    const ClipmapRenderer& colour, std::vector<float>* xyzw) {
+Status TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewport,
+                                      const ClipmapRenderer& colour, std::vector<float>* xyzw) {
   if (m_position_size.width_px != viewport.width_px || m_position_size.height_px != viewport.height_px) {
+    gl_util::clearErrors();
     glDeleteFramebuffers(1, &m_position_fbo);
     glDeleteRenderbuffers(1, &m_position_color);
     glDeleteRenderbuffers(1, &m_position_depth);
@@ -581,6 +587,12 @@ void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewpo
     glCreateFramebuffers(1, &m_position_fbo);
     glNamedFramebufferRenderbuffer(m_position_fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, m_position_color);
     glNamedFramebufferRenderbuffer(m_position_fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_position_depth);
+    if (Status s = gl_util::checkCreated("the terrain's position target (" + std::to_string(viewport.width_px) +
+                                         "x" + std::to_string(viewport.height_px) + " RGBA32F)");
+        !s) {
+      m_position_size = Viewport{};  // made again on the next call
+      return s;
+    }
     m_position_size = viewport;
   }
   GLint previous_fbo = 0;
@@ -604,6 +616,7 @@ void TerrainRenderer::readPositions(const Camera& camera, const Viewport& viewpo
     std::swap_ranges(xyzw->begin() + long(y * row), xyzw->begin() + long((y + 1) * row),
                      xyzw->begin() + long((viewport.height_px - 1 - y) * row));
   glBindFramebuffer(GL_FRAMEBUFFER, GLuint(previous_fbo));
+  return okStatus();
 }
 
 TerrainRenderer::Frustum TerrainRenderer::frustum(const Camera& camera, const Viewport& viewport) const {

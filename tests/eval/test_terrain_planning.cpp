@@ -98,7 +98,7 @@ Orbit flyOrbit(const std::string& dem, bool terrain_planning) {
                                                std::tuple{3800.0, 1200.0, -0.35}, std::tuple{2000.0, 60.0, 0.1}}) {
       const Camera c = cameraAt(angle, radius, above, pitch, flight.get());
       for (int k = 0; k < 3; ++k) flight->step(c);
-      flight->terrain()->readPositions(c, flight->viewport(), flight->renderer(), &xyzw);
+      EXPECT_TRUE(flight->terrain()->readPositions(c, flight->viewport(), flight->renderer(), &xyzw).ok());
       std::unordered_set<uint64_t> sampled;
       sampledTilesOfPositions(colour->geometry(), xyzw, c, flight->viewport(), &sampled);
       const ClipmapPlan& plan = flight->streamer().plan(0);
@@ -186,7 +186,7 @@ TEST(TerrainPlanning, SampledTilesOfFlatTerrainAreThePlanes) {
   ASSERT_TRUE(Flight::create(colour, fc, c, &flight).ok());
   for (int k = 0; k < 5; ++k) flight->step(c);
   std::vector<float> xyzw;
-  flight->terrain()->readPositions(c, flight->viewport(), flight->renderer(), &xyzw);
+  ASSERT_TRUE(flight->terrain()->readPositions(c, flight->viewport(), flight->renderer(), &xyzw).ok());
   std::unordered_set<uint64_t> terrain, plane;
   sampledTilesOfPositions(colour->geometry(), xyzw, c, flight->viewport(), &terrain);
   sampledTiles(colour->geometry(), c, flight->viewport(), &plane);

@@ -11,6 +11,9 @@
 
 #include <gtest/gtest.h>
 
+#define GL_GLEXT_PROTOTYPES 1
+#include <GL/glcorearb.h>  // GL_MAX_TEXTURE_SIZE, for a stack at the driver's limit
+
 #include <unistd.h>
 
 #include <cmath>
@@ -86,6 +89,34 @@ TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
   test::dumpPpm("match_ref", ref, kViewport);
   EXPECT_GT(groundPixels(ref), ref.size() / 16) << "a quarter of the view must be ground";
   EXPECT_GE(psnrLogged("gpu vs reference", gpu, ref), kMatchDb);
+}
+
+// A clip stack no driver can hold (the largest texture the driver allows,
+// a layer for each of 25 levels, two sets: over 100 GiB on any GPU) is
+// refused with an error naming it, not drawn black; the context still
+// works for the next renderer.
+TEST(ClipmapRender, AStackTheDriverCannotAllocateIsAnError) {
+  CLIPSTREAM_REQUIRE_GL();
+  std::shared_ptr<TileSource> planet = makeProceduralSource({kMaxProceduralSidePx, kMaxProceduralSidePx, 128, 1});
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  const uint32_t clip_tiles = uint32_t(max_size) / 128 - 2;  // slots = clip + 2
+  const uint32_t pyramid_level = planet->geometry().levelCount() - 1;
+  RendererConfig config{clip_tiles, pyramid_level, Buffering::kDoubleUploadTwice, planet->content()};
+  std::unique_ptr<ClipmapRenderer> renderer;
+  const Status s = ClipmapRenderer::create(planet->geometry(), config, &renderer);
+  ASSERT_FALSE(s.ok()) << "a " << max_size << "^2 x " << pyramid_level + 1 << " RGBA8 stack was allocated";
+  EXPECT_FALSE(renderer);
+  EXPECT_TRUE(s.code == ErrorCode::kOutOfMemory || s.code == ErrorCode::kUnavailable) << s.toString();
+  EXPECT_NE(s.message.find("the clip stack (2 sets of "), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("--tile-format bc1"), std::string::npos) << s.message;
+
+  const Camera cam = test::obliqueCamera();
+  Scene ok = makeScene(patternSource(), cam);
+  ASSERT_TRUE(ok.renderer);
+  test::loadPlan(*ok.renderer, *ok.source, ok.plan);
+  const auto gpu = test::renderFrame(*ok.renderer, *ok.target, cam);
+  EXPECT_GE(psnrLogged("after a refused stack", gpu, reference(*ok.source, ok.source, cam)), kMatchDb);
 }
 
 TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {

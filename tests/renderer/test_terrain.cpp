@@ -767,7 +767,7 @@ TEST(TerrainQuadtree, FlatMethodDrawsThePlaneAndRejectsBadSettings) {
   EXPECT_GT(groundPixels(rgba), rgba.size() / 8);
   EXPECT_EQ(crackPixels(rgba, camera, s.field.lowest()), 0u);
   std::vector<float> xyzw;
-  s.terrain->readPositions(camera, kViewport, *s.colour, &xyzw);
+  ASSERT_TRUE(s.terrain->readPositions(camera, kViewport, *s.colour, &xyzw).ok());
   float plane = INFINITY;
   for (uint32_t j = 0; j < s.field.geometry.levels.back().height_px; ++j)
     for (uint32_t i = 0; i < s.field.geometry.levels.back().width_px; ++i)

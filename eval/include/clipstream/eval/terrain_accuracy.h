@@ -90,8 +90,10 @@ class FewestTriangles {
                        std::unique_ptr<FewestTriangles>* out);
   // Triangles of the coarsest such quadtree whose frame from `camera` has
   // a p95 geometric error <= p95_px (`colour` gives the image's extent).
-  uint64_t count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
-                 const ReferenceSurface& surface, double p95_px);
+  // Into *triangles; kOutOfMemory / kUnavailable if the quadtree's
+  // position target cannot be made.
+  [[nodiscard]] Status count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
+                             const ReferenceSurface& surface, double p95_px, uint64_t* triangles);
 
  private:
   FewestTriangles() = default;

@@ -177,8 +177,9 @@ class TerrainRenderer {
   // replaces lastFrame(). GL thread.
   // `colour` gives the image's extent (ground outside it is left out, as
   // draw() leaves it).
-  void readPositions(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
-                     std::vector<float>* xyzw);
+  // kOutOfMemory / kUnavailable if its float target cannot be made.
+  [[nodiscard]] Status readPositions(const Camera& camera, const Viewport& viewport,
+                                     const ClipmapRenderer& colour, std::vector<float>* xyzw);
 
   // The lowest and highest ground (world units) around the camera: the
   // bounds of the resident tiles under the ring `kReliefRings` levels
