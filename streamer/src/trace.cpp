@@ -85,6 +85,12 @@ Status readTrace(const std::string& path, std::vector<TraceEvent>* events) {
   if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
     return Status::error(ErrorCode::kIo, "trace " + path + " is not a regular file");
   }
+  if (uint64_t(st.st_size) > kMaxTraceFileBytes) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "trace " + path + " is " + std::to_string(uint64_t(st.st_size) >> 20) +
+                             " MiB, larger than any trace read here (" +
+                             std::to_string(kMaxTraceFileBytes >> 20) + " MiB at most)");
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,

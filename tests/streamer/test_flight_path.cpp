@@ -2,10 +2,20 @@
 // interpolation through the keyframes, shortest-arc heading, built-ins.
 #include <clipstream/streamer/flight_path.h>
 
+#include <clipstream/testing/sanitizers.h>
+
 #include <gtest/gtest.h>
 
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
+#include <string>
 
 namespace clipstream {
 namespace {
@@ -55,6 +65,57 @@ TEST(FlightPath, RoundTripsThroughJson) {
   ASSERT_EQ(q.keyframes.size(), p.keyframes.size());
   for (double t : {0.0, 0.4, 1.7, 3.0})
     EXPECT_NEAR(glm::length(q.sample(t).position - p.sample(t).position), 0.0, 1e-9);
+}
+
+// A long recorded path (400,000 keyframes, 34 MB of JSON) is read holding
+// its Keyframes, not a JSON document of it: the whole document took 14
+// times the file (a 69 MB path, 987 MB of memory). The child that reads it
+// may map only 160 MB more than it has: the file, the Keyframes (18 MB)
+// and the parser fit, a document of the file does not.
+TEST(FlightPath, ALongPathIsReadWithoutHoldingItsJsonDocument) {
+  if (test::kSanitized) GTEST_SKIP() << "an address-space limit means nothing under a sanitizer";
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("clipstream_long_path_" + std::to_string(::getpid()) + ".json"))
+          .string();
+  constexpr size_t kKeys = 400000;
+  {
+    std::ofstream out(path);
+    out << "{\"interpolation\": \"smooth\", \"keyframes\": [";
+    char line[160];
+    for (size_t i = 0; i < kKeys; ++i) {
+      std::snprintf(line, sizeof line,
+                    "%s{\"t\": %.3f, \"x\": %.3f, \"y\": 300.0, \"z\": 1000.0, \"heading_deg\": 0.0, "
+                    "\"pitch_deg\": -30.0}",
+                    i ? ",\n" : "", double(i) * 0.01, 1000.0 + double(i) * 0.01);
+      out << line;
+    }
+    out << "]}\n";
+  }
+  const uintmax_t file_bytes = std::filesystem::file_size(path);
+  ASSERT_GT(file_bytes, uintmax_t(30) << 20);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    size_t vm_pages = 0;
+    if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+      if (std::fscanf(f, "%zu", &vm_pages) != 1) vm_pages = 0;
+      std::fclose(f);
+    }
+    const rlim_t limit = rlim_t(vm_pages) * rlim_t(::sysconf(_SC_PAGESIZE)) + (rlim_t(160) << 20);
+    const rlimit as{limit, limit};
+    ::setrlimit(RLIMIT_AS, &as);
+    FlightPath p;
+    try {
+      const Status s = FlightPath::load(path, &p);
+      ::_exit(s.ok() && p.keyframes.size() == kKeys ? 0 : 1);
+    } catch (...) {
+      ::_exit(2);  // std::bad_alloc: the limit was hit
+    }
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  std::filesystem::remove(path);
+  ASSERT_TRUE(WIFEXITED(status)) << "the reader died of signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: not read whole; 2: out of memory";
 }
 
 TEST(FlightPath, RejectsMalformedJsonWithAStatus) {

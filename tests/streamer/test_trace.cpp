@@ -192,6 +192,12 @@ TEST(Trace, EmptyTruncatedForeignOrNonRegularTracesAreRefused) {
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
   std::vector<TraceEvent> events;
   EXPECT_EQ(readTrace(fifo, &events).code, ErrorCode::kIo);
+  // Past the stated size (a sparse file: no disk used), refused before a line is read.
+  std::ofstream(path, std::ios::binary) << header;
+  std::filesystem::resize_file(path, kMaxTraceFileBytes + 1);
+  st = readTrace(path, &events);
+  EXPECT_EQ(st.code, ErrorCode::kInvalidArgument) << st.toString();
+  EXPECT_NE(st.message.find("larger than any trace read here (2048 MiB at most)"), std::string::npos) << st.message;
 }
 
 // clipstream-trace: NaN and other absurd numbers, and a bad trace, exit

@@ -4,6 +4,7 @@
 #include "tiler_test_util.h"
 
 #include <clipstream/testing/files.h>
+#include <clipstream/testing/sanitizers.h>
 #include <clipstream/testing/test_data.h>
 #include <clipstream/tiler/image_source.h>
 
@@ -36,14 +37,6 @@ void copyPrefix(const std::string& from, const std::string& to, double fraction)
   ASSERT_FALSE(bytes.empty()) << from;
   writeBytes(to, std::span(bytes).first(size_t(double(bytes.size()) * fraction)));
 }
-
-// Sanitizer runtimes add their own resident memory (shadow, allocator), so
-// budget checks are only meaningful in plain builds.
-#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
 
 double noisy(uint64_t x, uint64_t y, int c) {
   return double((x * 131 + y * 71 + uint64_t(c) * 29 + ((x * y) >> 3)) & 255);

@@ -6,6 +6,7 @@
 #include "tiler_test_util.h"
 
 #include <clipstream/testing/files.h>
+#include <clipstream/testing/sanitizers.h>
 #include <clipstream/testing/test_data.h>
 #include <clipstream/tiler/image_source.h>
 #include <clipstream/tiler/tiler.h>
@@ -143,12 +144,6 @@ nlohmann::json tileCli(const TempDir& dir, const std::string& in, const std::str
   std::ifstream f(json);
   return nlohmann::json::parse(f);
 }
-
-#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
-constexpr bool kSanitized = true;  // the runtimes' own memory breaks small budgets
-#else
-constexpr bool kSanitized = false;
-#endif
 
 // A progressive JPEG whose coefficients would take more than a quarter of
 // the budget is decoded through a temporary file, within the budget, with
