@@ -7,7 +7,8 @@
 # (store, streamer) under ThreadSanitizer and runs their tests again, then
 # builds the renderer tests under AddressSanitizer + UBSan and runs the
 # stability scenarios (with the shortened soak) with leak checking, then
-# fuzzes the store reader (clang, libFuzzer, ASan + UBSan) for a fixed minute.
+# fuzzes every parser of untrusted bytes (clang, libFuzzer, ASan + UBSan)
+# for a fixed minute in all.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -103,19 +104,27 @@ ASAN_OPTIONS="detect_leaks=1 halt_on_error=1" LSAN_OPTIONS="suppressions=$PWD/te
     --no-tests=error --output-on-failure -j "$jobs" --timeout 900 \
     --repeat until-pass:2
 
-# A regression guard, not a campaign: the reader's libFuzzer driver for a
-# fixed 60 s with a fixed seed, from the seed stores it writes itself. Any
-# crash, sanitizer report, leak or 10 s hang fails the suite (docs/cli.md,
+# A regression guard, not a campaign: each libFuzzer driver (tests/fuzz:
+# the store reader, a store over HTTP, the TIFF/JPEG/PNG readers, mosaic
+# lists and VRTs, flight paths, traces) from the seeds it writes itself,
+# with a fixed seed, for a fixed time: a minute in all. Any crash,
+# sanitizer report, leak or 10 s hang fails the suite (docs/cli.md,
 # "Fuzzing").
-echo "== Fuzzing the store reader for 60 s (clang, libFuzzer, ASan + UBSan) =="
+echo "== Fuzzing every parser of untrusted bytes for 60 s (clang, libFuzzer, ASan + UBSan) =="
 cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ -DCLIPSTREAM_FUZZ=ON \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-fuzz -j "$jobs" --target store_fuzz
+fuzzers=(store:15 http:9 image:9 mosaic:9 path:9 trace:9)  # name:seconds
+cmake --build build-fuzz -j "$jobs" --target "${fuzzers[@]/%:*/_fuzz}"
 corpus=$(mktemp -d)
 trap 'rm -rf "$corpus"' EXIT
-CLIPSTREAM_FUZZ_SEEDS="$corpus" build-fuzz/tests/store/store_fuzz -runs=0 "$corpus"
-UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
-  build-fuzz/tests/store/store_fuzz -max_total_time=60 -timeout=10 -rss_limit_mb=2048 -seed=1 \
-  -print_final_stats=1 "$corpus" 2>&1 | tail -n 8
-echo "store reader fuzzing: no crash, hang, leak or sanitizer report in 60 s"
+for entry in "${fuzzers[@]}"; do
+  name=${entry%%:*} seconds=${entry##*:}
+  mkdir "$corpus/$name"
+  CLIPSTREAM_FUZZ_SEEDS="$corpus/$name" "build-fuzz/tests/fuzz/${name}_fuzz" -runs=0 "$corpus/$name" >/dev/null 2>&1
+  UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
+    "build-fuzz/tests/fuzz/${name}_fuzz" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -seed=1 \
+    -artifact_prefix="$corpus/" -print_final_stats=1 "$corpus/$name" >"$corpus/$name.log" 2>&1 ||
+    { tail -n 40 "$corpus/$name.log"; echo "fuzzing $name: a crash, hang, leak or sanitizer report (above)"; exit 1; }
+  echo "fuzzing $name: $(grep -o 'Done [0-9]* runs' "$corpus/$name.log") in $seconds s, nothing found"
+done

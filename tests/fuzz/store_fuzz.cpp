@@ -1,7 +1,8 @@
 // libFuzzer driver for TileStoreReader: opens a mutated store and reads,
 // locates, verifies and decodes every tile. Built only with
 // -DCLIPSTREAM_FUZZ=ON (clang); scripts/test.sh runs it for a fixed time as
-// a regression guard; see docs/tile-store.md for the format.
+// a regression guard (docs/cli.md, "Fuzzing"); see docs/tile-store.md for
+// the format.
 //
 // Input: one control byte, then the store bytes. Control bit 0 re-seals the
 // mutated bytes (recomputes every checksum it can find and the file size
@@ -11,6 +12,7 @@
 //   CLIPSTREAM_FUZZ_SEEDS=corpus ./store_fuzz -runs=0   # write seed stores
 //   ./store_fuzz -max_total_time=300 -timeout=10 corpus
 #include "format.h"
+#include "fuzz_util.h"
 
 #include <clipstream/store/tile_store.h>
 
@@ -24,6 +26,7 @@
 namespace {
 
 using namespace clipstream;
+using fuzz::writeFile;
 
 bool inFile(uint64_t offset, uint64_t bytes, size_t size) {
   return offset <= size && bytes <= size - offset;
@@ -82,19 +85,6 @@ void reseal(std::vector<uint8_t>& b) {
   }
   format::put64(h + format::kHeaderChecksumOffset,
                 format::checksum64(h, format::kHeaderChecksumOffset));
-}
-
-std::string scratchPath() {
-  const char* dir = std::getenv("TMPDIR");
-  return std::string(dir ? dir : "/tmp") + "/clipstream_store_fuzz_" + std::to_string(::getpid()) +
-         ".cst";
-}
-
-void writeBytes(const std::string& path, const uint8_t* data, size_t size) {
-  std::FILE* file = std::fopen(path.c_str(), "wb");
-  if (file == nullptr) std::abort();
-  if (size > 0 && std::fwrite(data, 1, size, file) != size) std::abort();
-  std::fclose(file);
 }
 
 // Small stores covering every structure: edge pages, constant tiles and
@@ -173,15 +163,13 @@ void writeSeeds(const std::string& dir) {
       }
     }
     if (!writer->finish()) std::abort();
-    FILE* in = std::fopen(path.c_str(), "rb");
     std::vector<uint8_t> bytes(1, 0);
-    for (int c; (c = std::fgetc(in)) != EOF;) bytes.push_back(uint8_t(c));
-    std::fclose(in);
+    const std::vector<uint8_t> store = fuzz::readFile(path);
+    bytes.insert(bytes.end(), store.begin(), store.end());
     ::unlink(path.c_str());
     for (uint8_t control : {0, 1}) {
       bytes[0] = control;
-      writeBytes(dir + "/seed" + std::to_string(n) + "_" + std::to_string(control), bytes.data(),
-                 bytes.size());
+      writeFile(dir + "/seed" + std::to_string(n) + "_" + std::to_string(control), bytes.data(), bytes.size());
     }
     ++n;
   }
@@ -190,7 +178,7 @@ void writeSeeds(const std::string& dir) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  if (const char* dir = std::getenv("CLIPSTREAM_FUZZ_SEEDS")) writeSeeds(dir);
+  if (const char* dir = fuzz::seedDir()) writeSeeds(dir);
   return 0;
 }
 
@@ -198,8 +186,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
   std::vector<uint8_t> bytes(data + 1, data + size);
   if (data[0] & 1) reseal(bytes);
-  static const std::string path = scratchPath();
-  writeBytes(path, bytes.data(), bytes.size());
+  static const std::string path = fuzz::scratchPath("store.cst");
+  writeFile(path, bytes.data(), bytes.size());
 
   std::unique_ptr<TileStoreReader> reader;
   if (!TileStoreReader::open(path, &reader)) return 0;
