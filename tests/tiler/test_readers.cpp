@@ -238,6 +238,16 @@ TEST(Readers, TiffDecodeThreadsDoNotChangeTiles) {
   expectSameTiles(dir.file("one.cst"), dir.file("eight.cst"));
 }
 
+// Tiles `in` into `out` with the defaults (no fsync): the run's status.
+Status tileToFile(const std::string& in, const std::string& out) {
+  TilerOptions o;
+  o.input_path = in;
+  o.output_path = out;
+  o.fsync = false;
+  TilerSummary summary;
+  return tileImage(o, &summary);
+}
+
 // Damage found by a decode worker is the run's error, naming the file.
 TEST(Readers, DamagedTiffStripFailsTheRunNamingTheFile) {
   TempDir dir;
@@ -247,12 +257,7 @@ TEST(Readers, DamagedTiffStripFailsTheRunNamingTheFile) {
   std::vector<uint8_t> bytes = readBytes(in);
   for (size_t i = bytes.size() / 3; i < bytes.size() / 2; ++i) bytes[i] = uint8_t(i * 37);
   writeBytes(in, bytes);
-  TilerOptions o;
-  o.input_path = in;
-  o.output_path = dir.file("d.cst");
-  o.fsync = false;
-  TilerSummary summary;
-  const Status s = tileImage(o, &summary);
+  const Status s = tileToFile(in, dir.file("d.cst"));
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message.find("d.tif"), std::string::npos) << s.message;
   EXPECT_FALSE(std::filesystem::exists(dir.file("d.cst")));
@@ -286,18 +291,12 @@ TEST(Readers, ATiffWhoseStripOffsetsTagIsIgnoredIsRefused) {
   const size_t entry = tiffEntry(bytes, 273);  // StripOffsets
   ASSERT_NE(entry, 0u);
   const uint32_t count = 1;
-  std::vector<uint8_t> first(bytes.begin() + long(entry) + 8, bytes.begin() + long(entry) + 12);
   uint32_t array = 0;
-  std::memcpy(&array, first.data(), 4);
+  std::memcpy(&array, bytes.data() + entry + 8, 4);
   std::memcpy(bytes.data() + entry + 4, &count, 4);
   std::memcpy(bytes.data() + entry + 8, bytes.data() + array, 4);  // the one value inline
   writeBytes(in, bytes);
-  TilerOptions o;
-  o.input_path = in;
-  o.output_path = dir.file("s.cst");
-  o.fsync = false;
-  TilerSummary summary;
-  const Status s = tileImage(o, &summary);
+  const Status s = tileToFile(in, dir.file("s.cst"));
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message.find("s.tif: damaged TIFF"), std::string::npos) << s.message;
   EXPECT_NE(s.message.find("StripOffsets"), std::string::npos) << s.message;
@@ -330,12 +329,7 @@ TEST(Readers, ATiffCutShortIsRefusedBeforeTheWorkStarts) {
       ASSERT_LT(header_end, keep);
       std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(keep));
       writeBytes(in, cut);
-      TilerOptions o;
-      o.input_path = in;
-      o.output_path = dir.file("c.cst");
-      o.fsync = false;
-      TilerSummary summary;
-      const Status s = tileImage(o, &summary);
+      const Status s = tileToFile(in, dir.file("c.cst"));
       ASSERT_FALSE(s.ok());
       EXPECT_NE(s.message.find("c.tif: damaged TIFF: "), std::string::npos) << s.message;
       EXPECT_NE(s.message.find("beyond the end of the file"), std::string::npos) << s.message;
