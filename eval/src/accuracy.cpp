@@ -11,11 +11,13 @@ namespace clipstream {
 IdealReference::~IdealReference() = default;
 
 Status IdealReference::create(std::shared_ptr<TileSource> source, const Viewport& viewport,
-                              const PlannerConfig& planner, std::unique_ptr<IdealReference>* out) {
+                              const PlannerConfig& planner, std::unique_ptr<IdealReference>* out,
+                              TextureMemory memory) {
   std::unique_ptr<IdealReference> r(new IdealReference());
   r->m_source = std::move(source);
   r->m_geometry = r->m_source->geometry();
-  r->m_planner = planner;
+  r->m_planner = plannerFor(memory, planner);
+  r->m_memory = memory;
   if (Status s = r->resize(viewport); !s) return s;
   *out = std::move(r);
   return okStatus();
@@ -28,6 +30,10 @@ Status IdealReference::resize(const Viewport& viewport) {
   // The clip size depends on the viewport only, not the camera.
   const ClipmapPlan plan = planClipmap(m_geometry, viewport, Camera{}, m_planner);
   RendererConfig rc{plan.clip_tiles, plan.pyramid_level, Buffering::kSingle, m_source->content()};
+  rc.texture_memory = m_memory;
+  // A pool as large as the GL allows (the renderer caps it at
+  // GL_MAX_ARRAY_TEXTURE_LAYERS pages): the reference is never short.
+  if (m_memory == TextureMemory::kPaged) rc.pool_bytes = uint64_t(1) << 40;
   if (Status s = ClipmapRenderer::create(m_geometry, rc, &m_renderer); !s) return s;
   if (Status s = OffscreenTarget::create(viewport, &m_target); !s) return s;
   m_loaded.assign(plan.pyramid_level, TileRect{});
@@ -111,7 +117,8 @@ Status FlyAccuracy::create(std::shared_ptr<TileSource> source, const Viewport& v
   a->m_options = options;
   a->m_viewport = viewport;
   if (options.reference)
-    if (Status s = IdealReference::create(source, viewport, planner, &a->m_reference); !s) return s;
+    if (Status s = IdealReference::create(source, viewport, planner, &a->m_reference, options.texture_memory); !s)
+      return s;
   if (options.ground_truth) a->m_texels = texelsFromSource(source);
   *out = std::move(a);
   return okStatus();

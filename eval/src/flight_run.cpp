@@ -111,6 +111,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   fc.streamer = o.streamer;
   fc.upload_tiles = o.upload_tiles;
   fc.buffering = o.buffering;
+  fc.texture_memory = o.texture_memory;
+  fc.pool_bytes = o.pool_bytes;
   fc.overlay = o.overlay;
   fc.warmup_frames = o.warmup_frames;
   fc.offscreen = true;  // frames are judged and saved from the flight's own target
@@ -131,6 +133,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     ao.ground_truth = o.ground_truth_every > 0;
     ao.sample_tiles = o.sample_tiles;
     ao.reference = o.reference_every > 0;
+    ao.texture_memory = o.texture_memory;
     if (Status s = FlyAccuracy::create(reference, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
   }
   // Before the flight exists no height is known: the first camera is put
@@ -369,6 +372,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   run->pyramid_level = flight->firstPlan().pyramid_level;
   run->texture_bytes = flight->renderer().textureBytes();
   run->tile_content = flight->renderer().tileContent();
+  run->texture_memory = flight->renderer().textureMemory();
+  run->pool_pages = flight->renderer().poolPages();
   run->resizes = flight->resizes();
   run->preload_failures = flight->preloadFailures();
   // The run's statistics end with its last frame: reads that land while the

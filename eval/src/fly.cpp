@@ -283,6 +283,8 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.streamer.deterministic_io.latency_frames = o.io_latency_frames;
   r.upload_tiles = o.upload_tiles;
   r.buffering = o.buffering;
+  r.texture_memory = o.texture_memory;
+  r.pool_bytes = o.pool_mb << 20;
   r.overlay = o.overlay ? Overlay::kLevels : Overlay::kOff;
   r.path_hint = o.path_hint;
   r.reference_every = o.reference ? std::max(1u, o.reference_every) : 0;

@@ -99,6 +99,15 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
   return csv;
 }
 
+namespace {
+// Frames in which a tile the frame samples got no page (kPaged).
+uint64_t pagesShortFrames(const FlightRun& run) {
+  uint64_t n = 0;
+  for (const FlightRunFrame& f : run.frames) n += f.sample.pages_short > 0 ? 1 : 0;
+  return n;
+}
+}  // namespace
+
 std::string framesJson(const FlightRun& run, const RunDescription& d) {
   nlohmann::json jframes = nlohmann::json::array();
   for (const FlightRunFrame& f : run.frames) {
@@ -208,6 +217,9 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       {"gpu_texture_bytes", run.texture_bytes.total()},
       {"gpu_stack_bytes", run.texture_bytes.stack},
       {"gpu_usable_bytes", run.texture_bytes.usable},
+      {"texture_memory", textureMemoryName(run.texture_memory)},
+      {"pool_pages", run.pool_pages},
+      {"frames_pages_short", pagesShortFrames(run)},
       {"preload_ms", run.preload_ms},
       {"preload_failures", run.preload_failures},
       {"run_ms", run.run_ms},
@@ -311,6 +323,9 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("io_latency_frames", d.deterministic ? std::to_string(d.io_latency_frames) : "0");
   add("pngs_written", std::to_string(d.pngs_written));
   add("pngs_dropped", std::to_string(d.pngs_dropped));
+  add("texture_memory", textureMemoryName(run.texture_memory));
+  add("pool_pages", std::to_string(run.pool_pages));
+  add("frames_pages_short", std::to_string(pagesShortFrames(run)));
   // A store read over HTTP: the requests, bytes and retries it cost, and
   // what the disk cache served. Empty for local stores.
   const bool remote = readRemotely(run);
@@ -372,6 +387,11 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
       << "\n";
   row("gpu_texture_bytes", double(run.texture_bytes.total()), "%.0f");
   row("gpu_texture_mib", mib(run.texture_bytes.total()), "%.1f");
+  out << "texture_memory\t" << textureMemoryName(run.texture_memory) << "\n";
+  if (run.pool_pages > 0) {
+    row("pool_pages", double(run.pool_pages), "%.0f");
+    row("frames_pages_short", double(pagesShortFrames(run)), "%.0f");
+  }
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
   if (run.height_texture_bytes > 0) {
     row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");

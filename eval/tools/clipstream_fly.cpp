@@ -48,6 +48,14 @@ int main(int argc, char** argv) {
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--buffering", buffering, "single, double-upload, double-copy or staged");
+  std::string texture_memory = textureMemoryName(o.texture_memory);
+  app.add_option("--texture-memory", texture_memory,
+                 "Where colour tiles live on the GPU: stack (every level's whole window) or paged (a "
+                 "fixed pool of pages holding the tiles the frames sample; docs/renderer.md)");
+  app.add_option("--pool-mb", o.pool_mb,
+                 "The page pool's size with --texture-memory paged (default " +
+                     std::to_string(renderer_config::kDefaultPoolMiB) + ")")
+      ->transform(cli::wholeInRange(1, 65536));
   std::string tile_format = tileContentName(o.tile_format), reference_tile_format;
   app.add_option("--tile-format", tile_format,
                  "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads, an eighth of "
@@ -150,6 +158,9 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
+  if (s) s = textureMemoryFromName(texture_memory, &o.texture_memory);
+  if (s && app.count("--pool-mb") && o.texture_memory != TextureMemory::kPaged)
+    s = Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
   if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
   if (s && !reference_tile_format.empty()) {
     TileContent reference = TileContent::kRgba8;

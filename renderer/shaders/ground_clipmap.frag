@@ -7,10 +7,23 @@
 // trilinear fetch, whatever its level: llvmpipe runs both sides of a
 // divergent branch, and a second texture path cost about 2 ms per 640x360
 // frame (docs/benchmarks.md).
+//
+// PAGED (TextureMemory::kPaged): the tiles live in a pool of pages, one
+// page per layer of uStack: a tile with a PAGE_BORDER-texel border of its
+// neighbours' texels, and in mip 1 the next coarser level over it (with
+// half that border). uUsable then covers every level and also names, per
+// slot, the page of the finest usable tile over it; the fetch is the same
+// single trilinear one, from that page.
 layout(location = 0) out vec4 outColor;
 
+#ifdef PAGED
+uniform sampler2DArray uStack;    // the pool: layer = page
+uniform usampler2DArray uUsable;  // slots^2 per level: usableCode() | levels up << 8 | page << 16
+uniform int uTopLevel;            // coarsest level
+#else
 uniform sampler2DArray uStack;    // layer l: level l (mip 0), l + 1 (mip 1); pyramid layer: chain
 uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 8
+#endif
 uniform int uPyramidLevel;
 uniform float uMinLod;            // MaxTextureLOD from the streamer
 uniform float uMaxLod;            // coarsest level
@@ -56,6 +69,26 @@ void main() {
   float lambda = log2(max(max(length(gx), length(gy)), 1e-30));
   float lod = clamp(lambda, uMinLod, uMaxLod);
   int wanted = int(lod);
+#ifdef PAGED
+  // The wanted level's entry (any level: the coarse ones cover their whole
+  // level) and the pyramid level's, for ground outside the wanted level's
+  // window. Both are read: llvmpipe would run both sides of a branch.
+  int probe = min(wanted, uTopLevel);
+  ivec2 slot, pslot;
+  uint code, pcode;
+  slotPosition(probe, rel, slot, code);
+  slotPosition(uPyramidLevel, rel, pslot, pcode);
+  uint v = texelFetch(uUsable, ivec3(slot, probe), 0).r;
+  uint pv = texelFetch(uUsable, ivec3(pslot, uPyramidLevel), 0).r;
+  bool hit = (v & 255u) == code;
+  uint e = hit ? v : pv;
+  int level = min((hit ? probe : uPyramidLevel) + int((e >> 8) & 255u), uTopLevel);
+  float used = max(lod, float(level));
+  // The position in the tile, then in its page (border included).
+  vec2 tq = uCamCell[level].xy + rel * uInvTileTexels[level];
+  vec2 inPage = (float(PAGE_BORDER) + fract(tq) * uTilePx) / (uTilePx + 2.0 * float(PAGE_BORDER));
+  vec4 color = textureLod(uStack, vec3(inPage, float(e >> 16)), used - float(level));
+#else
   // One lookup at the wanted level gives the finest usable level for this
   // spot (usable map, high byte); a tile outside the wanted level's window
   // (code mismatch) falls back to the always complete pyramid level.
@@ -74,6 +107,7 @@ void main() {
   // Cell-relative is enough here: GL_REPEAT wraps onto the slots.
   vec2 tq = uCamCell[layer].xy + rel * uInvTileTexels[layer];
   vec4 color = textureLod(uStack, vec3(tq / float(uSlots), float(layer)), used - float(layer));
+#endif
 #ifdef OVERLAY
   {
     color.rgb = mix(color.rgb, levelTint(int(used)), 0.4);

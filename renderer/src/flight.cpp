@@ -36,11 +36,13 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
-                             ClipmapPlan* plan, uint32_t upload_tiles) {
+                             ClipmapPlan* plan, uint32_t upload_tiles, TextureMemory memory,
+                             uint64_t pool_bytes) {
   out->reset();
   const ClipmapPlan first = planClipmap(source.geometry(), viewport, camera, planner);
   std::unique_ptr<ClipmapRenderer> renderer;
-  RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering, source.content(), upload_tiles};
+  RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering, source.content(), upload_tiles, memory,
+                    pool_bytes};
   if (Status s = ClipmapRenderer::create(source.geometry(), rc, &renderer); !s) return s;
   renderer->beginFrame();
   const uint32_t missing = renderer->loadPyramid(
@@ -94,9 +96,14 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   if (config.upload_tiles == 0)
     return Status::error(ErrorCode::kInvalidArgument, "flight: uploads per frame must be at least 1");
   keepHeapForSoftwareGl();
+  if (config.texture_memory == TextureMemory::kPaged && config.terrain)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "flight: paged texture memory does not draw terrain yet; terrain takes the stack "
+                         "(--texture-memory stack)");
   std::unique_ptr<Flight> f(new Flight());
   f->m_source = std::move(source);
   f->m_config = config;
+  f->m_config.streamer.planner = plannerFor(config.texture_memory, config.streamer.planner);
   if (Status s = f->makeRenderer(config.viewport, first, &f->m_preload_ms); !s) return s;
   if (config.terrain) {
     if (Status s = f->makeTerrain(); !s) return s;
@@ -112,9 +119,9 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
                         a.world_per_height};
     std::vector<StreamLayer> layers{colour, heights};
     if (Status s = checkStreamLayers(layers); !s) return s;
-    f->m_streamer = std::make_unique<Streamer>(std::move(layers), config.streamer);
+    f->m_streamer = std::make_unique<Streamer>(std::move(layers), f->m_config.streamer);
   } else {
-    f->m_streamer = std::make_unique<Streamer>(f->m_source, config.streamer);
+    f->m_streamer = std::make_unique<Streamer>(f->m_source, f->m_config.streamer);
   }
   f->m_before = f->m_streamer->stats();
   f->m_previous = first;
@@ -138,7 +145,7 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
   const auto start = Clock::now();
   if (Status s = createClipmapRenderer(*m_source, viewport, camera, m_config.streamer.planner,
                                        m_config.buffering, &renderer, &m_preload_failures, &plan,
-                                       m_config.upload_tiles);
+                                       m_config.upload_tiles, m_config.texture_memory, m_config.pool_bytes);
       !s)
     return s;
   *preload_ms = msBetween(start, Clock::now());
@@ -281,6 +288,7 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   f.upload_ms = uploads.upload_ms;
   f.tiles_uploaded = uploads.tiles;
   f.second_copies = uploads.second_copies;
+  f.pages_short = uploads.pages_short;
   f.max_texture_lod = handoff.max_texture_lod;
   const ClipmapPlan& plan = m_streamer->plan();
   f.finest_needed = plan.finest_level;

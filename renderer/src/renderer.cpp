@@ -5,6 +5,7 @@
 #include "gl.h"
 #include "gl_util.h"
 #include "shaders.h"
+#include "tile_fill.h"
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/streamer/bc1.h>
@@ -59,6 +60,25 @@ const char* bufferingName(Buffering buffering) {
   return "?";
 }
 
+const char* textureMemoryName(TextureMemory memory) {
+  return memory == TextureMemory::kPaged ? "paged" : "stack";
+}
+
+Status textureMemoryFromName(const std::string& name, TextureMemory* out) {
+  if (name == "stack") *out = TextureMemory::kStack;
+  else if (name == "paged") *out = TextureMemory::kPaged;
+  else
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "texture memory '" + name + "' is not one of: stack, paged");
+  return okStatus();
+}
+
+PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {
+  if (memory == TextureMemory::kPaged && planner.pyramid_tiles == 0)
+    planner.pyramid_tiles = renderer_config::kPagedPyramidTiles;
+  return planner;
+}
+
 Status bufferingFromName(const std::string& name, Buffering* out) {
   for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
                       Buffering::kStaged})
@@ -107,9 +127,19 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
       return Status::error(ErrorCode::kUnavailable,
                            "renderer: BC1 tiles need GL_EXT_texture_compression_s3tc, which this GL lacks");
   }
+  if (config.texture_memory == TextureMemory::kPaged &&
+      (config.buffering == Buffering::kDoubleUploadTwice || config.buffering == Buffering::kDoubleCopy))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         std::string("renderer: paged texture memory takes staged or single buffering, not ") +
+                             bufferingName(config.buffering));
   std::unique_ptr<ClipmapRenderer> r(new ClipmapRenderer());
   r->m_geometry = geometry;
   r->m_config = config;
+  if (r->paged()) {
+    r->m_page_border = config.tile_content == TileContent::kBc1 ? renderer_config::kPageBorderBc1
+                                                                : renderer_config::kPageBorderRgba8;
+    r->m_page_px = geometry.tile_px + 2 * r->m_page_border;
+  }
   // Slot period: even, so a coarser tile covers whole slot pairs in mip 1,
   // and 2 more than the window, so the parents of a window that starts on an
   // odd tile (clip/2 + 1 of them) never share a mip-1 slot.
@@ -130,10 +160,15 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
 
   for (int overlay = 0; overlay < 2; ++overlay) {
     Status s = gl_util::buildGroundProgram(shaders::k_ground_clipmap_frag, &r->m_program[overlay],
-                                           overlay ? "#define OVERLAY 1\n" : "");
+                                           r->shaderDefines() + (overlay ? "#define OVERLAY 1\n" : ""));
     if (!s) return s;
   }
   glCreateVertexArrays(1, &r->m_vao);
+  if (r->paged()) {
+    if (Status s = r->createPaged(); !s) return s;
+    *out = std::move(r);
+    return okStatus();
+  }
 
   const GLsizei layers = GLsizei(config.pyramid_level + 1);
   const GLsizei usable_layers = GLsizei(std::max(config.pyramid_level, 1u));
@@ -353,7 +388,8 @@ uint32_t ClipmapRenderer::loadPyramid(const PyramidTileFn& tile) {
         if (auto px = tile(key)) uploadTile(key, std::move(px));
         else ++failed;
       }
-  fillMissingPyramidTiles();
+  if (paged()) fillMissingPyramidPages();
+  else fillMissingPyramidTiles();
   return failed;
 }
 
@@ -470,21 +506,7 @@ void ClipmapRenderer::fillPyramidTileBc1(const TileKey& key, Fill fill) {
     const uint32_t pw = uint32_t(std::min<uint64_t>(tp / 2, psize - px));
     const uint32_t ph = uint32_t(std::min<uint64_t>(tp / 2, psize - py));
     const std::vector<uint8_t> src = readPyramidRegion(mip + 1, px, py, pw, ph);
-    for (uint32_t j = 0; j < tp; ++j)
-      for (uint32_t i = 0; i < tp; ++i) {
-        // Texel centres of the magnified tile in the quarter's texels.
-        const double sx = std::clamp((i + 0.5) * 0.5 - 0.5, 0.0, double(pw - 1));
-        const double sy = std::clamp((j + 0.5) * 0.5 - 0.5, 0.0, double(ph - 1));
-        const uint32_t ix = uint32_t(sx), iy = uint32_t(sy);
-        const uint32_t ix1 = std::min(ix + 1, pw - 1), iy1 = std::min(iy + 1, ph - 1);
-        const double fx = sx - ix, fy = sy - iy;
-        for (int c = 0; c < 3; ++c) {
-          auto at = [&](uint32_t u, uint32_t v) { return double(src[(size_t(v) * pw + u) * 4 + size_t(c)]); };
-          const double v = (at(ix, iy) * (1 - fx) + at(ix1, iy) * fx) * (1 - fy) +
-                           (at(ix, iy1) * (1 - fx) + at(ix1, iy1) * fx) * fy;
-          tile[(size_t(j) * tp + i) * 4 + size_t(c)] = uint8_t(std::lround(v));
-        }
-      }
+    magnifyQuarter(src.data(), pw, 0, 0, pw, ph, tp, tile.data());
   } else if (fill == Fill::kFromChildren) {
     // The four children's texels, 2x2 averaged, clamped to the finer mip.
     const uint64_t csize = size * 2;
@@ -547,7 +569,9 @@ void ClipmapRenderer::uploadTile(const TileKey& key,
                                  std::shared_ptr<const std::vector<uint8_t>> rgba) {
   if (!rgba || rgba->size() != tileBytes() || !m_geometry.contains(key)) return;
   const auto start = Clock::now();
-  if (key.level >= m_config.pyramid_level) {
+  if (paged()) {
+    uploadTilePaged(key, std::move(rgba));
+  } else if (key.level >= m_config.pyramid_level) {
     const size_t index = m_pyramid_first[key.level - m_config.pyramid_level] +
                          size_t(key.y) * m_geometry.levels[key.level].tiles_x + key.x;
     // The pyramid never changes once loaded: a tile handed over again (the
@@ -582,6 +606,18 @@ void ClipmapRenderer::endUploads() {
     return;
   }
   const auto start = Clock::now();
+  if (paged()) {
+    // Pages are written here (the tiles the frame samples), so the fence
+    // over the staging region follows them.
+    endUploadsPaged(usableSets() == 1 ? 0 : 1 - m_front);
+    if (staged() && m_staging_used > 0 && m_staging_fence[m_staging_region] == nullptr)
+      m_staging_fence[m_staging_region] = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+    if (usableSets() == 2) m_front = 1 - m_front;
+    m_changed = false;
+    m_issue_ms += msSince(start);
+    m_stats.upload_ms = m_issue_ms;
+    return;
+  }
   if (staged() && m_staging_used > 0 && m_staging_fence[m_staging_region] == nullptr)
     m_staging_fence[m_staging_region] = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
   const uint32_t target = stackSets() == 1 ? 0 : 1 - m_front;
@@ -648,6 +684,11 @@ void ClipmapRenderer::draw(const Camera& camera, const Viewport& viewport) {
   glUseProgram(0);
 }
 
+std::string ClipmapRenderer::shaderDefines() const {
+  if (!paged()) return "";
+  return "#define PAGED 1\n#define PAGE_BORDER " + std::to_string(m_page_border) + "\n";
+}
+
 void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewport& viewport) const {
   const uint32_t pyramid = m_config.pyramid_level;
   const double tp = m_geometry.tile_px;
@@ -658,7 +699,9 @@ void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewpor
   // lies in, and that cell's index mod 4 (see slotPosition() in the shader).
   float cam_cell[renderer_config::kMaxLevels * 4] = {};
   float inv_tile[renderer_config::kMaxLevels] = {};
-  for (uint32_t l = 0; l <= pyramid; ++l) {
+  // Paged: every level has an indirection map, the pyramid's levels too.
+  const uint32_t top = paged() ? m_geometry.levelCount() - 1 : pyramid;
+  for (uint32_t l = 0; l <= top; ++l) {
     const double tile_texels = tp * std::ldexp(1.0, int(l));
     const double tx = camera.position.x / tile_texels, ty = camera.position.z / tile_texels;
     const double cell_x = std::floor(tx / clip), cell_y = std::floor(ty / clip);
@@ -668,11 +711,13 @@ void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewpor
     cam_cell[4 * l + 3] = float(cell_y - 4.0 * std::floor(cell_y / 4.0));
     inv_tile[l] = float(1.0 / tile_texels);
   }
-  const GLsizei n = GLsizei(pyramid + 1);
+  const GLsizei n = GLsizei(top + 1);
   glProgramUniform4fv(p, loc(p, "uCamCell"), n, cam_cell);
   glProgramUniform1fv(p, loc(p, "uInvTileTexels"), n, inv_tile);
   glProgramUniform1i(p, loc(p, "uSlots"), GLint(clip));
-  const uint32_t max_level = std::min(m_geometry.levelCount() - 1, pyramid + m_mips - 1);
+  const uint32_t max_level =
+      paged() ? top : std::min(m_geometry.levelCount() - 1, pyramid + m_mips - 1);
+  if (paged()) glProgramUniform1i(p, loc(p, "uTopLevel"), GLint(top));
   glProgramUniform1i(p, loc(p, "uPyramidLevel"), GLint(pyramid));
   glProgramUniform1f(p, loc(p, "uMinLod"), float(std::min(m_max_texture_lod, max_level)));
   glProgramUniform1f(p, loc(p, "uMaxLod"), float(max_level));
@@ -738,6 +783,27 @@ void OffscreenTarget::readRgba(std::vector<uint8_t>* rgba) const {
   for (uint32_t y = 0; y < m_viewport.height_px; ++y)
     std::copy_n(bottom_up.data() + size_t(m_viewport.height_px - 1 - y) * row, row,
                 rgba->data() + size_t(y) * row);
+}
+
+void magnifyQuarter(const uint8_t* src, uint32_t src_stride, uint32_t x0, uint32_t y0, uint32_t w,
+                    uint32_t h, uint32_t tile_px, uint8_t* tile) {
+  for (uint32_t j = 0; j < tile_px; ++j)
+    for (uint32_t i = 0; i < tile_px; ++i) {
+      // Texel centres of the magnified tile in the region's texels.
+      const double sx = std::clamp((i + 0.5) * 0.5 - 0.5, 0.0, double(w - 1));
+      const double sy = std::clamp((j + 0.5) * 0.5 - 0.5, 0.0, double(h - 1));
+      const uint32_t ix = uint32_t(sx), iy = uint32_t(sy);
+      const uint32_t ix1 = std::min(ix + 1, w - 1), iy1 = std::min(iy + 1, h - 1);
+      const double fx = sx - ix, fy = sy - iy;
+      for (int c = 0; c < 3; ++c) {
+        auto at = [&](uint32_t u, uint32_t v) {
+          return double(src[(size_t(y0 + v) * src_stride + x0 + u) * 4 + size_t(c)]);
+        };
+        const double v = (at(ix, iy) * (1 - fx) + at(ix1, iy) * fx) * (1 - fy) +
+                         (at(ix, iy1) * (1 - fx) + at(ix1, iy1) * fx) * fy;
+        tile[(size_t(j) * tile_px + i) * 4 + size_t(c)] = uint8_t(std::lround(v));
+      }
+    }
 }
 
 }  // namespace clipstream

@@ -354,9 +354,10 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
   plan.clip_tiles =
       config.clip_tiles ? config.clip_tiles : chooseClipTiles(viewport, geometry.tile_px);
   plan.pyramid_level = level_count - 1;
+  const uint32_t fit =
+      config.pyramid_tiles != 0 ? std::min(config.pyramid_tiles, plan.clip_tiles) : plan.clip_tiles;
   for (uint32_t l = 0; l < level_count; ++l) {
-    if (geometry.levels[l].tiles_x <= plan.clip_tiles &&
-        geometry.levels[l].tiles_y <= plan.clip_tiles) {
+    if (geometry.levels[l].tiles_x <= fit && geometry.levels[l].tiles_y <= fit) {
       plan.pyramid_level = l;
       break;
     }

@@ -280,6 +280,45 @@ TEST(FlightRun, Bc1FlightRestsOnItsReferenceAndNearTheRgba8One) {
   }
 }
 
+// Paged texture memory: at rest bit-identical to the ideal reference drawn
+// the same way (RGBA8 and BC1), and close to the full stack's reference
+// (pages carry their neighbours' texels in a border, so trilinear sampling
+// reads the stack's texels; the sampling coordinates are computed
+// differently, and the image's outer edge has no neighbour to copy).
+TEST(FlightRun, PagedFlightRestsOnItsReferenceAndNearTheStacks) {
+  CLIPSTREAM_REQUIRE_GL();
+  const std::shared_ptr<TileSource> rgba8 = makeImageSource(test::patternImage(2048, 2048), 2048, 2048, 128);
+  Status st;
+  const std::shared_ptr<TileSource> bc1 = makeBc1Source(rgba8, &st);
+  ASSERT_TRUE(bc1) << st.toString();
+  for (const auto& source : {rgba8, bc1}) {
+    FlightRunOptions o;
+    ASSERT_NO_FATAL_FAILURE(restingOrbit(source, &o));
+    o.texture_memory = TextureMemory::kPaged;
+    FlightRun r;
+    const Status s = runFlight(o, &r);
+    ASSERT_TRUE(s.ok()) << s.toString();
+    EXPECT_EQ(r.texture_memory, TextureMemory::kPaged);
+    EXPECT_GT(r.pool_pages, 0u);
+    EXPECT_EQ(r.frames_with_holes, 0u);
+    EXPECT_EQ(r.render_thread_fetches, 0u);
+    EXPECT_EQ(r.final_max_abs_error, 0) << tileContentName(source->content()) << ": last PSNR "
+                                        << r.frames.back().accuracy.error.psnr_db;
+  }
+  // The paged and the stack's references of the same view.
+  const Viewport vp{256, 192};
+  const Camera cam = test::obliqueCamera();
+  std::vector<uint8_t> stack_frame, paged_frame;
+  std::unique_ptr<IdealReference> stack, paged;
+  ASSERT_TRUE(IdealReference::create(rgba8, vp, {}, &stack).ok());
+  ASSERT_TRUE(IdealReference::create(rgba8, vp, {}, &paged, TextureMemory::kPaged).ok());
+  ASSERT_TRUE(stack->render(cam, &stack_frame).ok());
+  ASSERT_TRUE(paged->render(cam, &paged_frame).ok());
+  const FrameError e = compareFrames(paged_frame, stack_frame);
+  std::printf("  paged reference against the stack's: %.2f dB, max abs error %d\n", e.psnr_db, e.max_abs_error);
+  EXPECT_GE(e.psnr_db, 45.0);
+}
+
 // clipstream-fly --reference: per-frame PSNR in the outputs, and the last
 // rest frame bit-identical to the reference.
 TEST(FlyReference, WritesPsnrAndIsIdenticalAfterResting) {

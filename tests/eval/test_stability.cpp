@@ -351,6 +351,35 @@ TEST(Stability, ViewportResize) {
   checkScenario("viewport resize", o);
 }
 
+// Paged texture memory (TextureMemory::kPaged) under the hardest paths.
+// With a pool of a few pages the views need more than it holds: the frames
+// are drawn from coarser levels where pages fall short (never a hole, a
+// stale page or another tile's texels: the garbage check), and the rest
+// view stays coarser than the reference, so it is not compared bit for bit.
+TEST(Stability, PagedPoolOfAFewPagesTeleportsWithoutHoles) {
+  CLIPSTREAM_REQUIRE_GL();
+  FlightRunOptions o = baseOptions(test::procedural(1 << 20), "orbit");
+  ASSERT_TRUE(FlightPath::builtin("teleport", o.source->geometry(), &o.path, 10).ok());
+  o.texture_memory = TextureMemory::kPaged;
+  o.pool_bytes = 3 << 20;  // 36 pages of 132^2 RGBA8: 21 pinned, 1 black, 14 for the stack levels
+  FlightRun r;
+  checkScenario("paged, a pool of 3 MiB, teleport every 10 frames", o, false, &r);
+  EXPECT_GT(r.pool_pages, 0u);
+  EXPECT_LE(r.texture_bytes.stack, uint64_t(3) << 20);
+  uint32_t short_frames = 0;
+  for (const FlightRunFrame& f : r.frames) short_frames += f.sample.pages_short > 0 ? 1 : 0;
+  EXPECT_GT(short_frames, 0u) << "the pool was never over-subscribed: the scenario tests nothing";
+}
+
+// With the default pool the paged frames rest on their reference bit for bit.
+TEST(Stability, PagedSpeedTimesHundred) {
+  CLIPSTREAM_REQUIRE_GL();
+  FlightRunOptions o = baseOptions(test::procedural(1 << 20), "pass");
+  o.speed = 100.0;
+  o.texture_memory = TextureMemory::kPaged;
+  checkScenario("paged, speed x100", o);
+}
+
 // The soak (docs/accuracy.md, "Soak and leak checking"): a long straight flight over the
 // 2^26 procedural texture (the sweep's line: 200 texels up, 30 deg down,
 // no tile ever seen twice), so the RAM cache turns over many times and the

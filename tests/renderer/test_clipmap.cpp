@@ -1,5 +1,6 @@
 // CPU-side clipmap rules: the toroidal slot rule and the usable map.
 #include <clipstream/renderer/clipmap.h>
+#include <clipstream/renderer/page_table.h>
 
 #include <gtest/gtest.h>
 
@@ -137,6 +138,71 @@ TEST(UsableMap, RejectsAResidencyArrayOfTheWrongSize) {
   bad.resident.resize(3);
   const UsableMap m = computeUsableMap(g, 6, 2, {bad});
   for (uint8_t u : m.usable[0]) EXPECT_EQ(u, 0);
+}
+
+TEST(PageTable, GivesFreePagesThenTheLeastRecentlyUsedUnpinnedOne) {
+  PageTable t(4);
+  const TileKey a{0, 1, 1}, b{0, 2, 1}, c{0, 3, 1}, d{1, 0, 0}, e{0, 9, 9};
+  EXPECT_EQ(t.allocate(d, 1, true), 0u);  // pinned
+  EXPECT_EQ(t.allocate(a, 1, false), 1u);
+  EXPECT_EQ(t.allocate(b, 2, false), 2u);
+  EXPECT_EQ(t.allocate(c, 3, false), 3u);
+  EXPECT_EQ(t.used(), 4u);
+  EXPECT_EQ(t.pinned(), 1u);
+  t.use(1, 4);  // a is used again: b is now the oldest
+  TileKey evicted{};
+  bool had = false;
+  EXPECT_EQ(t.allocate(e, 5, false, &evicted, &had), 2u);
+  EXPECT_TRUE(had);
+  EXPECT_EQ(evicted, b);
+  EXPECT_EQ(t.find(b), PageTable::kNoPage);
+  EXPECT_EQ(t.find(e), 2u);
+  EXPECT_EQ(t.key(2), e);
+  EXPECT_EQ(t.borders(2), 0u) << "a new page has no border filled";
+  EXPECT_EQ(t.mip1From(2), PageTable::kMip1Empty);
+}
+
+TEST(PageTable, AFrameNeverTakesAPageItUsesAndAPinnedPageIsNeverTaken) {
+  PageTable t(3);
+  t.allocate(TileKey{2, 0, 0}, 7, true);
+  t.allocate(TileKey{0, 0, 0}, 7, false);
+  t.allocate(TileKey{0, 1, 0}, 7, false);
+  // Every page pinned or used in frame 7: over-subscribed.
+  EXPECT_EQ(t.allocate(TileKey{0, 2, 0}, 7, false), PageTable::kNoPage);
+  EXPECT_EQ(t.find(TileKey{0, 2, 0}), PageTable::kNoPage);
+  // In frame 8 the two unpinned pages are free to take, the pinned one not.
+  const uint32_t p = t.allocate(TileKey{0, 2, 0}, 8, false);
+  EXPECT_TRUE(p == 1u || p == 2u) << p;
+  const uint32_t q = t.allocate(TileKey{0, 3, 0}, 8, false);
+  EXPECT_TRUE((q == 1u || q == 2u) && q != p) << q;
+  EXPECT_EQ(t.allocate(TileKey{0, 4, 0}, 8, false), PageTable::kNoPage);
+  EXPECT_EQ(t.find(TileKey{2, 0, 0}), 0u);
+  t.clearUnpinned();
+  EXPECT_EQ(t.used(), 1u);
+  EXPECT_EQ(t.find(TileKey{2, 0, 0}), 0u);
+}
+
+TEST(PageTable, BordersAndMip1Bookkeeping) {
+  std::set<uint32_t> bits;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx)
+      if (dx != 0 || dy != 0) bits.insert(borderBit(dx, dy));
+  EXPECT_EQ(bits.size(), 8u);
+  EXPECT_EQ(*bits.rbegin(), 7u);
+  PageTable t(2);
+  const uint32_t p = t.allocate(TileKey{0, 5, 5}, 1, false);
+  t.addBorders(p, uint8_t(1u << borderBit(1, 0)));
+  t.addBorders(p, uint8_t(1u << borderBit(-1, -1)));
+  EXPECT_EQ(t.borders(p), uint8_t((1u << borderBit(1, 0)) | (1u << borderBit(-1, -1))));
+  t.setMip1From(p, 0x0f);
+  EXPECT_EQ(t.mip1From(p), 0x0f);
+  // A page reused for another tile starts over.
+  const uint32_t q = t.allocate(TileKey{0, 6, 5}, 2, false);
+  const uint32_t r = t.allocate(TileKey{0, 7, 5}, 3, false);
+  EXPECT_EQ(r, p);
+  EXPECT_NE(q, p);
+  EXPECT_EQ(t.borders(r), 0u);
+  EXPECT_EQ(t.mip1From(r), PageTable::kMip1Empty);
 }
 
 }  // namespace

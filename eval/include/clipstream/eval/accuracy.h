@@ -35,8 +35,12 @@ namespace clipstream {
 class IdealReference {
  public:
   // kUnavailable if GL objects cannot be made (needs a current context).
+  // `memory`: the streamed frames' TextureMemory, so that a frame at rest
+  // is compared with the same sampling (kPaged: the largest pool the GL
+  // allows; the planner's pyramid as plannerFor() gives it).
   static Status create(std::shared_ptr<TileSource> source, const Viewport& viewport,
-                       const PlannerConfig& planner, std::unique_ptr<IdealReference>* out);
+                       const PlannerConfig& planner, std::unique_ptr<IdealReference>* out,
+                       TextureMemory memory = TextureMemory::kStack);
   ~IdealReference();
   IdealReference(const IdealReference&) = delete;
   IdealReference& operator=(const IdealReference&) = delete;
@@ -66,6 +70,7 @@ class IdealReference {
   std::shared_ptr<TileSource> m_source;
   PyramidGeometry m_geometry;
   PlannerConfig m_planner;
+  TextureMemory m_memory = TextureMemory::kStack;
   Viewport m_viewport;
   std::unique_ptr<ClipmapRenderer> m_renderer;
   std::unique_ptr<OffscreenTarget> m_target;
@@ -85,6 +90,7 @@ struct AccuracyOptions {
   bool reference = true;      // false: no IdealReference, measure() only samples tiles
   bool ground_truth = false;  // measure() may be asked for the CPU ground truth
   bool sample_tiles = true;   // collect sampledTiles() for the over-fetch ratio
+  TextureMemory texture_memory = TextureMemory::kStack;  // the reference's (IdealReference::create())
 };
 
 struct AccuracyFrame {

@@ -58,6 +58,8 @@ struct FlightRunOptions {
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;
   Buffering buffering = kDefaultBuffering;
+  TextureMemory texture_memory = TextureMemory::kStack;  // FlightConfig's; the reference's too
+  uint64_t pool_bytes = 0;                                // kPaged: 0 = the default pool
   Overlay overlay = Overlay::kOff;
   bool path_hint = false;       // give the streamer the scripted path (Streamer::setPathHint)
   // Terrain under the colour layer (FlightConfig::terrain). Path heights
@@ -127,6 +129,8 @@ struct FlightRun {
   uint32_t clip_tiles = 0, pyramid_level = 0;  // the renderer's at the end (after a resize, the new one)
   TextureBytes texture_bytes;          // the colour clip stack's video memory (the renderer at the end)
   TileContent tile_content = TileContent::kRgba8;  // what the stack holds
+  TextureMemory texture_memory = TextureMemory::kStack;
+  uint32_t pool_pages = 0;             // kPaged: the pool's pages (0 for the stack)
   double preload_ms = 0.0;             // the first synchronous pyramid load
   uint32_t preload_failures = 0;       // pyramid tiles that could not be read, every load
   uint32_t resizes = 0;

@@ -54,6 +54,10 @@ struct FlyOptions {
   // spread over the run (the first, one each quarter, the last).
   std::optional<uint32_t> save_every;
   Buffering buffering = kDefaultBuffering;
+  // Where the colour tiles live on the GPU (renderer.h), and the pool's
+  // size for kPaged (0 = renderer_config::kDefaultPoolMiB).
+  TextureMemory texture_memory = TextureMemory::kStack;
+  uint64_t pool_mb = 0;
   // Colour tiles on the GPU: kRgba8 as the source gives them, or kBc1
   // transcoded by the loader threads (makeBc1Source()).
   TileContent tile_format = TileContent::kRgba8;

@@ -24,6 +24,22 @@ inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
 // guess).
 inline constexpr uint32_t kStagingFrames = 3;
 
+// TextureMemory::kPaged: the pool's size when the caller does not say.
+// Provisional: to be chosen from the chart of PSNR against pool size
+// (docs/benchmarks.md, "Paged texture memory").
+inline constexpr uint64_t kDefaultPoolMiB = 48;
+// kPaged: the pyramid (levels pinned in the pool, the fallback of every
+// other level) is every level at most this many tiles a side: 4 pins 21
+// pages of a square image (16 + 4 + 1), where the clip-sized pyramid of
+// the stack would pin a clip's worth (1,365 pages at 1920x1080).
+inline constexpr uint32_t kPagedPyramidTiles = 4;
+// kPaged: texels of border around a tile in its page. Bilinear filtering
+// reads one texel past the tile at mip 0 and one past it at mip 1, which
+// has half the border: RGBA8 needs 2. BC1 copies whole 4x4 blocks, and
+// mip 1's border must be a block too: 8.
+inline constexpr uint32_t kPageBorderRgba8 = 2;
+inline constexpr uint32_t kPageBorderBc1 = 8;
+
 // The simulated clock of a Flight (flight.h): every step advances the
 // streamer's clock, and a scripted path's time, by this much whatever the
 // real render time, so runs are deterministic.

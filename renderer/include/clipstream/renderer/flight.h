@@ -58,13 +58,16 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 // frame has something correct to draw (a tile that fails is filled from its
 // ancestor and added to *failures, which may be null). The first frame's
 // plan goes to *plan when given. The stack holds the source's content()
-// (RGBA8 or BC1); `upload_tiles` sizes kStaged's staging regions. GL
-// thread only.
+// (RGBA8 or BC1); `upload_tiles` sizes kStaged's staging regions;
+// `memory` and `pool_bytes` are RendererConfig's (kPaged wants a planner
+// with pyramid_tiles set: renderer_config::kPagedPyramidTiles). GL thread
+// only.
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
                              ClipmapPlan* plan = nullptr,
-                             uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame);
+                             uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame,
+                             TextureMemory memory = TextureMemory::kStack, uint64_t pool_bytes = 0);
 
 // Terrain under the colour layer: an elevation source (TileContent
 // kHeightF32, e.g. openElevationSource()) and where it lies (alignElevation()).
@@ -93,6 +96,11 @@ struct FlightConfig {
   StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // tiles handed to the GPU per frame
   Buffering buffering = kDefaultBuffering;
+  // Where the colour tiles live on the GPU (renderer.h); kPaged sets the
+  // planner's pyramid_tiles (when 0) to renderer_config::kPagedPyramidTiles
+  // and does not draw terrain yet.
+  TextureMemory texture_memory = TextureMemory::kStack;
+  uint64_t pool_bytes = 0;  // kPaged: 0 = renderer_config::kDefaultPoolMiB
   Overlay overlay = Overlay::kOff;
   uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
   // true: draw into the flight's own OffscreenTarget (headless); false: into
@@ -123,6 +131,9 @@ struct FrameSample {
   double upload_ms = 0.0;     // the renderer's texture work
   double draw_ms = 0.0;       // draw until the GPU finished
   uint32_t tiles_uploaded = 0, second_copies = 0;
+  // TextureMemory::kPaged: tiles the frame samples that got no page (the
+  // pool was full of tiles this frame needs too): drawn coarser.
+  uint32_t pages_short = 0;
   uint32_t max_texture_lod = 0, finest_needed = 0;
   uint64_t queue_depth = 0, in_flight = 0, ram_bytes = 0;
   uint64_t tiles_loaded = 0;  // tiles the loader read into RAM this frame

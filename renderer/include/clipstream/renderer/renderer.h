@@ -8,6 +8,7 @@
 
 #include <clipstream/renderer/clipmap.h>
 #include <clipstream/renderer/config.h>
+#include <clipstream/renderer/page_table.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/streamer.h>
@@ -17,6 +18,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 namespace clipstream {
@@ -43,6 +45,28 @@ const char* bufferingName(Buffering buffering);
 // or "staged". kInvalidArgument naming the choices otherwise.
 Status bufferingFromName(const std::string& name, Buffering* out);
 
+// Where the colour tiles live on the GPU.
+enum class TextureMemory {
+  // Every stack level's whole window, toroidally, in one array layer per
+  // level (the classic clipmap): memory follows the clip size, whatever
+  // the frame samples.
+  kStack,
+  // One fixed pool of pages shared by all levels, each page a tile with a
+  // border; a tile gets a page when the frame samples it, the least
+  // recently used page is reused, and per-level indirection maps name each
+  // window slot's page. Memory is the pool's; a view that needs more pages
+  // than the pool has is drawn from coarser levels where it falls short.
+  kPaged,
+};
+const char* textureMemoryName(TextureMemory memory);
+// "stack" or "paged"; kInvalidArgument naming the choices otherwise.
+Status textureMemoryFromName(const std::string& name, TextureMemory* out);
+
+// The planner settings `memory` needs: kPaged pins the pyramid in its pool,
+// so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to
+// renderer_config::kPagedPyramidTiles); kStack takes `planner` as it is.
+PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner);
+
 enum class Overlay { kOff = 0, kLevels = 1 };
 
 struct RendererConfig {
@@ -56,14 +80,20 @@ struct RendererConfig {
   // kStaged: tiles a frame can stage (its region of the ring); more go
   // straight from client memory. The flight's upload budget.
   uint32_t staging_tiles = renderer_config::kDefaultUploadTilesPerFrame;
+  TextureMemory texture_memory = TextureMemory::kStack;
+  // kPaged: the pool's size (pages of tile_px + 2 borders, with mip 1);
+  // 0 = renderer_config::kDefaultPoolMiB. At most GL_MAX_ARRAY_TEXTURE_LAYERS
+  // pages. The plan's pyramid must fit in it (PlannerConfig::pyramid_tiles =
+  // renderer_config::kPagedPyramidTiles keeps it to a few pages).
+  uint64_t pool_bytes = 0;
 };
 
 // Video memory the renderer allocated, computed from its textures' sizes,
 // formats and mip chains (every set counted). The colour clip stack is
 // stack + usable.
 struct TextureBytes {
-  uint64_t stack = 0;    // the stack array(s): every layer, every mip
-  uint64_t usable = 0;   // the usable map(s)
+  uint64_t stack = 0;    // the stack array(s): every layer, every mip (kPaged: the pool)
+  uint64_t usable = 0;   // the usable map(s) (kPaged: the indirection maps)
   uint64_t staging = 0;  // kStaged: the pixel-unpack ring
   uint64_t total() const { return stack + usable + staging; }
 };
@@ -75,6 +105,10 @@ struct UploadStats {
   double upload_ms = 0.0;      // wall time of all of the frame's texture work below
   double coarser_mips_ms = 0.0;  // mip-1 copies (level L + 1 under level L's window)
   double usable_ms = 0.0;      // usable map: compute and upload
+  // kPaged: pages given this frame, and tiles the frame samples that got
+  // no page because every page was pinned or in use (drawn coarser).
+  uint32_t pages_filled = 0;
+  uint32_t pages_short = 0;
 };
 
 class ClipmapRenderer {
@@ -152,6 +186,13 @@ class ClipmapRenderer {
   const PyramidGeometry& geometry() const { return m_geometry; }
   const TextureBytes& textureBytes() const { return m_texture_bytes; }
   TileContent tileContent() const { return m_config.tile_content; }
+  TextureMemory textureMemory() const { return m_config.texture_memory; }
+  // kPaged: the pool's pages, and those holding a tile now. 0 in kStack.
+  uint32_t poolPages() const { return m_pages ? m_pages->pages() : 0; }
+  uint32_t poolPagesUsed() const { return m_pages ? m_pages->used() : 0; }
+  // The #defines every program that samples the colour with
+  // ground_clipmap.frag needs for this renderer (bindColour()).
+  std::string shaderDefines() const;
 
  private:
   // Fills every pyramid tile that was never uploaded: the tile is
@@ -178,6 +219,25 @@ class ClipmapRenderer {
   std::vector<uint8_t> readPyramidRegion(uint32_t mip, uint32_t x, uint32_t y, uint32_t w,
                                          uint32_t h) const;
   bool compressed() const { return m_config.tile_content == TileContent::kBc1; }
+  bool paged() const { return m_config.texture_memory == TextureMemory::kPaged; }
+
+  // kPaged (paged.cpp). The pool and the indirection maps.
+  Status createPaged();
+  // A stack tile is kept (pixels) until it leaves its window; a pyramid
+  // tile gets its pinned page at once.
+  void uploadTilePaged(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba);
+  // Gives pages to the tiles the frame samples (coarse levels first, near
+  // the window's centre first), fills their borders and mip 1, and writes
+  // the indirection maps into set `target`.
+  void endUploadsPaged(uint32_t target);
+  // Takes a page for `key` and writes `pixels` into it (with its borders
+  // from the neighbours' pages); kNoPage when the pool is full this frame.
+  uint32_t placePage(const TileKey& key, const uint8_t* pixels, bool pin);
+  void writePage(uint32_t page, const uint8_t* pixels);
+  void copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy, uint32_t dst_page,
+                      uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w, uint32_t h);
+  void fillBorders(uint32_t page, const TileKey& key);
+  uint32_t fillMissingPyramidPages();
   size_t tileBytes() const;
   void fillCoarserMips(uint32_t set);
   // Stack arrays and usable maps: two of each when double-buffered; staged
@@ -236,6 +296,14 @@ class ClipmapRenderer {
   void* m_staging_fence[renderer_config::kStagingFrames] = {};
   UploadStats m_stats;
   double m_issue_ms = 0.0;
+  // kPaged: m_stack[0] is the pool (a layer per page), m_usable_tex the
+  // indirection maps (every level), page 0 a black page for slots that
+  // have none.
+  std::unique_ptr<PageTable> m_pages;
+  std::unordered_map<uint64_t, std::shared_ptr<const std::vector<uint8_t>>> m_page_pixels;
+  uint32_t m_page_border = 0;  // texels of border on each side (mip 0)
+  uint32_t m_page_px = 0;      // tile_px + 2 borders
+  uint64_t m_frame = 1;
 };
 
 // An offscreen framebuffer: RGBA8 colour + 24-bit depth, with readback.

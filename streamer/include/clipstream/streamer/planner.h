@@ -50,6 +50,11 @@ struct PlannerConfig {
   uint32_t clip_tiles = 0;       // clip size in tiles; 0 = choose from the viewport
   double max_oversample = 2.0;   // finest level: texel footprint >= 1/this screen pixel
   uint32_t max_stack_levels = 0; // 0 = no limit beyond the pyramid
+  // The pyramid is every level at most this many tiles a side (at most
+  // clip_tiles; 0 = clip_tiles, the classic clipmap). The paged texture
+  // memory pins the pyramid's tiles in its pool and pages the rest, so it
+  // asks for a small pyramid (renderer_config::kPagedPyramidTiles).
+  uint32_t pyramid_tiles = 0;
   // Terrain without per-tile bounds: how far the ground within view rises
   // above (and falls below) the plane y = 0 under the camera, in level-0
   // texels. The footprint is then the union of the footprints on the
@@ -93,7 +98,7 @@ struct ClipLevelPlan {
 
 struct ClipmapPlan {
   uint32_t clip_tiles = 0;
-  uint32_t pyramid_level = 0;  // levels >= this fit whole in a clip and are always resident
+  uint32_t pyramid_level = 0;  // levels >= this fit whole in a clip (PlannerConfig::pyramid_tiles) and are always resident
   uint32_t finest_level = 0;   // finest level any visible pixel needs
   std::vector<ClipLevelPlan> stack;  // one entry per level in [0, pyramid_level)
   // Whole tile grid of each pyramid level: pyramid[i] is level pyramid_level + i.

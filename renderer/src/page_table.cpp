@@ -1,0 +1,63 @@
+// Paged texture memory bookkeeping. See page_table.h.
+#include <clipstream/renderer/page_table.h>
+
+namespace clipstream {
+
+PageTable::PageTable(uint32_t pages) : m_pages(pages) {
+  m_free.reserve(pages);
+  // Taken from the back: page 0 first.
+  for (uint32_t p = pages; p-- > 0;) m_free.push_back(p);
+}
+
+uint32_t PageTable::find(const TileKey& key) const {
+  const auto it = m_by_key.find(pack(key));
+  return it == m_by_key.end() ? kNoPage : it->second;
+}
+
+uint32_t PageTable::allocate(const TileKey& key, uint64_t frame, bool pin, TileKey* evicted,
+                             bool* had_evicted) {
+  if (had_evicted != nullptr) *had_evicted = false;
+  uint32_t page = kNoPage;
+  if (!m_free.empty()) {
+    page = m_free.back();
+    m_free.pop_back();
+  } else {
+    // The least recently used page no frame at or after `frame` needs. A
+    // scan: a pool has at most a few thousand pages and a frame allocates
+    // a few dozen.
+    uint64_t oldest = frame;
+    for (uint32_t p = 0; p < m_pages.size(); ++p) {
+      const Page& c = m_pages[p];
+      if (!c.pinned && c.last_used < oldest) {
+        oldest = c.last_used;
+        page = p;
+      }
+    }
+    if (page == kNoPage) return kNoPage;
+    Page& victim = m_pages[page];
+    m_by_key.erase(pack(victim.key));
+    if (evicted != nullptr) *evicted = victim.key;
+    if (had_evicted != nullptr) *had_evicted = true;
+  }
+  Page& p = m_pages[page];
+  p = Page{};
+  p.key = key;
+  p.holds = true;
+  p.pinned = pin;
+  p.last_used = frame;
+  if (pin) ++m_pinned;
+  m_by_key[pack(key)] = page;
+  return page;
+}
+
+void PageTable::clearUnpinned() {
+  for (uint32_t p = 0; p < m_pages.size(); ++p) {
+    Page& c = m_pages[p];
+    if (!c.holds || c.pinned) continue;
+    m_by_key.erase(pack(c.key));
+    c = Page{};
+    m_free.push_back(p);
+  }
+}
+
+}  // namespace clipstream

@@ -1,0 +1,383 @@
+// TextureMemory::kPaged: the colour tiles in one pool of pages behind
+// per-level indirection maps. Bookkeeping: page_table.h; the shader's side:
+// shaders/ground_clipmap.frag (PAGED); the design and its measurements:
+// docs/renderer.md, "Paged texture memory".
+//
+// A page is one layer of the pool array: the tile in the middle, a border
+// of m_page_border texels of its 8 neighbours around it, and in mip 1 the
+// next coarser level over the tile with half that border. So one trilinear
+// fetch inside the page reads what the full stack's fetch reads, and no
+// filter footprint leaves the page. Borders are copied on the GPU from the
+// neighbours' pages, in both directions, when a page is filled; a
+// neighbour without a page leaves that border unfilled, which keeps the
+// tile from being drawn (computeUsableMap() requires every neighbour the
+// frame reads to have a page) until it comes. A tile's texels never
+// change while it is in the pool, so a filled border stays right even
+// after its neighbour's page is reused.
+#include <clipstream/renderer/renderer.h>
+
+#include "gl.h"
+#include "gl_util.h"
+#include "tile_fill.h"
+
+#include <clipstream/streamer/bc1.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+
+namespace clipstream {
+namespace {
+
+constexpr GLenum kBc1Format = GL_COMPRESSED_RGB_S3TC_DXT1_EXT;
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Bytes of one page (mip 0 and mip 1) of side `page_px`.
+uint64_t pageBytes(uint32_t page_px, bool bc1) {
+  const uint64_t m0 = uint64_t(page_px) * page_px, m1 = uint64_t(page_px / 2) * (page_px / 2);
+  return bc1 ? (m0 + m1) / 2 : (m0 + m1) * 4;
+}
+
+}  // namespace
+
+Status ClipmapRenderer::createPaged() {
+  const bool bc1 = compressed();
+  const uint32_t levels = m_geometry.levelCount();
+  const uint64_t pool_bytes =
+      m_config.pool_bytes != 0 ? m_config.pool_bytes : renderer_config::kDefaultPoolMiB << 20;
+  GLint max_layers = 0;
+  glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
+  const uint64_t page_bytes = pageBytes(m_page_px, bc1);
+  const uint64_t pages = std::min<uint64_t>(pool_bytes / page_bytes, uint64_t(std::max(max_layers, 1)));
+  // Page 0 stays black (slots with no page point there), and the pyramid is
+  // pinned: the pool must hold both and leave pages for the stack levels.
+  uint64_t pyramid_tiles = 0;
+  for (uint32_t l = m_config.pyramid_level; l < levels; ++l)
+    pyramid_tiles += uint64_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y;
+  if (pages < pyramid_tiles + 2)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "renderer: a pool of " + std::to_string(pool_bytes >> 20) + " MiB holds " +
+                             std::to_string(pages) + " pages of " + std::to_string(m_page_px) +
+                             " px (at most GL_MAX_ARRAY_TEXTURE_LAYERS " + std::to_string(max_layers) +
+                             "); the pyramid pins " + std::to_string(pyramid_tiles) +
+                             " and one more stays black: give a larger pool");
+
+  gl_util::clearErrors();
+  glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &m_stack[0]);
+  glTextureStorage3D(m_stack[0], 2, bc1 ? kBc1Format : GL_RGBA8, GLsizei(m_page_px), GLsizei(m_page_px),
+                     GLsizei(pages));
+  glTextureParameteri(m_stack[0], GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+  glTextureParameteri(m_stack[0], GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(m_stack[0], GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(m_stack[0], GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(m_stack[0], GL_TEXTURE_MAX_LEVEL, 1);
+  for (GLint m = 0; m < 2; ++m) {
+    const GLsizei size = GLsizei(m_page_px >> m);
+    if (bc1) {
+      const std::vector<uint8_t> zeros(size_t(size / 4) * size_t(size / 4) * kBc1BlockBytes, 0);
+      for (GLsizei layer = 0; layer < GLsizei(pages); ++layer)
+        glCompressedTextureSubImage3D(m_stack[0], m, 0, 0, layer, size, size, 1, kBc1Format,
+                                      GLsizei(zeros.size()), zeros.data());
+    } else {
+      const uint8_t zero[4] = {0, 0, 0, 0};
+      glClearTexImage(m_stack[0], m, GL_RGBA, GL_UNSIGNED_BYTE, zero);
+    }
+  }
+  m_texture_bytes.stack = pages * page_bytes;
+  char what[160];
+  std::snprintf(what, sizeof what, "the page pool (%llu pages, %.1f MiB of %s)", (unsigned long long)pages,
+                double(m_texture_bytes.stack) / (1 << 20), bc1 ? "BC1" : "RGBA8");
+  if (Status s = gl_util::checkCreated(what, "a smaller pool (--pool-mb) needs less"); !s) return s;
+
+  const uint32_t c = m_slots;
+  for (uint32_t set = 0; set < usableSets(); ++set) {
+    const uint32_t zero[4] = {0, 0, 0, 0};
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &m_usable_tex[set]);
+    glTextureStorage3D(m_usable_tex[set], 1, GL_R32UI, GLsizei(c), GLsizei(c), GLsizei(levels));
+    glTextureParameteri(m_usable_tex[set], GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(m_usable_tex[set], GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glClearTexImage(m_usable_tex[set], 0, GL_RED_INTEGER, GL_UNSIGNED_INT, zero);
+    m_texture_bytes.usable += uint64_t(c) * c * levels * 4;
+    if (Status s = gl_util::checkCreated("the page pool's indirection maps"); !s) return s;
+  }
+  if (staged()) {
+    m_staging_region_bytes = size_t(std::max(m_config.staging_tiles, 1u)) * tileBytes();
+    const size_t bytes = m_staging_region_bytes * renderer_config::kStagingFrames;
+    const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+    glCreateBuffers(1, &m_staging);
+    glNamedBufferStorage(m_staging, GLsizeiptr(bytes), nullptr, flags);
+    if (Status s = gl_util::checkCreated("the staging buffer (" + std::to_string(bytes >> 20) + " MiB)"); !s)
+      return s;
+    m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(m_staging, 0, GLsizeiptr(bytes), flags));
+    if (m_staging_map == nullptr)
+      return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
+    m_texture_bytes.staging = bytes;
+  }
+
+  m_pages = std::make_unique<PageTable>(uint32_t(pages));
+  // Page 0: black, pinned, no tile's (a key outside every pyramid).
+  m_pages->allocate(TileKey{63, 0, 0}, 0, true);
+  for (uint32_t l = m_config.pyramid_level; l < levels; ++l) {
+    m_pyramid_first.push_back(m_pyramid_have.size());
+    m_pyramid_have.resize(m_pyramid_have.size() + size_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y,
+                          0);
+  }
+  m_pyramid_missing = uint32_t(m_pyramid_have.size());
+  m_front_map = computeUsableMap(m_geometry, c, m_config.pyramid_level, {});
+  return okStatus();
+}
+
+void ClipmapRenderer::writePage(uint32_t page, const uint8_t* pixels) {
+  const GLsizei tp = GLsizei(m_geometry.tile_px);
+  const GLint b = GLint(m_page_border);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  if (staged()) {
+    const int64_t offset = stage(pixels, tileBytes());
+    if (offset >= 0) {
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, m_staging);
+      pixels = reinterpret_cast<const uint8_t*>(uintptr_t(offset));
+    } else {
+      ++m_stats.unstaged;
+    }
+  }
+  if (compressed())
+    glCompressedTextureSubImage3D(m_stack[0], 0, b, b, GLint(page), tp, tp, 1, kBc1Format, GLsizei(tileBytes()),
+                                  pixels);
+  else
+    glTextureSubImage3D(m_stack[0], 0, b, b, GLint(page), tp, tp, 1, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
+  if (staged()) glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+}
+
+void ClipmapRenderer::copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy,
+                                     uint32_t dst_page, uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w,
+                                     uint32_t h) {
+  glCopyImageSubData(m_stack[0], GL_TEXTURE_2D_ARRAY, GLint(src_mip), GLint(sx), GLint(sy), GLint(src_page),
+                     m_stack[0], GL_TEXTURE_2D_ARRAY, GLint(dst_mip), GLint(dx), GLint(dy), GLint(dst_page),
+                     GLsizei(w), GLsizei(h), 1);
+}
+
+void ClipmapRenderer::fillBorders(uint32_t page, const TileKey& key) {
+  // Along one axis, for a neighbour at offset d in {-1, 0, 1}: where the
+  // border lies in this page, and where its texels lie in the neighbour's
+  // page (its edge facing this tile). A tile whose neighbour is outside the
+  // level takes its own edge strip there instead.
+  const uint32_t tp = m_geometry.tile_px, b = m_page_border;
+  auto border_at = [&](int d) { return d < 0 ? 0u : d == 0 ? b : b + tp; };
+  auto edge_at = [&](int d) { return d < 0 ? tp : d == 0 ? b : b; };  // in the neighbour, facing us
+  auto own_at = [&](int d) { return d < 0 ? b : d == 0 ? b : tp; };   // this tile's own edge strip
+  auto extent = [&](int d) { return d == 0 ? tp : b; };
+  const LevelInfo& info = m_geometry.levels[key.level];
+  uint8_t filled = 0;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      if (dx == 0 && dy == 0) continue;
+      const int64_t nx = int64_t(key.x) + dx, ny = int64_t(key.y) + dy;
+      const uint32_t bit = 1u << borderBit(dx, dy);
+      if (nx < 0 || ny < 0 || nx >= int64_t(info.tiles_x) || ny >= int64_t(info.tiles_y)) {
+        copyPageRegion(page, 0, own_at(dx), own_at(dy), page, 0, border_at(dx), border_at(dy), extent(dx),
+                       extent(dy));
+        filled |= uint8_t(bit);
+        continue;
+      }
+      const uint32_t other = m_pages->find(TileKey{key.level, uint32_t(nx), uint32_t(ny)});
+      if (other == PageTable::kNoPage) continue;
+      // Its edge into our border, and ours into its border facing us.
+      copyPageRegion(other, 0, edge_at(dx), edge_at(dy), page, 0, border_at(dx), border_at(dy), extent(dx),
+                     extent(dy));
+      filled |= uint8_t(bit);
+      copyPageRegion(page, 0, edge_at(-dx), edge_at(-dy), other, 0, border_at(-dx), border_at(-dy), extent(dx),
+                     extent(dy));
+      m_pages->addBorders(other, uint8_t(1u << borderBit(-dx, -dy)));
+    }
+  m_pages->addBorders(page, filled);
+}
+
+uint32_t ClipmapRenderer::placePage(const TileKey& key, const uint8_t* pixels, bool pin) {
+  const uint32_t page = m_pages->allocate(key, m_frame, pin);
+  if (page == PageTable::kNoPage) return page;
+  writePage(page, pixels);
+  fillBorders(page, key);
+  ++m_stats.pages_filled;
+  return page;
+}
+
+void ClipmapRenderer::uploadTilePaged(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba) {
+  if (key.level >= m_config.pyramid_level) {
+    const size_t index = m_pyramid_first[key.level - m_config.pyramid_level] +
+                         size_t(key.y) * m_geometry.levels[key.level].tiles_x + key.x;
+    if (m_pyramid_have[index]) return;
+    if (placePage(key, rgba->data(), true) == PageTable::kNoPage) return;  // create() made room
+    m_pyramid_have[index] = 1;
+    --m_pyramid_missing;
+    m_page_pixels[PageTable::pack(key)] = std::move(rgba);
+  } else {
+    m_page_pixels[PageTable::pack(key)] = std::move(rgba);
+  }
+  ++m_stats.tiles;
+  m_changed = true;
+}
+
+uint32_t ClipmapRenderer::fillMissingPyramidPages() {
+  // A pyramid tile the source could not give is made from its parent's
+  // pixels (the quarter over it, magnified bilinearly), coarse levels
+  // first so a made parent serves its children; with no parent, mid grey.
+  const uint32_t tp = m_geometry.tile_px;
+  uint32_t filled = 0;
+  for (uint32_t l = m_geometry.levelCount(); l-- > m_config.pyramid_level;) {
+    const LevelInfo& info = m_geometry.levels[l];
+    for (uint32_t y = 0; y < info.tiles_y; ++y)
+      for (uint32_t x = 0; x < info.tiles_x; ++x) {
+        const size_t index = m_pyramid_first[l - m_config.pyramid_level] + size_t(y) * info.tiles_x + x;
+        if (m_pyramid_have[index]) continue;
+        std::vector<uint8_t> rgba(size_t(tp) * tp * 4, 128);
+        for (size_t i = 3; i < rgba.size(); i += 4) rgba[i] = 255;
+        const auto parent = m_page_pixels.find(PageTable::pack(TileKey{l + 1, x / 2, y / 2}));
+        if (l + 1 < m_geometry.levelCount() && parent != m_page_pixels.end()) {
+          std::vector<uint8_t> decoded;
+          const uint8_t* src = parent->second->data();
+          if (compressed()) {
+            if (!decodeBc1Tile(*parent->second, tp, &decoded)) continue;
+            src = decoded.data();
+          }
+          magnifyQuarter(src, tp, (x & 1) * (tp / 2), (y & 1) * (tp / 2), tp / 2, tp / 2, tp, rgba.data());
+        }
+        auto pixels = std::make_shared<std::vector<uint8_t>>();
+        if (compressed()) {
+          if (!encodeBc1Tile(rgba, tp, pixels.get())) continue;
+        } else {
+          *pixels = std::move(rgba);
+        }
+        uploadTilePaged(TileKey{l, x, y}, std::move(pixels));
+        ++filled;
+      }
+  }
+  return filled;
+}
+
+void ClipmapRenderer::endUploadsPaged(uint32_t target) {
+  ++m_frame;
+  const uint32_t pyramid = m_config.pyramid_level;
+  const uint32_t levels = m_geometry.levelCount();
+  const uint32_t c = m_slots;
+
+  // Stack tiles are kept while their window holds them resident.
+  std::vector<const LevelResidency*> by_level(pyramid, nullptr);
+  for (const LevelResidency& r : m_residency)
+    if (r.level < pyramid && r.resident.size() == size_t(r.window.width()) * size_t(r.window.height()))
+      by_level[r.level] = &r;
+  auto resident = [&](const TileKey& k) {
+    const LevelResidency* r = by_level[k.level];
+    if (r == nullptr || !r->window.contains(k.x, k.y)) return false;
+    return r->resident[size_t(int64_t(k.y) - r->window.y0) * size_t(r->window.width()) +
+                       size_t(int64_t(k.x) - r->window.x0)] != 0;
+  };
+  for (auto it = m_page_pixels.begin(); it != m_page_pixels.end();) {
+    const uint64_t packed = it->first;
+    const TileKey k{uint32_t(packed >> 58), uint32_t(packed & ((uint64_t(1) << 29) - 1)),
+                    uint32_t((packed >> 29) & ((uint64_t(1) << 29) - 1))};
+    if (k.level < pyramid && !resident(k)) it = m_page_pixels.erase(it);
+    else ++it;
+  }
+
+  // The tiles the frame reads, coarse levels first (every finer tile needs
+  // its ancestors), near the window's centre first within a level (the
+  // windows lie around the camera's ground point). Those with a page keep
+  // it this frame; the others take one while the pool has pages to give.
+  struct Want {
+    double distance;
+    TileKey key;
+  };
+  std::vector<Want> wants;
+  for (uint32_t l = pyramid; l-- > 0;) {
+    const LevelResidency* r = by_level[l];
+    if (r == nullptr) continue;
+    const TileRect& w = r->window;
+    const bool any_unread = r->unread.size() == r->resident.size();
+    const double cx = 0.5 * double(w.x0 + w.x1), cy = 0.5 * double(w.y0 + w.y1);
+    const size_t first = wants.size();
+    size_t i = 0;
+    for (int64_t y = w.y0; y < w.y1; ++y)
+      for (int64_t x = w.x0; x < w.x1; ++x, ++i) {
+        if (!r->resident[i] || (any_unread && r->unread[i])) continue;
+        const TileKey key{l, uint32_t(x), uint32_t(y)};
+        const uint32_t page = m_pages->find(key);
+        if (page != PageTable::kNoPage) {
+          m_pages->use(page, m_frame);
+          continue;
+        }
+        if (m_page_pixels.count(PageTable::pack(key)) == 0) continue;
+        wants.push_back({std::hypot(x + 0.5 - cx, y + 0.5 - cy), key});
+      }
+    std::stable_sort(wants.begin() + std::ptrdiff_t(first), wants.end(),
+                     [](const Want& a, const Want& b) { return a.distance < b.distance; });
+  }
+  for (const Want& want : wants) {
+    const auto& pixels = m_page_pixels[PageTable::pack(want.key)];
+    if (placePage(want.key, pixels->data(), false) == PageTable::kNoPage) ++m_stats.pages_short;
+  }
+
+  // Mip 1 of every page: the parent's texels over it, copied again when
+  // the parent's page has borders it did not have at the last copy.
+  const uint32_t tp = m_geometry.tile_px, b = m_page_border;
+  for (uint32_t page = 1; page < m_pages->pages(); ++page) {
+    if (!m_pages->holds(page)) continue;
+    const TileKey& k = m_pages->key(page);
+    if (k.level + 1 >= levels) continue;
+    const uint32_t parent = m_pages->find(TileKey{k.level + 1, k.x / 2, k.y / 2});
+    if (parent == PageTable::kNoPage) continue;
+    const uint16_t from = m_pages->mip1From(page), has = m_pages->borders(parent);
+    if (from != PageTable::kMip1Empty && (has & ~from) == 0) continue;
+    copyPageRegion(parent, 0, b + (k.x & 1) * (tp / 2) - b / 2, b + (k.y & 1) * (tp / 2) - b / 2, page, 1, 0, 0,
+                   tp / 2 + b, tp / 2 + b);
+    m_pages->setMip1From(page, has);
+  }
+
+  // The usable map over what has a page.
+  std::vector<LevelResidency> paged;
+  paged.reserve(m_residency.size());
+  for (const LevelResidency& r : m_residency) {
+    if (r.level >= pyramid || by_level[r.level] != &r) continue;
+    LevelResidency p = r;
+    size_t i = 0;
+    for (int64_t y = r.window.y0; y < r.window.y1; ++y)
+      for (int64_t x = r.window.x0; x < r.window.x1; ++x, ++i)
+        p.resident[i] = m_pages->find(TileKey{r.level, uint32_t(x), uint32_t(y)}) != PageTable::kNoPage;
+    paged.push_back(std::move(p));
+  }
+  const auto usable_start = std::chrono::steady_clock::now();
+  UsableMap map = computeUsableMap(m_geometry, c, pyramid, paged);
+
+  // Per slot of every level: usableCode() | levels up << 8 | page << 16,
+  // the page of the finest usable tile over the slot's tile (its ancestor
+  // `up` levels coarser). Stack levels: their window's tiles; the pyramid's
+  // levels: every tile (they fit the slots). 0 elsewhere.
+  std::vector<uint32_t> flat(size_t(c) * c * levels, 0);
+  auto page_of = [&](uint32_t level, int64_t x, int64_t y) {
+    const uint32_t page = m_pages->find(TileKey{level, uint32_t(x), uint32_t(y)});
+    return page == PageTable::kNoPage ? 0u : page;
+  };
+  for (uint32_t l = 0; l < levels; ++l) {
+    const TileRect w = l < pyramid ? map.windows[l]
+                                   : TileRect{0, 0, int64_t(m_geometry.levels[l].tiles_x),
+                                              int64_t(m_geometry.levels[l].tiles_y)};
+    for (int64_t y = w.y0; y < w.y1; ++y)
+      for (int64_t x = w.x0; x < w.x1; ++x) {
+        const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
+        const uint32_t up = l < pyramid ? map.finest[l][i] - l : 0;
+        flat[size_t(l) * c * c + i] =
+            uint32_t(usableCode(x, y, c)) | (up << 8) | (page_of(l + up, x >> up, y >> up) << 16);
+      }
+  }
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glTextureSubImage3D(m_usable_tex[target], 0, 0, 0, 0, GLsizei(c), GLsizei(c), GLsizei(levels), GL_RED_INTEGER,
+                      GL_UNSIGNED_INT, flat.data());
+  m_front_map = std::move(map);
+  m_stats.usable_ms = msSince(usable_start);
+}
+
+}  // namespace clipstream
