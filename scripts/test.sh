@@ -67,10 +67,11 @@ echo "== ThreadSanitizer build of the store, streamer, HTTP and image reader tes
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=thread -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
 cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_tiler_readers
-TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
+# tests/tsan.supp: third-party code TSan cannot see into (OpenImageIO).
+TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/tsan.supp" \
   ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
 # ... and the tiler's own image readers, whose TIFF decode runs on threads.
-TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
+TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/tsan.supp" \
   ctest --test-dir build-tsan -R '^(Kinds/)?Readers\.' --no-tests=error --output-on-failure -j "$jobs" --timeout 900
 
 # Leak checking with llvmpipe: tests/renderer/lsan_keep_gl_driver.cpp keeps
