@@ -1,6 +1,8 @@
 // Frame cost of the clipmap ground against a plain mipmapped 2D texture
-// drawing the same view (same ray setup, hardware trilinear), and of BC1
-// tiles against RGBA8 ones (the same shader sampling a compressed stack).
+// drawing the same view (same ray setup, hardware trilinear), of BC1
+// tiles against RGBA8 ones (the same shader sampling a compressed stack),
+// and of paged texture memory (TextureMemory::kPaged: the tiles the view
+// samples in a pool of pages) against the full stack.
 // Everything the clipmap needs is resident; the time is the render thread's CPU time for
 // draw + glFinish, best of N. Run with LP_NUM_THREADS=0 so llvmpipe shades on
 // that thread (then the CPU time is the whole frame's work).
@@ -105,21 +107,26 @@ int main(int argc, char** argv) {
   std::printf("# %s, %ux%u, texture %ux%u, tile %u, best of %d\n", ctx->describe().c_str(),
               vp.width_px, vp.height_px, side, side, tile, repeats);
   std::printf("view\tplain_ms\tclipmap_single_ms\tclipmap_double_ms\tratio_double\tclipmap_bc1_ms\t"
-              "bc1_vs_rgba8\tstack_levels\n");
+              "bc1_vs_rgba8\tstack_levels\tclipmap_paged_ms\tpaged_vs_stack\tpaged_pages\n");
   for (const View& v : views) {
     Camera cam;
     cam.position = {side * 0.5 + 0.3, v.height, side * 0.6 + 0.7};
     cam.heading_rad = 0.35;
     cam.pitch_rad = v.pitch;
-    const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, planner);
-    // RGBA8 single-buffered, RGBA8 double-buffered, BC1 single-buffered.
-    constexpr int kModes = 3;
+    // RGBA8 single-buffered, RGBA8 double-buffered, BC1 single-buffered,
+    // RGBA8 paged (its own plan: a small pyramid; the pool as large as the
+    // GL allows, so no sampled tile goes without a page).
+    constexpr int kModes = 4;
     std::unique_ptr<ClipmapRenderer> renderers[kModes];
     for (int mode = 0; mode < kModes; ++mode) {
       std::unique_ptr<ClipmapRenderer>& r = renderers[mode];
       TileSource& tiles = mode == 2 ? *bc1_source : *source;
+      const TextureMemory memory = mode == 3 ? TextureMemory::kPaged : TextureMemory::kStack;
+      const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, plannerFor(memory, planner));
       RendererConfig rc{plan.clip_tiles, plan.pyramid_level,
                         mode == 1 ? Buffering::kDoubleUploadTwice : Buffering::kSingle, tiles.content()};
+      rc.texture_memory = memory;
+      if (memory == TextureMemory::kPaged) rc.pool_bytes = uint64_t(1) << 40;
       if (Status s = ClipmapRenderer::create(source->geometry(), rc, &r); !s) {
         std::fprintf(stderr, "%s\n", s.toString().c_str());
         return 1;
@@ -138,8 +145,17 @@ int main(int argc, char** argv) {
       for (const ClipLevelPlan& lp : plan.stack) {
         for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
           for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) upload(lp.level, x, y);
-        res.push_back({lp.level, lp.window,
-                       std::vector<uint8_t>(size_t(lp.window.width() * lp.window.height()), 1)});
+        LevelResidency level{lp.level, lp.window,
+                             std::vector<uint8_t>(size_t(lp.window.width() * lp.window.height()), 1)};
+        // The tiles no tap reads, as the streamer says them: the stack
+        // ignores this, the pool gives pages to the others only.
+        if (!lp.sampled.empty()) {
+          level.unread.assign(level.resident.size(), 0);
+          size_t j = 0;
+          for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+            for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j) level.unread[j] = lp.wants(x, y) ? 0 : 1;
+        }
+        res.push_back(std::move(level));
       }
       r->setResidency(res);
       r->endUploads();
@@ -147,14 +163,16 @@ int main(int argc, char** argv) {
       r->endUploads();
     }
     // Interleaved rounds, so load from other processes hits all three alike.
-    double ms[kModes] = {1e30, 1e30, 1e30}, plain_ms = 1e30;
+    double ms[kModes] = {1e30, 1e30, 1e30, 1e30}, plain_ms = 1e30;
     for (int round = 0; round < repeats; ++round) {
       plain_ms = std::min(plain_ms, bestMs(1, *target, [&] { plain->draw(cam, vp); }));
       for (int mode = 0; mode < kModes; ++mode)
         ms[mode] = std::min(ms[mode], bestMs(1, *target, [&] { renderers[mode]->draw(cam, vp); }));
     }
-    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0], ms[1],
-                ms[1] / plain_ms, ms[2], ms[2] / ms[0], plan.pyramid_level);
+    const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, planner);
+    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%u\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0],
+                ms[1], ms[1] / plain_ms, ms[2], ms[2] / ms[0], plan.pyramid_level, ms[3], ms[3] / ms[0],
+                renderers[3]->poolPagesUsed());
   }
   return 0;
 }

@@ -31,9 +31,10 @@ Status IdealReference::resize(const Viewport& viewport) {
   const ClipmapPlan plan = planClipmap(m_geometry, viewport, Camera{}, m_planner);
   RendererConfig rc{plan.clip_tiles, plan.pyramid_level, Buffering::kSingle, m_source->content()};
   rc.texture_memory = m_memory;
-  // A pool as large as the GL allows (the renderer caps it at
-  // GL_MAX_ARRAY_TEXTURE_LAYERS pages): the reference is never short.
-  if (m_memory == TextureMemory::kPaged) rc.pool_bytes = uint64_t(1) << 40;
+  // Four times the flight's default pool: prepare() fails rather than
+  // draw a reference that fell short of a page.
+  if (m_memory == TextureMemory::kPaged)
+    rc.pool_bytes = 4 * defaultPoolBytes(viewport, m_geometry.tile_px, m_source->content());
   if (Status s = ClipmapRenderer::create(m_geometry, rc, &m_renderer); !s) return s;
   if (Status s = OffscreenTarget::create(viewport, &m_target); !s) return s;
   m_loaded.assign(plan.pyramid_level, TileRect{});
@@ -106,6 +107,10 @@ Status IdealReference::prepare(const Camera& camera, bool every_level) {
   m_renderer->setResidency(residency);
   m_renderer->setMaxTextureLod(0);
   m_renderer->endUploads();
+  if (const uint32_t short_of = m_renderer->lastUploads().pages_short; short_of > 0)
+    return Status::error(ErrorCode::kOutOfMemory,
+                         "ideal reference: its page pool (" + std::to_string(m_renderer->poolPages()) +
+                             " pages) is " + std::to_string(short_of) + " short for this view");
   return okStatus();
 }
 

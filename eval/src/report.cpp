@@ -106,6 +106,12 @@ uint64_t pagesShortFrames(const FlightRun& run) {
   for (const FlightRunFrame& f : run.frames) n += f.sample.pages_short > 0 ? 1 : 0;
   return n;
 }
+// The most pages a recorded frame needed (kPaged): the working set.
+uint32_t pagesWantedMax(const FlightRun& run) {
+  uint32_t n = 0;
+  for (const FlightRunFrame& f : run.frames) n = std::max(n, f.sample.pages_wanted);
+  return n;
+}
 }  // namespace
 
 std::string framesJson(const FlightRun& run, const RunDescription& d) {
@@ -220,6 +226,7 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       {"texture_memory", textureMemoryName(run.texture_memory)},
       {"pool_pages", run.pool_pages},
       {"frames_pages_short", pagesShortFrames(run)},
+      {"pool_pages_wanted_max", pagesWantedMax(run)},
       {"preload_ms", run.preload_ms},
       {"preload_failures", run.preload_failures},
       {"run_ms", run.run_ms},
@@ -326,6 +333,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("texture_memory", textureMemoryName(run.texture_memory));
   add("pool_pages", std::to_string(run.pool_pages));
   add("frames_pages_short", std::to_string(pagesShortFrames(run)));
+  add("pool_pages_wanted_max", std::to_string(pagesWantedMax(run)));
   // A store read over HTTP: the requests, bytes and retries it cost, and
   // what the disk cache served. Empty for local stores.
   const bool remote = readRemotely(run);
@@ -391,6 +399,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   if (run.pool_pages > 0) {
     row("pool_pages", double(run.pool_pages), "%.0f");
     row("frames_pages_short", double(pagesShortFrames(run)), "%.0f");
+    row("pool_pages_wanted_max", double(pagesWantedMax(run)), "%.0f");
   }
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
   if (run.height_texture_bytes > 0) {

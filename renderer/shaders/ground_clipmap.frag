@@ -8,18 +8,22 @@
 // divergent branch, and a second texture path cost about 2 ms per 640x360
 // frame (docs/benchmarks.md).
 //
-// PAGED (TextureMemory::kPaged): the tiles live in a pool of pages, one
-// page per layer of uStack: a tile with a PAGE_BORDER-texel border of its
-// neighbours' texels, and in mip 1 the next coarser level over it (with
-// half that border). uUsable then covers every level and also names, per
+// PAGED (TextureMemory::kPaged): the tiles live in a pool of pages, four
+// to a layer of uStack (page p: quarter p % 4 of layer p / 4): a tile with
+// a PAGE_BORDER-texel border of its neighbours' texels, and in mip 1 the
+// next coarser level over it (with half that border). uUsable then covers every level and also names, per
 // slot, the page of the finest usable tile over it; the fetch is the same
 // single trilinear one, from that page.
 layout(location = 0) out vec4 outColor;
 
 #ifdef PAGED
-uniform sampler2DArray uStack;    // the pool: layer = page
+uniform sampler2DArray uStack;    // the pool: 2 x 2 pages a layer
 uniform usampler2DArray uUsable;  // slots^2 per level: usableCode() | levels up << 8 | page << 16
 uniform int uTopLevel;            // coarsest level
+// The pyramid level's tile grid, and the absolute tile of its slot cell's
+// origin (uCamCell): its tiles lie in the slots of their own coordinates.
+uniform ivec2 uPyramidTiles;
+uniform vec2 uPyramidOrigin;
 #else
 uniform sampler2DArray uStack;    // layer l: level l (mip 0), l + 1 (mip 1); pyramid layer: chain
 uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 8
@@ -71,23 +75,28 @@ void main() {
   int wanted = int(lod);
 #ifdef PAGED
   // The wanted level's entry (any level: the coarse ones cover their whole
-  // level) and the pyramid level's, for ground outside the wanted level's
-  // window. Both are read: llvmpipe would run both sides of a branch.
+  // level); ground outside the wanted level's window falls back to the
+  // pyramid level, whose tiles sit in the slots of their own coordinates
+  // (llvmpipe makes that second lookup for every fragment: kept cheap).
   int probe = min(wanted, uTopLevel);
-  ivec2 slot, pslot;
-  uint code, pcode;
+  ivec2 slot;
+  uint code;
   slotPosition(probe, rel, slot, code);
-  slotPosition(uPyramidLevel, rel, pslot, pcode);
   uint v = texelFetch(uUsable, ivec3(slot, probe), 0).r;
-  uint pv = texelFetch(uUsable, ivec3(pslot, uPyramidLevel), 0).r;
   bool hit = (v & 255u) == code;
+  vec2 ptq = uCamCell[uPyramidLevel].xy + rel * uInvTileTexels[uPyramidLevel];
+  ivec2 pt = clamp(ivec2(floor(ptq + uPyramidOrigin)), ivec2(0), uPyramidTiles - 1);
+  uint pv = texelFetch(uUsable, ivec3(pt, uPyramidLevel), 0).r;
   uint e = hit ? v : pv;
   int level = min((hit ? probe : uPyramidLevel) + int((e >> 8) & 255u), uTopLevel);
   float used = max(lod, float(level));
-  // The position in the tile, then in its page (border included).
+  // The position in the tile, then in its page's layer (border included).
   vec2 tq = uCamCell[level].xy + rel * uInvTileTexels[level];
-  vec2 inPage = (float(PAGE_BORDER) + fract(tq) * uTilePx) / (uTilePx + 2.0 * float(PAGE_BORDER));
-  vec4 color = textureLod(uStack, vec3(inPage, float(e >> 16)), used - float(level));
+  uint page = e >> 16;
+  float pagePx = uTilePx + 2.0 * float(PAGE_BORDER);
+  vec2 quarter = vec2(float(page & 1u), float((page >> 1) & 1u)) * pagePx;
+  vec2 inLayer = (quarter + float(PAGE_BORDER) + fract(tq) * uTilePx) / (2.0 * pagePx);
+  vec4 color = textureLod(uStack, vec3(inLayer, float(page >> 2)), used - float(level));
 #else
   // One lookup at the wanted level gives the finest usable level for this
   // spot (usable map, high byte); a tile outside the wanted level's window

@@ -42,7 +42,8 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
   const ClipmapPlan first = planClipmap(source.geometry(), viewport, camera, planner);
   std::unique_ptr<ClipmapRenderer> renderer;
   RendererConfig rc{first.clip_tiles, first.pyramid_level, buffering, source.content(), upload_tiles, memory,
-                    pool_bytes};
+                    pool_bytes != 0 ? pool_bytes
+                                    : defaultPoolBytes(viewport, source.geometry().tile_px, source.content())};
   if (Status s = ClipmapRenderer::create(source.geometry(), rc, &renderer); !s) return s;
   renderer->beginFrame();
   const uint32_t missing = renderer->loadPyramid(
@@ -289,6 +290,7 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   f.tiles_uploaded = uploads.tiles;
   f.second_copies = uploads.second_copies;
   f.pages_short = uploads.pages_short;
+  f.pages_wanted = uploads.pages_wanted;
   f.max_texture_lod = handoff.max_texture_lod;
   const ClipmapPlan& plan = m_streamer->plan();
   f.finest_needed = plan.finest_level;

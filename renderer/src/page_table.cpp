@@ -3,10 +3,10 @@
 
 namespace clipstream {
 
-PageTable::PageTable(uint32_t pages) : m_pages(pages) {
-  m_free.reserve(pages);
-  // Taken from the back: page 0 first.
-  for (uint32_t p = pages; p-- > 0;) m_free.push_back(p);
+PageTable::PageTable(uint32_t pages, uint32_t classes)
+    : m_pages(pages), m_classes(classes == 4 ? 4 : 1), m_free(m_classes) {
+  // Taken from the back: the lowest page of each class first.
+  for (uint32_t p = pages; p-- > 0;) m_free[p % m_classes].push_back(p);
 }
 
 uint32_t PageTable::find(const TileKey& key) const {
@@ -18,15 +18,17 @@ uint32_t PageTable::allocate(const TileKey& key, uint64_t frame, bool pin, TileK
                              bool* had_evicted) {
   if (had_evicted != nullptr) *had_evicted = false;
   uint32_t page = kNoPage;
-  if (!m_free.empty()) {
-    page = m_free.back();
-    m_free.pop_back();
+  const uint32_t cls = classOf(key);
+  std::vector<uint32_t>& free = m_free[cls];
+  if (!free.empty()) {
+    page = free.back();
+    free.pop_back();
   } else {
     // The least recently used page no frame at or after `frame` needs. A
     // scan: a pool has at most a few thousand pages and a frame allocates
     // a few dozen.
     uint64_t oldest = frame;
-    for (uint32_t p = 0; p < m_pages.size(); ++p) {
+    for (uint32_t p = cls; p < m_pages.size(); p += m_classes) {
       const Page& c = m_pages[p];
       if (!c.pinned && c.last_used < oldest) {
         oldest = c.last_used;
@@ -56,7 +58,7 @@ void PageTable::clearUnpinned() {
     if (!c.holds || c.pinned) continue;
     m_by_key.erase(pack(c.key));
     c = Page{};
-    m_free.push_back(p);
+    m_free[p % m_classes].push_back(p);
   }
 }
 

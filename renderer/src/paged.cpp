@@ -3,7 +3,11 @@
 // shaders/ground_clipmap.frag (PAGED); the design and its measurements:
 // docs/renderer.md, "Paged texture memory".
 //
-// A page is one layer of the pool array: the tile in the middle, a border
+// The pool is an array texture of layers of 2 x 2 pages (so it may hold
+// four times GL_MAX_ARRAY_TEXTURE_LAYERS pages); a tile always takes a page
+// in the quarter its x and y parity name (PageTable's classes), so its
+// texels sit at the same place in a layer, and are sampled with the same
+// coordinates, whichever layer it gets. A page is the tile in the middle, a border
 // of m_page_border texels of its 8 neighbours around it, and in mip 1 the
 // next coarser level over the tile with half that border. So one trilinear
 // fetch inside the page reads what the full stack's fetch reads, and no
@@ -36,13 +40,14 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-// Bytes of one page (mip 0 and mip 1) of side `page_px`.
-uint64_t pageBytes(uint32_t page_px, bool bc1) {
-  const uint64_t m0 = uint64_t(page_px) * page_px, m1 = uint64_t(page_px / 2) * (page_px / 2);
+}  // namespace
+
+uint64_t pageBytes(uint32_t tile_px, TileContent content) {
+  const bool bc1 = content == TileContent::kBc1;
+  const uint64_t page_px = tile_px + 2 * (bc1 ? renderer_config::kPageBorderBc1 : renderer_config::kPageBorderRgba8);
+  const uint64_t m0 = page_px * page_px, m1 = (page_px / 2) * (page_px / 2);
   return bc1 ? (m0 + m1) / 2 : (m0 + m1) * 4;
 }
-
-}  // namespace
 
 Status ClipmapRenderer::createPaged() {
   const bool bc1 = compressed();
@@ -51,35 +56,45 @@ Status ClipmapRenderer::createPaged() {
       m_config.pool_bytes != 0 ? m_config.pool_bytes : renderer_config::kDefaultPoolMiB << 20;
   GLint max_layers = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
-  const uint64_t page_bytes = pageBytes(m_page_px, bc1);
-  const uint64_t pages = std::min<uint64_t>(pool_bytes / page_bytes, uint64_t(std::max(max_layers, 1)));
+  const uint64_t page_bytes = pageBytes(m_geometry.tile_px, m_config.tile_content);
+  // Whole layers of four pages.
+  const uint64_t pages = std::min<uint64_t>(pool_bytes / page_bytes, 4 * uint64_t(std::max(max_layers, 1))) / 4 * 4;
+  const LevelInfo& top = m_geometry.levels[m_config.pyramid_level];
+  if (top.tiles_x > renderer_config::kPagedPyramidTiles || top.tiles_y > renderer_config::kPagedPyramidTiles)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "renderer: paged texture memory takes a pyramid of at most " +
+                             std::to_string(renderer_config::kPagedPyramidTiles) +
+                             " tiles a side (PlannerConfig::pyramid_tiles; plannerFor() sets it)");
   // Page 0 stays black (slots with no page point there), and the pyramid is
   // pinned: the pool must hold both and leave pages for the stack levels.
   uint64_t pyramid_tiles = 0;
   for (uint32_t l = m_config.pyramid_level; l < levels; ++l)
     pyramid_tiles += uint64_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y;
-  if (pages < pyramid_tiles + 2)
+  if (pages < pyramid_tiles + 2) {
+    char size[32];
+    std::snprintf(size, sizeof size, "%.2f MiB", double(pool_bytes) / (1 << 20));
     return Status::error(ErrorCode::kInvalidArgument,
-                         "renderer: a pool of " + std::to_string(pool_bytes >> 20) + " MiB holds " +
+                         "renderer: a pool of " + std::string(size) + " holds " +
                              std::to_string(pages) + " pages of " + std::to_string(m_page_px) +
-                             " px (at most GL_MAX_ARRAY_TEXTURE_LAYERS " + std::to_string(max_layers) +
+                             " px (at most 4 x GL_MAX_ARRAY_TEXTURE_LAYERS " + std::to_string(max_layers) +
                              "); the pyramid pins " + std::to_string(pyramid_tiles) +
                              " and one more stays black: give a larger pool");
+  }
 
   gl_util::clearErrors();
+  const GLsizei layers = GLsizei(pages / 4), layer_px = GLsizei(2 * m_page_px);
   glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &m_stack[0]);
-  glTextureStorage3D(m_stack[0], 2, bc1 ? kBc1Format : GL_RGBA8, GLsizei(m_page_px), GLsizei(m_page_px),
-                     GLsizei(pages));
+  glTextureStorage3D(m_stack[0], 2, bc1 ? kBc1Format : GL_RGBA8, layer_px, layer_px, layers);
   glTextureParameteri(m_stack[0], GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
   glTextureParameteri(m_stack[0], GL_TEXTURE_MAG_FILTER, GL_LINEAR);
   glTextureParameteri(m_stack[0], GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
   glTextureParameteri(m_stack[0], GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
   glTextureParameteri(m_stack[0], GL_TEXTURE_MAX_LEVEL, 1);
   for (GLint m = 0; m < 2; ++m) {
-    const GLsizei size = GLsizei(m_page_px >> m);
+    const GLsizei size = layer_px >> m;
     if (bc1) {
       const std::vector<uint8_t> zeros(size_t(size / 4) * size_t(size / 4) * kBc1BlockBytes, 0);
-      for (GLsizei layer = 0; layer < GLsizei(pages); ++layer)
+      for (GLsizei layer = 0; layer < layers; ++layer)
         glCompressedTextureSubImage3D(m_stack[0], m, 0, 0, layer, size, size, 1, kBc1Format,
                                       GLsizei(zeros.size()), zeros.data());
     } else {
@@ -118,7 +133,7 @@ Status ClipmapRenderer::createPaged() {
     m_texture_bytes.staging = bytes;
   }
 
-  m_pages = std::make_unique<PageTable>(uint32_t(pages));
+  m_pages = std::make_unique<PageTable>(uint32_t(pages), 4);
   // Page 0: black, pinned, no tile's (a key outside every pyramid).
   m_pages->allocate(TileKey{63, 0, 0}, 0, true);
   for (uint32_t l = m_config.pyramid_level; l < levels; ++l) {
@@ -145,20 +160,28 @@ void ClipmapRenderer::writePage(uint32_t page, const uint8_t* pixels) {
       ++m_stats.unstaged;
     }
   }
+  const GLint x = GLint((page & 1) * m_page_px) + b, y = GLint(((page >> 1) & 1) * m_page_px) + b;
   if (compressed())
-    glCompressedTextureSubImage3D(m_stack[0], 0, b, b, GLint(page), tp, tp, 1, kBc1Format, GLsizei(tileBytes()),
-                                  pixels);
+    glCompressedTextureSubImage3D(m_stack[0], 0, x, y, GLint(page / 4), tp, tp, 1, kBc1Format,
+                                  GLsizei(tileBytes()), pixels);
   else
-    glTextureSubImage3D(m_stack[0], 0, b, b, GLint(page), tp, tp, 1, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
+    glTextureSubImage3D(m_stack[0], 0, x, y, GLint(page / 4), tp, tp, 1, GL_RGBA, GL_UNSIGNED_BYTE, pixels);
   if (staged()) glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
 }
 
 void ClipmapRenderer::copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy,
                                      uint32_t dst_page, uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w,
                                      uint32_t h) {
-  glCopyImageSubData(m_stack[0], GL_TEXTURE_2D_ARRAY, GLint(src_mip), GLint(sx), GLint(sy), GLint(src_page),
-                     m_stack[0], GL_TEXTURE_2D_ARRAY, GLint(dst_mip), GLint(dx), GLint(dy), GLint(dst_page),
-                     GLsizei(w), GLsizei(h), 1);
+  // Page p is quarter p % 4 of layer p / 4; positions are the page's own.
+  auto at = [&](uint32_t page, uint32_t mip, uint32_t x, uint32_t y, GLint* gx, GLint* gy) {
+    *gx = GLint((((page & 1) * m_page_px) >> mip) + x);
+    *gy = GLint(((((page >> 1) & 1) * m_page_px) >> mip) + y);
+  };
+  GLint ax, ay, bx, by;
+  at(src_page, src_mip, sx, sy, &ax, &ay);
+  at(dst_page, dst_mip, dx, dy, &bx, &by);
+  glCopyImageSubData(m_stack[0], GL_TEXTURE_2D_ARRAY, GLint(src_mip), ax, ay, GLint(src_page / 4), m_stack[0],
+                     GL_TEXTURE_2D_ARRAY, GLint(dst_mip), bx, by, GLint(dst_page / 4), GLsizei(w), GLsizei(h), 1);
 }
 
 void ClipmapRenderer::fillBorders(uint32_t page, const TileKey& key) {
@@ -308,6 +331,7 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
         const uint32_t page = m_pages->find(key);
         if (page != PageTable::kNoPage) {
           m_pages->use(page, m_frame);
+          ++m_stats.pages_wanted;
           continue;
         }
         if (m_page_pixels.count(PageTable::pack(key)) == 0) continue;
@@ -316,6 +340,7 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
     std::stable_sort(wants.begin() + std::ptrdiff_t(first), wants.end(),
                      [](const Want& a, const Want& b) { return a.distance < b.distance; });
   }
+  m_stats.pages_wanted += uint32_t(wants.size()) + m_pages->pinned();
   for (const Want& want : wants) {
     const auto& pixels = m_page_pixels[PageTable::pack(want.key)];
     if (placePage(want.key, pixels->data(), false) == PageTable::kNoPage) ++m_stats.pages_short;

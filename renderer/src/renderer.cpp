@@ -79,6 +79,16 @@ PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {
   return planner;
 }
 
+uint64_t defaultPoolBytes(const Viewport& viewport, uint32_t tile_px, TileContent content) {
+  if (tile_px == 0) return 0;
+  const double screen_tiles =
+      double(viewport.width_px) * double(viewport.height_px) / (double(tile_px) * double(tile_px));
+  const uint64_t pages =
+      std::max<uint64_t>(renderer_config::kPoolMinPages,
+                         uint64_t(std::ceil(renderer_config::kDefaultPoolPagesPerScreenTile * screen_tiles)));
+  return pages * pageBytes(tile_px, content);
+}
+
 Status bufferingFromName(const std::string& name, Buffering* out) {
   for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
                       Buffering::kStaged})
@@ -717,7 +727,16 @@ void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewpor
   glProgramUniform1i(p, loc(p, "uSlots"), GLint(clip));
   const uint32_t max_level =
       paged() ? top : std::min(m_geometry.levelCount() - 1, pyramid + m_mips - 1);
-  if (paged()) glProgramUniform1i(p, loc(p, "uTopLevel"), GLint(top));
+  if (paged()) {
+    glProgramUniform1i(p, loc(p, "uTopLevel"), GLint(top));
+    // The pyramid level's grid and its cell's origin, for the fallback.
+    const LevelInfo& info = m_geometry.levels[pyramid];
+    glProgramUniform2i(p, loc(p, "uPyramidTiles"), GLint(info.tiles_x), GLint(info.tiles_y));
+    const double tile_texels = tp * std::ldexp(1.0, int(pyramid));
+    glProgramUniform2f(p, loc(p, "uPyramidOrigin"),
+                       float(std::floor(camera.position.x / tile_texels / clip) * clip),
+                       float(std::floor(camera.position.z / tile_texels / clip) * clip));
+  }
   glProgramUniform1i(p, loc(p, "uPyramidLevel"), GLint(pyramid));
   glProgramUniform1f(p, loc(p, "uMinLod"), float(std::min(m_max_texture_lod, max_level)));
   glProgramUniform1f(p, loc(p, "uMaxLod"), float(max_level));

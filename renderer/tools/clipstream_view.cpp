@@ -196,6 +196,15 @@ int main(int argc, char** argv) {
   std::string tile_format = "rgba8";
   app.add_option("--tile-format", tile_format,
                  "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
+  std::string texture_memory = textureMemoryName(TextureMemory::kStack);
+  app.add_option("--texture-memory", texture_memory,
+                 "Where colour tiles live on the GPU: stack (every level's whole window) or paged (a "
+                 "fixed pool of pages holding the tiles the frames sample)");
+  uint64_t pool_mb = 0;
+  app.add_option("--pool-mb", pool_mb,
+                 "The page pool's size with --texture-memory paged (default: 5.5 pages of 128^2 per 128^2 "
+                 "of the viewport, 59 MiB of RGBA8 at 1920x1080)")
+      ->transform(cli::wholeInRange(1, 65536));
   app.add_option("--record-out", record_path, "Where R writes the recorded path");
   std::string screenshot_dir = ".";
   app.add_option("--screenshot-dir", screenshot_dir, "Where P writes clipstream-view-NNN.png");
@@ -227,6 +236,10 @@ int main(int argc, char** argv) {
   TileContent tile_content = TileContent::kRgba8;
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
+  TextureMemory memory = TextureMemory::kStack;
+  if (Status s = textureMemoryFromName(texture_memory, &memory); !s) return cli::usageError(app, s.message);
+  if (app.count("--pool-mb") && memory != TextureMemory::kPaged)
+    return cli::usageError(app, "--pool-mb sizes the pool of --texture-memory paged");
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {
@@ -356,6 +369,8 @@ int main(int argc, char** argv) {
   fc.viewport = vp;
   fc.streamer.ram_budget_bytes = cache_mb << 20;
   fc.upload_tiles = upload_tiles;
+  fc.texture_memory = memory;
+  fc.pool_bytes = pool_mb << 20;
   fc.offscreen = false;
   fc.terrain = terrain;
   {

@@ -36,8 +36,9 @@ class IdealReference {
  public:
   // kUnavailable if GL objects cannot be made (needs a current context).
   // `memory`: the streamed frames' TextureMemory, so that a frame at rest
-  // is compared with the same sampling (kPaged: the largest pool the GL
-  // allows; the planner's pyramid as plannerFor() gives it).
+  // is compared with the same sampling (kPaged: four times the default
+  // pool, the planner's pyramid as plannerFor() gives it; a view that
+  // needs more pages fails prepare() with kOutOfMemory).
   static Status create(std::shared_ptr<TileSource> source, const Viewport& viewport,
                        const PlannerConfig& planner, std::unique_ptr<IdealReference>* out,
                        TextureMemory memory = TextureMemory::kStack);

@@ -55,7 +55,7 @@ struct FlyOptions {
   std::optional<uint32_t> save_every;
   Buffering buffering = kDefaultBuffering;
   // Where the colour tiles live on the GPU (renderer.h), and the pool's
-  // size for kPaged (0 = renderer_config::kDefaultPoolMiB).
+  // size for kPaged (0 = defaultPoolBytes() of the viewport).
   TextureMemory texture_memory = TextureMemory::kStack;
   uint64_t pool_mb = 0;
   // Colour tiles on the GPU: kRgba8 as the source gives them, or kBc1

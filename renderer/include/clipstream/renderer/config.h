@@ -24,10 +24,23 @@ inline constexpr uint32_t kDefaultUploadTilesPerFrame = 16;
 // guess).
 inline constexpr uint32_t kStagingFrames = 3;
 
-// TextureMemory::kPaged: the pool's size when the caller does not say.
-// Provisional: to be chosen from the chart of PSNR against pool size
-// (docs/benchmarks.md, "Paged texture memory").
-inline constexpr uint64_t kDefaultPoolMiB = 48;
+// TextureMemory::kPaged: the pool's size when the caller does not say, in
+// pages per tile-sized area of the screen (defaultPoolBytes()). The most
+// pages a frame of the sweep's line and turn flights needed (no frame
+// short of a page) was 4.4, 3.0, 4.7 and 5.4 per screen tile at 1280x720,
+// 1920x1080, 2560x1440 and 3840x2160 (docs/benchmarks.md, "Paged texture
+// memory"); 5.5 covers every one, and at 1920x1080 comes to 59 MiB of
+// RGBA8 pages.
+inline constexpr double kDefaultPoolPagesPerScreenTile = 5.5;
+// ... and never fewer than this many pages: what a frame needs does not
+// shrink with the screen below a point (the pinned pyramid's 21 pages, a
+// tile ahead and the ancestors on every level, the neighbours filtering
+// reads). Small views needed 50 to 146 (160x96 to 640x360, the pass at
+// x100 and the line at x1); 256 pages are 21 MiB of RGBA8.
+inline constexpr uint32_t kPoolMinPages = 256;
+// Without a viewport (RendererConfig::pool_bytes 0 given to the renderer
+// directly): the pool of 1920x1080.
+inline constexpr uint64_t kDefaultPoolMiB = 59;
 // kPaged: the pyramid (levels pinned in the pool, the fallback of every
 // other level) is every level at most this many tiles a side: 4 pins 21
 // pages of a square image (16 + 4 + 1), where the clip-sized pyramid of

@@ -60,8 +60,8 @@ bool isCut(const Camera& previous, const Camera& current, double previous_step_t
 // plan goes to *plan when given. The stack holds the source's content()
 // (RGBA8 or BC1); `upload_tiles` sizes kStaged's staging regions;
 // `memory` and `pool_bytes` are RendererConfig's (kPaged wants a planner
-// with pyramid_tiles set: renderer_config::kPagedPyramidTiles). GL thread
-// only.
+// with pyramid_tiles set: plannerFor(); pool_bytes 0 = defaultPoolBytes()
+// for `viewport`). GL thread only.
 Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const Camera& camera,
                              const PlannerConfig& planner, Buffering buffering,
                              std::unique_ptr<ClipmapRenderer>* out, uint32_t* failures,
@@ -100,7 +100,7 @@ struct FlightConfig {
   // planner's pyramid_tiles (when 0) to renderer_config::kPagedPyramidTiles
   // and does not draw terrain yet.
   TextureMemory texture_memory = TextureMemory::kStack;
-  uint64_t pool_bytes = 0;  // kPaged: 0 = renderer_config::kDefaultPoolMiB
+  uint64_t pool_bytes = 0;  // kPaged: 0 = defaultPoolBytes() of the viewport
   Overlay overlay = Overlay::kOff;
   uint32_t warmup_frames = 0;          // the first steps are warm-up (see above)
   // true: draw into the flight's own OffscreenTarget (headless); false: into
@@ -134,6 +134,7 @@ struct FrameSample {
   // TextureMemory::kPaged: tiles the frame samples that got no page (the
   // pool was full of tiles this frame needs too): drawn coarser.
   uint32_t pages_short = 0;
+  uint32_t pages_wanted = 0;  // kPaged: UploadStats::pages_wanted
   uint32_t max_texture_lod = 0, finest_needed = 0;
   uint64_t queue_depth = 0, in_flight = 0, ram_bytes = 0;
   uint64_t tiles_loaded = 0;  // tiles the loader read into RAM this frame

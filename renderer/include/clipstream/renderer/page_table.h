@@ -30,7 +30,14 @@ class PageTable {
   // Mip 1 of a page that was never filled (PageTable::mip1From()).
   static constexpr uint16_t kMip1Empty = 0xffff;
 
-  explicit PageTable(uint32_t pages);
+  // Pages fall into `classes` classes (page p in class p % classes), and a
+  // tile only ever takes a page of its class (classOf()): 1, or 4 by the
+  // parity of the tile's x and y (ClipmapRenderer keeps four pages a layer,
+  // a tile always in the same quarter of whichever layer it gets).
+  explicit PageTable(uint32_t pages, uint32_t classes = 1);
+  uint32_t classOf(const TileKey& key) const {
+    return m_classes == 4 ? (key.x & 1u) + 2u * (key.y & 1u) : 0u;
+  }
 
   uint32_t pages() const { return uint32_t(m_pages.size()); }
   uint32_t used() const { return uint32_t(m_by_key.size()); }
@@ -39,9 +46,9 @@ class PageTable {
   // The page holding `key`, or kNoPage.
   uint32_t find(const TileKey& key) const;
 
-  // A page for `key` (which must not have one): a free page if there is
-  // one, else the least recently used page that is not pinned and was not
-  // used in `frame`; its tile loses the page (`*evicted`, when not null, is
+  // A page for `key` (which must not have one), of its class: a free page
+  // if there is one, else the least recently used page that is not pinned
+  // and was not used in `frame`; its tile loses the page (`*evicted`, when not null, is
   // set to that tile and `*had_evicted` to true). kNoPage when every page is
   // pinned or used in `frame`: the pool is over-subscribed. The new page
   // counts as used in `frame`, has no border and no mip 1 filled.
@@ -83,7 +90,8 @@ class PageTable {
     uint64_t last_used = 0;
   };
   std::vector<Page> m_pages;
-  std::vector<uint32_t> m_free;  // pages holding nothing, taken from the back
+  uint32_t m_classes = 1;
+  std::vector<std::vector<uint32_t>> m_free;  // per class: pages holding nothing, taken from the back
   std::unordered_map<uint64_t, uint32_t> m_by_key;
   uint32_t m_pinned = 0;
 };

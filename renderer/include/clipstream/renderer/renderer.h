@@ -66,6 +66,13 @@ Status textureMemoryFromName(const std::string& name, TextureMemory* out);
 // so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to
 // renderer_config::kPagedPyramidTiles); kStack takes `planner` as it is.
 PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner);
+// kPaged's pool for a viewport when the caller does not size it:
+// renderer_config::kDefaultPoolPagesPerScreenTile pages per tile-sized area
+// of the screen, at least kPoolMinPages, in bytes of `content` pages.
+uint64_t defaultPoolBytes(const Viewport& viewport, uint32_t tile_px, TileContent content);
+// Bytes of one kPaged page (mip 0 and mip 1) for tiles of `tile_px` holding
+// `content` (kRgba8 or kBc1), borders included.
+uint64_t pageBytes(uint32_t tile_px, TileContent content);
 
 enum class Overlay { kOff = 0, kLevels = 1 };
 
@@ -82,7 +89,8 @@ struct RendererConfig {
   uint32_t staging_tiles = renderer_config::kDefaultUploadTilesPerFrame;
   TextureMemory texture_memory = TextureMemory::kStack;
   // kPaged: the pool's size (pages of tile_px + 2 borders, with mip 1);
-  // 0 = renderer_config::kDefaultPoolMiB. At most GL_MAX_ARRAY_TEXTURE_LAYERS
+  // 0 = renderer_config::kDefaultPoolMiB (createClipmapRenderer() sizes it to
+  // the viewport: defaultPoolBytes()). At most GL_MAX_ARRAY_TEXTURE_LAYERS
   // pages. The plan's pyramid must fit in it (PlannerConfig::pyramid_tiles =
   // renderer_config::kPagedPyramidTiles keeps it to a few pages).
   uint64_t pool_bytes = 0;
@@ -109,6 +117,10 @@ struct UploadStats {
   // no page because every page was pinned or in use (drawn coarser).
   uint32_t pages_filled = 0;
   uint32_t pages_short = 0;
+  // kPaged: the pages this frame needs: its sampled tiles' (with a page or
+  // short of one) and the pinned ones. Its maximum over a flight is the
+  // working set a pool must hold to never fall short.
+  uint32_t pages_wanted = 0;
 };
 
 class ClipmapRenderer {
