@@ -131,6 +131,13 @@ add "turn_window" 12 "$TURNS $DET --frames $LONG --plan-scope window"
 for s in 1 10 100; do
   add "bc1_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --tile-format bc1 --reference-tile-format rgba8"
 done
+# Paged texture memory beside the stack (docs/renderer.md, "Paged texture
+# memory"): the same deterministic line and turns, each judged against a
+# reference drawn the same way.
+for s in 1 10 100; do
+  add "paged_speed_$s" 12 "$COMMON $DET --frames $FRAMES --speed $s --texture-memory paged"
+done
+add "turn_paged" 12 "$TURNS $DET --frames $LONG --texture-memory paged"
 # Buffering is about frame time: real time only.
 add "buffering_single" 12 "$COMMON --frames $LONG --speed 20 --buffering single"
 add "buffering_double" 12 "$COMMON --frames $LONG --speed 20 --buffering double-upload"
@@ -272,6 +279,18 @@ publish "$DATA/upload_budget.csv"
   done
 } >"$DATA/bc1.csv.tmp.$$"
 publish "$DATA/bc1.csv"
+{
+  echo "run,psnr_mean_stack,psnr_mean_paged,psnr_min_stack,psnr_min_paged,frames_below_30db_stack,frames_below_30db_paged,time_to_sharp_max_stack,time_to_sharp_max_paged,frame_ms_p50_stack,frame_ms_p50_paged,gpu_texture_mib_stack,gpu_texture_mib_paged,frames_pages_short,pool_pages_wanted_max"
+  for pair in "speed_1 paged_speed_1" "speed_10 paged_speed_10" "speed_100 paged_speed_100" "turn turn_paged"; do
+    read -r a b <<<"$pair"
+    line="$a"
+    for k in psnr_mean_db psnr_min_db frames_below_30db time_to_sharp_max frame_ms_p50 gpu_texture_mib; do
+      line="$line,$(S "$a" $k),$(S "$b" $k)"
+    done
+    echo "$line,$(S "$b" frames_pages_short),$(S "$b" pool_pages_wanted_max)"
+  done
+} >"$DATA/paged.csv.tmp.$$"
+publish "$DATA/paged.csv"
 {
   echo "budget_mib,opt_pct,lru_pct,ours_pct"
   for b in 1 2 4 8 16 32 64 128; do
