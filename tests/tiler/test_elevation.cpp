@@ -340,6 +340,15 @@ TEST(Elevation, CommandLineRefusesWhatHeightsCannotMean) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("exactly (use F32)"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("F32 or F32"), std::string::npos) << r.output;
+  // R16 is a height format too: quantised float heights (with --height-step),
+  // and refused, naming what holds them, for int16 heights it cannot hold.
+  r = runTiler({f32, dir.file("q.cst"), "--layer", "elevation", "--format", "R16", "--height-step", "0.25",
+                "--no-fsync"});
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  r = runTiler({grey16, dir.file("x.cst"), "--layer", "elevation", "--format", "R16", "--no-fsync"});
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output.find("is a colour format"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("exactly (use I16 or F32)"), std::string::npos) << r.output;
 }
 
 }  // namespace

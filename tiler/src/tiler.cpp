@@ -475,7 +475,11 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
                          o.input_path + ": " + std::to_string(first.input_channels) +
                              " channels; an elevation store needs a single-band DEM");
   }
-  if (o.format && !forced_height) {
+  // R16 is both a grey colour format and a height format: in an elevation
+  // store it means quantised or unsigned 16-bit heights.
+  const bool height_format = o.format && (*o.format == PixelFormat::kI16 || *o.format == PixelFormat::kR16 ||
+                                          *o.format == PixelFormat::kF32);
+  if (o.format && !height_format) {
     return Status::error(ErrorCode::kInvalidArgument,
                          std::string("--format ") + pixelFormatName(*o.format) +
                              " is a colour format; elevation stores hold I16, R16 or F32");
@@ -493,7 +497,7 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
                              ") are stored exactly; --height-step is for floating-point DEMs");
   }
   PixelFormat stored = o.height_step > 0.0 ? PixelFormat::kR16 : native;
-  if (forced_height) {
+  if (height_format) {
     const bool widen = *o.format == PixelFormat::kF32;
     if (*o.format != stored && !widen) {
       return Status::error(ErrorCode::kInvalidArgument,
