@@ -239,11 +239,12 @@ TEST(Readers, TiffDecodeThreadsDoNotChangeTiles) {
 }
 
 // Tiles `in` into `out` with the defaults (no fsync): the run's status.
-Status tileToFile(const std::string& in, const std::string& out) {
+Status tileToFile(const std::string& in, const std::string& out, ImageReader reader = ImageReader::kAuto) {
   TilerOptions o;
   o.input_path = in;
   o.output_path = out;
   o.fsync = false;
+  o.reader = reader;
   TilerSummary summary;
   return tileImage(o, &summary);
 }
@@ -296,11 +297,14 @@ TEST(Readers, ATiffWhoseStripOffsetsTagIsIgnoredIsRefused) {
   std::memcpy(bytes.data() + entry + 4, &count, 4);
   std::memcpy(bytes.data() + entry + 8, bytes.data() + array, 4);  // the one value inline
   writeBytes(in, bytes);
-  const Status s = tileToFile(in, dir.file("s.cst"));
-  ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message.find("s.tif: damaged TIFF"), std::string::npos) << s.message;
-  EXPECT_NE(s.message.find("StripOffsets"), std::string::npos) << s.message;
-  EXPECT_FALSE(std::filesystem::exists(dir.file("s.cst")));
+  // Whichever reader decodes it: OpenImageIO's drops libtiff's warning.
+  for (ImageReader reader : {ImageReader::kAuto, ImageReader::kOpenImageIO}) {
+    const Status s = tileToFile(in, dir.file("s.cst"), reader);
+    ASSERT_FALSE(s.ok()) << (reader == ImageReader::kAuto ? "auto" : "openimageio");
+    EXPECT_NE(s.message.find("s.tif: damaged TIFF"), std::string::npos) << s.message;
+    EXPECT_NE(s.message.find("StripOffsets"), std::string::npos) << s.message;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("s.cst")));
+  }
 }
 
 // A file cut short declares more data than it holds: refused before any

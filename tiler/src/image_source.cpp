@@ -196,6 +196,15 @@ Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
     bool covered = false;
     Status s = openNativeImage(path, forced, read, out, &covered);
     if (covered || !s) return s;
+  } else {
+    // OpenImageIO's TIFF reader drops libtiff's warnings, so a file whose
+    // layout libtiff had to ignore would tile as zeros: our readers' checks
+    // at open (layout warnings, strips and tiles inside the file) refuse a
+    // damaged file whichever reader then decodes it.
+    bool covered = false;
+    std::unique_ptr<ImageSource> probe;
+    Status s = openNativeImage(path, forced, read, &probe, &covered);
+    if (!s && s.code == ErrorCode::kTruncated) return s;
   }
   OpenImageFileFn fn = nullptr;
   Status s = loadOiioModule(&fn);
