@@ -356,6 +356,11 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
       !s)
     return s;
 
+  if (run.remote.disk_cache_folders_refused > 0)
+    (warnings ? *warnings : log) << "clipstream-fly: warning: the disk cache " << o.remote.disk_cache_dir
+                                 << " did not cache this store: its sub-folder there is a symlink or another "
+                                    "user's, which the cache never follows nor writes; remove it, or give "
+                                    "--disk-cache a folder of your own\n";
   for (const std::string& line : swept)
     (warnings ? *warnings : log) << "clipstream-fly: warning: removed a temporary file left by an interrupted "
                                     "earlier run: " << printableText(line, 300) << "\n";

@@ -44,7 +44,8 @@ nlohmann::json remoteJson(const RemoteStats& r) {
           {"http_bytes", r.bytes},               {"http_failures", r.failures},
           {"http_connections", r.connections},   {"http2_requests", r.http2_requests},
           {"disk_cache_hits", r.disk_cache_hits}, {"disk_cache_misses", r.disk_cache_misses},
-          {"disk_cache_dropped", r.disk_cache_dropped}};
+          {"disk_cache_dropped", r.disk_cache_dropped},
+          {"disk_cache_folders_refused", r.disk_cache_folders_refused}};
 }
 
 // Whether the run read a store over HTTP (RemoteStats are all zero otherwise).

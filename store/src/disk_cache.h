@@ -72,6 +72,9 @@ class DiskCache {
   // Removes an entry found wrong by the caller.
   void drop(const std::string& store_key, const std::string& name);
 
+  // Whether store sub-folder `store_key` may be used (made if missing).
+  bool usableStoreDir(const std::string& store_key);
+
   struct Stats {
     uint64_t entries = 0;
     uint64_t bytes = 0;          // content and entry headers, as counted against the cap
@@ -97,8 +100,6 @@ class DiskCache {
   std::vector<std::string> evict(uint64_t extra);
   // Unlinks entry `path` if it is still one of ours (name and header).
   void removeEntry(const std::string& path) const;
-  // Whether store sub-folder `store_key` may be used (made if missing).
-  bool usableStoreDir(const std::string& store_key);
   std::string entryPath(const std::string& store_key, const std::string& name) const {
     return store_key + "/" + name;
   }

@@ -64,6 +64,7 @@ struct TileStoreReader::Impl {
   std::shared_ptr<DiskCache> disk_cache;
   std::string cache_key;  // this store version's sub-folder
   mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
+  bool disk_folder_refused = false;  // the store's cache sub-folder is not ours to use
 
   ~Impl() {
     for (LevelRead& level : levels) {
@@ -179,6 +180,7 @@ Status TileStoreReader::Impl::openImpl() {
     Status cache = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache);
     if (!cache) return cache;
     cache_key = DiskCache::storeKey(path, source->version());
+    disk_folder_refused = !disk_cache->usableStoreDir(cache_key);
   }
   path = displayStorePath(path);  // from here on `path` only names the store in messages
   const uint64_t actual_bytes = source->size();
@@ -831,6 +833,7 @@ RemoteStats TileStoreReader::remoteStats() const {
   stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
   stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
   stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
+  stats.disk_cache_folders_refused = m_impl->disk_folder_refused ? 1 : 0;
   return stats;
 }
 

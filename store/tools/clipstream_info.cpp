@@ -263,6 +263,11 @@ int main(int argc, char** argv) {
     }
     if (!verify_status) exit_code = kExitCorrupt;
   }
+  if (reader->remoteStats().disk_cache_folders_refused > 0)
+    std::fprintf(stderr,
+                 "clipstream-info: warning: the disk cache did not cache this store: its sub-folder there is a "
+                 "symlink or another user's, which the cache never follows nor writes; remove it, or give "
+                 "--disk-cache a folder of your own\n");
   // The CRS text comes from the file and need not be valid UTF-8: replace
   // bad sequences instead of letting dump() throw.
   if (json) {

@@ -647,6 +647,7 @@ TEST_F(HttpStore, DiskCacheEvictsOnlyTheEntriesItWrote) {
     std::unique_ptr<TileStoreReader> remote;
     ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
+    EXPECT_EQ(remote->remoteStats().disk_cache_folders_refused, 0u);
   }
   const std::string sub = storeSubFolder(options.disk_cache_dir);
   ASSERT_FALSE(sub.empty());
@@ -718,6 +719,7 @@ TEST_F(HttpStore, DiskCacheNeverFollowsASymlinkedStoreFolder) {
     ASSERT_TRUE(TileStoreReader::open(m_server->url("store.cstore"), options, &remote).ok());
     expectSamePayloads(*remote, *local, keys);
     EXPECT_EQ(remote->remoteStats().disk_cache_hits, 0u) << "entries read through the symlink";
+    EXPECT_EQ(remote->remoteStats().disk_cache_folders_refused, 1u) << "the programs would not warn";
   }
   std::vector<std::string> after;
   for (const auto& e : std::filesystem::directory_iterator(theirs)) after.push_back(e.path());

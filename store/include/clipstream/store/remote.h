@@ -90,6 +90,10 @@ struct RemoteStats {
   uint64_t disk_cache_hits = 0;     // served from the folder, checksum verified
   uint64_t disk_cache_misses = 0;   // not there: read from the server, then kept
   uint64_t disk_cache_dropped = 0;  // there but torn or damaged: removed, read again
+  // Stores whose sub-folder in the cache folder is a symlink or another
+  // user's: never followed nor written, so nothing of them is cached. The
+  // programs warn about it.
+  uint64_t disk_cache_folders_refused = 0;
 
   // The sum of two stores' figures (a colour and an elevation store).
   RemoteStats& operator+=(const RemoteStats& o) {
@@ -102,6 +106,7 @@ struct RemoteStats {
     disk_cache_hits += o.disk_cache_hits;
     disk_cache_misses += o.disk_cache_misses;
     disk_cache_dropped += o.disk_cache_dropped;
+    disk_cache_folders_refused += o.disk_cache_folders_refused;
     return *this;
   }
 };
