@@ -119,19 +119,8 @@ Status ClipmapRenderer::createPaged() {
     m_texture_bytes.usable += uint64_t(c) * c * levels * 4;
     if (Status s = gl_util::checkCreated("the page pool's indirection maps"); !s) return s;
   }
-  if (staged()) {
-    m_staging_region_bytes = size_t(std::max(m_config.staging_tiles, 1u)) * tileBytes();
-    const size_t bytes = m_staging_region_bytes * renderer_config::kStagingFrames;
-    const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
-    glCreateBuffers(1, &m_staging);
-    glNamedBufferStorage(m_staging, GLsizeiptr(bytes), nullptr, flags);
-    if (Status s = gl_util::checkCreated("the staging buffer (" + std::to_string(bytes >> 20) + " MiB)"); !s)
-      return s;
-    m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(m_staging, 0, GLsizeiptr(bytes), flags));
-    if (m_staging_map == nullptr)
-      return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
-    m_texture_bytes.staging = bytes;
-  }
+  if (staged())
+    if (Status s = createStaging(); !s) return s;
 
   m_pages = std::make_unique<PageTable>(uint32_t(pages), 4);
   // Page 0: black, pinned, no tile's (a key outside every pyramid).
@@ -149,17 +138,7 @@ Status ClipmapRenderer::createPaged() {
 void ClipmapRenderer::writePage(uint32_t page, const uint8_t* pixels) {
   const GLsizei tp = GLsizei(m_geometry.tile_px);
   const GLint b = GLint(m_page_border);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-  if (staged()) {
-    const int64_t offset = stage(pixels, tileBytes());
-    if (offset >= 0) {
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, m_staging);
-      pixels = reinterpret_cast<const uint8_t*>(uintptr_t(offset));
-    } else {
-      ++m_stats.unstaged;
-    }
-  }
+  pixels = beginTileUpload(pixels);
   const GLint x = GLint((page & 1) * m_page_px) + b, y = GLint(((page >> 1) & 1) * m_page_px) + b;
   if (compressed())
     glCompressedTextureSubImage3D(m_stack[0], 0, x, y, GLint(page / 4), tp, tp, 1, kBc1Format,

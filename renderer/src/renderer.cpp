@@ -231,19 +231,8 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
     r->m_texture_bytes.usable += uint64_t(c) * c * uint64_t(usable_layers) * 2;
     if (Status s = gl_util::checkCreated("the clip stack's usable-tile map"); !s) return s;
   }
-  if (r->staged()) {
-    r->m_staging_region_bytes = size_t(std::max(config.staging_tiles, 1u)) * r->tileBytes();
-    const size_t bytes = r->m_staging_region_bytes * renderer_config::kStagingFrames;
-    const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
-    glCreateBuffers(1, &r->m_staging);
-    glNamedBufferStorage(r->m_staging, GLsizeiptr(bytes), nullptr, flags);
-    if (Status s = gl_util::checkCreated("the staging buffer (" + std::to_string(bytes >> 20) + " MiB)"); !s)
-      return s;
-    r->m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(r->m_staging, 0, GLsizeiptr(bytes), flags));
-    if (r->m_staging_map == nullptr)
-      return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
-    r->m_texture_bytes.staging = bytes;
-  }
+  if (r->staged())
+    if (Status s = r->createStaging(); !s) return s;
 
   for (uint32_t l = config.pyramid_level; l < geometry.levelCount(); ++l) {
     r->m_pyramid_first.push_back(r->m_pyramid_have.size());
@@ -313,6 +302,36 @@ size_t ClipmapRenderer::tileBytes() const {
   return size_t(tileContentBytes(m_config.tile_content, m_geometry.tile_px));
 }
 
+const uint8_t* ClipmapRenderer::beginTileUpload(const uint8_t* pixels) {
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+  if (!staged()) return pixels;
+  // From the frame's staging region: `pixels` becomes an offset into the
+  // bound pixel-unpack buffer.
+  const int64_t offset = stage(pixels, tileBytes());
+  if (offset < 0) {
+    ++m_stats.unstaged;
+    return pixels;
+  }
+  glBindBuffer(GL_PIXEL_UNPACK_BUFFER, m_staging);
+  return reinterpret_cast<const uint8_t*>(uintptr_t(offset));
+}
+
+Status ClipmapRenderer::createStaging() {
+  m_staging_region_bytes = size_t(std::max(m_config.staging_tiles, 1u)) * tileBytes();
+  const size_t bytes = m_staging_region_bytes * renderer_config::kStagingFrames;
+  const GLbitfield flags = GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+  glCreateBuffers(1, &m_staging);
+  glNamedBufferStorage(m_staging, GLsizeiptr(bytes), nullptr, flags);
+  if (Status s = gl_util::checkCreated("the staging buffer (" + std::to_string(bytes >> 20) + " MiB)"); !s)
+    return s;
+  m_staging_map = static_cast<uint8_t*>(glMapNamedBufferRange(m_staging, 0, GLsizeiptr(bytes), flags));
+  if (m_staging_map == nullptr)
+    return Status::error(ErrorCode::kUnavailable, "renderer: cannot map the staging buffer");
+  m_texture_bytes.staging = bytes;
+  return okStatus();
+}
+
 int64_t ClipmapRenderer::stage(const uint8_t* pixels, size_t bytes) {
   if (m_staging_used + bytes > m_staging_region_bytes) return -1;
   const size_t offset = size_t(m_staging_region) * m_staging_region_bytes + m_staging_used;
@@ -324,19 +343,7 @@ int64_t ClipmapRenderer::stage(const uint8_t* pixels, size_t bytes) {
 void ClipmapRenderer::uploadStack(uint32_t set, const TileKey& key, const uint8_t* pixels) {
   const GLsizei tp = GLsizei(m_geometry.tile_px);
   const uint32_t sx = slot(key.x, m_slots), sy = slot(key.y, m_slots);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-  if (staged()) {
-    // From the frame's staging region: `pixels` becomes an offset into the
-    // bound pixel-unpack buffer.
-    const int64_t offset = stage(pixels, tileBytes());
-    if (offset >= 0) {
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, m_staging);
-      pixels = reinterpret_cast<const uint8_t*>(uintptr_t(offset));
-    } else {
-      ++m_stats.unstaged;
-    }
-  }
+  pixels = beginTileUpload(pixels);
   if (compressed())
     glCompressedTextureSubImage3D(m_stack[set], 0, GLint(sx) * tp, GLint(sy) * tp, GLint(key.level), tp, tp,
                                   1, kBc1Format, GLsizei(tileBytes()), pixels);

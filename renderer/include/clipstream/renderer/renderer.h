@@ -264,6 +264,11 @@ class ClipmapRenderer {
   // kStaged: copies `pixels` into this frame's staging region and returns
   // its offset in the buffer, or -1 when the region is full.
   int64_t stage(const uint8_t* pixels, size_t bytes);
+  // Unpack state for one tile's upload; kStaged: stages `pixels` and binds
+  // the ring, returning the offset to pass instead (unbind after the call).
+  const uint8_t* beginTileUpload(const uint8_t* pixels);
+  // kStaged: the ring, persistently mapped (m_staging*).
+  Status createStaging();
   uint32_t slot(int64_t tile, uint32_t period) const {
     return toroidalSlot(tile + m_test_slot_bias, period);
   }
