@@ -53,7 +53,8 @@ Status ClipmapRenderer::createPaged() {
   const bool bc1 = compressed();
   const uint32_t levels = m_geometry.levelCount();
   const uint64_t pool_bytes =
-      m_config.pool_bytes != 0 ? m_config.pool_bytes : renderer_config::kDefaultPoolMiB << 20;
+      m_config.pool_bytes != 0 ? m_config.pool_bytes
+                               : defaultPoolBytes(Viewport{1920, 1080}, m_geometry.tile_px, m_config.tile_content);
   GLint max_layers = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
   const uint64_t page_bytes = pageBytes(m_geometry.tile_px, m_config.tile_content);
@@ -279,9 +280,7 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
                        size_t(int64_t(k.x) - r->window.x0)] != 0;
   };
   for (auto it = m_page_pixels.begin(); it != m_page_pixels.end();) {
-    const uint64_t packed = it->first;
-    const TileKey k{uint32_t(packed >> 58), uint32_t(packed & ((uint64_t(1) << 29) - 1)),
-                    uint32_t((packed >> 29) & ((uint64_t(1) << 29) - 1))};
+    const TileKey k = PageTable::unpack(it->first);
     if (k.level < pyramid && !resident(k)) it = m_page_pixels.erase(it);
     else ++it;
   }

@@ -38,9 +38,6 @@ inline constexpr double kDefaultPoolPagesPerScreenTile = 5.5;
 // reads). Small views needed 50 to 146 (160x96 to 640x360, the pass at
 // x100 and the line at x1); 256 pages are 21 MiB of RGBA8.
 inline constexpr uint32_t kPoolMinPages = 256;
-// Without a viewport (RendererConfig::pool_bytes 0 given to the renderer
-// directly): the pool of 1920x1080.
-inline constexpr uint64_t kDefaultPoolMiB = 59;
 // kPaged: the pyramid (levels pinned in the pool, the fallback of every
 // other level) is every level at most this many tiles a side: 4 pins 21
 // pages of a square image (16 + 4 + 1), where the clip-sized pyramid of

@@ -79,6 +79,10 @@ class PageTable {
   static uint64_t pack(const TileKey& key) {
     return (uint64_t(key.level) << 58) | (uint64_t(key.y) << 29) | uint64_t(key.x);
   }
+  static TileKey unpack(uint64_t packed) {
+    constexpr uint64_t kMask = (uint64_t(1) << 29) - 1;
+    return TileKey{uint32_t(packed >> 58), uint32_t(packed & kMask), uint32_t((packed >> 29) & kMask)};
+  }
 
  private:
   struct Page {

@@ -89,7 +89,7 @@ struct RendererConfig {
   uint32_t staging_tiles = renderer_config::kDefaultUploadTilesPerFrame;
   TextureMemory texture_memory = TextureMemory::kStack;
   // kPaged: the pool's size (pages of tile_px + 2 borders, with mip 1);
-  // 0 = renderer_config::kDefaultPoolMiB (createClipmapRenderer() sizes it to
+  // 0 = defaultPoolBytes() of 1920x1080 (createClipmapRenderer() sizes it to
   // the viewport: defaultPoolBytes()). At most GL_MAX_ARRAY_TEXTURE_LAYERS
   // pages. The plan's pyramid must fit in it (PlannerConfig::pyramid_tiles =
   // renderer_config::kPagedPyramidTiles keeps it to a few pages).
