@@ -6,3 +6,8 @@
 #define GL_GLEXT_PROTOTYPES 1
 #endif
 #include <GL/glcorearb.h>
+
+namespace clipstream {
+// The one GL format of BC1 tiles (stack and pool alike).
+constexpr GLenum kBc1Format = GL_COMPRESSED_RGB_S3TC_DXT1_EXT;
+}  // namespace clipstream

@@ -5,11 +5,17 @@
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 namespace clipstream::gl_util {
+
+// Milliseconds from `start` to now, for the frame's timings.
+inline double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
 
 // Links fullscreen.vert with ground_ray.glsl + `fragment_body` (the
 // "#version" line, renderer_config defines and `extra_defines`, e.g.

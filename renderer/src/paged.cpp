@@ -32,15 +32,8 @@
 #include <cstring>
 
 namespace clipstream {
-namespace {
 
-constexpr GLenum kBc1Format = GL_COMPRESSED_RGB_S3TC_DXT1_EXT;
-
-double msSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
+using gl_util::msSince;
 
 uint64_t pageBytes(uint32_t tile_px, TileContent content) {
   const bool bc1 = content == TileContent::kBc1;

@@ -21,13 +21,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
+using gl_util::msSince;
 
 GLint loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
-
-constexpr GLenum kBc1Format = GL_COMPRESSED_RGB_S3TC_DXT1_EXT;
 
 // Bytes of one size_px^2 image of `content` (BC1: whole 4x4 blocks).
 uint64_t imageBytes(uint64_t size_px, TileContent content) {

@@ -22,7 +22,7 @@ namespace clipstream {
 namespace {
 
 constexpr uint32_t kDemSide = 512;
-const Viewport kViewport{320, 180};
+const Viewport kTerrainViewport{320, 180};
 
 // The DEM of the scenarios: hills and a 50-unit cliff across the flight;
 // with `spikes`, single samples 300 units high every 37 samples.
@@ -103,7 +103,7 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   o.frames = sc.frames;
   o.rest_frames = sc.rest_frames;
   o.speed = sc.speed;
-  o.viewport = kViewport;
+  o.viewport = kTerrainViewport;
   o.reference_every = 0;
   o.sample_tiles = false;
   o.streamer.ram_budget_bytes = sc.ram_budget_bytes;
@@ -119,8 +119,8 @@ void flyScenario(const Scenario& sc, Outcome* out) {
     size_t ground = 0;
     std::vector<uint8_t> marked;
     const size_t cracks =
-        test::terrainCracks(rgba, camera, kViewport, sc.lowest_ground - 1.0, 8.0, field - 8.0, &ground, &marked);
-    if (cracks > 0) test::dumpPpm("terrain_cracks_" + std::to_string(f.frame), marked, kViewport);
+        test::terrainCracks(rgba, camera, kTerrainViewport, sc.lowest_ground - 1.0, 8.0, field - 8.0, &ground, &marked);
+    if (cracks > 0) test::dumpPpm("terrain_cracks_" + std::to_string(f.frame), marked, kTerrainViewport);
     out->cracks += cracks;
     out->ground += ground;
     ++out->checked;
@@ -136,7 +136,7 @@ void checkScenario(const Scenario& sc, const Outcome& r) {
   const FlightRun& run = r.run;
   ASSERT_EQ(run.frames.size(), size_t(sc.frames + sc.rest_frames));
   EXPECT_GT(r.checked, 0u);
-  EXPECT_GT(r.ground, r.checked * kViewport.width_px * kViewport.height_px / 4) << "looked at too little terrain";
+  EXPECT_GT(r.ground, r.checked * kTerrainViewport.width_px * kTerrainViewport.height_px / 4) << "looked at too little terrain";
   EXPECT_EQ(r.cracks, 0u) << "background where the terrain must be";
   EXPECT_EQ(run.render_thread_fetches, 0u) << "a frame waited on a source";
   EXPECT_LE(run.streamer.ram_peak_bytes, run.streamer.ram_budget_bytes);
@@ -406,7 +406,7 @@ TEST_P(TerrainFlight, AtRestTheGeometricErrorMeetsTheTarget) {
   ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).ok());
   o.frames = 20;
   o.rest_frames = 20;
-  o.viewport = kViewport;
+  o.viewport = kTerrainViewport;
   o.reference_every = 5;
   o.sample_tiles = false;
   o.terrain = terrain;  // default ring size
@@ -507,7 +507,7 @@ void flyOverTestDem(const std::shared_ptr<TileSource>& source, const std::shared
   ASSERT_TRUE(FlightPath::builtin("orbit", o.source->geometry(), &o.path).ok());
   o.frames = 10;
   o.rest_frames = 20;
-  o.viewport = kViewport;
+  o.viewport = kTerrainViewport;
   o.reference_every = 5;
   o.sample_tiles = false;
   o.terrain = terrain;  // default ring size
@@ -532,7 +532,7 @@ TEST(TerrainAccuracy, AtRestTheTextureIsBitIdenticalWhereTheGeometryAgrees) {
   EXPECT_GT(run.summary.psnr_mean_db, 0.0);
   // Enough agreeing pixels to mean something: the finest ring fills much
   // of a low view.
-  const uint64_t rest_pixels = uint64_t(run.geometry_rest_frames) * kViewport.width_px * kViewport.height_px;
+  const uint64_t rest_pixels = uint64_t(run.geometry_rest_frames) * kTerrainViewport.width_px * kTerrainViewport.height_px;
   EXPECT_GT(run.terrain_rest_agree_pixels, rest_pixels / 10);
   EXPECT_EQ(run.terrain_rest_agree_mismatched, 0u);
   EXPECT_GT(rest_psnr, 25.0);

@@ -230,7 +230,7 @@ class DecodePool {
 };
 
 // How the file's pixels are laid out, read once from the first handle.
-struct Layout {
+struct PixelLayout {
   SampleKind kind = SampleKind::kU8;
   bool doubles = false;       // 64-bit floats, narrowed to float on conversion
   size_t native_pixel = 0;    // bytes of one decoded pixel
@@ -243,7 +243,7 @@ struct Layout {
 
 class TiffSource final : public ImageSource {
  public:
-  TiffSource(std::string path, SourceInfo info, Layout layout, std::unique_ptr<Handle> first,
+  TiffSource(std::string path, SourceInfo info, PixelLayout layout, std::unique_ptr<Handle> first,
              unsigned threads)
       : m_path(std::move(path)), m_info(std::move(info)), m_layout(layout), m_pool(threads - 1) {
     m_handles.resize(threads);
@@ -406,7 +406,7 @@ class TiffSource final : public ImageSource {
 
   std::string m_path;
   SourceInfo m_info;
-  Layout m_layout;
+  PixelLayout m_layout;
   std::vector<std::unique_ptr<Handle>> m_handles;  // one per worker, opened when it first decodes
   std::vector<std::vector<uint8_t>> m_scratch;     // one tile per worker
   std::vector<uint8_t> m_band;                     // decoded pixels of [y0, y1) x [x0, x1)
@@ -445,7 +445,7 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
   }
 
   // What these readers cover; the rest (and its errors) is OpenImageIO's.
-  Layout layout;
+  PixelLayout layout;
   bool ok = spp >= 1 && spp <= 4 && (planar == PLANARCONFIG_CONTIG || spp == 1);
   if (sample_format == SAMPLEFORMAT_UINT && bits == 8) {
     layout.kind = SampleKind::kU8;

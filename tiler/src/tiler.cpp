@@ -148,7 +148,7 @@ struct TileJob {
 // How the image is cut: panels of panel_px columns (and rows), whose first
 // `local_levels` levels are built per block; the rest by one coarse builder
 // over the whole of level local_levels - 1.
-struct Layout {
+struct PanelLayout {
   uint32_t local_levels = 1;
   uint64_t panel_px = 0;  // block size at level 0 (tile_px << (local_levels - 1))
   uint64_t blocks_x = 1, blocks_y = 1;
@@ -156,7 +156,7 @@ struct Layout {
 };
 
 Status planLayout(const PyramidGeometry& g, const Downsampler& ds, unsigned threads,
-                  uint64_t budget_bytes, uint64_t base_bytes, bool need_single, Layout* out) {
+                  uint64_t budget_bytes, uint64_t base_bytes, bool need_single, PanelLayout* out) {
   const uint32_t levels = g.levelCount();
   const uint64_t bpp = bytesPerPixel(g.format);
   const uint64_t jobs = uint64_t(threads) * kTileJobsPerThread * g.tileBytes() * 2;
@@ -751,7 +751,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
   const unsigned threads =
       o.threads != 0 ? o.threads : std::max(1u, std::thread::hardware_concurrency());
 
-  Layout layout;
+  PanelLayout layout;
   const uint64_t base_bytes = currentRssBytes();
   // Box and decimate read only the 2x2 samples under each output sample, so
   // levels can be built per panel; Lanczos reaches across panel borders.
