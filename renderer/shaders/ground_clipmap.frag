@@ -21,9 +21,12 @@ uniform sampler2DArray uStack;    // the pool: 2 x 2 pages a layer
 uniform usampler2DArray uUsable;  // slots^2 per level: usableCode() | levels up << 8 | page << 16
 uniform int uTopLevel;            // coarsest level
 // The pyramid level's tile grid, and the absolute tile of its slot cell's
-// origin (uCamCell): its tiles lie in the slots of their own coordinates.
+// origin (uCamCell). Its tile (x, y) is always at page 4 * (1 + (y / 2) *
+// uPyramidLayersX + x / 2) + the quarter of its parity (pyramidPage() in
+// renderer.h), with no level up: the fallback needs no lookup.
 uniform ivec2 uPyramidTiles;
 uniform vec2 uPyramidOrigin;
+uniform int uPyramidLayersX;
 #else
 uniform sampler2DArray uStack;    // layer l: level l (mip 0), l + 1 (mip 1); pyramid layer: chain
 uniform usampler2DArray uUsable;  // slots^2 per stack level: usableCode() | levels up << 8
@@ -76,8 +79,8 @@ void main() {
 #ifdef PAGED
   // The wanted level's entry (any level: the coarse ones cover their whole
   // level); ground outside the wanted level's window falls back to the
-  // pyramid level, whose tiles sit in the slots of their own coordinates
-  // (llvmpipe makes that second lookup for every fragment: kept cheap).
+  // pyramid level's tile, whose page is arithmetic (llvmpipe computes the
+  // fallback for every fragment: a second texelFetch there cost about 5 %).
   int probe = min(wanted, uTopLevel);
   ivec2 slot;
   uint code;
@@ -86,8 +89,8 @@ void main() {
   bool hit = (v & 255u) == code;
   vec2 ptq = uCamCell[uPyramidLevel].xy + rel * uInvTileTexels[uPyramidLevel];
   ivec2 pt = clamp(ivec2(floor(ptq + uPyramidOrigin)), ivec2(0), uPyramidTiles - 1);
-  uint pv = texelFetch(uUsable, ivec3(pt, uPyramidLevel), 0).r;
-  uint e = hit ? v : pv;
+  int pp = 4 * (1 + (pt.y >> 1) * uPyramidLayersX + (pt.x >> 1)) + (pt.x & 1) + 2 * (pt.y & 1);
+  uint e = hit ? v : uint(pp) << 16;
   int level = min((hit ? probe : uPyramidLevel) + int((e >> 8) & 255u), uTopLevel);
   float used = max(lod, float(level));
   // The position in the tile, then in its page's layer (border included).

@@ -1,6 +1,8 @@
 // Paged texture memory bookkeeping. See page_table.h.
 #include <clipstream/renderer/page_table.h>
 
+#include <algorithm>
+
 namespace clipstream {
 
 PageTable::PageTable(uint32_t pages, uint32_t classes)
@@ -48,6 +50,32 @@ uint32_t PageTable::allocate(const TileKey& key, uint64_t frame, bool pin, TileK
   p.pinned = pin;
   p.last_used = frame;
   if (pin) ++m_pinned;
+  m_by_key[pack(key)] = page;
+  return page;
+}
+
+void PageTable::reserve(uint32_t first, uint32_t end) {
+  end = std::min<uint32_t>(end, pages());
+  if (m_reserved.empty()) m_reserved.assign(m_pages.size(), false);
+  for (uint32_t p = first; p < end; ++p) {
+    if (m_reserved[p] || m_pages[p].holds) continue;
+    m_reserved[p] = true;
+    std::vector<uint32_t>& free = m_free[p % m_classes];
+    free.erase(std::find(free.begin(), free.end(), p));
+  }
+}
+
+uint32_t PageTable::allocateAt(uint32_t page, const TileKey& key, uint64_t frame) {
+  if (page >= pages() || m_reserved.empty() || !m_reserved[page] || m_pages[page].holds ||
+      page % m_classes != classOf(key) || find(key) != kNoPage)
+    return kNoPage;
+  Page& p = m_pages[page];
+  p = Page{};
+  p.key = key;
+  p.holds = true;
+  p.pinned = true;
+  p.last_used = frame;
+  ++m_pinned;
   m_by_key[pack(key)] = page;
   return page;
 }

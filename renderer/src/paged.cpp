@@ -59,20 +59,24 @@ Status ClipmapRenderer::createPaged() {
                          "renderer: paged texture memory takes a pyramid of at most " +
                              std::to_string(renderer_config::kPagedPyramidTiles) +
                              " tiles a side (PlannerConfig::pyramid_tiles; plannerFor() sets it)");
-  // Page 0 stays black (slots with no page point there), and the pyramid is
-  // pinned: the pool must hold both and leave pages for the stack levels.
-  uint64_t pyramid_tiles = 0;
-  for (uint32_t l = m_config.pyramid_level; l < levels; ++l)
+  // Page 0 stays black (slots with no page point there), the pyramid level
+  // takes the layers after it at fixed places (pyramidPage()), and the
+  // coarser levels are pinned where they land: the pool must hold them all
+  // and leave pages for the stack levels.
+  m_pyramid_layers_x = (top.tiles_x + 1) / 2;
+  const uint32_t reserved_end = pyramidPage(0, 0) + 4 * m_pyramid_layers_x * ((top.tiles_y + 1) / 2);
+  uint64_t pyramid_tiles = reserved_end;
+  for (uint32_t l = m_config.pyramid_level + 1; l < levels; ++l)
     pyramid_tiles += uint64_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y;
-  if (pages < pyramid_tiles + 2) {
+  if (pages < pyramid_tiles + 1) {
     char size[32];
     std::snprintf(size, sizeof size, "%.2f MiB", double(pool_bytes) / (1 << 20));
     return Status::error(ErrorCode::kInvalidArgument,
                          "renderer: a pool of " + std::string(size) + " holds " +
                              std::to_string(pages) + " pages of " + std::to_string(m_page_px) +
                              " px (at most 4 x GL_MAX_ARRAY_TEXTURE_LAYERS " + std::to_string(max_layers) +
-                             "); the pyramid pins " + std::to_string(pyramid_tiles) +
-                             " and one more stays black: give a larger pool");
+                             "); the black page and the pyramid take " + std::to_string(pyramid_tiles) +
+                             ": give a larger pool");
   }
 
   gl_util::clearErrors();
@@ -117,8 +121,11 @@ Status ClipmapRenderer::createPaged() {
     if (Status s = createStaging(); !s) return s;
 
   m_pages = std::make_unique<PageTable>(uint32_t(pages), 4);
-  // Page 0: black, pinned, no tile's (a key outside every pyramid).
-  m_pages->allocate(TileKey{63, 0, 0}, 0, true);
+  // Page 0: black, pinned, no tile's (a key outside every pyramid). Pages
+  // 1-3 are free; the pyramid level's layers follow.
+  m_pages->reserve(0, 1);
+  m_pages->reserve(pyramidPage(0, 0), reserved_end);
+  m_pages->allocateAt(0, TileKey{63, 0, 0}, 0);
   for (uint32_t l = m_config.pyramid_level; l < levels; ++l) {
     m_pyramid_first.push_back(m_pyramid_have.size());
     m_pyramid_have.resize(m_pyramid_have.size() + size_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y,
@@ -194,7 +201,9 @@ void ClipmapRenderer::fillBorders(uint32_t page, const TileKey& key) {
 }
 
 uint32_t ClipmapRenderer::placePage(const TileKey& key, const uint8_t* pixels, bool pin) {
-  const uint32_t page = m_pages->allocate(key, m_frame, pin);
+  const uint32_t page = key.level == m_config.pyramid_level
+                            ? m_pages->allocateAt(pyramidPage(key.x, key.y), key, m_frame)
+                            : m_pages->allocate(key, m_frame, pin);
   if (page == PageTable::kNoPage) return page;
   writePage(page, pixels);
   fillBorders(page, key);

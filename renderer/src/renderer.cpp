@@ -735,6 +735,7 @@ void ClipmapRenderer::bindColour(uint32_t p, const Camera& camera, const Viewpor
     // The pyramid level's grid and its cell's origin, for the fallback.
     const LevelInfo& info = m_geometry.levels[pyramid];
     glProgramUniform2i(p, loc(p, "uPyramidTiles"), GLint(info.tiles_x), GLint(info.tiles_y));
+    glProgramUniform1i(p, loc(p, "uPyramidLayersX"), GLint(m_pyramid_layers_x));
     const double tile_texels = tp * std::ldexp(1.0, int(pyramid));
     glProgramUniform2f(p, loc(p, "uPyramidOrigin"),
                        float(std::floor(camera.position.x / tile_texels / clip) * clip),

@@ -205,5 +205,28 @@ TEST(PageTable, BordersAndMip1Bookkeeping) {
   EXPECT_EQ(t.mip1From(r), PageTable::kMip1Empty);
 }
 
+TEST(PageTable, ReservedPagesAreGivenOnlyAtTheirPlaceAndStayPinned) {
+  PageTable t(12, 4);
+  t.reserve(4, 8);
+  // Free pages never come from the reserved range, whatever the class.
+  std::set<uint32_t> given;
+  for (uint32_t i = 0; i < 8; ++i) given.insert(t.allocate(TileKey{0, i & 1, i >> 1 & 1}, 1, false));
+  for (uint32_t p : given) EXPECT_TRUE(p < 4 || p >= 8) << p;
+  EXPECT_EQ(given.size(), 8u);
+  // A reserved page takes only a tile of its class, once.
+  EXPECT_EQ(t.allocateAt(5, TileKey{3, 0, 0}, 2), PageTable::kNoPage);  // class 0, page class 1
+  EXPECT_EQ(t.allocateAt(5, TileKey{3, 1, 0}, 2), 5u);
+  EXPECT_EQ(t.allocateAt(5, TileKey{3, 3, 0}, 2), PageTable::kNoPage);  // holds a tile
+  EXPECT_EQ(t.allocateAt(2, TileKey{3, 0, 1}, 2), PageTable::kNoPage);  // not reserved
+  EXPECT_EQ(t.allocateAt(12, TileKey{3, 0, 0}, 2), PageTable::kNoPage);  // past the pool
+  EXPECT_EQ(t.find(TileKey{3, 1, 0}), 5u);
+  EXPECT_EQ(t.pinned(), 1u);
+  // Eviction and clearUnpinned() leave it alone; the unreserved pages turn over.
+  for (uint32_t i = 0; i < 8; ++i) EXPECT_NE(t.allocate(TileKey{1, i & 1, 4 + i}, 10 + i, false), 5u);
+  t.clearUnpinned();
+  EXPECT_EQ(t.find(TileKey{3, 1, 0}), 5u);
+  EXPECT_EQ(t.used(), 1u);
+}
+
 }  // namespace
 }  // namespace clipstream

@@ -55,6 +55,15 @@ class PageTable {
   uint32_t allocate(const TileKey& key, uint64_t frame, bool pin, TileKey* evicted = nullptr,
                     bool* had_evicted = nullptr);
 
+  // Takes pages [first, end) out of the free pages: only allocateAt()
+  // gives them (ClipmapRenderer keeps the black page and the pyramid
+  // level's pages at fixed places, which the shader computes instead of
+  // looking up).
+  void reserve(uint32_t first, uint32_t end);
+  // `page` (reserved, holding nothing, of `key`'s class) for `key`, pinned;
+  // kNoPage when it is not such a page.
+  uint32_t allocateAt(uint32_t page, const TileKey& key, uint64_t frame);
+
   // Marks `page` used in `frame`: allocate() will not take it this frame.
   void use(uint32_t page, uint64_t frame) { m_pages[page].last_used = frame; }
   uint64_t lastUsed(uint32_t page) const { return m_pages[page].last_used; }
@@ -96,6 +105,7 @@ class PageTable {
   std::vector<Page> m_pages;
   uint32_t m_classes = 1;
   std::vector<std::vector<uint32_t>> m_free;  // per class: pages holding nothing, taken from the back
+  std::vector<bool> m_reserved;               // pages only allocateAt() gives
   std::unordered_map<uint64_t, uint32_t> m_by_key;
   uint32_t m_pinned = 0;
 };

@@ -245,6 +245,12 @@ class ClipmapRenderer {
   // Takes a page for `key` and writes `pixels` into it (with its borders
   // from the neighbours' pages); kNoPage when the pool is full this frame.
   uint32_t placePage(const TileKey& key, const uint8_t* pixels, bool pin);
+  // The pyramid level's tile (x, y) lives at a fixed page, which the shader
+  // computes the same way (its fallback then needs no lookup): layer
+  // 1 + (y / 2) * m_pyramid_layers_x + x / 2, the quarter of its parity.
+  uint32_t pyramidPage(uint32_t x, uint32_t y) const {
+    return 4 * (1 + (y >> 1) * m_pyramid_layers_x + (x >> 1)) + (x & 1) + 2 * (y & 1);
+  }
   void writePage(uint32_t page, const uint8_t* pixels);
   void copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy, uint32_t dst_page,
                       uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w, uint32_t h);
@@ -320,6 +326,7 @@ class ClipmapRenderer {
   std::unordered_map<uint64_t, std::shared_ptr<const std::vector<uint8_t>>> m_page_pixels;
   uint32_t m_page_border = 0;  // texels of border on each side (mip 0)
   uint32_t m_page_px = 0;      // tile_px + 2 borders
+  uint32_t m_pyramid_layers_x = 0;  // layers a row of the pyramid level's pages (pyramidPage())
   uint64_t m_frame = 1;
 };
 
