@@ -323,7 +323,7 @@ TEST(Elevation, CommandLineRefusesWhatHeightsCannotMean) {
   r = runTiler({"--synthetic", "64x64", "--format", "F32", dir.file("x.cst")});
   EXPECT_EQ(r.exit_code, 2) << r.output;
   // A no-data value no int16 sample can hold would turn no-data off unsaid.
-  for (const char* nodata : {"1e30", "40000", "-32769", "2.5"}) {
+  for (const char* nodata : {"1e30", "40000", "-32769", "2.5", "nan"}) {
     r = runTiler({grey16, dir.file("x.cst"), "--nodata", nodata, "--no-fsync"});
     EXPECT_EQ(r.exit_code, 1) << nodata << ": " << r.output;
     EXPECT_NE(r.output.find("no int16 sample can hold it"), std::string::npos) << r.output;

@@ -510,9 +510,9 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
     }
     stored = *o.format;
   }
-  // A no-data value no sample of an integer DEM can hold would turn no-data
-  // off without a word.
-  if (integer && o.nodata && !std::isnan(*o.nodata)) {
+  // A no-data value no sample of an integer DEM can hold (NaN included)
+  // would turn no-data off without a word.
+  if (integer && o.nodata) {
     const double lo = int16 ? -32768.0 : 0.0, hi = int16 ? 32767.0 : uint16 ? 65535.0 : 255.0;
     if (*o.nodata < lo || *o.nodata > hi || *o.nodata != std::floor(*o.nodata)) {
       char text[160];

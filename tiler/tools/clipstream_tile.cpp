@@ -164,7 +164,7 @@ int main(int argc, char** argv) {
       app.add_option("--relief-scale", relief_scale, "with --relief: pixels per DEM sample along each axis (1..64)")
           ->capture_default_str()
           ->transform(cli::wholeInRange(1, kMaxReliefScale));
-  app.add_option("--nodata", nodata_text, "elevation: the no-data value (overrides the file's; 'nan' allowed)");
+  app.add_option("--nodata", nodata_text, "elevation: the no-data value (overrides the file's; 'nan' for float DEMs)");
   app.add_option("--vertical-units", units_text, "elevation: metre, foot or us-foot (overrides the file's)");
   app.add_option("--tile-size", tile_px, "tile edge in pixels (power of two, 16..4096)")
       ->transform(cli::wholeInRange(kMinTilePx, kMaxTilePx));
