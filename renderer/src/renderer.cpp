@@ -154,10 +154,18 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   GLint max_size = 0, max_layers = 0;
   glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
-  if (slots_px > uint64_t(max_size) || config.pyramid_level + 1 > uint32_t(max_layers))
+  // The stack is slots x tile_px texels a side, a layer per stack level;
+  // paged, only the indirection maps are as wide (a texel per slot, a
+  // layer per level) and the pool is checked when it is created.
+  const uint64_t widest = r->paged() ? r->m_slots : slots_px;
+  const uint32_t map_layers = r->paged() ? geometry.levelCount() : config.pyramid_level + 1;
+  if (widest > uint64_t(max_size) || map_layers > uint32_t(max_layers))
     return Status::error(ErrorCode::kUnavailable,
-                         "renderer: clip of " + std::to_string(slots_px) +
-                             " px exceeds GL_MAX_TEXTURE_SIZE " + std::to_string(max_size));
+                         std::string(r->paged() ? "renderer: indirection maps of " : "renderer: clip of ") +
+                             std::to_string(widest) + (r->paged() ? " slots" : " px") +
+                             " exceed GL_MAX_TEXTURE_SIZE " + std::to_string(max_size) + " or " +
+                             std::to_string(map_layers) + " layers GL_MAX_ARRAY_TEXTURE_LAYERS " +
+                             std::to_string(max_layers));
   // Mips: enough for the pyramid layer's chain, at least 2 (level L + 1),
   // and only while each mip halves exactly (REPEAT must wrap at the same
   // ground distance on every mip).

@@ -119,6 +119,36 @@ TEST(ClipmapRender, AStackTheDriverCannotAllocateIsAnError) {
   EXPECT_GE(psnrLogged("after a refused stack", gpu, reference(*ok.source, ok.source, cam)), kMatchDb);
 }
 
+// The paged mode's pool likewise: pages of tiles as wide as the driver's
+// largest texture make a layer (2 x 2 pages) no driver creates. The error
+// names the pool and its size; the context still works.
+TEST(ClipmapRender, APoolTheDriverCannotAllocateIsAnError) {
+  CLIPSTREAM_REQUIRE_GL();
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  const uint32_t tile = uint32_t(max_size);
+  std::shared_ptr<TileSource> one = makeProceduralSource({tile, tile, tile, 1});
+  RendererConfig config{1, 0, Buffering::kStaged, one->content()};
+  config.texture_memory = TextureMemory::kPaged;
+  config.pool_bytes = uint64_t(1) << 40;
+  std::unique_ptr<ClipmapRenderer> renderer;
+  const Status s = ClipmapRenderer::create(one->geometry(), config, &renderer);
+  ASSERT_FALSE(s.ok()) << "a pool of " << tile << "-px pages was allocated";
+  std::printf("  %s\n", s.message.c_str());
+  EXPECT_FALSE(renderer);
+  EXPECT_TRUE(s.code == ErrorCode::kOutOfMemory || s.code == ErrorCode::kUnavailable) << s.toString();
+  EXPECT_NE(s.message.find("the page pool ("), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find(" MiB of RGBA8)"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("--pool-mb"), std::string::npos) << s.message;
+
+  const Camera cam = test::obliqueCamera();
+  Scene ok = makeScene(patternSource(), cam);
+  ASSERT_TRUE(ok.renderer);
+  test::loadPlan(*ok.renderer, *ok.source, ok.plan);
+  const auto gpu = test::renderFrame(*ok.renderer, *ok.target, cam);
+  EXPECT_GE(psnrLogged("after a refused pool", gpu, reference(*ok.source, ok.source, cam)), kMatchDb);
+}
+
 TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
   CLIPSTREAM_REQUIRE_GL();
   const Camera cam = test::obliqueCamera();
