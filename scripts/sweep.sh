@@ -6,6 +6,7 @@
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #   SWEEP_ASAN=0 bash scripts/sweep.sh --quick  # without the soak under ASan (its row says "not run")
 #   SWEEP_TERRAIN=0 bash scripts/sweep.sh       # without the terrain methods (scripts/sweep_terrain.sh, ~25 min)
+#   SWEEP_PAGED=0 bash scripts/sweep.sh         # without stack against paged at four viewports (scripts/sweep_paged.sh, ~30 min)
 #
 # Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
 # once, runs every experiment with clipstream-fly --reference (each frame's
@@ -186,6 +187,10 @@ i=0
 (( CHARTS_ONLY )) && RUN_LIST=() || RUN_LIST=("${RUNS[@]}")
 for r in "${RUN_LIST[@]+"${RUN_LIST[@]}"}"; do
   IFS='|' read -r name w args <<<"$r"
+  # The stack unless a run says otherwise: clipstream-fly's own default
+  # (auto) would page the flat plane, and the stack is what these rows
+  # have always measured.
+  [[ $args == *--texture-memory* ]] || args="$args --texture-memory stack"
   progress "$i" "$name"
   rm -rf "${WORK:?}/$name"
   # shellcheck disable=SC2086
@@ -586,4 +591,10 @@ echo "sweep: wrote $DATA/*.csv, $CHARTS/*.png and the sweep section of $BM in $(
 # The terrain methods side by side (docs/terrain.md); SWEEP_TERRAIN=0 skips them.
 if [[ ${SWEEP_TERRAIN:-1} != 0 ]] && (( ! CHARTS_ONLY )); then
   if (( QUICK )); then bash scripts/sweep_terrain.sh --quick; else bash scripts/sweep_terrain.sh; fi
+fi
+
+# Texture memory side by side at four viewports, and the pool's size
+# (docs/renderer.md, "Paged texture memory"); SWEEP_PAGED=0 skips it.
+if [[ ${SWEEP_PAGED:-1} != 0 ]] && (( ! CHARTS_ONLY )); then
+  if (( QUICK )); then bash scripts/sweep_paged.sh --quick; else bash scripts/sweep_paged.sh; fi
 fi

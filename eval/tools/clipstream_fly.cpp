@@ -48,10 +48,11 @@ int main(int argc, char** argv) {
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
   app.add_option("--buffering", buffering, "single, double-upload, double-copy or staged");
-  std::string texture_memory = textureMemoryName(o.texture_memory);
+  std::string texture_memory = "auto";
   app.add_option("--texture-memory", texture_memory,
-                 "Where colour tiles live on the GPU: stack (every level's whole window) or paged (a "
-                 "fixed pool of pages holding the tiles the frames sample; docs/renderer.md)");
+                 "Where colour tiles live on the GPU: stack (every level's whole window), paged (a "
+                 "fixed pool of pages holding the tiles the frames sample; docs/renderer.md), or auto: "
+                 "paged, but stack with --elevation or double buffering, which paged does not draw yet");
   app.add_option("--pool-mb", o.pool_mb,
                  "The page pool's size with --texture-memory paged (default: 5.5 pages of 128^2 per 128^2 "
                  "of the viewport, 59 MiB of RGBA8 at 1920x1080)")
@@ -158,7 +159,10 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
-  if (s) s = textureMemoryFromName(texture_memory, &o.texture_memory);
+  if (s && texture_memory == "auto")
+    o.texture_memory = automaticTextureMemory(!o.elevation_path.empty(), o.buffering);
+  else if (s)
+    s = textureMemoryFromName(texture_memory, &o.texture_memory);
   if (s && app.count("--pool-mb") && o.texture_memory != TextureMemory::kPaged)
     s = Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
   if (s) s = colourTileContentFromName(tile_format, &o.tile_format);

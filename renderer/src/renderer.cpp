@@ -69,6 +69,11 @@ Status textureMemoryFromName(const std::string& name, TextureMemory* out) {
   return okStatus();
 }
 
+TextureMemory automaticTextureMemory(bool terrain, Buffering buffering) {
+  const bool doubled = buffering == Buffering::kDoubleUploadTwice || buffering == Buffering::kDoubleCopy;
+  return terrain || doubled ? TextureMemory::kStack : TextureMemory::kPaged;
+}
+
 PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {
   if (memory == TextureMemory::kPaged && planner.pyramid_tiles == 0)
     planner.pyramid_tiles = renderer_config::kPagedPyramidTiles;

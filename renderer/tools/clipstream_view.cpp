@@ -196,10 +196,11 @@ int main(int argc, char** argv) {
   std::string tile_format = "rgba8";
   app.add_option("--tile-format", tile_format,
                  "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
-  std::string texture_memory = textureMemoryName(TextureMemory::kStack);
+  std::string texture_memory = "auto";
   app.add_option("--texture-memory", texture_memory,
-                 "Where colour tiles live on the GPU: stack (every level's whole window) or paged (a "
-                 "fixed pool of pages holding the tiles the frames sample)");
+                 "Where colour tiles live on the GPU: stack (every level's whole window), paged (a "
+                 "fixed pool of pages holding the tiles the frames sample), or auto: paged, but stack "
+                 "with --elevation, which paged does not draw yet");
   uint64_t pool_mb = 0;
   app.add_option("--pool-mb", pool_mb,
                  "The page pool's size with --texture-memory paged (default: 5.5 pages of 128^2 per 128^2 "
@@ -236,8 +237,9 @@ int main(int argc, char** argv) {
   TileContent tile_content = TileContent::kRgba8;
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
-  TextureMemory memory = TextureMemory::kStack;
-  if (Status s = textureMemoryFromName(texture_memory, &memory); !s) return cli::usageError(app, s.message);
+  TextureMemory memory = automaticTextureMemory(!elevation_path.empty(), kDefaultBuffering);
+  if (texture_memory != "auto")
+    if (Status s = textureMemoryFromName(texture_memory, &memory); !s) return cli::usageError(app, s.message);
   if (app.count("--pool-mb") && memory != TextureMemory::kPaged)
     return cli::usageError(app, "--pool-mb sizes the pool of --texture-memory paged");
   if (!store_path.empty() && procedural_px > 0)

@@ -360,7 +360,8 @@ TEST(ClipstreamFlyMemory, ReportsTheTileFormatAndTheStacksBytes) {
   auto run = [&](const std::string& args) {
     fs::remove_all(dir);
     const std::string cmd = std::string(CLIPSTREAM_FLY_EXE) + " --procedural 1048576 --path orbit --frames 3"
-                            " --size 192x108 --io-threads 2 " + args + " --out " + dir.string() + " > /dev/null 2>&1";
+                            " --size 192x108 --io-threads 2 --texture-memory stack " + args + " --out " +
+                            dir.string() + " > /dev/null 2>&1";
     EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
     std::ifstream in(dir / "frames.json");
     std::stringstream ss;

@@ -5,6 +5,7 @@
 #include "test_helpers.h"
 
 #include <clipstream/eval/frame_writer.h>
+#include <clipstream/renderer/renderer.h>
 
 #include <gtest/gtest.h>
 
@@ -205,6 +206,32 @@ TEST(FlyHardening, AnEarlierRunsFilesAreRemovedAndOthersKept) {
   notes >> text;
   EXPECT_EQ(text, "mine");
   expectOnlyWholeFiles(out, 160, 90);
+}
+
+// --texture-memory auto (the default) pages the flat plane, so a screen the
+// stack cannot be allocated for still flies; it keeps the stack with double
+// buffering, which the pool does not do (and with terrain:
+// automaticTextureMemory()). A choice given is taken as given.
+TEST(FlyHardening, TheDefaultTextureMemoryIsPagedWhereThePoolDrawsIt) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_auto");
+  auto mode = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = {"--procedural", "65536", "--frames", "2", "--size", "160x90",
+                                     "--save-frames", "0", "--out", dir.file("out")};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const FlyRun run = runFly(args, dir.file("log"));
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    const size_t at = run.output.find("texture_memory\t");
+    return at == std::string::npos ? std::string("(none)") : run.output.substr(at + 15, 5);
+  };
+  EXPECT_EQ(mode({}), "paged");
+  EXPECT_EQ(mode({"--pool-mb", "8"}), "paged");
+  EXPECT_EQ(mode({"--buffering", "double-upload"}), "stack");
+  EXPECT_EQ(mode({"--texture-memory", "stack"}), "stack");
+  EXPECT_EQ(mode({"--texture-memory", "auto", "--buffering", "single"}), "paged");
+  EXPECT_TRUE(automaticTextureMemory(true, Buffering::kStaged) == TextureMemory::kStack);
+  EXPECT_TRUE(automaticTextureMemory(false, Buffering::kDoubleCopy) == TextureMemory::kStack);
+  EXPECT_TRUE(automaticTextureMemory(false, Buffering::kStaged) == TextureMemory::kPaged);
 }
 
 // Bug 8: SIGHUP was not handled. Every signal that ends a run removes the

@@ -61,6 +61,12 @@ enum class TextureMemory {
 const char* textureMemoryName(TextureMemory memory);
 // "stack" or "paged"; kInvalidArgument naming the choices otherwise.
 Status textureMemoryFromName(const std::string& name, TextureMemory* out);
+// The mode a program takes when the user does not choose (--texture-memory
+// auto, the default of clipstream-fly and clipstream-view): kPaged, whose
+// memory follows the screen, unless the frames draw terrain or double-
+// buffer the stack, which kPaged does not do yet; then kStack
+// (docs/decisions.md, "Paged texture memory").
+TextureMemory automaticTextureMemory(bool terrain, Buffering buffering);
 
 // The planner settings `memory` needs: kPaged pins the pyramid in its pool,
 // so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to
