@@ -159,12 +159,17 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
-  if (s && texture_memory == "auto")
+  const bool automatic = texture_memory == "auto";
+  if (s && automatic)
     o.texture_memory = automaticTextureMemory(!o.elevation_path.empty(), o.buffering);
-  else if (s)
-    s = textureMemoryFromName(texture_memory, &o.texture_memory);
+  else if (s && !textureMemoryFromName(texture_memory, &o.texture_memory))
+    s = Status::error(ErrorCode::kInvalidArgument,
+                      "--texture-memory " + texture_memory + " is not one of: auto, stack, paged");
   if (s && app.count("--pool-mb") && o.texture_memory != TextureMemory::kPaged)
-    s = Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
+    s = Status::error(ErrorCode::kInvalidArgument,
+                      automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool does not "
+                                  "draw --elevation or double buffering yet)"
+                                : "--pool-mb sizes the pool of --texture-memory paged");
   if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
   if (s && !reference_tile_format.empty()) {
     TileContent reference = TileContent::kRgba8;

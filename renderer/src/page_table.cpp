@@ -30,9 +30,11 @@ uint32_t PageTable::allocate(const TileKey& key, uint64_t frame, bool pin, TileK
     // scan: a pool has at most a few thousand pages and a frame allocates
     // a few dozen.
     uint64_t oldest = frame;
+    // A page holding nothing here is a reserved one (the free ones are in
+    // the free list, which is empty): only allocateAt() gives it.
     for (uint32_t p = cls; p < m_pages.size(); p += m_classes) {
       const Page& c = m_pages[p];
-      if (!c.pinned && c.last_used < oldest) {
+      if (c.holds && !c.pinned && c.last_used < oldest) {
         oldest = c.last_used;
         page = p;
       }

@@ -61,22 +61,27 @@ Status ClipmapRenderer::createPaged() {
                              " tiles a side (PlannerConfig::pyramid_tiles; plannerFor() sets it)");
   // Page 0 stays black (slots with no page point there), the pyramid level
   // takes the layers after it at fixed places (pyramidPage()), and the
-  // coarser levels are pinned where they land: the pool must hold them all
-  // and leave pages for the stack levels.
+  // coarser levels are pinned where they land. A tile only takes a page of
+  // its parity class (a quarter of the pool), so every class must keep a
+  // page for the stack levels after its share of those.
   m_pyramid_layers_x = (top.tiles_x + 1) / 2;
-  const uint32_t reserved_end = pyramidPage(0, 0) + 4 * m_pyramid_layers_x * ((top.tiles_y + 1) / 2);
-  uint64_t pyramid_tiles = reserved_end;
+  const uint32_t pyramid_layers = m_pyramid_layers_x * ((top.tiles_y + 1) / 2);
+  const uint32_t reserved_end = pyramidPage(0, 0) + 4 * pyramid_layers;
+  uint64_t taken[4] = {1 + uint64_t(pyramid_layers), pyramid_layers, pyramid_layers, pyramid_layers};
   for (uint32_t l = m_config.pyramid_level + 1; l < levels; ++l)
-    pyramid_tiles += uint64_t(m_geometry.levels[l].tiles_x) * m_geometry.levels[l].tiles_y;
-  if (pages < pyramid_tiles + 1) {
+    for (uint32_t y = 0; y < m_geometry.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < m_geometry.levels[l].tiles_x; ++x) ++taken[(x & 1) + 2 * (y & 1)];
+  const uint64_t most_taken = *std::max_element(taken, taken + 4);
+  if (pages / 4 < most_taken + 1) {
     char size[32];
     std::snprintf(size, sizeof size, "%.2f MiB", double(pool_bytes) / (1 << 20));
     return Status::error(ErrorCode::kInvalidArgument,
-                         "renderer: a pool of " + std::string(size) + " holds " +
-                             std::to_string(pages) + " pages of " + std::to_string(m_page_px) +
+                         "renderer: a pool of " + std::string(size) + " holds " + std::to_string(pages) +
+                             " pages of " + std::to_string(m_page_px) +
                              " px (at most 4 x GL_MAX_ARRAY_TEXTURE_LAYERS " + std::to_string(max_layers) +
-                             "); the black page and the pyramid take " + std::to_string(pyramid_tiles) +
-                             ": give a larger pool");
+                             "), a quarter of them for each tile parity; the black page and the pinned "
+                             "pyramid take " +
+                             std::to_string(most_taken) + " of one quarter and leave none: give a larger pool");
   }
 
   gl_util::clearErrors();

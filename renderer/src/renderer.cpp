@@ -167,8 +167,8 @@ Status ClipmapRenderer::create(const PyramidGeometry& geometry, const RendererCo
   if (widest > uint64_t(max_size) || map_layers > uint32_t(max_layers))
     return Status::error(ErrorCode::kUnavailable,
                          std::string(r->paged() ? "renderer: indirection maps of " : "renderer: clip of ") +
-                             std::to_string(widest) + (r->paged() ? " slots" : " px") +
-                             " exceed GL_MAX_TEXTURE_SIZE " + std::to_string(max_size) + " or " +
+                             std::to_string(widest) + (r->paged() ? " slots exceed" : " px exceeds") +
+                             " GL_MAX_TEXTURE_SIZE " + std::to_string(max_size) + " or " +
                              std::to_string(map_layers) + " layers GL_MAX_ARRAY_TEXTURE_LAYERS " +
                              std::to_string(max_layers));
   // Mips: enough for the pyramid layer's chain, at least 2 (level L + 1),

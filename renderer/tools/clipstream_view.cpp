@@ -238,10 +238,13 @@ int main(int argc, char** argv) {
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
   TextureMemory memory = automaticTextureMemory(!elevation_path.empty(), kDefaultBuffering);
-  if (texture_memory != "auto")
-    if (Status s = textureMemoryFromName(texture_memory, &memory); !s) return cli::usageError(app, s.message);
+  const bool automatic = texture_memory == "auto";
+  if (!automatic && !textureMemoryFromName(texture_memory, &memory))
+    return cli::usageError(app, "--texture-memory " + texture_memory + " is not one of: auto, stack, paged");
   if (app.count("--pool-mb") && memory != TextureMemory::kPaged)
-    return cli::usageError(app, "--pool-mb sizes the pool of --texture-memory paged");
+    return cli::usageError(app, automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool "
+                                            "does not draw --elevation yet)"
+                                          : "--pool-mb sizes the pool of --texture-memory paged");
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {

@@ -210,9 +210,16 @@ TEST(PageTable, ReservedPagesAreGivenOnlyAtTheirPlaceAndStayPinned) {
   t.reserve(4, 8);
   // Free pages never come from the reserved range, whatever the class.
   std::set<uint32_t> given;
-  for (uint32_t i = 0; i < 8; ++i) given.insert(t.allocate(TileKey{0, i & 1, i >> 1 & 1}, 1, false));
+  for (uint32_t i = 0; i < 8; ++i) given.insert(t.allocate(TileKey{0, i & 1, (i >> 1 & 1) + 2 * (i >> 2)}, 1, false));
   for (uint32_t p : given) EXPECT_TRUE(p < 4 || p >= 8) << p;
   EXPECT_EQ(given.size(), 8u);
+  // Nor does eviction take one, though the reserved pages hold nothing.
+  for (uint32_t i = 0; i < 8; ++i) {
+    const uint32_t p = t.allocate(TileKey{2, i & 1, 10 + i}, 2 + i, false);
+    EXPECT_TRUE(p < 4 || p >= 8) << p;
+  }
+  EXPECT_EQ(t.used(), 8u);
+  EXPECT_EQ(t.find(TileKey{0, 0, 0}), PageTable::kNoPage);  // evicted, by its own page
   // A reserved page takes only a tile of its class, once.
   EXPECT_EQ(t.allocateAt(5, TileKey{3, 0, 0}, 2), PageTable::kNoPage);  // class 0, page class 1
   EXPECT_EQ(t.allocateAt(5, TileKey{3, 1, 0}, 2), 5u);
@@ -221,11 +228,20 @@ TEST(PageTable, ReservedPagesAreGivenOnlyAtTheirPlaceAndStayPinned) {
   EXPECT_EQ(t.allocateAt(12, TileKey{3, 0, 0}, 2), PageTable::kNoPage);  // past the pool
   EXPECT_EQ(t.find(TileKey{3, 1, 0}), 5u);
   EXPECT_EQ(t.pinned(), 1u);
-  // Eviction and clearUnpinned() leave it alone; the unreserved pages turn over.
-  for (uint32_t i = 0; i < 8; ++i) EXPECT_NE(t.allocate(TileKey{1, i & 1, 4 + i}, 10 + i, false), 5u);
+  // Eviction and clearUnpinned() leave the reserved pages alone, held or
+  // not; the unreserved pages turn over.
+  for (uint32_t i = 0; i < 8; ++i) {
+    const uint32_t p = t.allocate(TileKey{1, i & 1, 40 + i}, 20 + i, false);
+    EXPECT_TRUE(p < 4 || p >= 8) << p;
+  }
+  EXPECT_EQ(t.used(), 9u);
   t.clearUnpinned();
   EXPECT_EQ(t.find(TileKey{3, 1, 0}), 5u);
   EXPECT_EQ(t.used(), 1u);
+  for (uint32_t i = 0; i < 8; ++i) {
+    const uint32_t p = t.allocate(TileKey{1, i & 1, 60 + i}, 40 + i, false);
+    EXPECT_TRUE(p < 4 || p >= 8) << p;
+  }
 }
 
 }  // namespace

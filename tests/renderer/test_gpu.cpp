@@ -149,6 +149,32 @@ TEST(ClipmapRender, APoolTheDriverCannotAllocateIsAnError) {
   EXPECT_GE(psnrLogged("after a refused pool", gpu, reference(*ok.source, ok.source, cam)), kMatchDb);
 }
 
+// A pool too small for the pinned pyramid and one page of each parity
+// class more is refused up front, naming what takes the pages.
+TEST(ClipmapRender, APoolThePyramidFillsIsRefused) {
+  CLIPSTREAM_REQUIRE_GL();
+  std::shared_ptr<TileSource> big = makeProceduralSource({uint64_t(1) << 20, uint64_t(1) << 20, 128, 1});
+  uint32_t pyramid = 0;
+  while (big->geometry().levels[pyramid].tiles_x > 4) ++pyramid;
+  RendererConfig config{16, pyramid, Buffering::kStaged, big->content()};
+  config.texture_memory = TextureMemory::kPaged;
+  // 4 x 4 tiles at the pyramid level: 4 layers after the black page's, and
+  // 2 x 2 + 1 coarser: 7 pages of class 0 pinned, so 8 a class are needed.
+  const uint64_t page = pageBytes(128, big->content());
+  for (uint64_t pages : {28u, 32u}) {
+    config.pool_bytes = pages * page;
+    std::unique_ptr<ClipmapRenderer> renderer;
+    const Status s = ClipmapRenderer::create(big->geometry(), config, &renderer);
+    if (pages == 28) {
+      EXPECT_EQ(s.code, ErrorCode::kInvalidArgument) << s.toString();
+      EXPECT_NE(s.message.find("take 7 of one quarter and leave none: give a larger pool"), std::string::npos)
+          << s.message;
+    } else {
+      EXPECT_TRUE(s.ok()) << s.toString();
+    }
+  }
+}
+
 TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
   CLIPSTREAM_REQUIRE_GL();
   const Camera cam = test::obliqueCamera();
