@@ -6,7 +6,7 @@
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #   SWEEP_ASAN=0 bash scripts/sweep.sh --quick  # without the soak under ASan (its row says "not run")
 #   SWEEP_TERRAIN=0 bash scripts/sweep.sh       # without the terrain methods (scripts/sweep_terrain.sh, ~25 min)
-#   SWEEP_PAGED=0 bash scripts/sweep.sh         # without stack against paged at four viewports (scripts/sweep_paged.sh, ~30 min)
+#   SWEEP_PAGED=0 bash scripts/sweep.sh         # without stack against paged at four viewports (scripts/sweep_paged.sh, ~40 min)
 #
 # Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
 # once, runs every experiment with clipstream-fly --reference (each frame's

@@ -122,8 +122,10 @@ trap 'rm -rf "$corpus"' EXIT
 for entry in "${fuzzers[@]}"; do
   name=${entry%%:*} seconds=${entry##*:}
   mkdir "$corpus/$name"
-  CLIPSTREAM_FUZZ_SEEDS="$corpus/$name" "build-fuzz/tests/fuzz/${name}_fuzz" -runs=0 "$corpus/$name" >/dev/null 2>&1
-  UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
+  # TMPDIR: the drivers' scratch files (tests/fuzz/fuzz_util.h) go with the corpus.
+  TMPDIR="$corpus" CLIPSTREAM_FUZZ_SEEDS="$corpus/$name" "build-fuzz/tests/fuzz/${name}_fuzz" -runs=0 "$corpus/$name" \
+    >/dev/null 2>&1
+  TMPDIR="$corpus" UBSAN_OPTIONS="halt_on_error=1 print_stacktrace=1" \
     "build-fuzz/tests/fuzz/${name}_fuzz" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -seed=1 \
     -artifact_prefix="$corpus/" -print_final_stats=1 "$corpus/$name" >"$corpus/$name.log" 2>&1 ||
     { tail -n 40 "$corpus/$name.log"; echo "fuzzing $name: a crash, hang, leak or sanitizer report (above)"; exit 1; }
