@@ -45,6 +45,10 @@ uint32_t PageTable::allocate(const TileKey& key, uint64_t frame, bool pin, TileK
     if (evicted != nullptr) *evicted = victim.key;
     if (had_evicted != nullptr) *had_evicted = true;
   }
+  return take(page, key, frame, pin);
+}
+
+uint32_t PageTable::take(uint32_t page, const TileKey& key, uint64_t frame, bool pin) {
   Page& p = m_pages[page];
   p = Page{};
   p.key = key;
@@ -71,15 +75,7 @@ uint32_t PageTable::allocateAt(uint32_t page, const TileKey& key, uint64_t frame
   if (page >= pages() || m_reserved.empty() || !m_reserved[page] || m_pages[page].holds ||
       page % m_classes != classOf(key) || find(key) != kNoPage)
     return kNoPage;
-  Page& p = m_pages[page];
-  p = Page{};
-  p.key = key;
-  p.holds = true;
-  p.pinned = true;
-  p.last_used = frame;
-  ++m_pinned;
-  m_by_key[pack(key)] = page;
-  return page;
+  return take(page, key, frame, true);
 }
 
 void PageTable::clearUnpinned() {

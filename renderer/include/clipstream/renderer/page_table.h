@@ -94,6 +94,9 @@ class PageTable {
   }
 
  private:
+  // Gives `page` (holding nothing, off the free lists) to `key`.
+  uint32_t take(uint32_t page, const TileKey& key, uint64_t frame, bool pin);
+
   struct Page {
     TileKey key;
     bool holds = false;
