@@ -160,11 +160,7 @@ int main(int argc, char** argv) {
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
   const bool automatic = texture_memory == "auto";
-  if (s && automatic)
-    o.texture_memory = automaticTextureMemory(!o.elevation_path.empty(), o.buffering);
-  else if (s && !textureMemoryFromName(texture_memory, &o.texture_memory))
-    s = Status::error(ErrorCode::kInvalidArgument,
-                      "--texture-memory " + texture_memory + " is not one of: auto, stack, paged");
+  if (s) s = textureMemoryFromChoice(texture_memory, !o.elevation_path.empty(), o.buffering, &o.texture_memory);
   if (s && app.count("--pool-mb") && o.texture_memory != TextureMemory::kPaged)
     s = Status::error(ErrorCode::kInvalidArgument,
                       automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool does not "

@@ -74,6 +74,16 @@ TextureMemory automaticTextureMemory(bool terrain, Buffering buffering) {
   return terrain || doubled ? TextureMemory::kStack : TextureMemory::kPaged;
 }
 
+Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, TextureMemory* out) {
+  if (name == "auto") {
+    *out = automaticTextureMemory(terrain, buffering);
+    return okStatus();
+  }
+  if (textureMemoryFromName(name, out)) return okStatus();
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "--texture-memory " + name + " is not one of: auto, stack, paged");
+}
+
 PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {
   if (memory == TextureMemory::kPaged && planner.pyramid_tiles == 0)
     planner.pyramid_tiles = renderer_config::kPagedPyramidTiles;

@@ -237,10 +237,10 @@ int main(int argc, char** argv) {
   TileContent tile_content = TileContent::kRgba8;
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
-  TextureMemory memory = automaticTextureMemory(!elevation_path.empty(), kDefaultBuffering);
+  TextureMemory memory = TextureMemory::kStack;
   const bool automatic = texture_memory == "auto";
-  if (!automatic && !textureMemoryFromName(texture_memory, &memory))
-    return cli::usageError(app, "--texture-memory " + texture_memory + " is not one of: auto, stack, paged");
+  if (Status s = textureMemoryFromChoice(texture_memory, !elevation_path.empty(), kDefaultBuffering, &memory); !s)
+    return cli::usageError(app, s.message);
   if (app.count("--pool-mb") && memory != TextureMemory::kPaged)
     return cli::usageError(app, automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool "
                                             "does not draw --elevation yet)"

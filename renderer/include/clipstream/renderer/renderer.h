@@ -67,6 +67,10 @@ Status textureMemoryFromName(const std::string& name, TextureMemory* out);
 // buffer the stack, which kPaged does not do yet; then kStack
 // (docs/decisions.md, "Paged texture memory").
 TextureMemory automaticTextureMemory(bool terrain, Buffering buffering);
+// A program's --texture-memory: "auto" (automaticTextureMemory() of the
+// frames' terrain and buffering), "stack" or "paged"; kInvalidArgument
+// naming the three otherwise.
+Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, TextureMemory* out);
 
 // The planner settings `memory` needs: kPaged pins the pyramid in its pool,
 // so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to
