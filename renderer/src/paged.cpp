@@ -213,6 +213,7 @@ uint32_t ClipmapRenderer::placePage(const TileKey& key, const uint8_t* pixels, b
   writePage(page, pixels);
   fillBorders(page, key);
   ++m_stats.pages_filled;
+  m_pages_changed = true;
   return page;
 }
 
@@ -269,6 +270,27 @@ uint32_t ClipmapRenderer::fillMissingPyramidPages() {
   return filled;
 }
 
+void ClipmapRenderer::indexPages() {
+  // Every page's tile at its slot: a stack level's window tile at its
+  // toroidal slot (one tile of a window per slot), a pyramid level's tile
+  // at x + y * c. Pages of tiles outside their window are left out.
+  const uint32_t c = m_slots, pyramid = m_config.pyramid_level;
+  m_slot_pages.assign(size_t(c) * c * m_geometry.levelCount(), 0);
+  for (uint32_t page = 1; page < m_pages->pages(); ++page) {
+    if (!m_pages->holds(page)) continue;
+    const TileKey& k = m_pages->key(page);
+    if (k.level < pyramid && !m_page_windows[k.level].contains(k.x, k.y)) continue;
+    m_slot_pages[slotIndex(k.level, k.x, k.y)] = page;
+  }
+}
+
+uint32_t ClipmapRenderer::pageOf(uint32_t level, int64_t x, int64_t y) const {
+  if (level < m_config.pyramid_level && !m_page_windows[level].contains(x, y))
+    return m_pages->find(TileKey{level, uint32_t(x), uint32_t(y)});
+  const uint32_t page = m_slot_pages[slotIndex(level, x, y)];
+  return page != 0 && m_pages->key(page) == TileKey{level, uint32_t(x), uint32_t(y)} ? page : PageTable::kNoPage;
+}
+
 void ClipmapRenderer::endUploadsPaged(uint32_t target) {
   ++m_frame;
   const uint32_t pyramid = m_config.pyramid_level;
@@ -291,6 +313,15 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
     if (k.level < pyramid && !resident(k)) it = m_page_pixels.erase(it);
     else ++it;
   }
+  // Where each page's tile sits this frame (the windows move): the lookups
+  // below are array reads, not hash finds over every window slot.
+  std::vector<TileRect> windows(pyramid);
+  for (uint32_t l = 0; l < pyramid; ++l)
+    if (by_level[l] != nullptr) windows[l] = by_level[l]->window;
+  if (windows != m_page_windows || m_pages_changed) {
+    m_page_windows = std::move(windows);
+    indexPages();
+  }
 
   // The tiles the frame reads, coarse levels first (every finer tile needs
   // its ancestors), near the window's centre first within a level (the
@@ -312,13 +343,13 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
     for (int64_t y = w.y0; y < w.y1; ++y)
       for (int64_t x = w.x0; x < w.x1; ++x, ++i) {
         if (!r->resident[i] || (any_unread && r->unread[i])) continue;
-        const TileKey key{l, uint32_t(x), uint32_t(y)};
-        const uint32_t page = m_pages->find(key);
+        const uint32_t page = pageOf(l, x, y);
         if (page != PageTable::kNoPage) {
           m_pages->use(page, m_frame);
           ++m_stats.pages_wanted;
           continue;
         }
+        const TileKey key{l, uint32_t(x), uint32_t(y)};
         if (m_page_pixels.count(PageTable::pack(key)) == 0) continue;
         wants.push_back({std::hypot(x + 0.5 - cx, y + 0.5 - cy), key});
       }
@@ -331,62 +362,102 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
     if (placePage(want.key, pixels->data(), false) == PageTable::kNoPage) ++m_stats.pages_short;
   }
 
-  // Mip 1 of every page: the parent's texels over it, copied again when
-  // the parent's page has borders it did not have at the last copy.
-  const uint32_t tp = m_geometry.tile_px, b = m_page_border;
-  for (uint32_t page = 1; page < m_pages->pages(); ++page) {
-    if (!m_pages->holds(page)) continue;
-    const TileKey& k = m_pages->key(page);
-    if (k.level + 1 >= levels) continue;
-    const uint32_t parent = m_pages->find(TileKey{k.level + 1, k.x / 2, k.y / 2});
-    if (parent == PageTable::kNoPage) continue;
-    const uint16_t from = m_pages->mip1From(page), has = m_pages->borders(parent);
-    if (from != PageTable::kMip1Empty && (has & ~from) == 0) continue;
-    copyPageRegion(parent, 0, b + (k.x & 1) * (tp / 2) - b / 2, b + (k.y & 1) * (tp / 2) - b / 2, page, 1, 0, 0,
-                   tp / 2 + b, tp / 2 + b);
-    m_pages->setMip1From(page, has);
+  // Only a page placed (this frame's, or a pyramid tile's since the last
+  // frame) changes what follows from the pages: their slots, borders,
+  // mip 1 and the maps' page numbers.
+  if (m_pages_changed) {
+    indexPages();
+    // Mip 1 of every page: the parent's texels over it, copied again when
+    // the parent's page has borders it did not have at the last copy.
+    const uint32_t tp = m_geometry.tile_px, b = m_page_border;
+    for (uint32_t page = 1; page < m_pages->pages(); ++page) {
+      if (!m_pages->holds(page)) continue;
+      const uint16_t from = m_pages->mip1From(page);
+      if (from == kAllBorders) continue;  // the parent has nothing more to give
+      const TileKey& k = m_pages->key(page);
+      if (k.level + 1 >= levels) continue;
+      const uint32_t parent = pageOf(k.level + 1, k.x / 2, k.y / 2);
+      if (parent == PageTable::kNoPage) continue;
+      const uint16_t has = m_pages->borders(parent);
+      if (from != PageTable::kMip1Empty && (has & ~from) == 0) continue;
+      copyPageRegion(parent, 0, b + (k.x & 1) * (tp / 2) - b / 2, b + (k.y & 1) * (tp / 2) - b / 2, page, 1, 0, 0,
+                     tp / 2 + b, tp / 2 + b);
+      m_pages->setMip1From(page, has);
+    }
   }
 
-  // The usable map over what has a page.
+  // The usable map over what has a page, computed again only when that
+  // changed (the windows, residency or pages).
+  const auto usable_start = std::chrono::steady_clock::now();
   std::vector<LevelResidency> paged;
   paged.reserve(m_residency.size());
   for (const LevelResidency& r : m_residency) {
     if (r.level >= pyramid || by_level[r.level] != &r) continue;
-    LevelResidency p = r;
+    LevelResidency p;
+    p.level = r.level;
+    p.window = r.window;
+    p.unread = r.unread;
+    p.resident.resize(r.resident.size());
+    // The index holds exactly the window's tiles with a page.
+    const uint32_t* slots = m_slot_pages.data() + size_t(r.level) * c * c;
     size_t i = 0;
-    for (int64_t y = r.window.y0; y < r.window.y1; ++y)
-      for (int64_t x = r.window.x0; x < r.window.x1; ++x, ++i)
-        p.resident[i] = m_pages->find(TileKey{r.level, uint32_t(x), uint32_t(y)}) != PageTable::kNoPage;
+    for (int64_t y = r.window.y0; y < r.window.y1; ++y) {
+      const uint32_t* row = slots + size_t(toroidalSlot(y, c)) * c;
+      for (int64_t x = r.window.x0; x < r.window.x1; ++x, ++i) p.resident[i] = row[toroidalSlot(x, c)] != 0;
+    }
     paged.push_back(std::move(p));
   }
-  const auto usable_start = std::chrono::steady_clock::now();
-  UsableMap map = computeUsableMap(m_geometry, c, pyramid, paged);
+  const bool same_input = !m_paged_input_valid || paged.size() != m_paged_input.size()
+                              ? false
+                              : std::equal(paged.begin(), paged.end(), m_paged_input.begin(),
+                                           [](const LevelResidency& a, const LevelResidency& b) {
+                                             return a.level == b.level && a.window == b.window &&
+                                                    a.resident == b.resident && a.unread == b.unread;
+                                           });
+  if (!same_input) {
+    UsableMap map = computeUsableMap(m_geometry, c, pyramid, paged);
+    if (m_pages_changed || map.windows != m_front_map.windows || map.finest != m_front_map.finest) ++m_map_generation;
+    m_front_map = std::move(map);
+    m_paged_input = std::move(paged);
+    m_paged_input_valid = true;
+  } else if (m_pages_changed) {
+    ++m_map_generation;
+  }
+  m_pages_changed = false;
 
   // Per slot of every level: usableCode() | levels up << 8 | page << 16,
   // the page of the finest usable tile over the slot's tile (its ancestor
   // `up` levels coarser). Stack levels: their window's tiles; the pyramid's
-  // levels: every tile (they fit the slots). 0 elsewhere.
-  std::vector<uint32_t> flat(size_t(c) * c * levels, 0);
-  auto page_of = [&](uint32_t level, int64_t x, int64_t y) {
-    const uint32_t page = m_pages->find(TileKey{level, uint32_t(x), uint32_t(y)});
-    return page == PageTable::kNoPage ? 0u : page;
-  };
-  for (uint32_t l = 0; l < levels; ++l) {
-    const TileRect w = l < pyramid ? map.windows[l]
-                                   : TileRect{0, 0, int64_t(m_geometry.levels[l].tiles_x),
-                                              int64_t(m_geometry.levels[l].tiles_y)};
-    for (int64_t y = w.y0; y < w.y1; ++y)
-      for (int64_t x = w.x0; x < w.x1; ++x) {
-        const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
-        const uint32_t up = l < pyramid ? map.finest[l][i] - l : 0;
-        flat[size_t(l) * c * c + i] =
-            uint32_t(usableCode(x, y, c)) | (up << 8) | (page_of(l + up, x >> up, y >> up) << 16);
-      }
+  // levels: every tile (they fit the slots). 0 elsewhere. Written into a
+  // set only when it holds an older map.
+  if (m_map_written[target] != m_map_generation) {
+    const UsableMap& map = m_front_map;
+    std::vector<uint32_t> flat(size_t(c) * c * levels, 0);
+    for (uint32_t l = 0; l < levels; ++l) {
+      const TileRect w = l < pyramid ? map.windows[l]
+                                     : TileRect{0, 0, int64_t(m_geometry.levels[l].tiles_x),
+                                                int64_t(m_geometry.levels[l].tiles_y)};
+      // A window tile's own page is its slot's (the index is this window's).
+      const bool indexed = l >= pyramid || w == m_page_windows[l];
+      const uint32_t* slots = m_slot_pages.data() + size_t(l) * c * c;
+      uint32_t* out = flat.data() + size_t(l) * c * c;
+      const uint8_t* finest = l < pyramid ? map.finest[l].data() : nullptr;
+      forEachWindowSlot(w, c, [&](int64_t x, int64_t y, size_t i, uint8_t code) {
+        const uint32_t up = finest != nullptr ? finest[i] - l : 0;
+        uint32_t page = 0;
+        if (up == 0 && indexed) {
+          page = slots[i];
+        } else if (const uint32_t p = pageOf(l + up, x >> up, y >> up); p != PageTable::kNoPage) {
+          page = p;
+        }
+        out[i] = uint32_t(code) | (up << 8) | (page << 16);
+      });
+    }
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    glTextureSubImage3D(m_usable_tex[target], 0, 0, 0, 0, GLsizei(c), GLsizei(c), GLsizei(levels), GL_RED_INTEGER,
+                        GL_UNSIGNED_INT, flat.data());
+    m_map_written[target] = m_map_generation;
   }
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  glTextureSubImage3D(m_usable_tex[target], 0, 0, 0, 0, GLsizei(c), GLsizei(c), GLsizei(levels), GL_RED_INTEGER,
-                      GL_UNSIGNED_INT, flat.data());
-  m_front_map = std::move(map);
   m_stats.usable_ms = msSince(usable_start);
 }
 

@@ -671,13 +671,11 @@ void ClipmapRenderer::endUploads() {
     // not; 0 elsewhere (no code matches it).
     std::vector<uint16_t> flat(size_t(c) * c * std::max<size_t>(map.usable.size(), 1), 0);
     for (size_t l = 0; l < map.usable.size(); ++l) {
-      const TileRect& w = map.windows[l];
-      for (int64_t y = w.y0; y < w.y1; ++y)
-        for (int64_t x = w.x0; x < w.x1; ++x) {
-          const size_t i = size_t(toroidalSlot(y, c)) * c + toroidalSlot(x, c);
-          const uint32_t up = map.finest[l][i] - uint32_t(l);
-          flat[l * c * c + i] = uint16_t(usableCode(x, y, c) | (up << 8));
-        }
+      const uint8_t* finest = map.finest[l].data();
+      uint16_t* out = flat.data() + l * c * c;
+      forEachWindowSlot(map.windows[l], c, [&](int64_t, int64_t, size_t i, uint8_t code) {
+        out[i] = uint16_t(code | ((finest[i] - uint32_t(l)) << 8));
+      });
     }
     if (!map.usable.empty()) {
       glPixelStorei(GL_UNPACK_ALIGNMENT, 2);

@@ -38,6 +38,30 @@ inline uint8_t usableCode(int64_t tile_x, int64_t tile_y, uint32_t slots) {
   return uint8_t(1 + px + 4 * py);
 }
 
+// Calls fn(x, y, slot, code) for every tile of `window`, row by row: slot =
+// toroidalSlot(y) * slots + toroidalSlot(x), code = usableCode(x, y). Each
+// row's and column's divisions are done once, not once a tile (the
+// indirection maps are rebuilt from every window tile on most frames).
+template <typename Fn>
+void forEachWindowSlot(const TileRect& window, uint32_t slots, Fn&& fn) {
+  const int64_t w = window.width();
+  if (w == 0 || window.height() == 0) return;
+  std::vector<uint32_t> column(size_t(w), 0);
+  std::vector<uint8_t> column_code(size_t(w), 0);
+  for (int64_t x = window.x0; x < window.x1; ++x) {
+    column[size_t(x - window.x0)] = toroidalSlot(x, slots);
+    column_code[size_t(x - window.x0)] = uint8_t(usableCode(x, 0, slots) - 1);  // px
+  }
+  for (int64_t y = window.y0; y < window.y1; ++y) {
+    const size_t row = size_t(toroidalSlot(y, slots)) * slots;
+    const uint8_t row_code = usableCode(0, y, slots);  // 1 + 4 py
+    for (int64_t x = window.x0; x < window.x1; ++x) {
+      const size_t j = size_t(x - window.x0);
+      fn(x, y, row + column[j], uint8_t(row_code + column_code[j]));
+    }
+  }
+}
+
 // Which slot of every stack level may be sampled, as the shader sees it:
 // usable[level][slot_y * clip_tiles + slot_x] != 0. A tile is usable when
 //  - it lies in the level's window and is resident,

@@ -261,6 +261,14 @@ class ClipmapRenderer {
   uint32_t pyramidPage(uint32_t x, uint32_t y) const {
     return 4 * (1 + (y >> 1) * m_pyramid_layers_x + (x >> 1)) + (x & 1) + 2 * (y & 1);
   }
+  // The page of level `level`'s tile (x, y), or PageTable::kNoPage: an
+  // array read for a tile of its window (or a pyramid level's), from the
+  // index indexPages() builds; a hash find elsewhere.
+  uint32_t pageOf(uint32_t level, int64_t x, int64_t y) const;
+  void indexPages();
+  size_t slotIndex(uint32_t level, int64_t x, int64_t y) const {
+    return (size_t(level) * m_slots + toroidalSlot(y, m_slots)) * m_slots + toroidalSlot(x, m_slots);
+  }
   void writePage(uint32_t page, const uint8_t* pixels);
   void copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy, uint32_t dst_page,
                       uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w, uint32_t h);
@@ -338,6 +346,17 @@ class ClipmapRenderer {
   uint32_t m_page_px = 0;      // tile_px + 2 borders
   uint32_t m_pyramid_layers_x = 0;  // layers a row of the pyramid level's pages (pyramidPage())
   uint64_t m_frame = 1;
+  // kPaged, per frame: each window tile's page by slot (indexPages(); 0 =
+  // none) over the windows it was built for; whether a page was placed
+  // since the last endUploadsPaged(); the usable map's input then, and a
+  // generation of the indirection maps' contents with the one each set holds.
+  std::vector<uint32_t> m_slot_pages;
+  std::vector<TileRect> m_page_windows;
+  bool m_pages_changed = true;
+  std::vector<LevelResidency> m_paged_input;
+  bool m_paged_input_valid = false;
+  uint64_t m_map_generation = 1;
+  uint64_t m_map_written[2] = {0, 0};
 };
 
 // An offscreen framebuffer: RGBA8 colour + 24-bit depth, with readback.
