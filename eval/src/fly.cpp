@@ -289,7 +289,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.path_hint = o.path_hint;
   r.reference_every = o.reference ? std::max(1u, o.reference_every) : 0;
   r.ground_truth_every = o.reference ? o.ground_truth_every : 0;
-  r.sample_tiles = o.reference;
+  r.sample_tiles = o.reference && o.over_fetch;
   r.fewest_triangles = o.fewest_triangles;
 
   // Outputs are checked before any work, and none of them may be an input.

@@ -73,6 +73,10 @@ int main(int argc, char** argv) {
                "frame within 1 px p95 (docs/terrain.md; a dozen position passes a judged frame)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
       ->transform(frames);
+  bool no_over_fetch = false;
+  app.add_flag("--no-over-fetch", no_over_fetch,
+               "With --reference: skip the over-fetch ratio (which traces every pixel of every frame on the "
+               "CPU, judged or not: most of a judged run's time at 3840x2160); it reads 0");
   app.add_option("--ground-truth-every", o.ground_truth_every,
                  "Also compare the reference with the CPU ground truth every Nth frame (0 = never)")
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
@@ -181,6 +185,7 @@ int main(int argc, char** argv) {
   o.frustum_priority = !no_frustum;
   o.plan_scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
   o.terrain_bounds = !no_terrain_bounds;
+  o.over_fetch = !no_over_fetch;
 
   if (save_frames->count() > 0) o.save_every = save_every;
   // A progress line on a terminal (CLIPSTREAM_PROGRESS=0/1 overrides),

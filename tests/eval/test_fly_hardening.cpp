@@ -234,6 +234,33 @@ TEST(FlyHardening, TheDefaultTextureMemoryIsPagedWhereThePoolDrawsIt) {
   EXPECT_TRUE(automaticTextureMemory(false, Buffering::kStaged) == TextureMemory::kPaged);
 }
 
+// --no-over-fetch skips the per-pixel trace of the sampled tiles (most of
+// a judged run's time at 3840x2160), and only that: frames are still judged.
+TEST(FlyHardening, NoOverFetchSkipsTheSampledTilesButStillJudges) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("fly_no_over_fetch");
+  auto value = [&](const std::string& output, const std::string& key) {
+    const size_t at = output.find("\n" + key + "\t");
+    if (at == std::string::npos) return std::string("(none)");
+    const size_t from = at + key.size() + 2;
+    return output.substr(from, output.find('\n', from) - from);
+  };
+  for (const bool skip : {false, true}) {
+    std::vector<std::string> args = {"--procedural", "65536", "--frames", "3", "--size", "160x90", "--reference",
+                                     "--deterministic", "--save-frames", "0", "--out", dir.file("out")};
+    if (skip) args.push_back("--no-over-fetch");
+    const FlyRun run = runFly(args, dir.file("log"));
+    ASSERT_EQ(run.exit_code, 0) << run.output;
+    const std::string ratio = value(run.output, "over_fetch_ratio");
+    ASSERT_NE(ratio, "(none)") << run.output;
+    if (skip) EXPECT_EQ(std::stod(ratio), 0.0) << run.output;
+    else EXPECT_GT(std::stod(ratio), 0.0) << run.output;
+    const std::string psnr = value(run.output, "psnr_mean_db");
+    ASSERT_NE(psnr, "(none)") << run.output;
+    EXPECT_GT(std::stod(psnr), 30.0) << run.output;
+  }
+}
+
 // Bug 8: SIGHUP was not handled. Every signal that ends a run removes the
 // temporaries and leaves only whole files.
 TEST(FlyHardening, SignalsLeaveOnlyWholeFiles) {

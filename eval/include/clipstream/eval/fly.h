@@ -71,6 +71,10 @@ struct FlyOptions {
   bool fewest_triangles = false;     // over terrain, judged frames count the fewest triangles too
   uint32_t reference_every = 1;      // ... every Nth frame (and every rest frame)
   uint32_t ground_truth_every = 0;   // reference vs CPU ground truth every Nth frame; 0 = never
+  // With reference: also trace which tiles every frame samples (on the CPU,
+  // every pixel of every frame, judged or not) for the over-fetch ratio.
+  // The largest part of a judged run at 3840x2160; false leaves it 0.
+  bool over_fetch = true;
   // The ideal reference's tiles; unset: tile_format (frames at rest are then
   // bit-identical to it). kRgba8 under a BC1 flight measures the
   // compression error too.
