@@ -273,7 +273,8 @@ uint32_t ClipmapRenderer::fillMissingPyramidPages() {
 void ClipmapRenderer::indexPages() {
   // Every page's tile at its slot: a stack level's window tile at its
   // toroidal slot (one tile of a window per slot), a pyramid level's tile
-  // at x + y * c. Pages of tiles outside their window are left out.
+  // at x + y * c (its levels are at most clip_tiles < c tiles a side).
+  // Pages of tiles outside their window are left out.
   const uint32_t c = m_slots, pyramid = m_config.pyramid_level;
   m_slot_pages.assign(size_t(c) * c * m_geometry.levelCount(), 0);
   for (uint32_t page = 1; page < m_pages->pages(); ++page) {
@@ -288,7 +289,9 @@ uint32_t ClipmapRenderer::pageOf(uint32_t level, int64_t x, int64_t y) const {
   if (level < m_config.pyramid_level && !m_page_windows[level].contains(x, y))
     return m_pages->find(TileKey{level, uint32_t(x), uint32_t(y)});
   const uint32_t page = m_slot_pages[slotIndex(level, x, y)];
-  return page != 0 && m_pages->key(page) == TileKey{level, uint32_t(x), uint32_t(y)} ? page : PageTable::kNoPage;
+  return page != 0 && m_pages->holds(page) && m_pages->key(page) == TileKey{level, uint32_t(x), uint32_t(y)}
+             ? page
+             : PageTable::kNoPage;
 }
 
 void ClipmapRenderer::endUploadsPaged(uint32_t target) {
@@ -300,7 +303,10 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
   // Stack tiles are kept while their window holds them resident.
   std::vector<const LevelResidency*> by_level(pyramid, nullptr);
   for (const LevelResidency& r : m_residency)
-    if (r.level < pyramid && r.resident.size() == size_t(r.window.width()) * size_t(r.window.height()))
+    // A window wider than the slots would alias them (computeUsableMap()
+    // refuses it too): its level is not drawn.
+    if (r.level < pyramid && r.window.width() <= int64_t(c) && r.window.height() <= int64_t(c) &&
+        r.resident.size() == size_t(r.window.width()) * size_t(r.window.height()))
       by_level[r.level] = &r;
   auto resident = [&](const TileKey& k) {
     const LevelResidency* r = by_level[k.level];

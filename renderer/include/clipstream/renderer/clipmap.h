@@ -41,7 +41,8 @@ inline uint8_t usableCode(int64_t tile_x, int64_t tile_y, uint32_t slots) {
 // Calls fn(x, y, slot, code) for every tile of `window`, row by row: slot =
 // toroidalSlot(y) * slots + toroidalSlot(x), code = usableCode(x, y). Each
 // row's and column's divisions are done once, not once a tile (the
-// indirection maps are rebuilt from every window tile on most frames).
+// usable and indirection maps are rebuilt from every window tile whenever
+// they change, most frames of a moving flight).
 template <typename Fn>
 void forEachWindowSlot(const TileRect& window, uint32_t slots, Fn&& fn) {
   const int64_t w = window.width();

@@ -299,7 +299,7 @@ class ClipmapRenderer {
 
   PyramidGeometry m_geometry;
   RendererConfig m_config;
-  uint32_t m_slots = 0;  // slot period: clip_tiles rounded up to even, plus 2 (see create())
+  uint32_t m_slots = 0;  // slot period: clip_tiles rounded down to even, plus 2 (see create())
   uint32_t m_mips = 0;   // mips of the stack array: 0 = level L, 1 = level L + 1, ...
   // Two builds of the ground shader: without and with the overlay. A
   // uniform switch would cost the overlay's arithmetic on every fragment
@@ -346,7 +346,7 @@ class ClipmapRenderer {
   uint32_t m_page_px = 0;      // tile_px + 2 borders
   uint32_t m_pyramid_layers_x = 0;  // layers a row of the pyramid level's pages (pyramidPage())
   uint64_t m_frame = 1;
-  // kPaged, per frame: each window tile's page by slot (indexPages(); 0 =
+  // kPaged, per frame: each window tile's and pyramid tile's page by slot (indexPages(); 0 =
   // none) over the windows it was built for; whether a page was placed
   // since the last endUploadsPaged(); the usable map's input then, and a
   // generation of the indirection maps' contents with the one each set holds.
