@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Speed against accuracy: the whole sweep in one command.
 #
-#   bash scripts/sweep.sh            # full sweep (about 12 minutes on 2 cores before the real-time repeats; estimated 20-25 now)
+#   bash scripts/sweep.sh            # full sweep (38 min 40 s on 2 cores with SWEEP_ASAN=0, 2026-12-06: docs/benchmarks.md)
 #   bash scripts/sweep.sh --quick    # fewer frames, for a smoke run (CSV/charts still written)
 #   bash scripts/sweep.sh --charts-only  # redraw from the last run's outputs
 #   SWEEP_ASAN=0 bash scripts/sweep.sh --quick  # without the soak under ASan (its row says "not run")
 #   SWEEP_TERRAIN=0 bash scripts/sweep.sh       # without the terrain methods (scripts/sweep_terrain.sh, ~25 min)
-#   SWEEP_PAGED=0 bash scripts/sweep.sh         # without stack against paged at four viewports (scripts/sweep_paged.sh, ~40 min)
+#   SWEEP_PAGED=0 bash scripts/sweep.sh         # without stack against paged at four viewports (scripts/sweep_paged.sh, ~8 min)
 #
 # Builds what it needs (into $BUILD_DIR, default build/), tiles data/autzen.jpg
 # once, runs every experiment with clipstream-fly --reference (each frame's
