@@ -54,7 +54,8 @@ using Clock = std::chrono::steady_clock;
 constexpr size_t kLatencySamples = 4096;
 // Distinct failing tiles logged to stderr before logging goes quiet.
 constexpr uint32_t kMaxLoggedFailures = 16;
-// Back-off for transient (kUnavailable) failures: 0.5 s doubling to 30 s.
+// Back-off for transient (kUnavailable) failures: the n-th failure of a tile
+// waits kRetryBaseS * 2^n, so 1 s, 2 s, 4 s ... capped at kRetryMaxS.
 constexpr double kRetryBaseS = 0.5;
 constexpr double kRetryMaxS = 30.0;
 // Batches for sources that read neighbours together (TileSource::maxBatch):

@@ -21,6 +21,11 @@ HeadlessContext* sharedContext(std::string* why) {
   return context.get();
 }
 
+bool glRequired() {
+  const char* value = std::getenv("CLIPSTREAM_REQUIRE_GL");
+  return value != nullptr && *value != '\0' && std::string(value) != "0";
+}
+
 std::vector<LevelResidency> fullResidency(const ClipmapPlan& plan, uint32_t finest_loaded) {
   std::vector<LevelResidency> out;
   for (const ClipLevelPlan& l : plan.stack) {

@@ -27,12 +27,21 @@ namespace clipstream::test {
 // The process-wide headless context, or null (with the reason in *why).
 HeadlessContext* sharedContext(std::string* why);
 
-// Skips the calling test (GTEST_SKIP) when no headless GL context exists.
-#define CLIPSTREAM_REQUIRE_GL()                                               \
-  do {                                                                        \
-    std::string require_gl_why;                                               \
-    if (::clipstream::test::sharedContext(&require_gl_why) == nullptr)        \
-      GTEST_SKIP() << require_gl_why;                                         \
+// Whether a missing GL context fails a GL test instead of skipping it: the
+// environment's CLIPSTREAM_REQUIRE_GL set and not "0" (the test command sets
+// it, so a CI machine that lost its context cannot pass by skipping).
+bool glRequired();
+
+// Skips the calling test (GTEST_SKIP) when no headless GL context exists,
+// or fails it when glRequired().
+#define CLIPSTREAM_REQUIRE_GL()                                                             \
+  do {                                                                                      \
+    std::string require_gl_why;                                                             \
+    if (::clipstream::test::sharedContext(&require_gl_why) == nullptr) {                    \
+      if (::clipstream::test::glRequired())                                                 \
+        GTEST_FAIL() << "no GL context, and CLIPSTREAM_REQUIRE_GL is set: " << require_gl_why; \
+      GTEST_SKIP() << require_gl_why;                                                       \
+    }                                                                                       \
   } while (0)
 
 
