@@ -413,13 +413,12 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
     }
     paged.push_back(std::move(p));
   }
-  const bool same_input = !m_paged_input_valid || paged.size() != m_paged_input.size()
-                              ? false
-                              : std::equal(paged.begin(), paged.end(), m_paged_input.begin(),
-                                           [](const LevelResidency& a, const LevelResidency& b) {
-                                             return a.level == b.level && a.window == b.window &&
-                                                    a.resident == b.resident && a.unread == b.unread;
-                                           });
+  const bool same_input = m_paged_input_valid && paged.size() == m_paged_input.size() &&
+                          std::equal(paged.begin(), paged.end(), m_paged_input.begin(),
+                                     [](const LevelResidency& a, const LevelResidency& b) {
+                                       return a.level == b.level && a.window == b.window &&
+                                              a.resident == b.resident && a.unread == b.unread;
+                                     });
   if (!same_input) {
     UsableMap map = computeUsableMap(m_geometry, c, pyramid, paged);
     if (m_pages_changed || map.windows != m_front_map.windows || map.finest != m_front_map.finest) ++m_map_generation;
