@@ -12,6 +12,7 @@
 #include <clipstream/tiler/mosaic.h>
 #include <clipstream/tiler/shard.h>
 
+#include "bounded_queue.h"
 #include "height_bounds.h"
 #include "height_source.h"
 #include "relief_source.h"
@@ -61,55 +62,6 @@ double threadCpuSeconds() {
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
 }
-
-// A bounded FIFO that producers block on when full. close() lets consumers
-// drain what is queued; abort() wakes everyone and drops the rest.
-template <typename T>
-class BoundedQueue {
- public:
-  explicit BoundedQueue(size_t capacity) : m_capacity(capacity) {}
-
-  bool push(T&& item) {
-    std::unique_lock lock(m_mutex);
-    m_not_full.wait(lock, [&] { return m_items.size() < m_capacity || m_closed; });
-    if (m_closed) return false;
-    m_items.push_back(std::move(item));
-    m_not_empty.notify_one();
-    return true;
-  }
-  bool pop(T* out) {
-    std::unique_lock lock(m_mutex);
-    m_not_empty.wait(lock, [&] { return !m_items.empty() || m_closed; });
-    if (m_items.empty() || m_aborted) return false;
-    *out = std::move(m_items.front());
-    m_items.pop_front();
-    m_not_full.notify_one();
-    return true;
-  }
-  void close() {
-    std::lock_guard lock(m_mutex);
-    m_closed = true;
-    m_not_empty.notify_all();
-    m_not_full.notify_all();
-  }
-  void abort() {
-    std::lock_guard lock(m_mutex);
-    m_closed = true;
-    m_aborted = true;
-    m_items.clear();
-    m_not_empty.notify_all();
-    m_not_full.notify_all();
-  }
-
- private:
-  const size_t m_capacity;
-  std::mutex m_mutex;  // guards everything below
-  std::condition_variable m_not_full;
-  std::condition_variable m_not_empty;
-  std::deque<T> m_items;
-  bool m_closed = false;
-  bool m_aborted = false;
-};
 
 // First error wins; later ones are usually consequences of it.
 class ErrorSlot {
