@@ -189,6 +189,22 @@ TEST(TileCliHardening, HangupRemovesTheTemporaries) {
   EXPECT_TRUE(dir.entries().empty()) << dir.entries().front();
 }
 
+// Whether process `pid` holds `path` open, polled (up to 30 s) through
+// /proc/<pid>/fd; false if it never did or has exited.
+bool waitUntilOpened(pid_t pid, const std::string& path) {
+  const std::filesystem::path fds = "/proc/" + std::to_string(pid) + "/fd";
+  const std::filesystem::path target = std::filesystem::canonical(path);
+  for (int i = 0; i < 6000; ++i) {
+    std::error_code ec;
+    for (const auto& fd : std::filesystem::directory_iterator(fds, ec)) {
+      std::error_code link_ec;
+      if (std::filesystem::read_symlink(fd.path(), link_ec) == target) return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
 // Third pass: a huge all-zero input kept the image library busy guessing its
 // format for minutes, where the tiler never polls its stop flag: one SIGTERM
 // did nothing. The grace alarm ends the run within seconds.
@@ -199,7 +215,9 @@ TEST(TileCliHardening, OneSignalStopsTheRunEvenInsideTheImageLibrary) {
   std::filesystem::resize_file(input, uint64_t(4) << 30);  // sparse: no disk used
   const pid_t pid = spawnTiler({"-q", input, dir.file("z.cst")});
   ASSERT_GE(pid, 0);
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  // The signal is sent once the run holds the input open: from then on the
+  // image library is reading it (and, this input, guessing its format).
+  ASSERT_TRUE(waitUntilOpened(pid, input)) << "the tiler never opened " << input;
   const auto start = std::chrono::steady_clock::now();
   kill(pid, SIGTERM);
   int status = 0;
