@@ -24,13 +24,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-QUICK=0; CHARTS_ONLY=0
-case "${1:-}" in
-  "") ;;
-  --quick) QUICK=1 ;;
-  --charts-only) CHARTS_ONLY=1 ;;  # redo data, charts and docs from the last runs in $SWEEP_WORK
-  *) echo "usage: scripts/sweep.sh [--quick | --charts-only]" >&2; exit 2 ;;
-esac
+# shellcheck source=scripts/sweep_args.sh
+source scripts/sweep_args.sh "$@"
 BUILD=${BUILD_DIR:-build}
 ASAN_BUILD=${ASAN_BUILD_DIR:-build-asan}
 WORK=${SWEEP_WORK:-out/sweep}

@@ -25,13 +25,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-QUICK=0; CHARTS_ONLY=0
-case "${1:-}" in
-  "") ;;
-  --quick) QUICK=1 ;;
-  --charts-only) CHARTS_ONLY=1 ;;
-  *) echo "usage: scripts/sweep_terrain.sh [--quick | --charts-only]" >&2; exit 2 ;;
-esac
+# shellcheck source=scripts/sweep_args.sh
+source scripts/sweep_args.sh "$@"
 BUILD=${BUILD_DIR:-build}
 WORK=${SWEEP_WORK:-out/sweep}/terrain
 DOCS=${SWEEP_DOCS:-docs}
