@@ -163,13 +163,9 @@ int main(int argc, char** argv) {
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
   if (s) s = bufferingFromName(buffering, &o.buffering);
-  const bool automatic = texture_memory == "auto";
-  if (s) s = textureMemoryFromChoice(texture_memory, !o.elevation_path.empty(), o.buffering, &o.texture_memory);
-  if (s && app.count("--pool-mb") && o.texture_memory != TextureMemory::kPaged)
-    s = Status::error(ErrorCode::kInvalidArgument,
-                      automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool does not "
-                                  "draw --elevation or double buffering yet)"
-                                : "--pool-mb sizes the pool of --texture-memory paged");
+  if (s)
+    s = textureMemoryFromChoice(texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
+                                &o.texture_memory);
   if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
   if (s && !reference_tile_format.empty()) {
     TileContent reference = TileContent::kRgba8;

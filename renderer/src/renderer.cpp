@@ -74,14 +74,19 @@ TextureMemory automaticTextureMemory(bool terrain, Buffering buffering) {
   return terrain || doubled ? TextureMemory::kStack : TextureMemory::kPaged;
 }
 
-Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, TextureMemory* out) {
-  if (name == "auto") {
-    *out = automaticTextureMemory(terrain, buffering);
-    return okStatus();
-  }
-  if (textureMemoryFromName(name, out)) return okStatus();
+Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
+                               TextureMemory* out) {
+  const bool automatic = name == "auto";
+  if (automatic) *out = automaticTextureMemory(terrain, buffering);
+  else if (!textureMemoryFromName(name, out))
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--texture-memory " + name + " is not one of: auto, stack, paged");
+  if (!pool_given || *out == TextureMemory::kPaged) return okStatus();
+  if (!automatic)
+    return Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
   return Status::error(ErrorCode::kInvalidArgument,
-                       "--texture-memory " + name + " is not one of: auto, stack, paged");
+                       std::string("--pool-mb sizes the page pool, and auto chose the stack (the pool does not draw ") +
+                           (terrain ? "--elevation" : "double buffering") + " yet)");
 }
 
 PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {

@@ -238,13 +238,10 @@ int main(int argc, char** argv) {
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
   TextureMemory memory = TextureMemory::kStack;
-  const bool automatic = texture_memory == "auto";
-  if (Status s = textureMemoryFromChoice(texture_memory, !elevation_path.empty(), kDefaultBuffering, &memory); !s)
+  if (Status s = textureMemoryFromChoice(texture_memory, !elevation_path.empty(), kDefaultBuffering,
+                                         app.count("--pool-mb") > 0, &memory);
+      !s)
     return cli::usageError(app, s.message);
-  if (app.count("--pool-mb") && memory != TextureMemory::kPaged)
-    return cli::usageError(app, automatic ? "--pool-mb sizes the page pool, and auto chose the stack (the pool "
-                                            "does not draw --elevation yet)"
-                                          : "--pool-mb sizes the pool of --texture-memory paged");
   if (!store_path.empty() && procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   {

@@ -208,6 +208,15 @@ TEST(FlyHardening, AnEarlierRunsFilesAreRemovedAndOthersKept) {
   expectOnlyWholeFiles(out, 160, 90);
 }
 
+// The value of `key` in the summary a run prints ("key\tvalue" lines), or
+// "(none)".
+std::string summaryValue(const std::string& output, const std::string& key) {
+  const size_t at = output.find("\n" + key + "\t");
+  if (at == std::string::npos) return "(none)";
+  const size_t from = at + key.size() + 2;
+  return output.substr(from, output.find('\n', from) - from);
+}
+
 // --texture-memory auto (the default) pages the flat plane, so a screen the
 // stack cannot be allocated for still flies; it keeps the stack with double
 // buffering, which the pool does not do (and with terrain:
@@ -221,8 +230,7 @@ TEST(FlyHardening, TheDefaultTextureMemoryIsPagedWhereThePoolDrawsIt) {
     args.insert(args.end(), extra.begin(), extra.end());
     const FlyRun run = runFly(args, dir.file("log"));
     EXPECT_EQ(run.exit_code, 0) << run.output;
-    const size_t at = run.output.find("texture_memory\t");
-    return at == std::string::npos ? std::string("(none)") : run.output.substr(at + 15, 5);
+    return summaryValue(run.output, "texture_memory");
   };
   EXPECT_EQ(mode({}), "paged");
   EXPECT_EQ(mode({"--pool-mb", "8"}), "paged");
@@ -239,23 +247,17 @@ TEST(FlyHardening, TheDefaultTextureMemoryIsPagedWhereThePoolDrawsIt) {
 TEST(FlyHardening, NoOverFetchSkipsTheSampledTilesButStillJudges) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir("fly_no_over_fetch");
-  auto value = [&](const std::string& output, const std::string& key) {
-    const size_t at = output.find("\n" + key + "\t");
-    if (at == std::string::npos) return std::string("(none)");
-    const size_t from = at + key.size() + 2;
-    return output.substr(from, output.find('\n', from) - from);
-  };
   for (const bool skip : {false, true}) {
     std::vector<std::string> args = {"--procedural", "65536", "--frames", "3", "--size", "160x90", "--reference",
                                      "--deterministic", "--save-frames", "0", "--out", dir.file("out")};
     if (skip) args.push_back("--no-over-fetch");
     const FlyRun run = runFly(args, dir.file("log"));
     ASSERT_EQ(run.exit_code, 0) << run.output;
-    const std::string ratio = value(run.output, "over_fetch_ratio");
+    const std::string ratio = summaryValue(run.output, "over_fetch_ratio");
     ASSERT_NE(ratio, "(none)") << run.output;
     if (skip) EXPECT_EQ(std::stod(ratio), 0.0) << run.output;
     else EXPECT_GT(std::stod(ratio), 0.0) << run.output;
-    const std::string psnr = value(run.output, "psnr_mean_db");
+    const std::string psnr = summaryValue(run.output, "psnr_mean_db");
     ASSERT_NE(psnr, "(none)") << run.output;
     EXPECT_GT(std::stod(psnr), 30.0) << run.output;
   }

@@ -69,8 +69,10 @@ Status textureMemoryFromName(const std::string& name, TextureMemory* out);
 TextureMemory automaticTextureMemory(bool terrain, Buffering buffering);
 // A program's --texture-memory: "auto" (automaticTextureMemory() of the
 // frames' terrain and buffering), "stack" or "paged"; kInvalidArgument
-// naming the three otherwise.
-Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, TextureMemory* out);
+// naming the three otherwise, or when `pool_given` (--pool-mb) but the
+// choice is not paged (saying why auto chose the stack).
+Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
+                               TextureMemory* out);
 
 // The planner settings `memory` needs: kPaged pins the pyramid in its pool,
 // so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to
