@@ -363,16 +363,18 @@ void ClipmapRenderer::endUploadsPaged(uint32_t target) {
                      [](const Want& a, const Want& b) { return a.distance < b.distance; });
   }
   m_stats.pages_wanted += uint32_t(wants.size()) + m_pages->pinned();
+  const uint32_t filled_before = m_stats.pages_filled;
   for (const Want& want : wants) {
     const auto& pixels = m_page_pixels[PageTable::pack(want.key)];
     if (placePage(want.key, pixels->data(), false) == PageTable::kNoPage) ++m_stats.pages_short;
   }
+  // The index above predates this frame's pages (and what they evicted).
+  if (m_stats.pages_filled != filled_before) indexPages();
 
   // Only a page placed (this frame's, or a pyramid tile's since the last
-  // frame) changes what follows from the pages: their slots, borders,
-  // mip 1 and the maps' page numbers.
+  // frame) changes what follows from the pages: their borders, mip 1 and
+  // the maps' page numbers.
   if (m_pages_changed) {
-    indexPages();
     // Mip 1 of every page: the parent's texels over it, copied again when
     // the parent's page has borders it did not have at the last copy.
     const uint32_t tp = m_geometry.tile_px, b = m_page_border;
