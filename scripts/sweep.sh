@@ -24,8 +24,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# shellcheck source=scripts/sweep_args.sh
-source scripts/sweep_args.sh "$@"
+# shellcheck source=scripts/sweep_lib.sh
+source scripts/sweep_lib.sh "$@"
 BUILD=${BUILD_DIR:-build}
 ASAN_BUILD=${ASAN_BUILD_DIR:-build-asan}
 WORK=${SWEEP_WORK:-out/sweep}
@@ -574,13 +574,7 @@ GEN="$WORK/benchmarks_sweep.md"
 } >"$GEN"
 BM=$DOCS/benchmarks.md
 touch "$BM"
-if grep -q '<!-- sweep:begin -->' "$BM"; then
-  awk -v gen="$GEN" '/<!-- sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
-                     /<!-- sweep:end -->/{skip=0; next} !skip' "$BM" >"$BM.tmp.$$"
-  publish "$BM"
-else
-  { echo; cat "$GEN"; } >>"$BM"
-fi
+put_block "$BM" sweep "$GEN" || { echo; cat "$GEN"; } >>"$BM"
 echo "sweep: wrote $DATA/*.csv, $CHARTS/*.png and the sweep section of $BM in $(( $(date +%s) - start ))s"
 
 # The terrain methods side by side (docs/terrain.md); SWEEP_TERRAIN=0 skips them.

@@ -24,8 +24,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# shellcheck source=scripts/sweep_args.sh
-source scripts/sweep_args.sh "$@"
+# shellcheck source=scripts/sweep_lib.sh
+source scripts/sweep_lib.sh "$@"
 BUILD=${BUILD_DIR:-build}
 WORK=${SWEEP_WORK:-out/sweep}/paged
 DOCS=${SWEEP_DOCS:-docs}
@@ -198,11 +198,6 @@ GEN=$WORK/benchmarks_paged.md
   echo "<!-- paged-sweep:end -->"
 } >"$GEN"
 BM=$DOCS/benchmarks.md
-if grep -q '<!-- paged-sweep:begin -->' "$BM"; then
-  awk -v gen="$GEN" '/<!-- paged-sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
-                     /<!-- paged-sweep:end -->/{skip=0; next} !skip' "$BM" >"$BM.tmp.$$"
-  mv "$BM.tmp.$$" "$BM"
-else
+put_block "$BM" paged-sweep "$GEN" ||
   echo "sweep_paged: no <!-- paged-sweep:begin --> in $BM; the table is in $GEN" >&2
-fi
 echo "sweep_paged: done in $(( $(date +%s) - start )) s: $VCSV, $PCSV, $DOCS/charts/paged_*.png"

@@ -25,8 +25,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# shellcheck source=scripts/sweep_args.sh
-source scripts/sweep_args.sh "$@"
+# shellcheck source=scripts/sweep_lib.sh
+source scripts/sweep_lib.sh "$@"
 BUILD=${BUILD_DIR:-build}
 WORK=${SWEEP_WORK:-out/sweep}/terrain
 DOCS=${SWEEP_DOCS:-docs}
@@ -189,11 +189,5 @@ GEN=$WORK/terrain_section.md
   echo "<!-- terrain-sweep:end -->"
 } >"$GEN"
 TM=$DOCS/terrain.md
-if grep -q '<!-- terrain-sweep:begin -->' "$TM"; then
-  awk -v gen="$GEN" '/<!-- terrain-sweep:begin -->/{while((getline l < gen)>0)print l; skip=1; next}
-                     /<!-- terrain-sweep:end -->/{skip=0; next} !skip' "$TM" >"$TM.tmp.$$"
-  mv "$TM.tmp.$$" "$TM"
-else
-  { echo; cat "$GEN"; } >>"$TM"
-fi
+put_block "$TM" terrain-sweep "$GEN" || { echo; cat "$GEN"; } >>"$TM"
 echo "sweep_terrain: wrote $CSV, $DOCS/charts/terrain_*.png and the terrain-sweep section of $TM in $(( $(date +%s) - start ))s"
