@@ -79,7 +79,7 @@ bool isPyramidTile(const TileKey& key, const PlanWindows& windows) {
 // the distance extrapolated to this many prediction horizons ahead:
 // max(1, k * predicted - (k - 1) * current). Tiles the camera moves away
 // from go sooner, tiles it moves towards stay longer. Replayed on the
-// benchmark flights (docs/decisions.md, "Eviction by the motion"): k = 2
+// benchmark flights (docs/decisions.md D80, D81): k = 2
 // raises the orbit at 32/48/64 MiB from 56.9/81.9/94.8 to 69.5/89.2/98.1 %
 // of OPT and changes no other row; k = 3 raises it further, but k = 3.5
 // already drops the zoom at 32 MiB from 99.8 to 80.6, so k = 2 keeps a

@@ -144,8 +144,8 @@ constexpr double kSampleLodSlack = 0.05;
 // Each cell's ground also reaches this many tiles of the level ahead along
 // the horizontal view direction: a camera that starts to move forward
 // finds the next tiles loaded (the prefetch needs a few frames of motion
-// to see it). Measured on the sweep's line, deterministic (docs/decisions.md,
-// "Loading what the frames sample"): none lost 1-3 frames below 30 dB at
+// to see it). Measured on the sweep's line, deterministic (docs/decisions.md
+// D67): none lost 1-3 frames below 30 dB at
 // each start from rest (x10: 98.7 dB mean, x50: 97.1), half a tile one
 // (x50: 97.8), one tile none (99.0, 98.4) for an over-fetch of 1.85 at x1
 // instead of 1.27.

@@ -85,7 +85,7 @@ struct StreamerConfig {
                                  // connection), else the number of cores; at most kMaxIoThreads
   bool prefetch = true;          // velocity-predictive prefetch
   bool frustum_priority = true;  // visible tiles before hidden ones
-  // Throttling (docs/decisions.md, "Throttling"): reads no further ahead of
+  // Throttling (docs/decisions.md D60, D61): reads no further ahead of
   // the uploads than throttle_read_ahead_frames of the hand-off budget, and
   // MaxTextureLOD as the finest level streaming serves. Off: reads as fast
   // as the loaders go, MaxTextureLOD the plan's finest level.
@@ -100,7 +100,7 @@ struct StreamerConfig {
   // for the GPU; past that the loaders wait. 32 keeps every flight of the
   // sweep as accurate as without the bound; 8 cost 2 dB at one upload a
   // frame, where tiles read ahead are the ones the uploads need next
-  // (docs/decisions.md, "Throttling").
+  // (docs/decisions.md D61).
   uint32_t throttle_read_ahead_frames = 32;
   PlannerConfig planner;
   // Non-empty: record the request stream here (written under OutputFile's
@@ -111,10 +111,6 @@ struct StreamerConfig {
   EvictionMode eviction = EvictionMode::kGpuFirst;
   // Off by default: loads land as fast as the loaders read them.
   DeterministicIo deterministic_io;
-  // Test hook: called after every RAM insert (placeholder reservation) with
-  // the accounted bytes and the budget, under the cache lock, on the thread
-  // that inserted. Must not call back into the streamer.
-  std::function<void(uint64_t ram_bytes, uint64_t budget_bytes)> on_ram_insert;
 };
 
 // The camera's future, for applications that know it: a scripted flight, a
