@@ -1,6 +1,6 @@
 // What sampling a block-compressed colour stack costs on this GL: RGBA8, BC1
 // (the stack's compressed format) and BC7 (BPTC, which the product cannot
-// write: Debian 12 packages no BC7 encoder; docs/decisions.md, "Only BC1").
+// write: Debian 12 packages no BC7 encoder; docs/decisions.md D234).
 //
 // Each format fills a 2D array texture shaped like the colour clip stack
 // (--layers layers of --side^2 texels, full mip chain, trilinear) with the
@@ -106,7 +106,7 @@ std::vector<uint8_t> padToBlock(const std::vector<uint8_t>& rgba, uint32_t side)
 
 // A minimal BPTC (BC7) mode-6 block writer, for measuring sampling only: it
 // is not an encoder the product uses, and its picture quality is not a
-// concern (docs/decisions.md, "Only BC1"). Mode 6 is one subset, RGBA
+// concern (docs/decisions.md D234). Mode 6 is one subset, RGBA
 // end points of 7 bits plus one p-bit each, and 4-bit indices. The end points
 // are the block's per-channel minimum (p-bit 0) and maximum (p-bit 1), so the
 // decoded end points bracket every texel; each texel's index is its projection

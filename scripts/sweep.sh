@@ -107,7 +107,7 @@ COMMON="--procedural 67108864 --path $LINE --size $SIZE --io-threads 2 --referen
 # both NAME ARGS: a deterministic run and its real-time repeats.
 both() { add "$1" 12 "$COMMON $DET $2"; realtime "$1" 12 "$COMMON $2"; }
 # Each speed and upload budget also without throttling: throttling pays
-# for itself there (docs/decisions.md, "Throttling"); and each speed with
+# for itself there (docs/decisions.md D60, D61); and each speed with
 # the whole clip window of every needed level (the classic clipmap) beside
 # the default sampled scope, as the turns and teleports below.
 for s in 1 2 5 10 20 50 100; do

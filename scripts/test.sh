@@ -24,6 +24,8 @@ cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
 # demo, nginx, the install step right after the demo's build, the Debian
 # packages), as a user who ran the demo would; the tests are built after that.
 cmake --build build -j "$jobs" --target installables
+# The README's and docs' commands stay runnable (scripts/check_docs.sh: options, script flags, paths).
+scripts/check_docs.sh build
 
 # The README walked as written, in order, from the demo to the Debian
 # package (scripts/readme_walk.sh: what it changes to run as a test).
@@ -93,7 +95,7 @@ TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/ts
 # loaded after start-up gets its thread-locals from malloc (seen with
 # verbosity=2), so the crash came and went with the heap's layout. Off, the
 # runtime records no dynamic TLS range; leaks are still reported
-# (docs/decisions.md, "The ASan step's tracer crash"). Without a GL
+# (docs/decisions.md D216). Without a GL
 # context these tests skip; on the CI machine llvmpipe provides one.
 echo "== AddressSanitizer + UBSan build of the image readers and the stability scenarios (texture and terrain) and soak, leak-checked =="
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \

@@ -2,8 +2,8 @@
 // BigTIFF through libtiff (tiff_source.cpp), JPEG through libjpeg-turbo
 // (jpeg_source.cpp), PNG through libpng (png_source.cpp). They are tried
 // before the OpenImageIO module, which costs ~0.6 s and ~120 MB to load
-// (docs/decisions.md, Tiler: "The common formats are read without
-// OpenImageIO"); every file or variant they leave alone goes to OpenImageIO.
+// (docs/decisions.md D33); every file or variant they leave alone goes to
+// OpenImageIO.
 // Conversion to the store's formats is pixel_convert.h's, the module's too,
 // so both paths give the same bytes (tested).
 //

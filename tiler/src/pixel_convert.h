@@ -2,7 +2,7 @@
 // orientation warning), shared
 // by the tiler's own readers (native_source.cpp) and its OpenImageIO module
 // (oiio_source.cpp), so both give the same bytes for the same samples
-// (docs/decisions.md, Tiler: rounding). Header-only and free of store
+// (docs/decisions.md D24). Header-only and free of store
 // symbols: the module links OpenImageIO alone.
 //
 // Thread rule: pure functions; any thread.

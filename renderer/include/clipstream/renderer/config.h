@@ -68,8 +68,7 @@ inline constexpr uint32_t kTerrainTransitionDivisor = 10;
 // 128-sample tile a side) refine rough ground where it is rough and not
 // over a whole tile: on the demo orbit it drew 11 % fewer triangles than
 // 32-cell nodes at the same p95 error (20.7k against 23.3k at 1.0 px),
-// for a few hundred draws a frame (docs/decisions.md, "Terrain: the
-// restricted quadtree beside the geometry clipmap").
+// for a few hundred draws a frame (docs/decisions.md D255).
 inline constexpr uint32_t kTerrainPatchCells = 16;
 // Quadtree terrain: a node is split while its geometric error bound (the
 // tile's error from the store's index, tightened by the exact distance of

@@ -38,7 +38,7 @@ enum class Buffering {
 // The default everywhere (renderer, Flight, clipstream-fly): staged keeps
 // what double buffering is for (no write to memory a queued frame reads, no
 // CPU wait) at the memory of one set, and measured at least as fast as
-// double-upload on llvmpipe (docs/decisions.md, "GPU memory").
+// double-upload on llvmpipe (docs/decisions.md D231).
 inline constexpr Buffering kDefaultBuffering = Buffering::kStaged;
 const char* bufferingName(Buffering buffering);
 // The inverse of bufferingName(): "single", "double-upload", "double-copy"
@@ -65,7 +65,7 @@ Status textureMemoryFromName(const std::string& name, TextureMemory* out);
 // auto, the default of clipstream-fly and clipstream-view): kPaged, whose
 // memory follows the screen, unless the frames draw terrain or double-
 // buffer the stack, which kPaged does not do yet; then kStack
-// (docs/decisions.md, "Paged texture memory").
+// (docs/decisions.md D224).
 TextureMemory automaticTextureMemory(bool terrain, Buffering buffering);
 // A program's --texture-memory: "auto" (automaticTextureMemory() of the
 // frames' terrain and buffering), "stack" or "paged"; kInvalidArgument

@@ -4,7 +4,7 @@
 // then is the temporary renamed onto the final name, atomically and without
 // replacing anything the program did not own. On any failure, or on a signal
 // handled with removeOutputTemporaries(), nothing half-written remains under
-// a final name. docs/decisions.md ("Outputs") gives the reasons.
+// a final name. docs/decisions.md (D122-D132) gives the reasons.
 //
 // Temporary names: ".NAME.tmp-PID-RANDOM" (scratch files beside it add
 // ".SUFFIX"). The writer holds an flock on its temporary while it lives, so a

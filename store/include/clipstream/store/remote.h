@@ -21,7 +21,7 @@ bool isStoreUrl(const std::string& path);
 std::string displayStorePath(const std::string& path);
 
 // Tunables of the URL byte source. The defaults and their reasons are in
-// docs/decisions.md ("Stores over HTTP"); benchmarks in docs/benchmarks.md.
+// docs/decisions.md (D196-D215); benchmarks in docs/benchmarks.md.
 struct RemoteOptions {
   // Range requests in flight at once, and the most connections opened to
   // the server. Over HTTP/1.1 each request in flight holds a kept-alive
@@ -31,7 +31,7 @@ struct RemoteOptions {
   // (StreamerConfig::io_threads).
   unsigned connections = 32;
   // Offer HTTP/2 to https:// servers (ALPN); the server decides. false:
-  // HTTP/1.1 only. http:// is always HTTP/1.1 (docs/decisions.md, "HTTP/2").
+  // HTTP/1.1 only. http:// is always HTTP/1.1 (docs/decisions.md D198, D199).
   bool http2 = true;
   // Connecting (TCP + TLS) may take this long before the attempt fails.
   uint32_t connect_timeout_ms = 5000;

@@ -40,8 +40,8 @@ enum class PlanScope {
   // Computed on a grid of screen cells, each cell's ground and LOD range
   // bounded by its corners (exact bounds on the plane). On the flat plane only: over
   // terrain bounds or relief planes the plan wants the whole window.
-  // The default: a scene loads what its frames sample (docs/decisions.md,
-  // "Loading what the frames sample").
+  // The default: a scene loads what its frames sample (docs/decisions.md
+  // D62).
   kSampled,
   kWindow,  // the whole clip window of every needed level (the classic clipmap)
 };

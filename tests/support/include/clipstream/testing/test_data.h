@@ -1,4 +1,4 @@
-// Where tests find real data: the one rule (docs/decisions.md, "Test data").
+// Where tests find real data: the one rule (docs/decisions.md D154).
 //
 // * Bundled data, the repository's data/ (data/autzen.jpg + .wld): shipped
 //   with the product, so present in every checkout and in CI. A test that
