@@ -1,5 +1,5 @@
 // Private: the bounded FIFO between the tiler's pipeline stages (reader ->
-// workers -> writer, tiler.cpp). Producers block on it when full, so a fast
+// workers -> writer, pipeline.cpp). Producers block on it when full, so a fast
 // stage cannot run ahead of a slow one by more than the queue holds.
 //
 // Thread-safe: push() and pop() from any number of threads; close() and
