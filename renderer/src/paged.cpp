@@ -18,7 +18,7 @@
 // frame reads to have a page) until it comes. A tile's texels never
 // change while it is in the pool, so a filled border stays right even
 // after its neighbour's page is reused.
-#include <clipstream/renderer/renderer.h>
+#include "clipmap_renderer_impl.h"
 
 #include "gl.h"
 #include "gl_util.h"
@@ -42,7 +42,7 @@ uint64_t pageBytes(uint32_t tile_px, TileContent content) {
   return bc1 ? (m0 + m1) / 2 : (m0 + m1) * 4;
 }
 
-Status ClipmapRenderer::createPaged() {
+Status ClipmapRenderer::Impl::createPaged() {
   const bool bc1 = compressed();
   const uint32_t levels = m_geometry.levelCount();
   const uint64_t pool_bytes =
@@ -122,8 +122,10 @@ Status ClipmapRenderer::createPaged() {
     m_texture_bytes.usable += uint64_t(c) * c * levels * 4;
     if (Status s = gl_util::checkCreated("the page pool's indirection maps"); !s) return s;
   }
-  if (staged())
-    if (Status s = createStaging(); !s) return s;
+  if (staged()) {
+    if (Status s = m_staging.create(size_t(std::max(m_config.staging_tiles, 1u)) * tileBytes()); !s) return s;
+    m_texture_bytes.staging = m_staging.bytes();
+  }
 
   m_pages = std::make_unique<PageTable>(uint32_t(pages), 4);
   // Page 0: black, pinned, no tile's (a key outside every pyramid). Pages
@@ -141,7 +143,7 @@ Status ClipmapRenderer::createPaged() {
   return okStatus();
 }
 
-void ClipmapRenderer::writePage(uint32_t page, const uint8_t* pixels) {
+void ClipmapRenderer::Impl::writePage(uint32_t page, const uint8_t* pixels) {
   const GLsizei tp = GLsizei(m_geometry.tile_px);
   const GLint b = GLint(m_page_border);
   pixels = beginTileUpload(pixels);
@@ -154,7 +156,7 @@ void ClipmapRenderer::writePage(uint32_t page, const uint8_t* pixels) {
   if (staged()) glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
 }
 
-void ClipmapRenderer::copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy,
+void ClipmapRenderer::Impl::copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy,
                                      uint32_t dst_page, uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w,
                                      uint32_t h) {
   // Page p is quarter p % 4 of layer p / 4; positions are the page's own.
@@ -169,7 +171,7 @@ void ClipmapRenderer::copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32
                      GL_TEXTURE_2D_ARRAY, GLint(dst_mip), bx, by, GLint(dst_page / 4), GLsizei(w), GLsizei(h), 1);
 }
 
-void ClipmapRenderer::fillBorders(uint32_t page, const TileKey& key) {
+void ClipmapRenderer::Impl::fillBorders(uint32_t page, const TileKey& key) {
   // Along one axis, for a neighbour at offset d in {-1, 0, 1}: where the
   // border lies in this page, and where its texels lie in the neighbour's
   // page (its edge facing this tile). A tile whose neighbour is outside the
@@ -205,7 +207,7 @@ void ClipmapRenderer::fillBorders(uint32_t page, const TileKey& key) {
   m_pages->addBorders(page, filled);
 }
 
-uint32_t ClipmapRenderer::placePage(const TileKey& key, const uint8_t* pixels, bool pin) {
+uint32_t ClipmapRenderer::Impl::placePage(const TileKey& key, const uint8_t* pixels, bool pin) {
   const uint32_t page = key.level == m_config.pyramid_level
                             ? m_pages->allocateAt(pyramidPage(key.x, key.y), key, m_frame)
                             : m_pages->allocate(key, m_frame, pin);
@@ -217,7 +219,7 @@ uint32_t ClipmapRenderer::placePage(const TileKey& key, const uint8_t* pixels, b
   return page;
 }
 
-void ClipmapRenderer::uploadTilePaged(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba) {
+void ClipmapRenderer::Impl::uploadTilePaged(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba) {
   if (key.level >= m_config.pyramid_level) {
     const size_t index = m_pyramid_first[key.level - m_config.pyramid_level] +
                          size_t(key.y) * m_geometry.levels[key.level].tiles_x + key.x;
@@ -233,7 +235,7 @@ void ClipmapRenderer::uploadTilePaged(const TileKey& key, std::shared_ptr<const 
   m_changed = true;
 }
 
-uint32_t ClipmapRenderer::fillMissingPyramidPages() {
+uint32_t ClipmapRenderer::Impl::fillMissingPyramidPages() {
   // A pyramid tile the source could not give is made from its parent's
   // pixels (the quarter over it, magnified bilinearly), coarse levels
   // first so a made parent serves its children; with no parent, mid grey.
@@ -270,7 +272,7 @@ uint32_t ClipmapRenderer::fillMissingPyramidPages() {
   return filled;
 }
 
-void ClipmapRenderer::indexPages() {
+void ClipmapRenderer::Impl::indexPages() {
   // Every page's tile at its slot: a stack level's window tile at its
   // toroidal slot (one tile of a window per slot), a pyramid level's tile
   // at x + y * c (its levels are at most clip_tiles < c tiles a side).
@@ -285,7 +287,7 @@ void ClipmapRenderer::indexPages() {
   }
 }
 
-uint32_t ClipmapRenderer::pageOf(uint32_t level, int64_t x, int64_t y) const {
+uint32_t ClipmapRenderer::Impl::pageOf(uint32_t level, int64_t x, int64_t y) const {
   if (level < m_config.pyramid_level && !m_page_windows[level].contains(x, y))
     return m_pages->find(TileKey{level, uint32_t(x), uint32_t(y)});
   const uint32_t page = m_slot_pages[slotIndex(level, x, y)];
@@ -294,7 +296,7 @@ uint32_t ClipmapRenderer::pageOf(uint32_t level, int64_t x, int64_t y) const {
              : PageTable::kNoPage;
 }
 
-void ClipmapRenderer::endUploadsPaged(uint32_t target) {
+void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
   ++m_frame;
   const uint32_t pyramid = m_config.pyramid_level;
   const uint32_t levels = m_geometry.levelCount();

@@ -1,5 +1,7 @@
 #include "terrain_mesh.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 
 namespace clipstream::terrain_mesh {
@@ -38,6 +40,24 @@ uint32_t blockSides(uint32_t n, uint32_t bx, uint32_t by) {
 }
 
 }  // namespace
+
+glm::i64vec2 ringOrigin(const glm::dvec2& camera_samples, uint32_t n, uint32_t level) {
+  const glm::dvec2 cam = camera_samples / std::ldexp(1.0, int(level));
+  const double half = double(n) / 2.0;
+  return {2 * int64_t(std::floor((cam.x - half) / 2.0)), 2 * int64_t(std::floor((cam.y - half) / 2.0))};
+}
+
+void patternHole(uint32_t n, int pattern, int* hole_x, int* hole_y) {
+  *hole_x = pattern == kNoHole ? -1 : int(n / 4) + (pattern - 1) % 2;
+  *hole_y = pattern == kNoHole ? -1 : int(n / 4) + (pattern - 1) / 2;
+}
+
+int holePattern(const glm::i64vec2& fine_origin, const glm::i64vec2& origin, uint32_t n) {
+  // The finer ring's origin in this level's samples (both are even at their own level).
+  const int64_t kx = fine_origin.x / 2 - origin.x, ky = fine_origin.y / 2 - origin.y;
+  const int64_t base = int64_t(n / 4);
+  return 1 + int(kx - base) + 2 * int(ky - base);
+}
 
 std::vector<uint32_t> ringTriangles(uint32_t n, int hole_x, int hole_y) {
   std::vector<uint32_t> out;
@@ -84,6 +104,77 @@ std::vector<uint32_t> patchTriangles(uint32_t n, uint32_t coarse_sides) {
         for (uint32_t i = 2 * bx; i < 2 * bx + 2; ++i) appendCell(n, i, j, &out);
     }
   return out;
+}
+
+
+namespace {
+
+// The plain (n + 1)^2 grid's (i, j) pairs in row order.
+std::vector<int32_t> gridVertices(uint32_t n) {
+  std::vector<int32_t> out;
+  out.reserve(size_t(n + 1) * (n + 1) * 2);
+  for (uint32_t j = 0; j <= n; ++j)
+    for (uint32_t i = 0; i <= n; ++i) out.insert(out.end(), {int32_t(i), int32_t(j)});
+  return out;
+}
+
+// Appends one pattern's triangles `tris` to `mesh`, filed in blocks by the
+// cell of their centroid, each block with its own copy of its vertices.
+void appendBlocks(uint32_t n, const std::vector<uint32_t>& tris, RingMesh* mesh,
+                  std::array<IndexRange, RingMesh::kBlocks * RingMesh::kBlocks>* ranges) {
+  constexpr uint32_t kBlocks = RingMesh::kBlocks;
+  const uint32_t block_cells = n / kBlocks;
+  std::vector<std::vector<uint32_t>> blocks(kBlocks * kBlocks);
+  for (size_t t = 0; t < tris.size(); t += 3) {
+    uint32_t sx = 0, sy = 0;
+    for (int k = 0; k < 3; ++k) {
+      sx += tris[t + k] % (n + 1);
+      sy += tris[t + k] / (n + 1);
+    }
+    const uint32_t bx = std::min(sx / 3 / block_cells, kBlocks - 1);
+    const uint32_t by = std::min(sy / 3 / block_cells, kBlocks - 1);
+    blocks[by * kBlocks + bx].insert(blocks[by * kBlocks + bx].end(), tris.begin() + long(t),
+                                     tris.begin() + long(t) + 3);
+  }
+  for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
+    std::vector<uint32_t> used(blocks[b]);
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+    const uint32_t base = uint32_t(mesh->vertices.size() / 2);
+    for (uint32_t v : used) {
+      mesh->vertices.push_back(int32_t(v % (n + 1)));
+      mesh->vertices.push_back(int32_t(v / (n + 1)));
+    }
+    (*ranges)[b] = {uint32_t(mesh->indices.size()), uint32_t(blocks[b].size())};
+    for (uint32_t v : blocks[b])
+      mesh->indices.push_back(base + uint32_t(std::lower_bound(used.begin(), used.end(), v) - used.begin()));
+  }
+}
+
+}  // namespace
+
+RingMesh buildRingMesh(uint32_t n, bool plain_grid) {
+  RingMesh mesh;
+  mesh.vertices = gridVertices(n);
+  mesh.patterns = plain_grid ? 1 : kRingPatterns;
+  for (int pattern = 0; pattern < mesh.patterns; ++pattern) {
+    int hx = 0, hy = 0;
+    patternHole(n, pattern, &hx, &hy);
+    const std::vector<uint32_t> tris = plain_grid ? gridTriangles(n) : ringTriangles(n, hx, hy);
+    appendBlocks(n, tris, &mesh, &mesh.blocks[size_t(pattern)]);
+  }
+  return mesh;
+}
+
+PatchMesh buildPatchMesh(uint32_t n) {
+  PatchMesh mesh;
+  mesh.vertices = gridVertices(n);
+  for (uint32_t mask = 0; mask < 16; ++mask) {
+    const std::vector<uint32_t> tris = patchTriangles(n, mask);
+    mesh.masks[mask] = {uint32_t(mesh.indices.size()), uint32_t(tris.size())};
+    mesh.indices.insert(mesh.indices.end(), tris.begin(), tris.end());
+  }
+  return mesh;
 }
 
 }  // namespace clipstream::terrain_mesh

@@ -14,6 +14,7 @@
 // llvmpipe. With CLIPSTREAM_STABILITY_OUT set, one JSON line per scenario
 // is appended to that file (the sweep's stability table).
 #include "test_helpers.h"
+#include "../../renderer/src/clipmap_renderer_impl.h"  // private: the slot bias
 
 #include <clipstream/eval/flight_run.h>
 #include <clipstream/eval/metrics.h>
@@ -487,7 +488,7 @@ TEST(Stability, WrongTilesAreCaughtAsGarbage) {
   std::unique_ptr<ClipmapRenderer> wrong;
   ASSERT_TRUE(ClipmapRenderer::create(source->geometry(), {plan.clip_tiles, plan.pyramid_level,
                                                            Buffering::kSingle}, &wrong).ok());
-  wrong->setTestSlotBias(1);
+  wrong->impl().setSlotBias(1);
   std::unique_ptr<OffscreenTarget> target;
   ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).ok());
   test::loadPlan(*wrong, *source, plan);

@@ -2,6 +2,7 @@
 // llvmpipe; each skips when no EGL context can be created. Metric: PSNR over
 // RGB; thresholds: >= 35 dB "matches", >= 50 dB "same frame".
 #include "test_helpers.h"
+#include "../../renderer/src/clipmap_renderer_impl.h"  // private: the slot bias
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/eval/frame_writer.h>
@@ -179,7 +180,7 @@ TEST(ClipmapRender, WrongToroidalOffsetFailsTheReference) {
   const Camera cam = test::obliqueCamera();
   Scene s = makeScene(patternSource(), cam);
   ASSERT_TRUE(s.renderer);
-  s.renderer->setTestSlotBias(1);
+  s.renderer->impl().setSlotBias(1);
   test::loadPlan(*s.renderer, *s.source, s.plan);
   const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
   const auto ref = reference(*s.source, s.source, cam);

@@ -1,14 +1,18 @@
-// The geometry clipmap (terrain.h): the ring mesh's topology on the CPU,
-// and on the GPU no crack (no background pixel where the ground must be) at
-// rest and while the rings move across level borders, vertex heights and
-// normals against the CPU, and missing fine tiles coarsening the geometry
-// rather than opening holes. Headless llvmpipe; GL tests skip without EGL.
+// The terrain (terrain.h) on the GPU: no crack (no background pixel where
+// the ground must be) at rest and while the rings move across level
+// borders, vertex heights and normals against the CPU, missing fine tiles
+// coarsening the geometry rather than opening holes, the height stack's
+// toroidal slots, and the quadtree. The meshes on the CPU are
+// test_terrain_mesh.cpp's. Headless llvmpipe; GL tests skip without EGL.
 #include "test_helpers.h"
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/terrain.h>
 
-#include "../../renderer/src/terrain_mesh.h"
+#include "../../renderer/src/gl.h"
+#include "../../renderer/src/gl_util.h"
+#include "../../renderer/src/shaders.h"
+#include "../../renderer/src/terrain_impl.h"
 
 #include <gtest/gtest.h>
 
@@ -70,13 +74,15 @@ HeightField roughField(uint32_t side) {
 }
 
 // Uploads, for this camera, the tiles every ring reads at levels >= finest
-// of `geometry`, each as `tile` gives it.
-void uploadRingTiles(TerrainRenderer& terrain, const PyramidGeometry& geometry, const Camera& camera,
+// of `geometry`, each as `tile` gives it, into a TerrainRenderer or its
+// TerrainRendererImpl.
+template <class Terrain>
+void uploadRingTiles(Terrain& terrain, const PyramidGeometry& geometry, const Camera& camera,
                      const std::function<std::vector<float>(const TileKey&)>& tile, uint32_t finest = 0) {
   const uint32_t n = terrain.config().ring_cells;
   const int64_t t = geometry.tile_px;
   for (uint32_t l = finest; l < geometry.levelCount(); ++l) {
-    const glm::i64vec2 o = TerrainRenderer::ringOrigin(terrain.config(), camera, l);
+    const glm::i64vec2 o = ringOrigin(terrain.config(), camera, l);
     const LevelInfo& info = geometry.levels[l];
     auto clampTile = [&](int64_t s, uint64_t size) {
       return std::clamp<int64_t>(s, 0, int64_t(size) - 1) / t;
@@ -89,8 +95,8 @@ void uploadRingTiles(TerrainRenderer& terrain, const PyramidGeometry& geometry, 
   }
 }
 
-void uploadRings(TerrainRenderer& terrain, const HeightField& f, const Camera& camera,
-                 uint32_t finest = 0) {
+template <class Terrain>
+void uploadRings(Terrain& terrain, const HeightField& f, const Camera& camera, uint32_t finest = 0) {
   uploadRingTiles(terrain, f.geometry, camera, [&f](const TileKey& key) { return f.tile(key); }, finest);
 }
 
@@ -161,65 +167,94 @@ Camera overField(double x, double z, double height, double heading, double pitch
   return c;
 }
 
-// The area and the edge uses of a mesh of index triples over an
-// (n + 1)^2 vertex grid; a degenerate triangle fails the test.
-struct MeshTopology {
-  double area = 0.0;
-  std::map<std::pair<uint32_t, uint32_t>, int> edges;  // (lower, higher vertex) -> triangles
-};
-MeshTopology topologyOf(const std::vector<uint32_t>& tris, uint32_t n) {
-  MeshTopology m;
-  EXPECT_EQ(tris.size() % 3, 0u);
-  auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
-  for (size_t t = 0; t + 2 < tris.size(); t += 3) {
-    const auto [ax, ay] = xy(tris[t]);
-    const auto [bx, by] = xy(tris[t + 1]);
-    const auto [cx, cy] = xy(tris[t + 2]);
-    const double a = 0.5 * ((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
-    EXPECT_GT(std::abs(a), 0.0) << "degenerate triangle";
-    m.area += std::abs(a);
-    for (int e = 0; e < 3; ++e) {
-      uint32_t u = tris[t + e], v = tris[t + (e + 1) % 3];
-      if (u > v) std::swap(u, v);
-      ++m.edges[{u, v}];
-    }
-  }
-  return m;
+// Runs terrain.vert over every vertex of ring `level`'s (n + 1)^2 grid for
+// this camera, with the renderer's own uniforms, mesh and height stack,
+// through transform feedback (nothing drawn), and returns for each vertex
+// in row order the normal (xyz) and height (w) it outputs. The program is
+// built here, for this test alone. A complete framebuffer must be bound
+// (e.g. an OffscreenTarget).
+std::vector<glm::vec4> ringVertices(const TerrainRendererImpl& terrain, const Camera& camera,
+                                    const Viewport& viewport, uint32_t level) {
+  const uint32_t n = terrain.config().ring_cells;
+  const size_t count = size_t(n + 1) * (n + 1);
+  if (level >= terrain.geometry().levelCount()) return {};
+  GLuint p = 0;
+  const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" + shaders::k_ground_clipmap_frag;
+  const Status built = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &p, "#define TERRAIN 1\n",
+                                             {"vNormal", "vHeight"});
+  EXPECT_TRUE(built.ok()) << built.toString();
+  if (!built) return {};
+  terrain.setFrameUniforms(p, camera, viewport);
+  terrain.setRingUniforms(p, camera, level, ringOrigin(terrain.config(), camera, level));
+  GLuint buffer = 0;
+  glCreateBuffers(1, &buffer);
+  glNamedBufferStorage(buffer, GLsizeiptr(count * sizeof(glm::vec4)), nullptr, GL_MAP_READ_BIT);
+  glUseProgram(p);
+  glBindVertexArray(terrain.ringMesh().vao());
+  glEnable(GL_RASTERIZER_DISCARD);
+  glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, buffer);
+  glBeginTransformFeedback(GL_POINTS);
+  glDrawArrays(GL_POINTS, 0, GLsizei(count));  // the plain grid: the mesh's first (n + 1)^2 vertices
+  glEndTransformFeedback();
+  glDisable(GL_RASTERIZER_DISCARD);
+  glBindVertexArray(0);
+  glUseProgram(0);
+  std::vector<glm::vec4> out(count);
+  glGetNamedBufferSubData(buffer, 0, GLsizeiptr(count * sizeof(glm::vec4)), out.data());
+  glDeleteBuffers(1, &buffer);
+  glDeleteProgram(p);
+  return out;
 }
 
-TEST(TerrainMesh, RingsCoverTheirCellsOnceAndMeetWithoutTJunctions) {
-  for (uint32_t n : {16u, 64u, 128u}) {
-    for (int config = 0; config < 5; ++config) {
-      const int hx = config == 0 ? -1 : int(n / 4) + (config - 1) % 2;
-      const int hy = config == 0 ? -1 : int(n / 4) + (config - 1) / 2;
-      const std::vector<uint32_t> tris = terrain_mesh::ringTriangles(n, hx, hy);
-      const MeshTopology topology = topologyOf(tris, n);
-      const double area = topology.area;
-      const auto& edges = topology.edges;
-      auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
-      const double hole = config == 0 ? 0.0 : double(n / 2) * (n / 2);
-      EXPECT_DOUBLE_EQ(area, double(n) * n - hole) << "n " << n << " config " << config;
-      for (const auto& [edge, uses] : edges) {
-        ASSERT_LE(uses, 2) << "an edge shared by three triangles";
-        if (uses == 2) continue;
-        // A border edge: on the outer edge it joins two even vertices two
-        // cells apart (the coarser ring's vertices); on the hole's edge it
-        // is one cell long (the finer ring's outer edge has the same).
-        const auto [ux, uy] = xy(edge.first);
-        const auto [vx, vy] = xy(edge.second);
-        const bool outer = (ux == vx && (ux == 0 || ux == int(n))) || (uy == vy && (uy == 0 || uy == int(n)));
-        if (outer) {
-          EXPECT_EQ(std::abs(ux - vx) + std::abs(uy - vy), 2) << "T-junction on the outer edge";
-          EXPECT_EQ(ux % 2 + uy % 2 + vx % 2 + vy % 2, 0);
-        } else {
-          ASSERT_NE(config, 0) << "a border edge inside a ring without hole";
-          EXPECT_EQ(std::abs(ux - vx) + std::abs(uy - vy), 1);
-          const bool on_hole = (ux == hx || ux == hx + int(n / 2) || uy == hy || uy == hy + int(n / 2));
-          EXPECT_TRUE(on_hole) << "a crack inside the ring at (" << ux << ", " << uy << ")";
-        }
-      }
-    }
-  }
+TEST(TerrainHeightStack, ATileTakesItsToroidalSlotFromTheTileThatHadIt) {
+  CLIPSTREAM_REQUIRE_GL();
+  const HeightField f = roughField(1024);  // level 0: 8 x 8 tiles of 128^2
+  TerrainConfig config;
+  config.ring_cells = 64;
+  const uint32_t slots = TerrainHeightStack::slotsFor(f.geometry, config);
+  ASSERT_LT(slots, 8u) << "the test needs two tiles of a level sharing a slot";
+  std::unique_ptr<TerrainHeightStack> stack;
+  ASSERT_TRUE(TerrainHeightStack::create(f.geometry, slots, f.geometry.levelCount(), &stack).ok());
+  const int64_t t = f.geometry.tile_px;
+  // Level 0's texels of slot (sx, sy), read back from the texture.
+  auto slotTexels = [&](uint32_t sx, uint32_t sy) {
+    std::vector<float> texels(size_t(t) * t);
+    glGetTextureSubImage(stack->texture(), 0, GLint(sx * t), GLint(sy * t), 0, GLsizei(t), GLsizei(t), 1, GL_RED,
+                         GL_FLOAT, GLsizei(texels.size() * sizeof(float)), texels.data());
+    return texels;
+  };
+  auto bounds = [](const std::vector<float>& h) {
+    const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
+    return glm::vec2(*lo, *hi);
+  };
+  EXPECT_FALSE(stack->holds(0, 1, 2));
+  float h = 0.0f;
+  EXPECT_FALSE(stack->sample(0, 1 * t + 5, 2 * t + 7, &h));
+  const std::vector<float> a = f.tile({0, 1, 2});
+  stack->upload({0, 1, 2}, a.data());
+  EXPECT_TRUE(stack->holds(0, 1, 2));
+  EXPECT_EQ(slotTexels(1 % slots, 2 % slots), a) << "the tile is not in slot (x mod slots, y mod slots)";
+  ASSERT_TRUE(stack->sample(0, 1 * t + 5, 2 * t + 7, &h));
+  EXPECT_EQ(h, f.at(0, 1 * t + 5, 2 * t + 7));
+  EXPECT_EQ(stack->heightBounds(0, {1 * t, 2 * t}, {2 * t - 1, 3 * t - 1}), bounds(a));
+  // The tile `slots` further along takes the same slot: the first one is
+  // no longer resident anywhere, and its ground has no bound.
+  const std::vector<float> b = f.tile({0, 1 + slots, 2});
+  stack->upload({0, 1 + slots, 2}, b.data());
+  EXPECT_FALSE(stack->holds(0, 1, 2));
+  EXPECT_TRUE(stack->holds(0, 1 + slots, 2));
+  EXPECT_EQ(slotTexels(1 % slots, 2 % slots), b);
+  EXPECT_FALSE(stack->sample(0, 1 * t + 5, 2 * t + 7, &h));
+  ASSERT_TRUE(stack->sample(0, (1 + slots) * t + 5, 2 * t + 7, &h));
+  EXPECT_EQ(h, f.at(0, (1 + slots) * t + 5, 2 * t + 7));
+  EXPECT_FALSE(std::isfinite(stack->heightBounds(0, {1 * t, 2 * t}, {2 * t - 1, 3 * t - 1}).x));
+  // A ring is resident when every tile it reads (one sample around) is:
+  // 64 cells from (266, 394) read samples 265..331 x 393..459.
+  const glm::i64vec2 ring_origin(2 * t + 10, 3 * t + 10);
+  EXPECT_FALSE(stack->ringResident(0, ring_origin, 64));
+  stack->upload({0, 2, 3}, f.tile({0, 2, 3}).data());  // samples 256..383 x 384..511
+  EXPECT_TRUE(stack->ringResident(0, ring_origin, 64));
+  EXPECT_FALSE(stack->ringResident(0, ring_origin - glm::i64vec2(11, 0), 64)) << "reads one sample into tile 1";
 }
 
 TEST(Terrain, NoCrackAtRestOrWhileRingsMoveAcrossLevelBorders) {
@@ -297,14 +332,17 @@ TEST(Terrain, VertexHeightsAndNormalsMatchTheCpu) {
   const Camera camera = overField(1234.5, 987.25, 150.0, 0.3, -0.5);
   TerrainScene s = makeScene(camera);
   ASSERT_TRUE(s.terrain);
-  uploadRings(*s.terrain, s.field, camera);
+  // The same terrain as the scene's, reached through its implementation.
+  std::unique_ptr<TerrainRendererImpl> terrain;
+  ASSERT_TRUE(TerrainRendererImpl::create(s.field.geometry, s.terrain->config(), &terrain).ok());
+  uploadRings(*terrain, s.field, camera);
   s.target->bind();  // draws need a complete framebuffer, even with nothing rasterised
-  const uint32_t n = s.terrain->config().ring_cells;
+  const uint32_t n = terrain->config().ring_cells;
   const uint32_t w = std::max(1u, n / renderer_config::kTerrainTransitionDivisor);
   for (uint32_t level : {0u, 1u, 2u}) {
-    const std::vector<glm::vec4> v = s.terrain->ringVertices(camera, kViewport, level);
+    const std::vector<glm::vec4> v = ringVertices(*terrain, camera, kViewport, level);
     ASSERT_EQ(v.size(), size_t(n + 1) * (n + 1));
-    const glm::i64vec2 o = TerrainRenderer::ringOrigin(s.terrain->config(), camera, level);
+    const glm::i64vec2 o = ringOrigin(terrain->config(), camera, level);
     const double spacing = 2.0 * double(1 << level);  // world units between samples
     size_t inner = 0, edge = 0;
     for (uint32_t j = 0; j <= n; ++j)
@@ -402,7 +440,8 @@ TEST(Terrain, GroundHeightIsAboveEverySurfaceTheNextFrameMayDraw) {
 
 // Uploads, for this camera, the tiles every ring reads, fetched from a
 // height source.
-void uploadRingsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera& camera) {
+template <class Terrain>
+void uploadRingsFrom(Terrain& terrain, TileSource& heights, const Camera& camera) {
   uploadRingTiles(terrain, heights.geometry(), camera, [&heights](const TileKey& key) {
     std::vector<uint8_t> bytes;
     EXPECT_TRUE(heights.fetch(key, &bytes).ok());
@@ -410,6 +449,43 @@ void uploadRingsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera
     std::memcpy(out.data(), bytes.data(), out.size() * sizeof(float));
     return out;
   });
+}
+
+// Uploads the 3 x 3 tiles around the camera's at every level (what the
+// quadtree's stack slots hold), as a streamer's windows would hold them.
+void uploadWindowsFrom(TerrainRenderer& terrain, TileSource& heights, const Camera& camera) {
+  for (uint32_t l = 0; l < heights.geometry().levelCount(); ++l) {
+    const LevelInfo& info = heights.geometry().levels[l];
+    const double span = std::ldexp(double(heights.geometry().tile_px), int(l));
+    const int64_t cx = int64_t(camera.position.x / span), cz = int64_t(camera.position.z / span);
+    for (int64_t ty = std::max<int64_t>(cz - 1, 0); ty <= std::min<int64_t>(cz + 1, info.tiles_y - 1); ++ty)
+      for (int64_t tx = std::max<int64_t>(cx - 1, 0); tx <= std::min<int64_t>(cx + 1, info.tiles_x - 1); ++tx) {
+        std::vector<uint8_t> bytes;
+        const TileKey key{l, uint32_t(tx), uint32_t(ty)};
+        ASSERT_TRUE(heights.fetch(key, &bytes).ok());
+        terrain.uploadTile(key, reinterpret_cast<const float*>(bytes.data()));
+      }
+  }
+}
+
+// Heights of the finest ring, as terrain.vert outputs them after a draw of
+// the terrain `config` makes over `heights` (through its implementation),
+// are the procedural samples exactly. A complete framebuffer must be bound.
+void expectFinestRingOnTheSamples(TileSource& heights, const ProceduralSpec& spec, const TerrainConfig& config,
+                                  std::shared_ptr<const TerrainBounds> bounds, const Camera& camera,
+                                  const ClipmapRenderer& colour) {
+  std::unique_ptr<TerrainRendererImpl> terrain;
+  ASSERT_TRUE(TerrainRendererImpl::create(heights.geometry(), config, &terrain).ok());
+  terrain->setBounds(std::move(bounds));
+  uploadRingsFrom(*terrain, heights, camera);
+  terrain->draw(camera, kViewport, colour);
+  ASSERT_EQ(terrain->lastFrame().finest_level, 0u);
+  const std::vector<glm::vec4> v = ringVertices(*terrain, camera, kViewport, 0);
+  ASSERT_EQ(v.size(), size_t(65) * 65);
+  const glm::i64vec2 o = ringOrigin(config, camera, 0);
+  for (uint32_t j = 20; j <= 44; j += 6)
+    for (uint32_t i = 20; i <= 44; i += 6)
+      EXPECT_EQ(v[size_t(j) * 65 + i].w, float(proceduralHeight(spec, uint64_t(o.x + i), uint64_t(o.y + j))));
 }
 
 // A 2^26-sample terrain 3000 samples from its far corner, drawn by `method`.
@@ -447,23 +523,10 @@ void planetNearItsFarCorner(TerrainMethod method) {
   test::loadPlan(*colour_renderer, *colour, plan);
   std::unique_ptr<OffscreenTarget> target;
   ASSERT_TRUE(OffscreenTarget::create(kViewport, &target).ok());
-  if (method == TerrainMethod::kClipmap) {
+  if (method == TerrainMethod::kClipmap)
     uploadRingsFrom(*terrain, *heights, world);
-  } else {
-    // The 3 x 3 tiles around the camera's at every level (what the stack's
-    // slots hold), as a streamer's windows would hold them.
-    for (uint32_t l = 0; l < heights->geometry().levelCount(); ++l) {
-      const LevelInfo& info = heights->geometry().levels[l];
-      const int64_t cx = int64_t(x / std::ldexp(128.0, int(l))), cz = int64_t(z / std::ldexp(128.0, int(l)));
-      for (int64_t ty = std::max<int64_t>(cz - 1, 0); ty <= std::min<int64_t>(cz + 1, info.tiles_y - 1); ++ty)
-        for (int64_t tx = std::max<int64_t>(cx - 1, 0); tx <= std::min<int64_t>(cx + 1, info.tiles_x - 1); ++tx) {
-          std::vector<uint8_t> bytes;
-          const TileKey key{l, uint32_t(tx), uint32_t(ty)};
-          ASSERT_TRUE(heights->fetch(key, &bytes).ok());
-          terrain->uploadTile(key, reinterpret_cast<const float*>(bytes.data()));
-        }
-    }
-  }
+  else
+    uploadWindowsFrom(*terrain, *heights, world);
 
   auto draw = [&](const Camera& c) {
     target->bind();
@@ -479,13 +542,8 @@ void planetNearItsFarCorner(TerrainMethod method) {
   ASSERT_GT(terrain->lastFrame().rings, 3u);
   EXPECT_LE(terrain->lastFrame().finest_level, method == TerrainMethod::kClipmap ? 0u : 1u);
   if (method == TerrainMethod::kClipmap) {
-    // Heights of the finest ring are the procedural samples exactly.
     target->bind();
-    const std::vector<glm::vec4> v = terrain->ringVertices(world, kViewport, 0);
-    const glm::i64vec2 o = TerrainRenderer::ringOrigin(tc, world, 0);
-    for (uint32_t j = 20; j <= 44; j += 6)
-      for (uint32_t i = 20; i <= 44; i += 6)
-        EXPECT_EQ(v[size_t(j) * 65 + i].w, float(proceduralHeight(spec, uint64_t(o.x + i), uint64_t(o.y + j))));
+    expectFinestRingOnTheSamples(*heights, spec, tc, bounds, world, *colour_renderer);
   }
   // No crack: every pixel whose ray meets the plane of the lowest ground
   // (proceduralHeight >= 345) inside the planet shows terrain.
@@ -517,43 +575,6 @@ TEST(TerrainQuadtree, PlanetSizedTerrainNearItsFarCornerHasNoCrackOrJitter) {
 }
 
 // ---- The quadtree method (TerrainMethod::kQuadtree) ----
-
-TEST(TerrainMesh, PatchEdgePatternsCoverTheirCellsAndSkipOddVerticesTowardsCoarserNodes) {
-  for (uint32_t n : {4u, 8u, 32u}) {
-    for (uint32_t mask = 0; mask < 16; ++mask) {
-      const std::vector<uint32_t> tris = terrain_mesh::patchTriangles(n, mask);
-      const MeshTopology topology = topologyOf(tris, n);
-      const double area = topology.area;
-      const auto& edges = topology.edges;
-      auto xy = [&](uint32_t v) { return std::pair<int, int>(int(v % (n + 1)), int(v / (n + 1))); };
-      EXPECT_DOUBLE_EQ(area, double(n) * n) << "n " << n << " mask " << mask;
-      // Every border edge lies on a side: two cells long between even
-      // vertices on a side towards a coarser node, one cell elsewhere.
-      size_t border = 0;
-      for (const auto& [edge, uses] : edges) {
-        ASSERT_LE(uses, 2) << "an edge shared by three triangles";
-        if (uses == 2) continue;
-        ++border;
-        const auto [ux, uy] = xy(edge.first);
-        const auto [vx, vy] = xy(edge.second);
-        int side = -1;
-        if (uy == 0 && vy == 0) side = 0;
-        if (ux == int(n) && vx == int(n)) side = 1;
-        if (uy == int(n) && vy == int(n)) side = 2;
-        if (ux == 0 && vx == 0) side = 3;
-        ASSERT_GE(side, 0) << "a border edge inside the patch: a crack";
-        const bool coarse = (mask >> side) & 1;
-        EXPECT_EQ(std::abs(ux - vx) + std::abs(uy - vy), coarse ? 2 : 1) << "mask " << mask << " side " << side;
-        if (coarse) {
-          EXPECT_EQ(ux % 2 + uy % 2 + vx % 2 + vy % 2, 0) << "an odd vertex on a coarse side";
-        }
-      }
-      size_t want = 0;
-      for (int side = 0; side < 4; ++side) want += ((mask >> side) & 1) ? n / 2 : n;
-      EXPECT_EQ(border, want) << "n " << n << " mask " << mask;
-    }
-  }
-}
 
 // Uploads every tile of every level of the field (the quadtree scenes'
 // stack holds them all), from level `finest` up.

@@ -8,7 +8,6 @@
 
 #include <clipstream/renderer/clipmap.h>
 #include <clipstream/renderer/config.h>
-#include <clipstream/renderer/page_table.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/streamer.h>
@@ -18,7 +17,6 @@
 #include <functional>
 #include <memory>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 namespace clipstream {
@@ -167,7 +165,7 @@ class ClipmapRenderer {
   // Windows and resident flags of the stack levels after this frame's
   // uploads (FrameHandoff::residency). Turned into the usable map.
   void setResidency(const std::vector<LevelResidency>& residency);
-  void setMaxTextureLod(uint32_t level) { m_max_texture_lod = level; }
+  void setMaxTextureLod(uint32_t level);
 
   // Publishes the frame's uploads: writes the usable map and, when
   // double-buffered and anything changed, swaps the sets.
@@ -181,184 +179,38 @@ class ClipmapRenderer {
   void draw(const Camera& camera, const Viewport& viewport);
   static void clearSky();
 
-  // Binds the colour stack and usable map (texture units 0 and 1) and sets
-  // the sampling uniforms of ground_clipmap.frag on `program` for this
-  // camera: what draw() does before its triangle, for programs that draw
-  // other geometry with the same fragment shader (TerrainRenderer).
-  void bindColour(uint32_t program, const Camera& camera, const Viewport& viewport) const;
-
-  void setOverlay(Overlay overlay) { m_overlay = overlay; }
-  Overlay overlay() const { return m_overlay; }
-
-  // Test hook: puts every stack tile `bias` slots off its true slot
-  // (toroidalSlot(x + bias)), a deliberately wrong toroidal offset.
-  void setTestSlotBias(int64_t bias) { m_test_slot_bias = bias; }
+  void setOverlay(Overlay overlay);
+  Overlay overlay() const;
 
   // Loads the coarse pyramid: every tile of every level >= pyramid_level,
   // each asked of `tile` once (nullptr = the tile cannot be had: damaged or
   // missing). A tile `tile` cannot give is filled from its ancestor, so the
-  // pyramid, the fallback of every other level, has no hole (see
-  // fillMissingPyramidTiles()). Call between beginFrame() and endUploads().
-  // Returns the number of tiles `tile` could not give.
+  // pyramid, the fallback of every other level, has no hole. Call between
+  // beginFrame() and endUploads(). Returns the number of tiles `tile` could
+  // not give.
   using PyramidTileFn =
       std::function<std::shared_ptr<const std::vector<uint8_t>>(const TileKey& key)>;
   uint32_t loadPyramid(const PyramidTileFn& tile);
 
-
-  const UsableMap& usableMap() const { return m_front_map; }
-  const UploadStats& lastUploads() const { return m_stats; }
-  const PyramidGeometry& geometry() const { return m_geometry; }
-  const TextureBytes& textureBytes() const { return m_texture_bytes; }
-  TileContent tileContent() const { return m_config.tile_content; }
-  TextureMemory textureMemory() const { return m_config.texture_memory; }
+  const UsableMap& usableMap() const;
+  const UploadStats& lastUploads() const;
+  const PyramidGeometry& geometry() const;
+  const TextureBytes& textureBytes() const;
+  TileContent tileContent() const;
+  TextureMemory textureMemory() const;
   // kPaged: the pool's pages, and those holding a tile now. 0 in kStack.
-  uint32_t poolPages() const { return m_pages ? m_pages->pages() : 0; }
-  uint32_t poolPagesUsed() const { return m_pages ? m_pages->used() : 0; }
-  // The #defines every program that samples the colour with
-  // ground_clipmap.frag needs for this renderer (bindColour()).
-  std::string shaderDefines() const;
+  uint32_t poolPages() const;
+  uint32_t poolPagesUsed() const;
+
+  // The implementation, for the library's own use: its definition is not
+  // installed.
+  struct Impl;
+  Impl& impl() { return *m_impl; }
+  const Impl& impl() const { return *m_impl; }
 
  private:
-  // Fills every pyramid tile that was never uploaded: the tile is
-  // magnified from its parent (bilinear GPU blit, coarse levels first, so a
-  // filled parent serves its children); a tile with no parent in the chain
-  // is averaged down from its children, or else cleared to mid grey. Filled
-  // tiles count as uploaded (a later upload of the tile is skipped).
-  // Returns the number of tiles filled.
-  uint32_t fillMissingPyramidTiles();
-  ClipmapRenderer() = default;
-  struct Pending {
-    TileKey key;
-    std::shared_ptr<const std::vector<uint8_t>> rgba;
-  };
-  void uploadStack(uint32_t set, const TileKey& key, const uint8_t* pixels);
-  void uploadPyramid(const TileKey& key, const uint8_t* pixels);
-  // BC1: one pyramid tile made on the CPU (read back, decoded, filtered,
-  // encoded): magnified from its parent, averaged from its children, or
-  // mid grey. Compressed textures cannot be blit or cleared into.
-  enum class Fill { kFromParent, kFromChildren, kGrey };
-  void fillPyramidTileBc1(const TileKey& key, Fill fill);
-  // Decoded RGBA8 of the pyramid layer's region [x, x + w) x [y, y + h)
-  // of `mip` (block-aligned, inside the mip), set 0.
-  std::vector<uint8_t> readPyramidRegion(uint32_t mip, uint32_t x, uint32_t y, uint32_t w,
-                                         uint32_t h) const;
-  bool compressed() const { return m_config.tile_content == TileContent::kBc1; }
-  bool paged() const { return m_config.texture_memory == TextureMemory::kPaged; }
-
-  // kPaged (paged.cpp). The pool and the indirection maps.
-  Status createPaged();
-  // A stack tile is kept (pixels) until it leaves its window; a pyramid
-  // tile gets its pinned page at once.
-  void uploadTilePaged(const TileKey& key, std::shared_ptr<const std::vector<uint8_t>> rgba);
-  // Gives pages to the tiles the frame samples (coarse levels first, near
-  // the window's centre first), fills their borders and mip 1, and writes
-  // the indirection maps into set `target`.
-  void endUploadsPaged(uint32_t target);
-  // Takes a page for `key` and writes `pixels` into it (with its borders
-  // from the neighbours' pages); kNoPage when the pool is full this frame.
-  uint32_t placePage(const TileKey& key, const uint8_t* pixels, bool pin);
-  // The pyramid level's tile (x, y) lives at a fixed page, which the shader
-  // computes the same way (its fallback then needs no lookup): layer
-  // 1 + (y / 2) * m_pyramid_layers_x + x / 2, the quarter of its parity.
-  uint32_t pyramidPage(uint32_t x, uint32_t y) const {
-    return 4 * (1 + (y >> 1) * m_pyramid_layers_x + (x >> 1)) + (x & 1) + 2 * (y & 1);
-  }
-  // The page of level `level`'s tile (x, y), or PageTable::kNoPage: an
-  // array read for a tile of its window (or a pyramid level's), from the
-  // index indexPages() builds; a hash find elsewhere.
-  uint32_t pageOf(uint32_t level, int64_t x, int64_t y) const;
-  void indexPages();
-  size_t slotIndex(uint32_t level, int64_t x, int64_t y) const {
-    return (size_t(level) * m_slots + toroidalSlot(y, m_slots)) * m_slots + toroidalSlot(x, m_slots);
-  }
-  void writePage(uint32_t page, const uint8_t* pixels);
-  void copyPageRegion(uint32_t src_page, uint32_t src_mip, uint32_t sx, uint32_t sy, uint32_t dst_page,
-                      uint32_t dst_mip, uint32_t dx, uint32_t dy, uint32_t w, uint32_t h);
-  void fillBorders(uint32_t page, const TileKey& key);
-  uint32_t fillMissingPyramidPages();
-  size_t tileBytes() const;
-  void fillCoarserMips(uint32_t set);
-  // Stack arrays and usable maps: two of each when double-buffered; staged
-  // keeps one stack and two usable maps.
-  uint32_t stackSets() const {
-    return m_config.buffering == Buffering::kDoubleUploadTwice || m_config.buffering == Buffering::kDoubleCopy
-               ? 2
-               : 1;
-  }
-  uint32_t usableSets() const { return m_config.buffering == Buffering::kSingle ? 1 : 2; }
-  bool staged() const { return m_config.buffering == Buffering::kStaged; }
-  // kStaged: copies `pixels` into this frame's staging region and returns
-  // its offset in the buffer, or -1 when the region is full.
-  int64_t stage(const uint8_t* pixels, size_t bytes);
-  // Unpack state for one tile's upload; kStaged: stages `pixels` and binds
-  // the ring, returning the offset to pass instead (unbind after the call).
-  const uint8_t* beginTileUpload(const uint8_t* pixels);
-  // kStaged: the ring, persistently mapped (m_staging*).
-  Status createStaging();
-  uint32_t slot(int64_t tile, uint32_t period) const {
-    return toroidalSlot(tile + m_test_slot_bias, period);
-  }
-
-  PyramidGeometry m_geometry;
-  RendererConfig m_config;
-  uint32_t m_slots = 0;  // slot period: clip_tiles rounded down to even, plus 2 (see create())
-  uint32_t m_mips = 0;   // mips of the stack array: 0 = level L, 1 = level L + 1, ...
-  // Two builds of the ground shader: without and with the overlay. A
-  // uniform switch would cost the overlay's arithmetic on every fragment
-  // (llvmpipe runs both sides of a branch), about 0.6 ms per 640x360 frame.
-  uint32_t m_program[2] = {0, 0};
-  uint32_t m_vao = 0;
-  uint32_t m_stack[2] = {0, 0};
-  uint32_t m_usable_tex[2] = {0, 0};
-  uint32_t m_front = 0;           // index of the set the shader samples
-  // Which tile each slot holds, per set and stack level (x | y << 32;
-  // kNoTile = none): mip 0 slots (period m_slots) and mip 1 slots (period
-  // m_slots / 2, the next coarser level over this level's window).
-  static constexpr uint64_t kNoTile = ~uint64_t(0);
-  std::vector<std::vector<uint64_t>> m_mip0_tile[2];
-  std::vector<std::vector<uint64_t>> m_mip1_tile[2];
-  std::vector<Pending> m_pending; // landed in the front set, not yet in the back
-  std::vector<LevelResidency> m_residency;
-  UsableMap m_front_map;
-  bool m_changed = false;
-  uint32_t m_max_texture_lod = 0;
-  Overlay m_overlay = Overlay::kOff;
-  int64_t m_test_slot_bias = 0;
-  std::vector<uint8_t> m_pyramid_have;  // per pyramid tile, 1 = uploaded
-  std::vector<size_t> m_pyramid_first;  // index of each pyramid level's first tile
-  uint32_t m_pyramid_missing = 0;
-  TextureBytes m_texture_bytes;
-  // kStaged: the ring (kStagingFrames regions of staging_tiles tiles),
-  // persistently mapped, and per region the fence of the last frame that
-  // wrote it.
-  uint32_t m_staging = 0;
-  uint8_t* m_staging_map = nullptr;
-  size_t m_staging_region_bytes = 0;
-  uint32_t m_staging_region = 0;
-  size_t m_staging_used = 0;
-  void* m_staging_fence[renderer_config::kStagingFrames] = {};
-  UploadStats m_stats;
-  double m_issue_ms = 0.0;
-  // kPaged: m_stack[0] is the pool (a layer per page), m_usable_tex the
-  // indirection maps (every level), page 0 a black page for slots that
-  // have none.
-  std::unique_ptr<PageTable> m_pages;
-  std::unordered_map<uint64_t, std::shared_ptr<const std::vector<uint8_t>>> m_page_pixels;
-  uint32_t m_page_border = 0;  // texels of border on each side (mip 0)
-  uint32_t m_page_px = 0;      // tile_px + 2 borders
-  uint32_t m_pyramid_layers_x = 0;  // layers a row of the pyramid level's pages (pyramidPage())
-  uint64_t m_frame = 1;
-  // kPaged, per frame: each window tile's and pyramid tile's page by slot (indexPages(); 0 =
-  // none) over the windows it was built for; whether a page was placed
-  // since the last endUploadsPaged(); the usable map's input then, and a
-  // generation of the indirection maps' contents with the one each set holds.
-  std::vector<uint32_t> m_slot_pages;
-  std::vector<TileRect> m_page_windows;
-  bool m_pages_changed = true;
-  std::vector<LevelResidency> m_paged_input;
-  bool m_paged_input_valid = false;
-  uint64_t m_map_generation = 1;
-  uint64_t m_map_written[2] = {0, 0};
+  ClipmapRenderer();
+  std::unique_ptr<Impl> m_impl;
 };
 
 // An offscreen framebuffer: RGBA8 colour + 24-bit depth, with readback.

@@ -15,7 +15,8 @@
 // both methods and when to choose which.
 //
 // Owned by the GL thread: every method must be called on the thread whose
-// context was current at create().
+// context was current at create(). The implementation and its GL objects
+// are private (renderer/src/terrain_impl.h).
 #pragma once
 
 #include <clipstream/renderer/config.h>
@@ -32,10 +33,11 @@
 #include <functional>
 #include <memory>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 namespace clipstream {
+
+class TerrainRendererImpl;
 
 // How heights map to the world (the colour layer's level-0 texels, y up):
 // the scene's alignment of the elevation layer (alignElevation()); the
@@ -104,8 +106,9 @@ struct TerrainFrame {
 
 // A leaf of the quadtree drawn last (TerrainRenderer::lastNodes()): level-L
 // node (x, y) covers level-L samples [x P, (x + 1) P] (P = patch_cells);
-// coarse_sides: terrain_mesh's PatchSide bits of the sides that border a
-// node one level coarser (drawn with their odd vertices left out).
+// coarse_sides: bits of the sides that border a node one level coarser
+// (drawn with their odd vertices left out): 1 the side along sample row
+// y P, 2 along column (x + 1) P, 4 along row (y + 1) P, 8 along column x P.
 struct TerrainNode {
   uint32_t level = 0;
   int64_t x = 0, y = 0;
@@ -115,18 +118,6 @@ struct TerrainNode {
 
 class TerrainRenderer {
  public:
-  // A quadtree node: level-L node (x, y) (TerrainNode's coordinates).
-  struct NodeId {
-    uint32_t level;
-    int64_t x, y;
-    bool operator==(const NodeId& o) const { return level == o.level && x == o.x && y == o.y; }
-  };
-  struct NodeIdHash {
-    size_t operator()(const NodeId& k) const {
-      return size_t((uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^ k.level);
-    }
-  };
-
   // Allocates the height stack for `heights` (an elevation store's
   // geometry) and builds the ring meshes. kInvalidArgument for a ring size
   // that is not a power of two in 16..1024 or a non-positive mapping;
@@ -193,18 +184,18 @@ class TerrainRenderer {
   // store's index, loadTerrainBounds()). Without them a node has no bound
   // but the exact one from its resident finer level (it splits wherever
   // its children are resident).
-  void setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_bounds = std::move(bounds); }
+  void setBounds(std::shared_ptr<const TerrainBounds> bounds);
   // Quadtree: a new TerrainConfig::error_px (within its range) for the next draws.
-  void setErrorBound(double error_px) { m_config.error_px = error_px; }
+  void setErrorBound(double error_px);
 
-  const TerrainFrame& lastFrame() const { return m_frame; }
+  const TerrainFrame& lastFrame() const;
   // Quadtree: every leaf of the last draw (culled ones included); empty
   // for the other methods.
-  const std::vector<TerrainNode>& lastNodes() const { return m_nodes; }
+  const std::vector<TerrainNode>& lastNodes() const;
   // Bytes of the height stack texture (video memory).
-  uint64_t textureBytes() const { return m_texture_bytes; }
-  const PyramidGeometry& geometry() const { return m_geometry; }
-  const TerrainConfig& config() const { return m_config; }
+  uint64_t textureBytes() const;
+  const PyramidGeometry& geometry() const;
+  const TerrainConfig& config() const;
 
   // The clip size (tiles a side) a streamer's height layer needs for rings
   // of `ring_cells`: the n + 3 samples a ring reads (one more each side for
@@ -214,117 +205,9 @@ class TerrainRenderer {
     return (ring_cells + 3 + tile_px - 1) / tile_px + 3;
   }
 
-  // Ring origin of `level` for this camera: the level's sample index of the
-  // ring's vertex (0, 0), even, so every other vertex is a vertex of the
-  // next coarser ring. Pure; exposed for tests.
-  static glm::i64vec2 ringOrigin(const TerrainConfig& config, const Camera& camera, uint32_t level);
-
-  // Test hook: runs ring `level`'s vertex shader for this camera (transform
-  // feedback, nothing drawn) and returns, for each vertex of its
-  // (n + 1)^2 grid in row order, the normal (xyz) and height (w) it outputs.
-  // A complete framebuffer must be bound (e.g. an OffscreenTarget).
-  std::vector<glm::vec4> ringVertices(const Camera& camera, const Viewport& viewport,
-                                      uint32_t level);
-
  private:
-  TerrainRenderer() = default;
-  void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
-  // The coarsest ring level needed with the camera at `cam` (level-0
-  // samples), and setting it (with the colour image's extent) for a frame.
-  uint32_t coarsestFor(const glm::dvec2& cam) const;
-  void updateCoarsest(const Camera& camera, const ClipmapRenderer& colour);
-  double farDistance(const Camera& camera) const;
-  // Draws the resident rings with `program` (its uniforms set by the caller
-  // for the frame), culling blocks; fills m_frame.
-  void drawRings(uint32_t program, const Camera& camera, const Viewport& viewport);
-  // The nested rings of the geometry clipmap, finest (nearest) first.
-  void drawClipmapRings(uint32_t program, const Camera& camera, const Viewport& viewport);
-  // The full_resolution mesh: every patch over the height field and the
-  // colour image (m_image_px), culled by blocks.
-  void drawPatches(uint32_t program, const Camera& camera, const Viewport& viewport);
-  // The quadtree (and the flat plane, its roots at height 0): selects the
-  // leaves for this camera (selectNodes(), into m_nodes) and draws them.
-  void drawQuadtree(uint32_t program, const Camera& camera, const Viewport& viewport);
-  void selectNodes(const Camera& camera, const Viewport& viewport);
-  // Quadtree helpers (terrain_quadtree.cpp).
-  struct NodeBox {
-    glm::dvec3 lo, hi;  // camera-relative world box
-  };
-  NodeBox nodeBox(const Camera& camera, uint32_t level, int64_t x, int64_t y) const;
-  bool nodeVisible(const Camera& camera, const NodeBox& box) const;
-  // The node's error bound (height units): the smaller of the index's bound
-  // for its tiles (plus their twist) and, where the next finer level is
-  // resident, the exact distance of that level's samples from the node's
-  // surface plus the children's bounds. Cached until a tile under it changes.
-  double nodeError(uint32_t level, int64_t x, int64_t y);
-  double tileErrorBound(uint32_t level, int64_t x, int64_t y) const;
-  // Height of level sample (i, j) from the resident tiles (clamped to the
-  // level; levels past the pyramid decimate its last, as the shader does).
-  bool cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const;
-  bool samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const;
-  uint32_t rootLevel() const;
-  // The flat method's plane: the terrain's lowest height (height units;
-  // without bounds the lowest sample of the pyramid's last level), so that
-  // a camera kept above the ground is above the plane too.
-  double flatHeight() const;
-  using Frustum = std::array<glm::dvec4, 6>;
-  Frustum frustum(const Camera& camera, const Viewport& viewport) const;
-  // Draws the blocks of index pattern `config` of the grid whose vertex
-  // (0, 0) is `origin` (level samples) at `level` that meet the frustum;
-  // counts them in m_frame.
-  void drawGrid(uint32_t program, const Camera& camera, const Frustum& planes, uint32_t level,
-                const glm::i64vec2& origin, int config);
-  void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
-                       const glm::i64vec2& origin) const;
-  bool levelResident(uint32_t level, const glm::i64vec2& origin) const;
-  // Bounds of the heights a ring of `ring_level` reads in level samples
-  // [s0, s1] (inclusive, clamped), from the resident tiles' bounds.
-  glm::vec2 heightBounds(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const;
-  uint32_t slotOf(int64_t tile) const;
-
-  PyramidGeometry m_geometry;
-  TerrainConfig m_config;
-  uint32_t m_slots = 0;        // tiles per stack layer side (toroidal period)
-  // Outermost ring level: covers the whole height field and colour image
-  // from the camera of the last draw (updateCoarsest()).
-  uint32_t m_coarsest = 0;
-  uint32_t m_program[2] = {0, 0};  // without / with the overlay
-  uint32_t m_feedback_program = 0; // ringVertices()
-  uint32_t m_position_program = 0; // readPositions()
-  uint32_t m_position_fbo = 0, m_position_color = 0, m_position_depth = 0;
-  Viewport m_position_size{0, 0};
-  glm::dvec2 m_image_px{0.0};  // the colour image's size (world units) at the last draw
-  uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
-  uint32_t m_heights = 0;      // R32F array texture
-  // Index buffer ranges: [0] no hole, [1 + hx + 2 hy] hole at (n/4 + hx, n/4 + hy).
-  // Each pattern's triangles in kBlocks x kBlocks blocks (by the cell of
-  // their centroid), culled one by one against the frustum.
-  static constexpr uint32_t kBlocks = 4;
-  uint32_t m_first_index[5][kBlocks * kBlocks] = {};
-  uint32_t m_index_count[5][kBlocks * kBlocks] = {};
-  // Height bounds of the tile in each slot (min, max), per level.
-  std::vector<std::vector<glm::vec2>> m_slot_bounds;
-  // Which tile each slot holds, per level (x | y << 32, or kNoTile).
-  static constexpr uint64_t kNoTile = ~uint64_t(0);
-  std::vector<std::vector<uint64_t>> m_slot_tile;
-  // CPU copies of the same tiles, for groundHeight() (per level, per slot).
-  std::vector<std::vector<std::vector<float>>> m_slot_heights;
-  // Quadtree: the patch mesh (one (P + 1)^2 grid, 16 edge patterns), the
-  // largest twist |a - b - c + d| / 4 of the cells of each resident tile's
-  // node-sized blocks (the triangulated surface's distance from the
-  // bilinear one the index's error bounds), per level and slot.
-  uint32_t m_patch_vao = 0, m_patch_vertices = 0, m_patch_indices = 0;
-  uint32_t m_patch_first[16] = {}, m_patch_count[16] = {};
-  std::vector<std::vector<std::vector<float>>> m_slot_twist;
-  std::shared_ptr<const TerrainBounds> m_bounds;
-  std::vector<TerrainNode> m_nodes;
-  std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
-  // Entries kept at most (cleared beyond): a few frames' nodes, so that an
-  // upload's scan stays cheap and the cache cannot grow over a long flight.
-  static constexpr size_t kMaxCachedNodeErrors = 16384;
-  Frustum m_frustum_cache{};
-  uint64_t m_texture_bytes = 0;
-  TerrainFrame m_frame;
+  explicit TerrainRenderer(std::unique_ptr<TerrainRendererImpl> impl);
+  std::unique_ptr<TerrainRendererImpl> m_impl;
 };
 
 }  // namespace clipstream
