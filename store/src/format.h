@@ -204,7 +204,8 @@ inline uint32_t tileChecksum(const void* data, size_t bytes) {
 // ---- Records ----
 // Each record has one encoder and one decoder. Decoders check only what the
 // bytes themselves say (checksums, sizes); the rules between fields and
-// regions are the reader's (section 11). Every field is the raw stored value.
+// regions are format_check.h's (section 11), which the reader calls. Every
+// field is the raw stored value.
 
 // The header fields after the magic, as stored.
 struct Header {

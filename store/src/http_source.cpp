@@ -401,6 +401,9 @@ class HttpSource final : public ByteSource {
                bool opening) const;
   // Judges a finished request; *got receives the bytes delivered.
   Outcome judge(const Transfer& t, CURLcode rc, bool opening, size_t* got, Status* status) const;
+  // judge() of an HTTP 206 answer: the range asked for, all of it, of the
+  // file version opened (its size, ETag, Last-Modified).
+  Outcome judgePartial(const Transfer& t, CURLcode rc, bool opening, Status* status) const;
   // Every piece's request at once, each retried on its own while transient
   // (all retries of one round wait the same back-off).
   void fetch(std::span<Piece> pieces, bool opening) const;
@@ -455,7 +458,7 @@ CURL* HttpSource::acquire() const {
   curl_easy_setopt(curl, CURLOPT_FOLLOWLOCATION, 1L);  // object stores may redirect
   curl_easy_setopt(curl, CURLOPT_MAXREDIRS, 5L);
   // HTTP/2 where TLS negotiates it (ALPN), HTTP/1.1 otherwise; cleartext
-  // stays HTTP/1.1 (docs/decisions.md, "HTTP/2").
+  // stays HTTP/1.1 (docs/decisions.md D198, D199).
   curl_easy_setopt(curl, CURLOPT_HTTP_VERSION,
                    m_options.http2 ? long(CURL_HTTP_VERSION_2TLS) : long(CURL_HTTP_VERSION_1_1));
   // A new request waits for a connection being set up rather than opening
@@ -506,7 +509,6 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
                                       Status* status) const {
   CURL* curl = t.curl;
   const size_t bytes = t.capacity;
-  const uint64_t offset = t.offset;
   curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, nullptr);
   m_bytes.fetch_add(t.got, std::memory_order_relaxed);
   long code = 0, version = 0, connects = 0;
@@ -570,9 +572,16 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
     *status = fail(ec, httpStatusText(code) + " (" + what + ")");
     return isTransient(code) ? Outcome::kTransient : Outcome::kFailed;
   }
+  return judgePartial(t, rc, opening, status);
+}
+
+HttpSource::Outcome HttpSource::judgePartial(const Transfer& t, CURLcode rc, bool opening,
+                                             Status* status) const {
+  const uint64_t offset = t.offset;
+  const std::string what = "bytes " + t.range;
   // 206: the range asked for, of the version opened.
   if (rc != CURLE_OK) {
-    const std::string detail = failureText(rc, error_text);
+    const std::string detail = failureText(rc, t.error_text);
     *status = fail(isTransient(rc) ? ErrorCode::kUnavailable : ErrorCode::kIo,
                    printableText(detail, 300) + " (" + what + ")");
     return isTransient(rc) ? Outcome::kTransient : Outcome::kFailed;
@@ -611,7 +620,7 @@ HttpSource::Outcome HttpSource::judge(const Transfer& t, CURLcode rc, bool openi
       return Outcome::kFailed;
     }
   }
-  const uint64_t expected = opening ? std::min<uint64_t>(bytes, total - offset) : bytes;
+  const uint64_t expected = opening ? std::min<uint64_t>(t.capacity, total - offset) : t.capacity;
   if (last - first + 1 != expected || t.got != expected) {
     *status = fail(ErrorCode::kTruncated, "received " + std::to_string(t.got) + " of " +
                                               std::to_string(expected) + " bytes (" + what +

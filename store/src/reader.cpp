@@ -1,19 +1,19 @@
-// TileStoreReader: validates header, level table, page directories and
-// metadata at open; index pages are read on first use, outside any lock,
-// and published with a compare-and-swap (a racing loser frees its copy).
+// TileStoreReader: reads the header, level table, page directories and
+// metadata at open and has format_check.h judge each; index pages are read
+// on first use, outside any lock, checked the same way, and published with
+// a compare-and-swap (a racing loser frees its copy).
 #include "byte_source.h"
 #include "disk_cache.h"
 #include "format.h"
+#include "format_check.h"
+#include "worker_threads.h"
 
 #include <clipstream/store/tile_store.h>
 
 #include <algorithm>
 #include <cerrno>
-#include <chrono>
-#include <cmath>
-#include <condition_variable>
+#include <functional>
 #include <mutex>
-#include <system_error>
 #include <thread>
 #include <tuple>
 
@@ -37,12 +37,6 @@ struct LevelRead {
   std::unique_ptr<std::atomic<const Page*>[]> pages;  // null until loaded
 };
 
-// a + b <= limit without overflow.
-bool fits(uint64_t a, uint64_t b, uint64_t limit) { return a <= limit && b <= limit - a; }
-
-// Bytes above the pixel size in a packed constant value must be zero.
-bool valueFits(uint64_t value, size_t bpp) { return bpp >= 8 || (value >> (8 * bpp)) == 0; }
-
 }  // namespace
 
 struct TileStoreReader::Impl {
@@ -50,10 +44,7 @@ struct TileStoreReader::Impl {
   RemoteOptions remote;
   std::unique_ptr<ByteSource> source;
   StoreInfo info;
-  uint64_t pages_begin = 0;  // index pages region [pages_begin, pages_end)
-  uint64_t pages_end = 0;
-  size_t max_stored_bytes = 0;
-  uint32_t entry_bytes = format::kTileEntryBytes;  // per the elevation flag
+  format::CheckedHeader header;  // what the header says, checked at open
   std::vector<LevelRead> levels;
   mutable std::atomic<uint64_t> bytes_read{0};
   mutable std::atomic<uint64_t> pages_loaded{0};
@@ -142,11 +133,21 @@ struct TileStoreReader::Impl {
     if (disk_cache) disk_cache->put(cache_key, pageName(level_index, px, py), bytes);
   }
 
-  Status bad(ErrorCode code, const std::string& what) const {
-    return Status::error(code, path + ": " + what);
+  // A failed check of the store's bytes (format_check.h), its message
+  // prefixed with the store's path; a success passes through.
+  Status named(const Status& status) const {
+    return status ? status : Status::error(status.code, path + ": " + status.message);
   }
 
+  // Opens the source and checks the header, the level table, every page
+  // directory and the metadata (format_check.h), reading each once.
   Status openImpl();
+  // Reads and checks the header into `header` and `info`.
+  Status openHeader();
+  // Reads and checks the level table into *layout and `levels`.
+  Status openLevelTable(format::IndexLayout* layout);
+  // Reads and checks level l's page directory into levels[l].
+  Status openPageDirectory(const format::IndexLayout& layout, uint32_t l);
   // Reads and checks one index page without publishing it.
   Status readPage(uint32_t level_index, uint32_t px, uint32_t py,
                   std::unique_ptr<Page>* out) const;
@@ -183,277 +184,77 @@ Status TileStoreReader::Impl::openImpl() {
     disk_folder_refused = !disk_cache->usableStoreDir(cache_key);
   }
   path = displayStorePath(path);  // from here on `path` only names the store in messages
-  const uint64_t actual_bytes = source->size();
-
-  // Header.
-  uint8_t header_bytes[format::kHeaderBytes];
-  if (actual_bytes < format::kMagicEndBytes) {
-    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
-                                          " bytes, too short to be a tile store");
-  }
-  const size_t header_read =
-      static_cast<size_t>(std::min<uint64_t>(actual_bytes, sizeof(header_bytes)));
-  Status status = read(header_bytes, header_read, 0);
+  Status status = openHeader();
   if (!status) return status;
-  if (!format::hasMagic(header_bytes)) {
-    return bad(ErrorCode::kBadMagic, "not a clipstream tile store (bad magic)");
-  }
-  if (header_read < format::kVersionEndBytes) {
-    return bad(ErrorCode::kTruncated, "file ends inside the header");
-  }
-  const uint32_t version = format::decodeVersion(header_bytes);
-  if (version < format::kOldestVersion || version > format::kVersion) {
-    return bad(ErrorCode::kBadVersion, "format version " + std::to_string(version) +
-                                           " (this reader knows versions " +
-                                           std::to_string(format::kOldestVersion) + " to " +
-                                           std::to_string(format::kVersion) + ")");
-  }
-  if (header_read < sizeof(header_bytes)) {
-    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
-                                          " bytes, shorter than the " +
-                                          std::to_string(format::kHeaderBytes) + "-byte header");
-  }
-  if (!format::headerChecksumOk(header_bytes)) {
-    return bad(ErrorCode::kBadHeader, "header checksum mismatch");
-  }
-  format::Header header;
-  format::decodeHeader(header_bytes, &header);
-  const uint64_t file_bytes = header.file_bytes;
-  if (actual_bytes < file_bytes) {
-    return bad(ErrorCode::kTruncated, "file is " + std::to_string(actual_bytes) +
-                                          " bytes, the header says " +
-                                          std::to_string(file_bytes));
-  }
-  if (actual_bytes > file_bytes) {
-    return bad(ErrorCode::kBadHeader, "file has " + std::to_string(actual_bytes - file_bytes) +
-                                          " bytes after the end the header records");
-  }
-  if (header.header_bytes != format::kHeaderBytes) {
-    return bad(ErrorCode::kBadHeader, "header size field is not " +
-                                          std::to_string(format::kHeaderBytes));
-  }
-  const uint32_t tile_px = header.tile_px;
-  const uint32_t level_count = header.level_count;
-  if (tile_px < format::kMinTilePx || tile_px > format::kMaxTilePx) {
-    return bad(ErrorCode::kBadHeader, "tile size " + std::to_string(tile_px) + " outside 16..4096");
-  }
-  const bool v1 = version == 1;
-  if (!isValidPixelFormat(header.pixel_format) ||
-      (v1 && !isColourFormat(PixelFormat(header.pixel_format)))) {
-    return bad(ErrorCode::kUnsupported,
-               "unknown pixel format " + std::to_string(header.pixel_format));
-  }
-  if (header.compression > 1) {
-    return bad(ErrorCode::kUnsupported, "unknown compression " + std::to_string(header.compression));
-  }
-  if (header.predictor > 1) {
-    return bad(ErrorCode::kUnsupported, "unknown predictor " + std::to_string(header.predictor));
-  }
-  if (header.filter > (v1 ? 1u : 2u)) {
-    return bad(ErrorCode::kBadHeader, "unknown filter " + std::to_string(header.filter));
-  }
-  if ((header.flags & ~(v1 ? format::kKnownFlagsV1 : format::kKnownFlags)) != 0) {
-    return bad(ErrorCode::kBadHeader, "unknown header flags");
-  }
-  const bool elevation = (header.flags & format::kFlagElevation) != 0;
-  const bool shard = (header.flags & format::kFlagShard) != 0;
-  const PixelFormat pixel_format = static_cast<PixelFormat>(header.pixel_format);
-  if (elevation ? !isHeightFormat(pixel_format) : !isColourFormat(pixel_format)) {
-    return bad(ErrorCode::kBadHeader, std::string("pixel format ") + pixelFormatName(pixel_format) +
-                                          (elevation ? " cannot hold heights"
-                                                     : " is for elevation stores only"));
-  }
-  entry_bytes = format::tileEntryBytes(elevation);
-  if (header.page_tiles != format::kPageTiles || header.tile_entry_bytes != entry_bytes) {
-    return bad(ErrorCode::kBadHeader, "index page shape is not 64 tiles of " +
-                                          std::to_string(entry_bytes) + " bytes");
-  }
-  PyramidGeometry geometry;
-  if (!makePyramidGeometry(header.width_px, header.height_px, tile_px,
-                           static_cast<PixelFormat>(header.pixel_format), &geometry)) {
-    return bad(ErrorCode::kBadHeader, "image size " + std::to_string(header.width_px) + "x" +
-                                          std::to_string(header.height_px) +
-                                          " is not representable");
-  }
-  if (geometry.levelCount() != level_count) {
-    return bad(ErrorCode::kBadHeader, "level count " + std::to_string(level_count) +
-                                          " does not match the image size (expected " +
-                                          std::to_string(geometry.levelCount()) + ")");
-  }
-  info.geometry = geometry;
-  info.encoding.compression = static_cast<Compression>(header.compression);
-  info.encoding.zstd_level = header.zstd_level;
-  info.encoding.predictor = static_cast<Predictor>(header.predictor);
-  info.encoding.filter = static_cast<DownsampleFilter>(header.filter);
-  info.encoding.linear_light = (header.flags & format::kFlagLinearLight) != 0;
-  info.file_bytes = file_bytes;
-  info.format_version = version;
-  max_stored_bytes = format::maxStoredBytes(geometry.tileBytes(), info.encoding.compression);
-
-  // Region layout: payloads, index, level table, metadata, end of file,
-  // each starting where the previous ends.
-  const uint64_t table_offset = header.level_table_offset;
-  const uint64_t table_bytes = header.level_table_bytes;
-  const uint64_t index_offset = header.index_offset;
-  const uint64_t index_bytes = header.index_bytes;
-  const uint64_t metadata_offset = header.metadata_offset;
-  const uint64_t metadata_bytes = header.metadata_bytes;
-  if (table_bytes != format::levelTableBytes(level_count)) {
-    return bad(ErrorCode::kBadHeader, "level table size does not match the level count");
-  }
-  if (!fits(index_offset, index_bytes, file_bytes) || table_offset != index_offset + index_bytes ||
-      !fits(table_offset, table_bytes, file_bytes) || metadata_offset != table_offset + table_bytes ||
-      !fits(metadata_offset, metadata_bytes, file_bytes) ||
-      metadata_offset + metadata_bytes != file_bytes || index_offset < format::kHeaderBytes) {
-    return bad(ErrorCode::kBadHeader, "region offsets in the header are inconsistent");
-  }
-  if (metadata_bytes < format::metadataBytes(0, elevation, shard) ||
-      metadata_bytes > format::metadataBytes(format::kMaxCrsBytes, elevation, shard)) {
-    return bad(ErrorCode::kBadHeader, "metadata block size out of range");
-  }
   // Level table and metadata lie back to back at the end: one read remotely.
-  source->prefetch(table_offset, file_bytes - table_offset);
-
-  // Level table (its size was checked against the level count above).
-  std::vector<format::LevelEntry> table;
-  {
-    std::vector<uint8_t> bytes(static_cast<size_t>(table_bytes));
-    status = read(bytes.data(), bytes.size(), table_offset);
-    if (!status) return status;
-    if (format::decodeLevelTable(bytes, &table) != format::Decoded::kOk) {
-      return bad(ErrorCode::kCorruptIndex, "level table checksum mismatch");
-    }
-  }
-  levels.resize(level_count);
-  uint64_t payload_end = format::kHeaderBytes;
-  uint64_t directories_bytes = 0;
-  for (uint32_t l = 0; l < level_count; ++l) {
-    const format::LevelEntry& entry = table[l];
-    const LevelInfo& expected = geometry.levels[l];
-    LevelRead& level = levels[l];
-    const std::string where = "level table entry " + std::to_string(l) + ": ";
-    if (entry.width_px != expected.width_px || entry.height_px != expected.height_px ||
-        entry.tiles_x != expected.tiles_x || entry.tiles_y != expected.tiles_y) {
-      return bad(ErrorCode::kCorruptIndex, where + "size does not match the pyramid rule");
-    }
-    level.pages_x = entry.pages_x;
-    level.pages_y = entry.pages_y;
-    if (level.pages_x != format::pagesAlong(expected.tiles_x) ||
-        level.pages_y != format::pagesAlong(expected.tiles_y)) {
-      return bad(ErrorCode::kCorruptIndex, where + "page grid does not match the tile grid");
-    }
-    level.payload_offset = entry.payload_offset;
-    level.payload_bytes = entry.payload_bytes;
-    if (level.payload_offset != payload_end || !fits(level.payload_offset, level.payload_bytes,
-                                                     index_offset)) {
-      return bad(ErrorCode::kCorruptIndex, where + "payload region out of place");
-    }
-    payload_end = level.payload_offset + level.payload_bytes;
-    const uint64_t page_count = uint64_t(level.pages_x) * level.pages_y;
-    if (entry.directory_bytes != format::pageDirectoryBytes(page_count)) {
-      return bad(ErrorCode::kCorruptIndex, where + "page directory size does not match");
-    }
-    directories_bytes += entry.directory_bytes;
-  }
-  if (payload_end != index_offset) {
-    return bad(ErrorCode::kCorruptIndex, "payload regions do not end where the index begins");
-  }
-  // Directories sit back to back at the end of the index region.
-  if (directories_bytes > index_bytes) {
-    return bad(ErrorCode::kCorruptIndex, "page directories larger than the index region");
-  }
-  pages_begin = index_offset;
-  pages_end = index_offset + index_bytes - directories_bytes;
-  uint64_t directory_offset = pages_end;
-  source->prefetch(pages_end, table_offset - pages_end);  // every page directory
-  for (uint32_t l = 0; l < level_count; ++l) {
-    LevelRead& level = levels[l];
-    const uint64_t bytes = table[l].directory_bytes;
-    if (table[l].directory_offset != directory_offset) {
-      return bad(ErrorCode::kCorruptIndex,
-                 "level table entry " + std::to_string(l) + ": page directory out of place");
-    }
-    std::vector<uint8_t> directory(static_cast<size_t>(bytes));
-    status = read(directory.data(), directory.size(), directory_offset);
-    if (!status) return status;
-    // Its size was checked against the page grid above.
-    if (format::decodePageDirectory(directory, &level.directory) != format::Decoded::kOk) {
-      return bad(ErrorCode::kCorruptIndex,
-                 "page directory of level " + std::to_string(l) + ": checksum mismatch");
-    }
-    const size_t page_count = level.directory.size();
-    const size_t bpp = bytesPerPixel(geometry.format);
-    for (size_t i = 0; i < page_count; ++i) {
-      const format::PageDirEntry& entry = level.directory[i];
-      const uint32_t px = static_cast<uint32_t>(i % level.pages_x);
-      const uint32_t py = static_cast<uint32_t>(i / level.pages_x);
-      const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
-                                ") of level " + std::to_string(l) + ": ";
-      if ((entry.flags & ~format::kPageFlagConstant) != 0) {
-        return bad(ErrorCode::kCorruptIndex, where + "unknown flags");
-      }
-      if (entry.flags & format::kPageFlagConstant) {
-        if (entry.offset != 0 || entry.bytes != 0 || entry.checksum != 0 ||
-            !valueFits(entry.constant_value, bpp)) {
-          return bad(ErrorCode::kCorruptIndex, where + "malformed constant page entry");
-        }
-        continue;
-      }
-      const uint64_t tiles = uint64_t(format::pageSpan(geometry.levels[l].tiles_x, px)) *
-                             format::pageSpan(geometry.levels[l].tiles_y, py);
-      if (entry.bytes != tiles * entry_bytes || entry.constant_value != 0 ||
-          entry.offset < pages_begin || !fits(entry.offset, entry.bytes, pages_end)) {
-        return bad(ErrorCode::kCorruptIndex, where + "page location out of bounds");
-      }
-    }
-    level.pages.reset(new std::atomic<const Page*>[page_count]);
-    for (size_t i = 0; i < page_count; ++i) level.pages[i].store(nullptr);
-    directory_offset += bytes;
-  }
-
-  // Metadata block (its size was checked against the header's range above).
-  std::vector<uint8_t> metadata(static_cast<size_t>(metadata_bytes));
-  status = read(metadata.data(), metadata.size(), metadata_offset);
+  const format::Header& fields = header.fields;
+  source->prefetch(fields.level_table_offset, fields.file_bytes - fields.level_table_offset);
+  format::IndexLayout layout;
+  status = openLevelTable(&layout);
   if (!status) return status;
-  switch (format::decodeMetadata(metadata, &info.geo, elevation ? &info.elevation : nullptr,
-                                 shard ? &info.shard : nullptr)) {
-    case format::Decoded::kOk: break;
-    case format::Decoded::kBadChecksum:
-      return bad(ErrorCode::kBadHeader, "metadata block checksum mismatch");
-    case format::Decoded::kBadSize:
-      return bad(ErrorCode::kBadHeader,
-                 elevation ? "metadata block: CRS length does not match the block size, or the "
-                             "elevation record has unknown flags or units"
-                 : shard   ? "metadata block: CRS length does not match the block size, or the "
-                             "shard record's reserved words are not 0"
-                           : "metadata CRS length does not match the block size");
+  // Every page directory, back to back before the level table.
+  source->prefetch(layout.pages_end, fields.level_table_offset - layout.pages_end);
+  for (uint32_t l = 0; l < fields.level_count; ++l) {
+    status = openPageDirectory(layout, l);
+    if (!status) return status;
   }
-  if (shard) {
-    // The band must lie inside the whole image, on its tile grid, and own
-    // levels this store has.
-    const ShardInfo& sh = info.shard;
-    const uint64_t block_px = sh.owned_levels >= 1 && sh.owned_levels <= 32
-                                  ? uint64_t(tile_px) << (sh.owned_levels - 1)
-                                  : 0;
-    if (sh.count == 0 || sh.index == 0 || sh.index > sh.count || sh.owned_levels == 0 ||
-        sh.owned_levels > level_count || block_px == 0 ||
-        !fits(sh.x0_px, header.width_px, sh.full_width_px) ||
-        !fits(sh.y0_px, header.height_px, sh.full_height_px) || sh.x0_px % block_px != 0 ||
-        sh.y0_px % block_px != 0) {
-      return bad(ErrorCode::kBadHeader, "shard record: shard " + std::to_string(sh.index) + "/" +
-                                            std::to_string(sh.count) +
-                                            " does not describe a band of the whole image");
-    }
+  std::vector<uint8_t> metadata(static_cast<size_t>(fields.metadata_bytes));
+  status = read(metadata.data(), metadata.size(), fields.metadata_offset);
+  if (!status) return status;
+  return named(format::checkMetadata(metadata, header, &info));
+}
+
+Status TileStoreReader::Impl::openHeader() {
+  const uint64_t actual_bytes = source->size();
+  uint8_t bytes[format::kHeaderBytes];
+  // A file too short to hold the magic is not read: the check says so.
+  size_t given = 0;
+  if (actual_bytes >= format::kMagicEndBytes) {
+    given = static_cast<size_t>(std::min<uint64_t>(actual_bytes, sizeof(bytes)));
+    Status status = read(bytes, given, 0);
+    if (!status) return status;
   }
-  info.geo.present = (header.flags & format::kFlagGeoPresent) != 0;
-  if (elevation) {
-    const ElevationInfo& e = info.elevation;
-    if (!std::isfinite(e.scale) || e.scale <= 0.0 || !std::isfinite(e.offset) ||
-        !std::isfinite(e.max_error) || e.max_error < 0.0 || !std::isfinite(e.min_height) ||
-        !std::isfinite(e.max_height) || e.min_height > e.max_height) {
-      return bad(ErrorCode::kBadHeader, "elevation record: scale, offset or bounds out of range");
-    }
+  Status status = format::checkHeader(std::span(bytes, given), actual_bytes, &header);
+  if (!status) return named(status);
+  info.geometry = header.geometry;
+  info.encoding = header.encoding;
+  info.file_bytes = header.fields.file_bytes;
+  info.format_version = header.fields.format_version;
+  return okStatus();
+}
+
+Status TileStoreReader::Impl::openLevelTable(format::IndexLayout* layout) {
+  // Its size was checked against the level count with the header.
+  std::vector<uint8_t> bytes(static_cast<size_t>(header.fields.level_table_bytes));
+  Status status = read(bytes.data(), bytes.size(), header.fields.level_table_offset);
+  if (!status) return status;
+  status = format::checkLevelTable(bytes, header, layout);
+  if (!status) return named(status);
+  levels.resize(layout->levels.size());
+  for (size_t l = 0; l < levels.size(); ++l) {
+    const format::LevelEntry& entry = layout->levels[l];
+    levels[l].pages_x = entry.pages_x;
+    levels[l].pages_y = entry.pages_y;
+    levels[l].payload_offset = entry.payload_offset;
+    levels[l].payload_bytes = entry.payload_bytes;
   }
+  return okStatus();
+}
+
+Status TileStoreReader::Impl::openPageDirectory(const format::IndexLayout& layout, uint32_t l) {
+  uint64_t offset = 0;
+  Status status = format::checkDirectoryPlace(layout, l, &offset);
+  if (!status) return named(status);
+  // Its size was checked against the page grid with the level table.
+  std::vector<uint8_t> bytes(static_cast<size_t>(layout.levels[l].directory_bytes));
+  status = read(bytes.data(), bytes.size(), offset);
+  if (!status) return status;
+  LevelRead& level = levels[l];
+  status = format::checkPageDirectory(bytes, header, layout, l, &level.directory);
+  if (!status) return named(status);
+  const size_t page_count = level.directory.size();
+  level.pages.reset(new std::atomic<const Page*>[page_count]);
+  for (size_t i = 0; i < page_count; ++i) level.pages[i].store(nullptr);
   return okStatus();
 }
 
@@ -475,38 +276,10 @@ Status TileStoreReader::Impl::decodePage(uint32_t level_index, uint32_t px, uint
                                          std::unique_ptr<Page>* out) const {
   const LevelRead& level = levels[level_index];
   const PageDirEntry& dir = level.directory[size_t(py) * level.pages_x + px];
-  const std::string where = "index page (" + std::to_string(px) + ", " + std::to_string(py) +
-                            ") of level " + std::to_string(level_index);
   auto page = std::make_unique<Page>();
-  // Its size was checked against the page's tile count at open.
-  switch (format::decodeIndexPage(bytes, dir.checksum, entry_bytes, &page->entries)) {
-    case format::Decoded::kOk: break;
-    case format::Decoded::kBadChecksum:
-      return bad(ErrorCode::kCorruptIndex, where + ": checksum mismatch");
-    case format::Decoded::kBadSize:
-      return bad(ErrorCode::kCorruptIndex, where + ": malformed entries");
-  }
-  const LevelInfo& level_info = info.geometry.levels[level_index];
-  const uint32_t w = format::pageSpan(level_info.tiles_x, px);
-  const size_t bpp = bytesPerPixel(info.geometry.format);
-  for (size_t i = 0; i < page->entries.size(); ++i) {
-    const format::TileEntry& entry = page->entries[i];
-    const bool bounds_ok = !info.elevation.present ||
-                           (std::isfinite(entry.min_height) && std::isfinite(entry.max_height) &&
-                            std::isfinite(entry.error) && entry.min_height <= entry.max_height &&
-                            entry.error >= 0.0f);
-    const bool ok = bounds_ok &&
-                    (entry.stored_bytes == 0
-                         ? entry.checksum == 0 && valueFits(entry.offset_or_value, bpp)
-                         : entry.stored_bytes <= max_stored_bytes &&
-                               fits(entry.offset_or_value, entry.stored_bytes, level.payload_bytes));
-    if (!ok) {
-      const TileKey key{level_index, px * format::kPageTiles + uint32_t(i % w),
-                        py * format::kPageTiles + uint32_t(i / w)};
-      return bad(ErrorCode::kCorruptIndex, where + ": entry for " + format::keyText(key) +
-                                               " is out of bounds");
-    }
-  }
+  Status status = format::checkIndexPage(bytes, header, level_index, px, py, dir.checksum,
+                                         level.payload_bytes, &page->entries);
+  if (!status) return named(status);
   *out = std::move(page);
   return okStatus();
 }
@@ -970,44 +743,9 @@ Status TileStoreReader::verifyAll(std::vector<Problem>* problems, size_t max_pro
     }
   };
 
-  std::mutex done_mutex;  // pairs with done_cv; guards nothing else
-  std::condition_variable done_cv;
-  unsigned running = 0;
-  std::vector<std::thread> pool;
-  for (unsigned i = 0; i < threads; ++i) {
-    {
-      std::lock_guard<std::mutex> lock(done_mutex);
-      ++running;
-    }
-    try {
-      pool.emplace_back([&] {
-        worker();
-        std::lock_guard<std::mutex> lock(done_mutex);
-        if (--running == 0) done_cv.notify_all();
-      });
-    } catch (const std::system_error&) {
-      // The system's thread limit: verify with the threads that started.
-      std::lock_guard<std::mutex> lock(done_mutex);
-      --running;
-      break;
-    }
-  }
-  if (pool.empty()) worker();  // no thread at all: verify on this one
-  // The calling thread only reports progress, so callbacks never run on a
-  // worker and need no locking of their own.
-  {
-    std::unique_lock<std::mutex> lock(done_mutex);
-    while (running > 0) {
-      if (progress) {
-        lock.unlock();
-        progress(done.load(), total);
-        lock.lock();
-      }
-      done_cv.wait_for(lock, std::chrono::milliseconds(100), [&] { return running == 0; });
-    }
-  }
-  for (std::thread& thread : pool) thread.join();
-  if (progress) progress(done.load(), total);
+  std::function<void()> report;
+  if (progress) report = [&] { progress(done.load(), total); };
+  runWorkers(threads, worker, report);
 
   // Report in file order regardless of which worker found what.
   std::sort(found.begin(), found.end(), [](const Problem& a, const Problem& b) {

@@ -251,7 +251,24 @@ struct TileStoreWriter::Impl {
     return status;
   }
 
+  // finish() with the mutex held: checks that every tile arrived, then lays
+  // the file out region by region (docs/tile-store.md section 4), the
+  // header last, and commits it.
   Status finishLocked();
+  // kInvalidArgument naming the first tile never written, if any.
+  Status checkComplete() const;
+  // Puts every level's payloads in place after the header, level by level
+  // from *position (moved to their end); (*payload_offset)[l] is where
+  // level l's begin.
+  Status writePayloads(std::vector<uint64_t>* payload_offset, uint64_t* position);
+  // Copies the index pages to *position, then writes every level's page
+  // directory after them (*position moved to their end) and fills the
+  // level table's entries.
+  Status writeIndex(const std::vector<uint64_t>& payload_offset, uint64_t* position,
+                    std::vector<format::LevelEntry>* table);
+  // Fills the header's fields that come from the geometry and options (the
+  // region fields are the caller's) and writes it at offset 0.
+  Status writeHeader(bool geo_present, format::Header* header);
 };
 
 const char* payloadOrderName(PayloadOrder order) {
@@ -618,6 +635,53 @@ Status TileStoreWriter::Impl::reorderLevel(uint32_t l, uint64_t level_start) {
 
 Status TileStoreWriter::Impl::finishLocked() {
   // Every tile must be present before anything is laid out.
+  Status status = checkComplete();
+  if (!status) return status;
+  format::Header header;  // filled in region by region, written last
+
+  // Payload regions, level by level.
+  std::vector<uint64_t> payload_offset(levels.size());
+  uint64_t position = format::kHeaderBytes;
+  status = writePayloads(&payload_offset, &position);
+  if (!status) return status;
+
+  // Index region: all pages, then every level's page directory.
+  header.index_offset = position;
+  std::vector<format::LevelEntry> table(levels.size());
+  status = writeIndex(payload_offset, &position, &table);
+  if (!status) return status;
+  header.index_bytes = position - header.index_offset;
+
+  // Level table.
+  header.level_table_offset = position;
+  const std::vector<uint8_t> table_bytes = format::encodeLevelTable(table);
+  status = fileio::pwriteAll(main_fd, table_bytes.data(), table_bytes.size(), position, main_temp);
+  if (!status) return status;
+  header.level_table_bytes = table_bytes.size();
+  position += table_bytes.size();
+
+  // Metadata block: georeference.
+  header.metadata_offset = position;
+  // Without a georeference the block holds the identity transform and no
+  // CRS, so stale caller values never reach the file.
+  const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
+  const std::vector<uint8_t> metadata = format::encodeMetadata(
+      geo.transform, geo.crs, elevation() ? &options.elevation : nullptr,
+      options.shard.present ? &options.shard : nullptr);
+  status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
+  if (!status) return status;
+  header.metadata_bytes = metadata.size();
+  position += metadata.size();
+  header.file_bytes = position;
+
+  // Header last: a crash before this point leaves no valid magic.
+  status = writeHeader(geo.present, &header);
+  if (!status) return status;
+
+  return output->commit();
+}
+
+Status TileStoreWriter::Impl::checkComplete() const {
   for (uint32_t l = 0; l < levels.size(); ++l) {
     const LevelBuild& level = levels[l];
     for (uint32_t py = 0; py < level.pages_y; ++py) {
@@ -641,16 +705,17 @@ Status TileStoreWriter::Impl::finishLocked() {
       }
     }
   }
+  return okStatus();
+}
 
-  // Payload regions, level by level.
-  std::vector<uint64_t> payload_offset(levels.size());
-  uint64_t position = format::kHeaderBytes;
+Status TileStoreWriter::Impl::writePayloads(std::vector<uint64_t>* payload_offset,
+                                            uint64_t* position) {
   for (uint32_t l = 0; l < levels.size(); ++l) {
-    payload_offset[l] = position;
+    (*payload_offset)[l] = *position;
     if (levels[l].fd != main_fd && levels[l].payload_bytes > 0) {
-      Status status = curveOrder() ? reorderLevel(l, position)
+      Status status = curveOrder() ? reorderLevel(l, *position)
                                    : fileio::copyRange(levels[l].fd, levels[l].temp_path,
-                                                       levels[l].payload_bytes, main_fd, position,
+                                                       levels[l].payload_bytes, main_fd, *position,
                                                        main_temp);
       if (!status) return status;
       // The spill file is no longer needed; free its disk space early.
@@ -659,18 +724,21 @@ Status TileStoreWriter::Impl::finishLocked() {
       ::unlink(levels[l].temp_path.c_str());
       levels[l].temp_path.clear();
     }
-    position += levels[l].payload_bytes;
+    *position += levels[l].payload_bytes;
   }
+  return okStatus();
+}
 
-  // Index region: all pages, then every level's page directory.
-  const uint64_t index_offset = position;
+Status TileStoreWriter::Impl::writeIndex(const std::vector<uint64_t>& payload_offset,
+                                         uint64_t* position,
+                                         std::vector<format::LevelEntry>* table) {
+  const uint64_t index_offset = *position;
   if (index_bytes > 0) {
-    Status status = fileio::copyRange(index_fd, index_temp, index_bytes, main_fd, position,
+    Status status = fileio::copyRange(index_fd, index_temp, index_bytes, main_fd, *position,
                                       main_temp);
     if (!status) return status;
   }
-  position += index_bytes;
-  std::vector<format::LevelEntry> table(levels.size());
+  *position += index_bytes;
   for (uint32_t l = 0; l < levels.size(); ++l) {
     const LevelBuild& level = levels[l];
     std::vector<format::PageDirEntry> entries(level.pages.size());
@@ -687,10 +755,10 @@ Status TileStoreWriter::Impl::finishLocked() {
       }
     }
     const std::vector<uint8_t> bytes = format::encodePageDirectory(entries);
-    Status status = fileio::pwriteAll(main_fd, bytes.data(), bytes.size(), position, main_temp);
+    Status status = fileio::pwriteAll(main_fd, bytes.data(), bytes.size(), *position, main_temp);
     if (!status) return status;
     const LevelInfo& info = geometry.levels[l];
-    format::LevelEntry& entry = table[l];
+    format::LevelEntry& entry = (*table)[l];
     entry.width_px = info.width_px;
     entry.height_px = info.height_px;
     entry.tiles_x = info.tiles_x;
@@ -699,62 +767,32 @@ Status TileStoreWriter::Impl::finishLocked() {
     entry.pages_y = level.pages_y;
     entry.payload_offset = payload_offset[l];
     entry.payload_bytes = level.payload_bytes;
-    entry.directory_offset = position;
+    entry.directory_offset = *position;
     entry.directory_bytes = bytes.size();
-    position += bytes.size();
+    *position += bytes.size();
   }
-  const uint64_t index_total = position - index_offset;
+  return okStatus();
+}
 
-  // Level table.
-  const uint64_t level_table_offset = position;
-  const std::vector<uint8_t> table_bytes = format::encodeLevelTable(table);
-  Status status =
-      fileio::pwriteAll(main_fd, table_bytes.data(), table_bytes.size(), position, main_temp);
-  if (!status) return status;
-  position += table_bytes.size();
-
-  // Metadata block: georeference.
-  const uint64_t metadata_offset = position;
-  // Without a georeference the block holds the identity transform and no
-  // CRS, so stale caller values never reach the file.
-  const GeoReference geo = options.geo.present ? options.geo : GeoReference{};
-  const std::vector<uint8_t> metadata = format::encodeMetadata(
-      geo.transform, geo.crs, elevation() ? &options.elevation : nullptr,
-      options.shard.present ? &options.shard : nullptr);
-  status = fileio::pwriteAll(main_fd, metadata.data(), metadata.size(), position, main_temp);
-  if (!status) return status;
-  position += metadata.size();
-
-  // Header last: a crash before this point leaves no valid magic.
-  format::Header header;
-  header.width_px = geometry.width_px;
-  header.height_px = geometry.height_px;
-  header.tile_px = geometry.tile_px;
-  header.pixel_format = static_cast<uint32_t>(geometry.format);
-  header.level_count = static_cast<uint32_t>(levels.size());
+Status TileStoreWriter::Impl::writeHeader(bool geo_present, format::Header* header) {
+  header->width_px = geometry.width_px;
+  header->height_px = geometry.height_px;
+  header->tile_px = geometry.tile_px;
+  header->pixel_format = static_cast<uint32_t>(geometry.format);
+  header->level_count = static_cast<uint32_t>(levels.size());
   const StoreEncoding& encoding = options.encoding;
-  header.compression = static_cast<uint32_t>(encoding.compression);
-  header.zstd_level = encoding.zstd_level;
-  header.predictor = static_cast<uint32_t>(encoding.predictor);
-  header.filter = static_cast<uint32_t>(encoding.filter);
-  if (encoding.linear_light) header.flags |= format::kFlagLinearLight;
-  if (geo.present) header.flags |= format::kFlagGeoPresent;
-  if (elevation()) header.flags |= format::kFlagElevation;
-  if (options.shard.present) header.flags |= format::kFlagShard;
-  header.tile_entry_bytes = entryBytes();
-  header.level_table_offset = level_table_offset;
-  header.level_table_bytes = table_bytes.size();
-  header.index_offset = index_offset;
-  header.index_bytes = index_total;
-  header.metadata_offset = metadata_offset;
-  header.metadata_bytes = metadata.size();
-  header.file_bytes = position;
-  uint8_t header_bytes[format::kHeaderBytes];
-  format::encodeHeader(header, header_bytes);
-  status = fileio::pwriteAll(main_fd, header_bytes, sizeof(header_bytes), 0, main_temp);
-  if (!status) return status;
-
-  return output->commit();
+  header->compression = static_cast<uint32_t>(encoding.compression);
+  header->zstd_level = encoding.zstd_level;
+  header->predictor = static_cast<uint32_t>(encoding.predictor);
+  header->filter = static_cast<uint32_t>(encoding.filter);
+  if (encoding.linear_light) header->flags |= format::kFlagLinearLight;
+  if (geo_present) header->flags |= format::kFlagGeoPresent;
+  if (elevation()) header->flags |= format::kFlagElevation;
+  if (options.shard.present) header->flags |= format::kFlagShard;
+  header->tile_entry_bytes = entryBytes();
+  uint8_t bytes[format::kHeaderBytes];
+  format::encodeHeader(*header, bytes);
+  return fileio::pwriteAll(main_fd, bytes, sizeof(bytes), 0, main_temp);
 }
 
 }  // namespace clipstream
