@@ -18,6 +18,7 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/streamer/testing/procedural_texel.h>
 
 #include <cmath>
 #include <cstdio>

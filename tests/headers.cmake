@@ -34,3 +34,14 @@ foreach(root IN LISTS header_roots)
     target_link_libraries(test_headers_${folder} PRIVATE clipstream_${folder} clipstream_warnings)
   endif()
 endforeach()
+
+# The installed headers are the API a host needs: none declares a test hook
+# or includes a testing/ header (those of <folder>/testing/, for the tests
+# and the evaluation harness, are not installed).
+set(installed_roots "")
+foreach(root IN LISTS header_roots)
+  list(APPEND installed_roots ${root})
+endforeach()
+add_test(NAME InstalledHeaders.HoldNoTestHook
+  COMMAND sh -c "! grep -rniE 'test hook|include <clipstream/[a-z]+/testing/|include <clipstream/testing/' \"$@\"" sh ${installed_roots})
+set_tests_properties(InstalledHeaders.HoldNoTestHook PROPERTIES LABELS cli)

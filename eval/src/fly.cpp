@@ -12,6 +12,7 @@
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <algorithm>
 #include <chrono>

@@ -1,6 +1,7 @@
 // Test/benchmark wrapper that slows a source down and fails chosen tiles.
 // The failing set is a pure function of (key, seed) so a test knows it.
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <chrono>
 #include <thread>

@@ -2,6 +2,7 @@
 // tile: no disk, deterministic, every texel a pure function of its level and
 // coordinates (definition in tile_source.h above proceduralTexel()).
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/streamer/testing/procedural_texel.h>
 
 #include <algorithm>
 #include <string>

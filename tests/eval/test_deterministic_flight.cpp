@@ -10,6 +10,7 @@
 #include <clipstream/eval/metrics.h>
 #include <clipstream/streamer/flight_path.h>
 #include <clipstream/streamer/tile_source.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <gtest/gtest.h>
 

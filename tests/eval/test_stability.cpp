@@ -19,6 +19,7 @@
 #include <clipstream/eval/flight_run.h>
 #include <clipstream/eval/metrics.h>
 #include <clipstream/renderer/config.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

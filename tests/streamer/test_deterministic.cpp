@@ -8,6 +8,7 @@
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/testing/cameras.h>
 #include <clipstream/testing/sources.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <gtest/gtest.h>
 

@@ -9,6 +9,7 @@
 #include <clipstream/testing/sources.h>
 #include <clipstream/testing/synthetic_store.h>
 #include <clipstream/testing/temp_dir.h>
+#include <clipstream/streamer/testing/faulty_source.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -4,6 +4,8 @@
 #include <clipstream/streamer/tile_source.h>
 #include <clipstream/testing/synthetic_store.h>
 #include <clipstream/testing/temp_dir.h>
+#include <clipstream/streamer/testing/faulty_source.h>
+#include <clipstream/streamer/testing/procedural_texel.h>
 
 #include <gtest/gtest.h>
 

@@ -180,7 +180,7 @@ class TileStoreReader {
   Status levelStats(std::vector<LevelStats>* out) const;
 
   // Bytes read from the file so far by this reader (open, index pages and
-  // payloads). For tests and statistics; relaxed atomic counter.
+  // payloads), for statistics; a relaxed atomic counter.
   uint64_t bytesRead() const;
   // Number of index pages loaded so far (a page read twice by racing
   // threads counts once: only the published copy counts).

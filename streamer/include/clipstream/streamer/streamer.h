@@ -92,8 +92,9 @@ struct StreamerConfig {
   bool throttle = true;
   // Plan against an elevation layer's per-tile height bounds when it has
   // them (StreamLayer::world_per_height, plansOnTerrain()). false: against
-  // the plane, with the relief planes a caller sets (setGroundRelief()),
-  // the older method, kept for comparison (docs/benchmarks.md, terrain).
+  // the plane, with the relief planes a caller sets (setGroundRelief()):
+  // nothing read at open, but more tiles loaded over relief (measured in
+  // docs/terrain.md, "Planning against the terrain").
   bool terrain_bounds = true;
   // With throttling: at most this many frames of the upload budget (the
   // last non-zero max_tiles of takeReady()) wait in RAM, or on their way,

@@ -160,7 +160,9 @@ std::shared_ptr<TileSource> openElevationSource(const std::string& path,
 
 // Deterministic procedural texture of any size up to 2^31 texels a side,
 // computed per tile (no disk). Every texel is a pure function of (level, x, y)
-// in that level's texel coordinates (see proceduralTexel()). Texels of edge
+// in that level's texel coordinates: six layers of hashed colours over
+// aligned cells of 8 to 256 texels, the tile grid drawn darker (the
+// definition: clipstream/streamer/testing/procedural_texel.h). Texels of edge
 // tiles beyond the level's size follow the same function (no padding rule).
 // Largest procedural side makeProceduralSource() accepts (2^31 texels: a
 // planet at 2 cm per texel, and positions stay exact in double precision).
@@ -182,20 +184,6 @@ std::shared_ptr<TileSource> makeProceduralSource(const ProceduralSpec& spec);
 std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t width_px,
                                             uint32_t height_px, uint32_t tile_px);
 
-// The RGBA8 value the procedural source gives texel (tx, ty) of `level`.
-// Exposed so renderer tests can compute CPU references without the source.
-// Definition: six layers of hashed colours over aligned square cells of
-// 8, 16, 32, 64, 128 and 256 texels of this level, weights 2,2,3,3,4,4
-// (so every 8x8 block differs from its neighbours). A cell is identified by its size and
-// position in level-0 texels, so a cell of level l+1 is the same cell (same
-// colour) as the one covering the same ground at level l: levels agree on
-// structure, and a coarser level looks like a smoothed finer one (it drops
-// the finest layer). Texels on a tile boundary of their level (x or y a
-// multiple of tile_px) are darkened to half, drawing the tile grid.
-// Alpha is always 255.
-void proceduralTexel(const ProceduralSpec& spec, uint32_t level, uint64_t tx, uint64_t ty,
-                     uint8_t rgba[4]);
-
 // Deterministic procedural heights (a kHeightF32 source, metres) of any
 // size up to kMaxProceduralSidePx samples a side, computed per tile:
 // rolling value noise over five octaves (cells of 2^13 down to 2^5
@@ -213,20 +201,5 @@ double proceduralHeight(const ProceduralSpec& spec, uint64_t x, uint64_t y);
 // inner source is missing, is not an RGBA8 colour source, or its tile size
 // is not a multiple of 4.
 std::shared_ptr<TileSource> makeBc1Source(std::shared_ptr<TileSource> rgba8, Status* status);
-
-// Test/benchmark wrapper: adds latency to every fetch and fails a chosen
-// fraction of tiles (deterministically by key) or all of them.
-struct FaultSpec {
-  double latency_ms = 0.0;
-  double fail_fraction = 0.0;     // 0..1, chosen by hashing the key
-  ErrorCode fail_code = ErrorCode::kCorruptTile;
-  uint32_t seed = 7;
-};
-std::shared_ptr<TileSource> makeFaultySource(std::shared_ptr<TileSource> inner,
-                                             const FaultSpec& spec);
-
-// True when the faulty source fails `key` (a pure function of key and seed),
-// so tests know exactly which tiles fail.
-bool failsTile(const FaultSpec& spec, const TileKey& key);
 
 }  // namespace clipstream
