@@ -39,7 +39,7 @@ has "$p" "^/usr/lib/$multiarch/clipstream/libclipstream_tiler_oiio\.so\$" \
   "clipstream lacks the module in /usr/lib/$multiarch/clipstream"
 has "$p" "^/usr/share/doc/clipstream/copyright\$" "clipstream lacks its copyright file"
 lacks "$p" "^/usr/include/|\.a\$|/cmake/|/pkgconfig/" "clipstream carries development files"
-for name in store tiler streamer renderer; do
+for name in util store tiler streamer renderer; do
   has "$d" "^/usr/lib/$multiarch/libclipstream_$name\.a\$" "libclipstream-dev lacks libclipstream_$name.a"
   has "$d" "^/usr/include/clipstream/$name/" "libclipstream-dev lacks the headers of $name"
 done

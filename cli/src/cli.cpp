@@ -1,6 +1,6 @@
 #include <clipstream/cli/cli.h>
 
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/store/types.h>
 
 #include <signal.h>

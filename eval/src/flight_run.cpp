@@ -3,7 +3,7 @@
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
-#include <clipstream/store/process_memory.h>
+#include <clipstream/util/process_memory.h>
 
 #include <algorithm>
 #include <atomic>

@@ -8,7 +8,7 @@
 #include <clipstream/eval/report.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/tile_source.h>

@@ -1,7 +1,7 @@
 // PNG writer thread. See frame_writer.h.
 #include <clipstream/eval/frame_writer.h>
 
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>

@@ -8,7 +8,7 @@
 #include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/hud.h>
 #include <clipstream/renderer/renderer.h>
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/streamer/flight_path.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>

@@ -3,7 +3,7 @@
 // the content. Written under "<store key>/tmp.<pid>.<n>" and renamed.
 #include "disk_cache.h"
 
-#include "file_io.h"
+#include <clipstream/util/file_io.h>
 
 #include <dirent.h>
 #include <fcntl.h>

@@ -1,6 +1,6 @@
 // ByteSource over a local regular file: one descriptor, positional reads.
 #include "byte_source.h"
-#include "file_io.h"
+#include <clipstream/util/file_io.h>
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -11,10 +11,10 @@
 // one stretch, so the copy goes page by page, rewriting each page (same
 // size, new offsets and checksum) in its temporary file: one page's entries
 // and one payload in RAM at a time.
-#include "file_io.h"
+#include <clipstream/util/file_io.h>
 #include "format.h"
 
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/store/tile_store.h>
 
 #include <fcntl.h>

@@ -1,7 +1,7 @@
 // Flight paths: parsing, built-ins and interpolation. See flight_path.h.
 #include <clipstream/streamer/flight_path.h>
 
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 
 #include <nlohmann/json.hpp>
 

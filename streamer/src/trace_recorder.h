@@ -11,7 +11,7 @@
 #include "eviction.h"
 
 #include <clipstream/store/types.h>
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/streamer/planner.h>
 
 #include <cstdint>

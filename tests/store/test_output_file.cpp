@@ -2,7 +2,7 @@
 // breaks one promise on purpose: a device or FIFO at the path, a file that
 // appears or changes while the output is written, a writer killed mid-way,
 // a full disk, a signal.
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/testing/files.h>
 #include <clipstream/testing/temp_dir.h>
 

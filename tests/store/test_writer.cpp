@@ -1,5 +1,5 @@
 // Writer contract: atomic output, temporaries cleaned, clear failures.
-#include "file_io.h"  // private: exercised directly for the disk-full path
+#include <clipstream/util/file_io.h>  // private: exercised directly for the disk-full path
 #include "format.h"   // private: tile checksum for hand-made payloads
 
 #include <clipstream/store/tile_store.h>

@@ -129,14 +129,20 @@ std::string gdalUnitType(const std::string& xml) {
   return xml.substr(open + 1, close - open - 1);
 }
 
-Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* elevation) {
-  *out = GeoReference{};
-  *elevation = ElevationTags{};
-  std::error_code ec;
-  const uint64_t size = fs::file_size(path, ec);
-  if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::error(ErrorCode::kIo, path + ": cannot open");
+// The first IFD's entry table, as read by readFirstIfd().
+struct IfdTable {
+  bool tiff = false;        // false: the file is no TIFF, so it has no tags
+  bool big_endian = false;  // "MM" byte order
+  bool big = false;         // BigTIFF: 8-byte counts and offsets, 20-byte entries
+  uint64_t entries = 0;
+  std::vector<uint8_t> bytes;  // entries * entry size
+
+  size_t entrySize() const { return big ? 20 : 12; }
+};
+
+// Reads the header and the first IFD's entry table. A file that is not a
+// TIFF is no error: table->tiff stays false.
+Status readFirstIfd(const std::string& path, std::ifstream& in, uint64_t size, IfdTable* table) {
   uint8_t head[16] = {};
   in.read(reinterpret_cast<char*>(head), 16);
   if (!in && size >= 8) return Status::error(ErrorCode::kIo, path + ": cannot read header");
@@ -153,19 +159,91 @@ Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* 
   const uint64_t magic = tb.decode(head + 2, 2);
   const bool big = magic == 43;
   if (magic != 42 && !big) return okStatus();
+  table->tiff = true;
+  table->big_endian = be;
+  table->big = big;
   const uint64_t ifd = big ? tb.decode(head + 8, 8) : tb.decode(head + 4, 4);
   uint8_t count_bytes[8];
   if (!tb.read(ifd, count_bytes, big ? 8 : 2)) return bad(path, "first IFD offset past end of file");
-  const uint64_t entries = tb.decode(count_bytes, big ? 8 : 2);
-  const size_t entry_size = big ? 20 : 12;
-  if (entries > 4096) return bad(path, "IFD entry count " + std::to_string(entries));
-  std::vector<uint8_t> table(entries * entry_size);
-  if (!tb.read(ifd + (big ? 8 : 2), table.data(), table.size())) return bad(path, "IFD truncated");
+  table->entries = tb.decode(count_bytes, big ? 8 : 2);
+  if (table->entries > 4096) return bad(path, "IFD entry count " + std::to_string(table->entries));
+  table->bytes.resize(table->entries * table->entrySize());
+  if (!tb.read(ifd + (big ? 8 : 2), table->bytes.data(), table->bytes.size())) {
+    return bad(path, "IFD truncated");
+  }
+  return okStatus();
+}
 
+// The values of the georeferencing tags, as the file stores them.
+struct GeoTagValues {
   std::vector<double> scale, tiepoint, matrix;
-  std::vector<uint16_t> keys;
-  for (uint64_t i = 0; i < entries; ++i) {
-    const uint8_t* e = table.data() + i * entry_size;
+  std::vector<uint16_t> keys;  // the GeoKeyDirectory
+};
+
+// GDAL's metadata or no-data tag (ASCII) at entry `e`, into `elevation`. A
+// malformed one is ignored: it only adds information.
+void readGdalTag(TiffBytes& tb, const uint8_t* e, bool big, uint16_t tag, uint16_t type,
+                 uint64_t count, ElevationTags* elevation) {
+  if (type != 2 || count == 0 || count > kMaxAsciiTagBytes) return;
+  std::string text(count, '\0');
+  const size_t inline_bytes = big ? 8 : 4;
+  if (count <= inline_bytes) {
+    std::memcpy(text.data(), e + (big ? 12 : 8), count);
+  } else if (!tb.read(big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4), text.data(), count)) {
+    return;
+  }
+  text.resize(std::strlen(text.c_str()));
+  if (tag == kTagGdalNodata) {
+    char* end = nullptr;
+    const double v = std::strtod(text.c_str(), &end);
+    if (end != text.c_str()) {
+      elevation->has_nodata = true;
+      elevation->nodata = v;  // may be nan, as GDAL writes it
+    }
+  } else if (auto units = unitsFromText(gdalUnitType(text))) {
+    elevation->units = units;
+  }
+}
+
+// A GeoTIFF tag (DOUBLE values, or SHORT for the key directory) at entry
+// `e`, appended to its vector of `values`.
+Status readGeoTag(const std::string& path, TiffBytes& tb, const uint8_t* e, bool big, uint16_t tag,
+                  uint16_t type, uint64_t count, GeoTagValues* values) {
+  const int elem = type == 12 ? 8 : type == 3 ? 2 : 0;  // DOUBLE or SHORT
+  if (elem == 0 || count == 0 || count > kMaxTagValues) {
+    return bad(path, "tag " + std::to_string(tag) + " has type " + std::to_string(type) +
+                         " and count " + std::to_string(count));
+  }
+  std::vector<uint8_t> bytes(count * elem);
+  const size_t inline_bytes = big ? 8 : 4;
+  if (bytes.size() <= inline_bytes) {
+    std::memcpy(bytes.data(), e + (big ? 12 : 8), bytes.size());
+  } else {
+    const uint64_t off = big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4);
+    if (!tb.read(off, bytes.data(), bytes.size())) {
+      return bad(path, "tag " + std::to_string(tag) + " values lie past the end of the file");
+    }
+  }
+  if (tag == kTagGeoKeyDirectory) {
+    if (type != 3) return bad(path, "GeoKeyDirectory is not SHORT");
+    for (uint64_t k = 0; k < count; ++k) values->keys.push_back(uint16_t(tb.decode(bytes.data() + 2 * k, 2)));
+  } else {
+    if (type != 12) return bad(path, "tag " + std::to_string(tag) + " is not DOUBLE");
+    std::vector<double>& dst = tag == kTagModelPixelScale ? values->scale
+                               : tag == kTagModelTiepoint ? values->tiepoint
+                                                          : values->matrix;
+    for (uint64_t k = 0; k < count; ++k) dst.push_back(tb.decodeDouble(bytes.data() + 8 * k));
+  }
+  return okStatus();
+}
+
+// Walks the IFD's entries: GDAL's tags go into `elevation`, the GeoTIFF
+// tags into `values`; other tags are skipped.
+Status readTags(const std::string& path, TiffBytes& tb, const IfdTable& table,
+                ElevationTags* elevation, GeoTagValues* values) {
+  const bool big = table.big;
+  for (uint64_t i = 0; i < table.entries; ++i) {
+    const uint8_t* e = table.bytes.data() + i * table.entrySize();
     const uint16_t tag = uint16_t(tb.decode(e, 2));
     if (tag != kTagModelPixelScale && tag != kTagModelTiepoint && tag != kTagModelTransformation &&
         tag != kTagGeoKeyDirectory && tag != kTagGdalMetadata && tag != kTagGdalNodata) {
@@ -174,97 +252,91 @@ Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* 
     const uint16_t type = uint16_t(tb.decode(e + 2, 2));
     const uint64_t count = big ? tb.decode(e + 4, 8) : tb.decode(e + 4, 4);
     if (tag == kTagGdalMetadata || tag == kTagGdalNodata) {
-      // ASCII text; a malformed one is ignored (it only adds information).
-      if (type != 2 || count == 0 || count > kMaxAsciiTagBytes) continue;
-      std::string text(count, '\0');
-      const size_t inline_bytes = big ? 8 : 4;
-      if (count <= inline_bytes) {
-        std::memcpy(text.data(), e + (big ? 12 : 8), count);
-      } else if (!tb.read(big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4), text.data(), count)) {
-        continue;
-      }
-      text.resize(std::strlen(text.c_str()));
-      if (tag == kTagGdalNodata) {
-        char* end = nullptr;
-        const double v = std::strtod(text.c_str(), &end);
-        if (end != text.c_str()) {
-          elevation->has_nodata = true;
-          elevation->nodata = v;  // may be nan, as GDAL writes it
-        }
-      } else if (auto units = unitsFromText(gdalUnitType(text))) {
-        elevation->units = units;
-      }
+      readGdalTag(tb, e, big, tag, type, count, elevation);
       continue;
     }
-    const int elem = type == 12 ? 8 : type == 3 ? 2 : 0;  // DOUBLE or SHORT
-    if (elem == 0 || count == 0 || count > kMaxTagValues) {
-      return bad(path, "tag " + std::to_string(tag) + " has type " + std::to_string(type) +
-                           " and count " + std::to_string(count));
-    }
-    std::vector<uint8_t> bytes(count * elem);
-    const size_t inline_bytes = big ? 8 : 4;
-    if (bytes.size() <= inline_bytes) {
-      std::memcpy(bytes.data(), e + (big ? 12 : 8), bytes.size());
-    } else {
-      const uint64_t off = big ? tb.decode(e + 12, 8) : tb.decode(e + 8, 4);
-      if (!tb.read(off, bytes.data(), bytes.size())) {
-        return bad(path, "tag " + std::to_string(tag) + " values lie past the end of the file");
-      }
-    }
-    if (tag == kTagGeoKeyDirectory) {
-      if (type != 3) return bad(path, "GeoKeyDirectory is not SHORT");
-      for (uint64_t k = 0; k < count; ++k) keys.push_back(uint16_t(tb.decode(bytes.data() + 2 * k, 2)));
-    } else {
-      if (type != 12) return bad(path, "tag " + std::to_string(tag) + " is not DOUBLE");
-      std::vector<double>& dst =
-          tag == kTagModelPixelScale ? scale : tag == kTagModelTiepoint ? tiepoint : matrix;
-      for (uint64_t k = 0; k < count; ++k) dst.push_back(tb.decodeDouble(bytes.data() + 8 * k));
-    }
+    if (Status s = readGeoTag(path, tb, e, big, tag, type, count, values); !s) return s;
   }
+  return okStatus();
+}
 
-  // GeoKeys: header (version, revision, minor, count) then 4 shorts per key;
-  // only keys stored inline (location 0) are needed here.
+// The GeoKeys this parser uses, with GeoTIFF's defaults.
+struct GeoKeys {
   uint32_t model_type = 0, raster_type = 1, projected = 0, geographic = 0;
-  if (keys.size() >= 4) {
-    const uint64_t nkeys = keys[3];
-    if (4 + nkeys * 4 > keys.size()) return bad(path, "GeoKeyDirectory shorter than its key count");
-    for (uint64_t k = 0; k < nkeys; ++k) {
-      const uint16_t* key = &keys[4 + k * 4];
-      if (key[1] != 0 || key[2] != 1) continue;
-      if (key[0] == kKeyModelType) model_type = key[3];
-      if (key[0] == kKeyRasterType) raster_type = key[3];
-      if (key[0] == kKeyProjectedCsType) projected = key[3];
-      if (key[0] == kKeyGeographicType) geographic = key[3];
-      if (key[0] == kKeyVerticalUnits) {
-        if (auto units = unitsFromEpsg(key[3])) elevation->units = units;
-      }
+};
+
+// GeoKeys: header (version, revision, minor, count) then 4 shorts per key;
+// only keys stored inline (location 0) are needed here. The vertical units
+// key goes into `elevation`.
+Status readGeoKeys(const std::string& path, const std::vector<uint16_t>& keys, GeoKeys* out,
+                   ElevationTags* elevation) {
+  if (keys.size() < 4) return okStatus();
+  const uint64_t nkeys = keys[3];
+  if (4 + nkeys * 4 > keys.size()) return bad(path, "GeoKeyDirectory shorter than its key count");
+  for (uint64_t k = 0; k < nkeys; ++k) {
+    const uint16_t* key = &keys[4 + k * 4];
+    if (key[1] != 0 || key[2] != 1) continue;
+    if (key[0] == kKeyModelType) out->model_type = key[3];
+    if (key[0] == kKeyRasterType) out->raster_type = key[3];
+    if (key[0] == kKeyProjectedCsType) out->projected = key[3];
+    if (key[0] == kKeyGeographicType) out->geographic = key[3];
+    if (key[0] == kKeyVerticalUnits) {
+      if (auto units = unitsFromEpsg(key[3])) elevation->units = units;
     }
   }
+  return okStatus();
+}
 
-  double t[6] = {0, 1, 0, 0, 0, 1};
-  if (matrix.size() >= 16) {
-    t[0] = matrix[3], t[1] = matrix[0], t[2] = matrix[1];
-    t[3] = matrix[7], t[4] = matrix[4], t[5] = matrix[5];
-  } else if (scale.size() >= 2 && tiepoint.size() >= 6) {
-    const double i = tiepoint[0], j = tiepoint[1], x = tiepoint[3], y = tiepoint[4];
-    t[1] = scale[0];
-    t[5] = -scale[1];
-    t[0] = x - i * scale[0];
-    t[3] = y + j * scale[1];
+// The pixel-to-world transform the tags give (a matrix, else a pixel scale
+// and a tie point), moved to the pixel corner for PixelIsPoint rasters.
+// Returns false when the file has neither.
+bool transformOf(const GeoTagValues& v, const GeoKeys& keys, double t[6]) {
+  if (v.matrix.size() >= 16) {
+    t[0] = v.matrix[3], t[1] = v.matrix[0], t[2] = v.matrix[1];
+    t[3] = v.matrix[7], t[4] = v.matrix[4], t[5] = v.matrix[5];
+  } else if (v.scale.size() >= 2 && v.tiepoint.size() >= 6) {
+    const double i = v.tiepoint[0], j = v.tiepoint[1], x = v.tiepoint[3], y = v.tiepoint[4];
+    t[1] = v.scale[0];
+    t[5] = -v.scale[1];
+    t[0] = x - i * v.scale[0];
+    t[3] = y + j * v.scale[1];
   } else {
-    return okStatus();  // no transform tags
+    return false;  // no transform tags
   }
-  if (raster_type == 2) {
+  if (keys.raster_type == 2) {
     // PixelIsPoint: tie points name pixel centres; move to the corner as GDAL does.
     t[0] -= 0.5 * t[1] + 0.5 * t[2];
     t[3] -= 0.5 * t[4] + 0.5 * t[5];
   }
+  return true;
+}
+
+// The file's georeference and elevation tags in their steps: the first
+// IFD, its tags, the GeoKeys, then the transform and the CRS.
+Status parseTiffTags(const std::string& path, GeoReference* out, ElevationTags* elevation) {
+  *out = GeoReference{};
+  *elevation = ElevationTags{};
+  std::error_code ec;
+  const uint64_t size = fs::file_size(path, ec);
+  if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::error(ErrorCode::kIo, path + ": cannot open");
+  IfdTable table;
+  if (Status s = readFirstIfd(path, in, size, &table); !s || !table.tiff) return s;
+  TiffBytes tb(in, size, table.big_endian);
+  GeoTagValues values;
+  if (Status s = readTags(path, tb, table, elevation, &values); !s) return s;
+  GeoKeys keys;
+  if (Status s = readGeoKeys(path, values.keys, &keys, elevation); !s) return s;
+
+  double t[6] = {0, 1, 0, 0, 0, 1};
+  if (!transformOf(values, keys, t)) return okStatus();
   out->present = true;
   std::memcpy(out->transform, t, sizeof(t));
-  if (model_type == 1 && projected != 0 && projected != kUserDefined) {
-    out->crs = "EPSG:" + std::to_string(projected);
-  } else if (model_type == 2 && geographic != 0 && geographic != kUserDefined) {
-    out->crs = "EPSG:" + std::to_string(geographic);
+  if (keys.model_type == 1 && keys.projected != 0 && keys.projected != kUserDefined) {
+    out->crs = "EPSG:" + std::to_string(keys.projected);
+  } else if (keys.model_type == 2 && keys.geographic != 0 && keys.geographic != kUserDefined) {
+    out->crs = "EPSG:" + std::to_string(keys.geographic);
   }
   return okStatus();
 }

@@ -2,7 +2,7 @@
 // the relief.
 #include "input.h"
 
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 #include <clipstream/tiler/georef.h>
 
 #include "elevation_input.h"

@@ -344,6 +344,171 @@ Status readList(const std::string& list_path, std::vector<ListEntry>* out) {
 // The gap pixel in the mosaic's format, or an error for a value it cannot hold.
 using FillMaker = std::function<Status(PixelFormat, std::vector<uint8_t>*)>;
 
+// Opens the sheet `entry` names (kept open in *src until the caller is done
+// with its SourceInfo) and finds its georeference, checking that it is not
+// the list itself, that a VRT uses all of it unscaled, and that it is
+// georeferenced and north-up. `where` starts each message.
+Status openSheet(const std::string& where, const ListEntry& entry, const struct stat* list_st,
+                 std::optional<PixelFormat> forced, const ImageReadOptions& read,
+                 std::unique_ptr<ImageSource>* src, GeoReference* geo) {
+  const std::string& path = entry.path;
+  if (struct stat st{}; list_st != nullptr && ::stat(path.c_str(), &st) == 0 &&
+                        st.st_dev == list_st->st_dev && st.st_ino == list_st->st_ino) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + " is the mosaic list itself, not an image");
+  }
+  Status s = openImageFile(path, forced, src, read);
+  if (!s) return Status::error(s.code, where + s.message);
+  s = findGeoReference(path, geo);
+  if (!s) return Status::error(s.code, where + s.message);
+  const SourceInfo& si = (*src)->info();
+  if (entry.has_rects &&
+      (entry.src[0] != 0.0 || entry.src[1] != 0.0 || entry.src[2] != double(si.width_px) ||
+       entry.src[3] != double(si.height_px) || entry.dst[0] != entry.src[2] ||
+       entry.dst[1] != entry.src[3])) {
+    return Status::error(ErrorCode::kUnsupported,
+                         where + "the VRT draws part of " + path +
+                             " or scales it (SrcRect / DstRect); a mosaic takes whole sheets "
+                             "at their own resolution");
+  }
+  if (!geo->present) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + " has no georeference (no GeoTIFF tags, no world file "
+                                        "beside it): a mosaic places sheets by them");
+  }
+  if (geo->transform[2] != 0.0 || geo->transform[4] != 0.0) {
+    return Status::error(ErrorCode::kUnsupported,
+                         where + path + " is rotated or sheared; mosaics take north-up sheets");
+  }
+  return okStatus();
+}
+
+// Checks that a later sheet (path, geo, si) matches the first one (first,
+// first_geo, first_info): one pixel size, one CRS, one pixel type.
+Status checkLikeFirst(const std::string& where, const std::string& path, const GeoReference& geo,
+                      const SourceInfo& si, const std::string& first, const GeoReference& first_geo,
+                      const SourceInfo& first_info) {
+  if (!samePixelSize(geo.transform[1], first_geo.transform[1]) ||
+      !samePixelSize(geo.transform[5], first_geo.transform[5])) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + ": pixel size " + pixelSizeText(geo) + " differs from " +
+                             first + "'s " + pixelSizeText(first_geo) +
+                             "; a mosaic needs one resolution (resample the sheets first)");
+  }
+  if (geo.crs != first_geo.crs) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + ": CRS '" + printableText(geo.crs, 80) +
+                             "' differs from " + first + "'s '" +
+                             printableText(first_geo.crs, 80) + "'; a mosaic needs one CRS");
+  }
+  if (si.input_channels != first_info.input_channels || si.input_type != first_info.input_type) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + " has " + std::to_string(si.input_channels) + " " +
+                             si.input_type + " channels, " + first + " " +
+                             std::to_string(first_info.input_channels) + " " +
+                             first_info.input_type + "; a mosaic needs one pixel type");
+  }
+  return okStatus();
+}
+
+// The sheet's offset from the first sheet in whole pixels of the first
+// sheet's grid, or an error when it lies off that grid. `first` names the
+// first sheet.
+Status gridOffset(const std::string& where, const std::string& path, const GeoReference& geo,
+                  const GeoReference& first_geo, const std::string& first,
+                  std::pair<int64_t, int64_t>* offset) {
+  const double col = (geo.transform[0] - first_geo.transform[0]) / first_geo.transform[1];
+  const double row = (geo.transform[3] - first_geo.transform[3]) / first_geo.transform[5];
+  const double rcol = std::round(col), rrow = std::round(row);
+  if (std::fabs(col - rcol) > kGridTolerancePx || std::fabs(row - rrow) > kGridTolerancePx ||
+      std::fabs(rcol) > 1e15 || std::fabs(rrow) > 1e15) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         where + path + " is not on the pixel grid of " + first + " (offset " +
+                             std::to_string(col) + ", " + std::to_string(row) + " pixels)");
+  }
+  *offset = {int64_t(rcol), int64_t(rrow)};
+  return okStatus();
+}
+
+// The mosaic's extent: its top-left corner in whole pixels from the first
+// sheet, and its size.
+struct Extent {
+  int64_t min_col = INT64_MAX, min_row = INT64_MAX;
+  uint64_t width = 0, height = 0;
+};
+
+// The bounding box of the sheets at `offsets` (whole pixels from the first
+// sheet); sets each sheet's x0, y0 in the mosaic from it.
+Extent placeSheets(const std::vector<std::pair<int64_t, int64_t>>& offsets,
+                   std::vector<Sheet>* sheets) {
+  Extent e;
+  int64_t max_col = INT64_MIN, max_row = INT64_MIN;
+  for (size_t i = 0; i < sheets->size(); ++i) {
+    e.min_col = std::min(e.min_col, offsets[i].first);
+    e.min_row = std::min(e.min_row, offsets[i].second);
+    max_col = std::max(max_col, offsets[i].first + int64_t((*sheets)[i].width));
+    max_row = std::max(max_row, offsets[i].second + int64_t((*sheets)[i].height));
+  }
+  for (size_t i = 0; i < sheets->size(); ++i) {
+    (*sheets)[i].x0 = uint64_t(offsets[i].first - e.min_col);
+    (*sheets)[i].y0 = uint64_t(offsets[i].second - e.min_row);
+  }
+  e.width = uint64_t(max_col - e.min_col), e.height = uint64_t(max_row - e.min_row);
+  return e;
+}
+
+// The sheets of the list, checked and placed relative to the first one,
+// with what the mosaic's SourceInfo takes from them.
+struct ListedSheets {
+  std::vector<Sheet> sheets;
+  std::vector<std::pair<int64_t, int64_t>> offsets;  // whole pixels from the first sheet
+  SourceInfo first_info;
+  GeoReference first_geo;
+  uint64_t file_bytes = 0;
+  bool sequential = false;
+};
+
+// Opens each sheet of the list in turn (closing it again: strips open them
+// when they reach them) and checks that it fits the first one's grid.
+Status readSheets(const std::string& list_path, const std::vector<ListEntry>& paths,
+                  std::optional<PixelFormat> forced, const ImageReadOptions& read,
+                  ListedSheets* out) {
+  struct stat list_st{};
+  const bool list_known = ::stat(list_path.c_str(), &list_st) == 0;
+  std::vector<Sheet>& sheets = out->sheets;
+  for (const ListEntry& entry : paths) {
+    const std::string& path = entry.path;
+    const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
+    std::unique_ptr<ImageSource> src;
+    GeoReference geo;
+    Status s = openSheet(where, entry, list_known ? &list_st : nullptr, forced, read, &src, &geo);
+    if (!s) return s;
+    const SourceInfo& si = src->info();
+    if (sheets.empty()) {
+      out->first_info = si;
+      out->first_geo = geo;
+    } else {
+      s = checkLikeFirst(where, path, geo, si, sheets[0].path, out->first_geo, out->first_info);
+      if (!s) return s;
+    }
+    std::pair<int64_t, int64_t> offset;
+    s = gridOffset(where, path, geo, out->first_geo, sheets.empty() ? path : sheets[0].path, &offset);
+    if (!s) return s;
+    out->offsets.push_back(offset);
+    Sheet sheet;
+    sheet.path = path;
+    sheet.width = si.width_px;
+    sheet.height = si.height_px;
+    out->file_bytes += si.file_bytes;
+    out->sequential = out->sequential || si.sequential_only;
+    sheets.push_back(std::move(sheet));
+    // src closes here: sheets are opened again when strips reach them.
+  }
+  return okStatus();
+}
+
+// The mosaic in its steps: read the list, open and check every sheet,
+// place them, make the gap pixel, then the source and its MosaicInfo.
 Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> forced,
                       const FillMaker& make_fill, std::unique_ptr<ImageSource>* out,
                       MosaicInfo* mosaic, const ImageReadOptions& read) {
@@ -351,106 +516,14 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   std::vector<ListEntry> paths;
   Status s = readList(list_path, &paths);
   if (!s) return s;
-  struct stat list_st{};
-  const bool list_known = ::stat(list_path.c_str(), &list_st) == 0;
-
-  std::vector<Sheet> sheets;
-  SourceInfo first_info;
-  GeoReference first_geo;
-  std::vector<std::pair<int64_t, int64_t>> offsets;  // whole pixels from the first sheet
-  uint64_t file_bytes = 0;
-  bool sequential = false;
-  for (const ListEntry& entry : paths) {
-    const std::string& path = entry.path;
-    const std::string where = list_path + " line " + std::to_string(entry.line) + ": ";
-    if (struct stat st{}; list_known && ::stat(path.c_str(), &st) == 0 && st.st_dev == list_st.st_dev &&
-                          st.st_ino == list_st.st_ino) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           where + path + " is the mosaic list itself, not an image");
-    }
-    std::unique_ptr<ImageSource> src;
-    s = openImageFile(path, forced, &src, read);
-    if (!s) return Status::error(s.code, where + s.message);
-    GeoReference geo;
-    s = findGeoReference(path, &geo);
-    if (!s) return Status::error(s.code, where + s.message);
-    const SourceInfo& si = src->info();
-    if (entry.has_rects &&
-        (entry.src[0] != 0.0 || entry.src[1] != 0.0 || entry.src[2] != double(si.width_px) ||
-         entry.src[3] != double(si.height_px) || entry.dst[0] != entry.src[2] ||
-         entry.dst[1] != entry.src[3])) {
-      return Status::error(ErrorCode::kUnsupported,
-                           where + "the VRT draws part of " + path +
-                               " or scales it (SrcRect / DstRect); a mosaic takes whole sheets "
-                               "at their own resolution");
-    }
-    if (!geo.present) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           where + path + " has no georeference (no GeoTIFF tags, no world file "
-                                          "beside it): a mosaic places sheets by them");
-    }
-    if (geo.transform[2] != 0.0 || geo.transform[4] != 0.0) {
-      return Status::error(ErrorCode::kUnsupported,
-                           where + path + " is rotated or sheared; mosaics take north-up sheets");
-    }
-    if (sheets.empty()) {
-      first_info = si;
-      first_geo = geo;
-    } else {
-      const std::string& first = sheets[0].path;
-      if (!samePixelSize(geo.transform[1], first_geo.transform[1]) ||
-          !samePixelSize(geo.transform[5], first_geo.transform[5])) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             where + path + ": pixel size " + pixelSizeText(geo) + " differs from " +
-                                 first + "'s " + pixelSizeText(first_geo) +
-                                 "; a mosaic needs one resolution (resample the sheets first)");
-      }
-      if (geo.crs != first_geo.crs) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             where + path + ": CRS '" + printableText(geo.crs, 80) +
-                                 "' differs from " + first + "'s '" +
-                                 printableText(first_geo.crs, 80) + "'; a mosaic needs one CRS");
-      }
-      if (si.input_channels != first_info.input_channels || si.input_type != first_info.input_type) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             where + path + " has " + std::to_string(si.input_channels) + " " +
-                                 si.input_type + " channels, " + first + " " +
-                                 std::to_string(first_info.input_channels) + " " +
-                                 first_info.input_type + "; a mosaic needs one pixel type");
-      }
-    }
-    const double col = (geo.transform[0] - first_geo.transform[0]) / first_geo.transform[1];
-    const double row = (geo.transform[3] - first_geo.transform[3]) / first_geo.transform[5];
-    const double rcol = std::round(col), rrow = std::round(row);
-    if (std::fabs(col - rcol) > kGridTolerancePx || std::fabs(row - rrow) > kGridTolerancePx ||
-        std::fabs(rcol) > 1e15 || std::fabs(rrow) > 1e15) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           where + path + " is not on the pixel grid of " +
-                               (sheets.empty() ? path : sheets[0].path) + " (offset " +
-                               std::to_string(col) + ", " + std::to_string(row) + " pixels)");
-    }
-    offsets.emplace_back(int64_t(rcol), int64_t(rrow));
-    Sheet sheet;
-    sheet.path = path;
-    sheet.width = si.width_px;
-    sheet.height = si.height_px;
-    file_bytes += si.file_bytes;
-    sequential = sequential || si.sequential_only;
-    sheets.push_back(std::move(sheet));
-    // src closes here: sheets are opened again when strips reach them.
-  }
-  int64_t min_col = INT64_MAX, min_row = INT64_MAX, max_col = INT64_MIN, max_row = INT64_MIN;
-  for (size_t i = 0; i < sheets.size(); ++i) {
-    min_col = std::min(min_col, offsets[i].first);
-    min_row = std::min(min_row, offsets[i].second);
-    max_col = std::max(max_col, offsets[i].first + int64_t(sheets[i].width));
-    max_row = std::max(max_row, offsets[i].second + int64_t(sheets[i].height));
-  }
-  for (size_t i = 0; i < sheets.size(); ++i) {
-    sheets[i].x0 = uint64_t(offsets[i].first - min_col);
-    sheets[i].y0 = uint64_t(offsets[i].second - min_row);
-  }
-  const uint64_t width = uint64_t(max_col - min_col), height = uint64_t(max_row - min_row);
+  ListedSheets listed;
+  s = readSheets(list_path, paths, forced, read, &listed);
+  if (!s) return s;
+  std::vector<Sheet>& sheets = listed.sheets;
+  const SourceInfo& first_info = listed.first_info;
+  const GeoReference& first_geo = listed.first_geo;
+  const Extent extent = placeSheets(listed.offsets, &sheets);
+  const uint64_t width = extent.width, height = extent.height;
 
   const PixelFormat format = first_info.format;
   std::vector<uint8_t> fill_pixel(bytesPerPixel(format));
@@ -463,13 +536,13 @@ Status openMosaicImpl(const std::string& list_path, std::optional<PixelFormat> f
   info.input_channels = first_info.input_channels;
   info.input_type = first_info.input_type;
   info.decoder = "mosaic of " + first_info.decoder;
-  info.sequential_only = sequential;
-  info.file_bytes = file_bytes;
+  info.sequential_only = listed.sequential;
+  info.file_bytes = listed.file_bytes;
   info.format = format;
   mosaic->gap_px = gapPixels(sheets, width, height);
   mosaic->geo = first_geo;
-  mosaic->geo.transform[0] = first_geo.transform[0] + double(min_col) * first_geo.transform[1];
-  mosaic->geo.transform[3] = first_geo.transform[3] + double(min_row) * first_geo.transform[5];
+  mosaic->geo.transform[0] = first_geo.transform[0] + double(extent.min_col) * first_geo.transform[1];
+  mosaic->geo.transform[3] = first_geo.transform[3] + double(extent.min_row) * first_geo.transform[5];
   for (const Sheet& sh : sheets) mosaic->sheets.push_back(sh.path);
   *out = std::make_unique<MosaicSource>(std::move(sheets), std::move(info), format,
                                         std::move(fill_pixel), read);

@@ -417,98 +417,104 @@ class TiffSource final : public ImageSource {
   DecodePool m_pool;              // last: stopped before the handles close
 };
 
-}  // namespace
-
-Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
-                     const ImageReadOptions& read, std::unique_ptr<ImageSource>* out,
-                     bool* covered) {
-  *covered = true;
-  auto first = std::make_unique<Handle>();
-  Status s = openHandle(path, first.get());
-  if (!s) return s;
-  TIFF* t = first->tiff;
+// The baseline fields the readers decide by, with libtiff's defaults for
+// those the file leaves out.
+struct TiffFields {
   uint32_t w = 0, h = 0;
   uint16_t spp = 1, bits = 1, sample_format = SAMPLEFORMAT_UINT, planar = PLANARCONFIG_CONTIG;
   uint16_t photometric = 0, compression = COMPRESSION_NONE, orientation = ORIENTATION_TOPLEFT;
-  TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &w);
-  TIFFGetField(t, TIFFTAG_IMAGELENGTH, &h);
-  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &spp);
-  TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &bits);
-  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &sample_format);
-  TIFFGetFieldDefaulted(t, TIFFTAG_PLANARCONFIG, &planar);
-  TIFFGetFieldDefaulted(t, TIFFTAG_COMPRESSION, &compression);
-  TIFFGetFieldDefaulted(t, TIFFTAG_ORIENTATION, &orientation);
-  if (!TIFFGetField(t, TIFFTAG_PHOTOMETRIC, &photometric)) photometric = spp >= 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK;
-  if (w == 0 || h == 0) {
-    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(w) +
-                                                          "x" + std::to_string(h) + " is empty or not 2D");
-  }
+};
 
-  // What these readers cover; the rest (and its errors) is OpenImageIO's.
-  PixelLayout layout;
-  bool ok = spp >= 1 && spp <= 4 && (planar == PLANARCONFIG_CONTIG || spp == 1);
-  if (sample_format == SAMPLEFORMAT_UINT && bits == 8) {
-    layout.kind = SampleKind::kU8;
-  } else if (sample_format == SAMPLEFORMAT_UINT && bits == 16) {
-    layout.kind = SampleKind::kU16;
-  } else if (sample_format == SAMPLEFORMAT_INT && bits == 16) {
-    layout.kind = SampleKind::kI16;
-  } else if (sample_format == SAMPLEFORMAT_IEEEFP && (bits == 32 || bits == 64)) {
-    layout.kind = SampleKind::kF32;
-    layout.doubles = bits == 64;
+// The first handle's fields, as the file gives them or as libtiff defaults them.
+TiffFields readFields(TIFF* t) {
+  TiffFields f;
+  TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &f.w);
+  TIFFGetField(t, TIFFTAG_IMAGELENGTH, &f.h);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &f.spp);
+  TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &f.bits);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &f.sample_format);
+  TIFFGetFieldDefaulted(t, TIFFTAG_PLANARCONFIG, &f.planar);
+  TIFFGetFieldDefaulted(t, TIFFTAG_COMPRESSION, &f.compression);
+  TIFFGetFieldDefaulted(t, TIFFTAG_ORIENTATION, &f.orientation);
+  if (!TIFFGetField(t, TIFFTAG_PHOTOMETRIC, &f.photometric)) {
+    f.photometric = f.spp >= 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK;
+  }
+  return f;
+}
+
+// The samples and colour model: sets the layout's kind, doubles and
+// jpeg_rgb, and returns whether these readers cover them (1 to 4
+// interleaved samples of uint8, uint16, int16, float or double; grey, RGB,
+// or JPEG's YCbCr); what they do not is OpenImageIO's.
+bool sampleLayout(const TiffFields& f, PixelLayout* layout) {
+  bool ok = f.spp >= 1 && f.spp <= 4 && (f.planar == PLANARCONFIG_CONTIG || f.spp == 1);
+  if (f.sample_format == SAMPLEFORMAT_UINT && f.bits == 8) {
+    layout->kind = SampleKind::kU8;
+  } else if (f.sample_format == SAMPLEFORMAT_UINT && f.bits == 16) {
+    layout->kind = SampleKind::kU16;
+  } else if (f.sample_format == SAMPLEFORMAT_INT && f.bits == 16) {
+    layout->kind = SampleKind::kI16;
+  } else if (f.sample_format == SAMPLEFORMAT_IEEEFP && (f.bits == 32 || f.bits == 64)) {
+    layout->kind = SampleKind::kF32;
+    layout->doubles = f.bits == 64;
   } else {
     ok = false;
   }
-  if (photometric == PHOTOMETRIC_YCBCR) {
-    ok = ok && compression == COMPRESSION_JPEG && spp == 3;
-    layout.jpeg_rgb = true;
-  } else if (photometric == PHOTOMETRIC_RGB) {
-    ok = ok && spp >= 3;
+  if (f.photometric == PHOTOMETRIC_YCBCR) {
+    ok = ok && f.compression == COMPRESSION_JPEG && f.spp == 3;
+    layout->jpeg_rgb = true;
+  } else if (f.photometric == PHOTOMETRIC_RGB) {
+    ok = ok && f.spp >= 3;
   } else {
-    ok = ok && photometric == PHOTOMETRIC_MINISBLACK;
+    ok = ok && f.photometric == PHOTOMETRIC_MINISBLACK;
   }
-  if (!ok) {
-    *covered = false;
-    return okStatus();
-  }
-  if (layout.jpeg_rgb) TIFFSetField(t, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
-  layout.native_pixel = size_t(bits / 8) * spp;
-  layout.tiled = TIFFIsTiled(t) != 0;
-  if (layout.tiled) {
+  return ok;
+}
+
+// The strips or tiles: sets the layout's pixel size, chunk size and
+// scanline mode, and returns whether these readers cover them (tiles of at
+// most kMaxChunkBytes, chunks whose size libtiff agrees with).
+bool chunkLayout(TIFF* t, const TiffFields& f, PixelLayout* layout) {
+  layout->native_pixel = size_t(f.bits / 8) * f.spp;
+  layout->tiled = TIFFIsTiled(t) != 0;
+  if (layout->tiled) {
     uint32_t tw = 0, th = 0;
     TIFFGetField(t, TIFFTAG_TILEWIDTH, &tw);
     TIFFGetField(t, TIFFTAG_TILELENGTH, &th);
-    if (tw == 0 || th == 0 || size_t(tw) * th * layout.native_pixel > kMaxChunkBytes ||
-        TIFFTileSize64(t) != uint64_t(tw) * th * layout.native_pixel) {
-      *covered = false;
-      return okStatus();
+    if (tw == 0 || th == 0 || size_t(tw) * th * layout->native_pixel > kMaxChunkBytes ||
+        TIFFTileSize64(t) != uint64_t(tw) * th * layout->native_pixel) {
+      return false;
     }
-    layout.chunk_w = tw, layout.chunk_h = th;
-  } else {
-    uint32_t rps = h;
-    TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rps);
-    rps = std::clamp<uint32_t>(rps, 1, h);
-    layout.chunk_w = w, layout.chunk_h = rps;
-    layout.scanlines = uint64_t(rps) * w * layout.native_pixel > kMaxChunkBytes;
-    if (TIFFScanlineSize64(t) != uint64_t(w) * layout.native_pixel) {
-      *covered = false;
-      return okStatus();
-    }
+    layout->chunk_w = tw, layout->chunk_h = th;
+    return true;
   }
+  uint32_t rps = f.h;
+  TIFFGetFieldDefaulted(t, TIFFTAG_ROWSPERSTRIP, &rps);
+  rps = std::clamp<uint32_t>(rps, 1, f.h);
+  layout->chunk_w = f.w, layout->chunk_h = rps;
+  layout->scanlines = uint64_t(rps) * f.w * layout->native_pixel > kMaxChunkBytes;
+  return TIFFScanlineSize64(t) == uint64_t(f.w) * layout->native_pixel;
+}
 
-  {
-    const uint64_t chunk = uint64_t(layout.chunk_w) * layout.chunk_h * layout.native_pixel;
-    const uint64_t last_rows = layout.tiled ? layout.chunk_h : h - (uint64_t(h) - 1) / layout.chunk_h * layout.chunk_h;
-    s = checkChunks(path, t, layout.tiled, compression, chunk,
-                    uint64_t(layout.chunk_w) * last_rows * layout.native_pixel);
-    if (!s) return s;
-  }
+// checkChunks() with the chunk sizes of this layout (the last strip holds
+// the rows left over).
+Status checkLayoutChunks(const std::string& path, TIFF* t, const TiffFields& f,
+                         const PixelLayout& layout) {
+  const uint64_t chunk = uint64_t(layout.chunk_w) * layout.chunk_h * layout.native_pixel;
+  const uint64_t last_rows =
+      layout.tiled ? layout.chunk_h : f.h - (uint64_t(f.h) - 1) / layout.chunk_h * layout.chunk_h;
+  return checkChunks(path, t, layout.tiled, f.compression, chunk,
+                     uint64_t(layout.chunk_w) * last_rows * layout.native_pixel);
+}
 
+// The source's SourceInfo. Takes the first handle's warnings (what libtiff
+// said of the file at open that does not stop the run) into its warnings.
+SourceInfo tiffInfo(const std::string& path, const TiffFields& f, const PixelLayout& layout,
+                    std::optional<PixelFormat> forced, Handle* first) {
   SourceInfo info;
-  info.width_px = w;
-  info.height_px = h;
-  info.input_channels = spp;
-  // What libtiff said of the file at open that does not stop the run.
+  info.width_px = f.w;
+  info.height_px = f.h;
+  info.input_channels = f.spp;
   for (size_t at = 0; at < first->warnings.size();) {
     const size_t end = std::min(first->warnings.find('\n', at), first->warnings.size());
     info.warnings.push_back(path + ": libtiff: " + first->warnings.substr(at, end - at));
@@ -521,9 +527,45 @@ Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
   info.sequential_only = false;
   std::error_code ec;
   info.file_bytes = fs::file_size(path, ec);
-  info.format = forced ? *forced : defaultFormat(spp, layout.kind);
-  if (orientation != ORIENTATION_TOPLEFT) info.warnings.push_back(orientationWarning(path, orientation));
+  info.format = forced ? *forced : defaultFormat(f.spp, layout.kind);
+  if (f.orientation != ORIENTATION_TOPLEFT) info.warnings.push_back(orientationWarning(path, f.orientation));
+  return info;
+}
 
+}  // namespace
+
+// The reader in its steps: open the first handle, read its fields, decide
+// whether the samples and chunks are covered, check the chunks lie in the
+// file, then make the source with its decode threads.
+Status openTiffImage(const std::string& path, std::optional<PixelFormat> forced,
+                     const ImageReadOptions& read, std::unique_ptr<ImageSource>* out,
+                     bool* covered) {
+  *covered = true;
+  auto first = std::make_unique<Handle>();
+  Status s = openHandle(path, first.get());
+  if (!s) return s;
+  TIFF* t = first->tiff;
+  const TiffFields f = readFields(t);
+  if (f.w == 0 || f.h == 0) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(f.w) +
+                                                          "x" + std::to_string(f.h) + " is empty or not 2D");
+  }
+
+  // What these readers cover; the rest (and its errors) is OpenImageIO's.
+  PixelLayout layout;
+  if (!sampleLayout(f, &layout)) {
+    *covered = false;
+    return okStatus();
+  }
+  if (layout.jpeg_rgb) TIFFSetField(t, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+  if (!chunkLayout(t, f, &layout)) {
+    *covered = false;
+    return okStatus();
+  }
+  s = checkLayoutChunks(path, t, f, layout);
+  if (!s) return s;
+
+  SourceInfo info = tiffInfo(path, f, layout, forced, first.get());
   unsigned threads = read.decode_threads != 0 ? read.decode_threads : std::thread::hardware_concurrency();
   threads = std::clamp(threads, 1u, kMaxDecodeThreads);
   if (layout.scanlines) threads = 1;

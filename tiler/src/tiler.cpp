@@ -4,8 +4,8 @@
 // and the store's finish.
 #include <clipstream/tiler/tiler.h>
 
-#include <clipstream/store/output_file.h>
-#include <clipstream/store/process_memory.h>
+#include <clipstream/util/output_file.h>
+#include <clipstream/util/process_memory.h>
 #include <clipstream/tiler/downsample.h>
 #include <clipstream/tiler/shard.h>
 

@@ -13,7 +13,7 @@
 // ones and reports them (swept()).
 #pragma once
 
-#include <clipstream/store/types.h>
+#include <clipstream/util/status.h>
 
 #include <sys/stat.h>
 

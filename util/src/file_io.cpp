@@ -1,4 +1,4 @@
-#include "file_io.h"
+#include <clipstream/util/file_io.h>
 
 #include <unistd.h>
 

@@ -1,5 +1,5 @@
 // Reads the process's memory figures from /proc/self/status (Linux).
-#include <clipstream/store/process_memory.h>
+#include <clipstream/util/process_memory.h>
 
 #include <cstdio>
 #include <cstdlib>

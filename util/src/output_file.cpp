@@ -1,8 +1,8 @@
 // OutputFile: temporary name, checked writes, atomic publish that replaces
 // nothing it did not own, and a signal-safe registry of live temporaries.
-#include <clipstream/store/output_file.h>
+#include <clipstream/util/output_file.h>
 
-#include "file_io.h"
+#include <clipstream/util/file_io.h>
 
 #include <dirent.h>
 #include <fcntl.h>

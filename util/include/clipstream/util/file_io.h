@@ -1,8 +1,12 @@
-// Private: positional file I/O that loops over short transfers and turns
-// errno into a Status naming the file.
+// Positional file I/O that loops over short transfers and turns errno into
+// a Status naming the file: what the store's reader and writer and
+// OutputFile read and write with.
+//
+// Thread-safe: each call works on the descriptor it is given (positional
+// reads and writes do not move a shared offset).
 #pragma once
 
-#include <clipstream/store/types.h>
+#include <clipstream/util/status.h>
 
 #include <cstdint>
 #include <string>
