@@ -68,24 +68,25 @@ Status checkFlyOutputs(const FlyOptions& o) {
   std::error_code ec;
   auto canonical = [&](const std::string& p) { return fs::weakly_canonical(p, ec).string(); };
   const std::string out_dir = canonical(o.out_dir);
+  const std::string& trace_path = o.streamer.trace_path;
   for (const std::string& input : {o.store_path, o.path}) {
     if (input.empty() || !fs::exists(input, ec)) continue;
-    if (!o.trace_path.empty() && (sameFile(input, o.trace_path) || canonical(input) == canonical(o.trace_path)))
+    if (!trace_path.empty() && (sameFile(input, trace_path) || canonical(input) == canonical(trace_path)))
       return Status::error(ErrorCode::kInvalidArgument,
-                           "--trace " + o.trace_path + " is the input " + input + "; refusing to overwrite it");
+                           "--trace " + trace_path + " is the input " + input + "; refusing to overwrite it");
     const fs::path in = canonical(input);
     if (in.parent_path().string() == out_dir && isRunFileName(in.filename().string()))
       return Status::error(ErrorCode::kInvalidArgument,
                            input + " is in --out " + o.out_dir + " under a name the run replaces");
   }
-  if (!o.trace_path.empty()) {
-    const fs::path trace = canonical(o.trace_path);
+  if (!trace_path.empty()) {
+    const fs::path trace = canonical(trace_path);
     if (trace.parent_path().string() == out_dir && isRunFileName(trace.filename().string()))
       return Status::error(ErrorCode::kInvalidArgument,
-                           "--trace " + o.trace_path + " is one of the run's own files in --out");
+                           "--trace " + trace_path + " is one of the run's own files in --out");
     OutputOptions trace_options;
     trace_options.existing = ExistingOutput::kReplaceRegular;
-    if (Status s = checkOutputPath(o.trace_path, trace_options); !s) return s;
+    if (Status s = checkOutputPath(trace_path, trace_options); !s) return s;
   }
   return okStatus();
 }
@@ -132,9 +133,10 @@ Status checkFlyOptions(const FlyOptions& o) {
   auto bad = [](const std::string& what) { return Status::error(ErrorCode::kInvalidArgument, what); };
   if (!std::isfinite(o.speed) || o.speed <= 0.0 || o.speed > kMaxFlySpeed)
     return bad("speed must be a number from 0.001 to " + std::to_string(int(kMaxFlySpeed)));
-  if (o.cache_mb == 0) return bad("the RAM budget (cache MiB) must be at least 1");
+  if (o.streamer.ram_budget_bytes < (uint64_t(1) << 20))
+    return bad("the RAM budget (cache MiB) must be at least 1");
   if (o.upload_tiles == 0) return bad("uploads per frame must be at least 1");
-  if (o.io_threads > kMaxIoThreads)
+  if (o.streamer.io_threads > kMaxIoThreads)
     return bad("io threads must be at most " + std::to_string(kMaxIoThreads));
   if (o.remote.connections == 0 || o.remote.connections > kMaxRemoteConnections)
     return bad("HTTP connections must be from 1 to " + std::to_string(kMaxRemoteConnections));
@@ -148,9 +150,10 @@ Status checkFlyOptions(const FlyOptions& o) {
     return bad("fault corrupt fraction must be from 0 to 1");
   if (!std::isfinite(o.vertical_scale) || o.vertical_scale <= 0.0 || o.vertical_scale > kMaxVerticalScale)
     return bad("vertical scale must be a number above 0 and at most " + std::to_string(int(kMaxVerticalScale)));
-  if (o.io_reads_per_frame == 0 || o.io_reads_per_frame > kMaxFlyIoReadsPerFrame)
+  const DeterministicIo& io = o.streamer.deterministic_io;
+  if (io.reads_per_frame == 0 || io.reads_per_frame > kMaxFlyIoReadsPerFrame)
     return bad("reads per frame must be from 1 to " + std::to_string(kMaxFlyIoReadsPerFrame));
-  if (o.io_latency_frames == 0 || o.io_latency_frames > kMaxFlyIoLatencyFrames)
+  if (io.latency_frames == 0 || io.latency_frames > kMaxFlyIoLatencyFrames)
     return bad("I/O latency must be from 1 to " + std::to_string(kMaxFlyIoLatencyFrames) + " frames");
   if (o.terrain_ring < 16 || o.terrain_ring > 1024 || (o.terrain_ring & (o.terrain_ring - 1)) != 0)
     return bad("terrain ring must be a power of two from 16 to 1024");
@@ -271,17 +274,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.viewport = o.viewport;
   r.resize_at_frame = o.resize_at_frame;
   r.resize_to = o.resize_to;
-  r.streamer.ram_budget_bytes = o.cache_mb << 20;
-  r.streamer.io_threads = o.io_threads;
-  r.streamer.throttle = o.throttle;
-  r.streamer.prefetch = o.prefetch;
-  r.streamer.frustum_priority = o.frustum_priority;
-  r.streamer.planner.scope = o.plan_scope;
-  r.streamer.terrain_bounds = o.terrain_bounds;
-  r.streamer.trace_path = o.trace_path;
-  r.streamer.deterministic_io.enabled = o.deterministic;
-  r.streamer.deterministic_io.reads_per_frame = o.io_reads_per_frame;
-  r.streamer.deterministic_io.latency_frames = o.io_latency_frames;
+  r.streamer = o.streamer;
   r.upload_tiles = o.upload_tiles;
   r.buffering = o.buffering;
   r.texture_memory = o.texture_memory;
@@ -304,7 +297,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   std::vector<std::string> swept;
   r.on_start = [&]() -> Status {
     if (Status s = prepareOutDir(o.out_dir, &swept); !s) return s;
-    if (!o.trace_path.empty()) sweepOutputTemporaries(o.trace_path, &swept);
+    if (!o.streamer.trace_path.empty()) sweepOutputTemporaries(o.streamer.trace_path, &swept);
     return okStatus();
   };
   FrameWriter writer(kMaxQueuedPngFrames);
@@ -337,18 +330,11 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   d.viewport = o.viewport;
   d.buffering = o.buffering;
   d.upload_tiles = o.upload_tiles;
-  d.cache_mb = o.cache_mb;
   d.warmup_frames = o.warmup_frames;
   d.reference = o.reference;
   d.reference_tile_format = o.reference_tile_format.value_or(o.tile_format);
-  d.throttle = o.throttle;
-  d.prefetch = o.prefetch;
-  d.frustum_priority = o.frustum_priority;
-  d.plan_scope = o.plan_scope;
   d.path_hint = o.path_hint;
-  d.deterministic = o.deterministic;
-  d.io_reads_per_frame = o.io_reads_per_frame;
-  d.io_latency_frames = o.io_latency_frames;
+  d.streamer = o.streamer;
   d.pngs_written = writer.written();
   d.pngs_dropped = writer.dropped();
   if (Status s = writeRunFiles({{o.out_dir + "/frames.csv", framesCsv(run, geometry.levelCount())},

@@ -51,6 +51,9 @@ nlohmann::json remoteJson(const RemoteStats& r) {
 // Whether the run read a store over HTTP (RemoteStats are all zero otherwise).
 bool readRemotely(const FlightRun& run) { return run.remote.requests > 0 || run.remote.disk_cache_hits > 0; }
 
+// The RAM budget as the reports name it: cache_mb, whole MiB.
+uint64_t cacheMib(const RunDescription& d) { return d.streamer.ram_budget_bytes >> 20; }
+
 }  // namespace
 
 std::string framesCsv(const FlightRun& run, uint32_t levels) {
@@ -173,18 +176,19 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["ram_peak_bytes"] = run.streamer.ram_peak_bytes;
   acc["ram_budget_bytes"] = run.streamer.ram_budget_bytes;
   acc["tile_failures"] = run.tile_failures;
-  acc["throttle"] = d.throttle;
-  acc["prefetch"] = d.prefetch;
-  acc["frustum_priority"] = d.frustum_priority;
-  acc["plan_scope"] = d.plan_scope == PlanScope::kSampled ? "sampled" : "window";
+  const DeterministicIo& io = d.streamer.deterministic_io;
+  acc["throttle"] = d.streamer.throttle;
+  acc["prefetch"] = d.streamer.prefetch;
+  acc["frustum_priority"] = d.streamer.frustum_priority;
+  acc["plan_scope"] = d.streamer.planner.scope == PlanScope::kSampled ? "sampled" : "window";
   acc["path_hint"] = d.path_hint;
-  acc["io_mode"] = d.deterministic ? "deterministic" : "real-time";
-  acc["io_reads_per_frame"] = d.deterministic ? d.io_reads_per_frame : 0;
-  acc["io_latency_frames"] = d.deterministic ? d.io_latency_frames : 0;
+  acc["io_mode"] = io.enabled ? "deterministic" : "real-time";
+  acc["io_reads_per_frame"] = io.enabled ? io.reads_per_frame : 0;
+  acc["io_latency_frames"] = io.enabled ? io.latency_frames : 0;
   acc["path_hint_frames"] = run.streamer.path_hint_frames;
   acc["path_hint_ignored_frames"] = run.streamer.path_hint_ignored_frames;
   acc["upload_tiles"] = d.upload_tiles;
-  acc["cache_mb"] = d.cache_mb;
+  acc["cache_mb"] = cacheMib(d);
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
   acc["terrain_method"] = run.terrain_method;
@@ -264,7 +268,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("frames", std::to_string(s.frames));
   add("speed", num(d.speed));
   add("upload_tiles", std::to_string(d.upload_tiles));
-  add("cache_mb", std::to_string(d.cache_mb));
+  add("cache_mb", std::to_string(cacheMib(d)));
   // Accuracy: empty when no frame was compared with the reference.
   const bool judged = s.measured_frames > 0;
   auto judgedNum = [&](double v) { return judged ? num(v) : std::string(); };
@@ -326,9 +330,10 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("needed_coarser_frames", run.seen_frames ? std::to_string(run.needed_coarser_frames) : std::string());
   add("needed_finer_frames", run.seen_frames ? std::to_string(run.needed_finer_frames) : std::string());
   // Last, so scripts reading columns by position before it see no change.
-  add("io_mode", d.deterministic ? "deterministic" : "real-time");
-  add("io_reads_per_frame", d.deterministic ? std::to_string(d.io_reads_per_frame) : "0");
-  add("io_latency_frames", d.deterministic ? std::to_string(d.io_latency_frames) : "0");
+  const DeterministicIo& io = d.streamer.deterministic_io;
+  add("io_mode", io.enabled ? "deterministic" : "real-time");
+  add("io_reads_per_frame", io.enabled ? std::to_string(io.reads_per_frame) : "0");
+  add("io_latency_frames", io.enabled ? std::to_string(io.latency_frames) : "0");
   add("pngs_written", std::to_string(d.pngs_written));
   add("pngs_dropped", std::to_string(d.pngs_dropped));
   add("texture_memory", textureMemoryName(run.texture_memory));
@@ -389,10 +394,11 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
   }
   row("peak_rss_mib", mib(s.peak_rss_bytes), "%.1f");
   out << "tile_format\t" << tileContentName(run.tile_content) << "\n";
+  const DeterministicIo& io = d.streamer.deterministic_io;
   out << "io_mode\t"
-      << (d.deterministic ? "deterministic, " + std::to_string(d.io_reads_per_frame) + " reads/frame, " +
-                                std::to_string(d.io_latency_frames) + " frames latency"
-                          : std::string("real-time"))
+      << (io.enabled ? "deterministic, " + std::to_string(io.reads_per_frame) + " reads/frame, " +
+                           std::to_string(io.latency_frames) + " frames latency"
+                     : std::string("real-time"))
       << "\n";
   row("gpu_texture_bytes", double(run.texture_bytes.total()), "%.0f");
   row("gpu_texture_mib", mib(run.texture_bytes.total()), "%.1f");
@@ -447,6 +453,30 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     row("frames_with_holes", double(run.frames_with_holes), "%.0f");
     if (run.ground_truth_frames > 0) row("ground_truth_psnr_mean_db", run.ground_truth_psnr_mean_db, "%.2f");
   }
+}
+
+int restFramesToIdentical(const FlightRun& run, uint32_t moving_frames) {
+  for (size_t i = moving_frames; i < run.frames.size(); ++i)
+    if (run.frames[i].accuracy.measured && run.frames[i].accuracy.error.max_abs_error == 0)
+      return int(i - moving_frames);
+  return -1;
+}
+
+std::string scenarioJsonLine(const FlightRun& run, const ScenarioDescription& scenario) {
+  nlohmann::json j = nlohmann::json::parse(run.summary.toJson(), nullptr, false);
+  j["scenario"] = scenario.name;
+  j["moving_frames"] = scenario.moving_frames;
+  j["rest_frames"] = scenario.rest_frames;
+  j["rest_frames_to_identical"] = restFramesToIdentical(run, scenario.moving_frames);
+  j["render_thread_fetches"] = run.render_thread_fetches;
+  j["ram_peak_bytes"] = run.streamer.ram_peak_bytes;
+  j["ram_budget_bytes"] = run.streamer.ram_budget_bytes;
+  j["rss_after_warmup_bytes"] = run.rss_after_warmup_bytes;
+  j["rss_end_bytes"] = run.rss_end_bytes;
+  j["garbage_checked_frames"] = run.garbage_checked_frames;
+  j["garbage_pixels_max"] = run.garbage_pixels_max;
+  j["result"] = scenario.passed ? "pass" : "FAIL";
+  return j.dump() + "\n";
 }
 
 }  // namespace clipstream

@@ -2,6 +2,7 @@
 // Usage and output formats: docs/renderer.md; exit codes: docs/cli.md.
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
+#include <clipstream/cli/renderer_options.h>
 #include <clipstream/cli/sizes.h>
 #include <clipstream/eval/fly.h>
 #include <clipstream/streamer/streamer.h>
@@ -18,6 +19,7 @@ int main(int argc, char** argv) {
                "writes per-frame statistics (CSV, JSON) and PNG frames.",
                "clipstream-fly"};
   FlyOptions o;
+  StreamerConfig& streamer = o.streamer;
   std::string size = "1280x720", buffering = bufferingName(o.buffering);
   const auto frames = cli::wholeInRange(1, kMaxFlyFrames);
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
@@ -28,11 +30,12 @@ int main(int argc, char** argv) {
   app.add_option("--size", size, "Viewport WIDTHxHEIGHT");
   app.add_option("--speed", o.speed, "Path seconds per simulated second")
       ->transform(cli::inRange(0.001, kMaxFlySpeed));
-  app.add_option("--cache-mb", o.cache_mb, "Streamer RAM budget in MiB")
+  uint64_t cache_mb = streamer.ram_budget_bytes >> 20;
+  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", o.upload_tiles, "GPU tile uploads per frame")
       ->transform(cli::wholeInRange(1, 1000000));
-  app.add_option("--io-threads", o.io_threads,
+  app.add_option("--io-threads", streamer.io_threads,
                  "Loader threads (0 = cores; for a URL store, one per HTTP connection)")
       ->transform(cli::wholeInRange(0, kMaxIoThreads));
   cli::addRemoteOptions(app, &o.remote);
@@ -97,16 +100,16 @@ int main(int argc, char** argv) {
                "prefetch follows the path (jumps included). Off: the streamer sees the camera only, as in "
                "an interactive flight");
   CLI::Option* deterministic = app.add_flag(
-      "--deterministic", o.deterministic,
+      "--deterministic", streamer.deterministic_io.enabled,
       "Repeatable run for benchmarks: tile reads land on a simulated I/O clock (--io-reads-per-frame, "
       "--io-latency-frames), so the frames never depend on thread timing; frames wait for the reads "
       "due. Off: reads land as fast as the loaders go (an application's behaviour)");
-  app.add_option("--io-reads-per-frame", o.io_reads_per_frame,
+  app.add_option("--io-reads-per-frame", streamer.deterministic_io.reads_per_frame,
                  "With --deterministic: tile reads issued per frame (default " +
                      std::to_string(kDefaultIoReadsPerFrame) + ")")
       ->transform(cli::wholeInRange(1, kMaxFlyIoReadsPerFrame))
       ->needs(deterministic);
-  app.add_option("--io-latency-frames", o.io_latency_frames,
+  app.add_option("--io-latency-frames", streamer.deterministic_io.latency_frames,
                  "With --deterministic: frames from a read's request to its tile in RAM (default " +
                      std::to_string(kDefaultIoLatencyFrames) + ")")
       ->transform(cli::wholeInRange(1, kMaxFlyIoLatencyFrames))
@@ -130,7 +133,7 @@ int main(int argc, char** argv) {
   app.add_flag("--loop", o.loop, "Wrap path time instead of stopping at the path's end");
   app.add_option("--teleport-frames", o.teleport_frames, "Frames between jumps of the teleport path")
       ->transform(frames);
-  app.add_option("--trace", o.trace_path, "Record the streamer's request trace (clipstream-trace)");
+  app.add_option("--trace", streamer.trace_path, "Record the streamer's request trace (clipstream-trace)");
   app.add_option("--elevation", o.elevation_path,
                  "Elevation store (clipstream-tile DEM.tif) under the colour layer: fly over terrain");
   app.add_option("--vertical-scale", o.vertical_scale, "Height exaggeration (with --elevation)")
@@ -152,7 +155,7 @@ int main(int argc, char** argv) {
       "mistake, killed by INT/TERM/HUP after removing its temporaries (shell status 128+N).\n"
       "docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
-  if (Status s = terrainMethodFromName(terrain_method, &o.terrain_method); !s)
+  if (Status s = cli::parseTerrainMethod(terrain_method, &o.terrain_method); !s)
     return cli::usageError(app, "--terrain: " + s.message);
   if ((app.count("--terrain") || app.count("--terrain-error")) && o.elevation_path.empty())
     return cli::usageError(app, "--terrain and --terrain-error need --elevation");
@@ -162,9 +165,9 @@ int main(int argc, char** argv) {
   if (!o.store_path.empty() && o.procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
   Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
-  if (s) s = bufferingFromName(buffering, &o.buffering);
+  if (s) s = cli::parseBuffering(buffering, &o.buffering);
   if (s)
-    s = textureMemoryFromChoice(texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
+    s = cli::parseTextureMemory(texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
                                 &o.texture_memory);
   if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
   if (s && !reference_tile_format.empty()) {
@@ -176,11 +179,12 @@ int main(int argc, char** argv) {
     s = cli::parseResize(resize, kMaxFlyFrames, &o.resize_at_frame, &o.resize_to.width_px,
                          &o.resize_to.height_px);
   if (!s) return cli::usageError(app, s.message);
-  o.throttle = !no_throttle;
-  o.prefetch = !no_prefetch;
-  o.frustum_priority = !no_frustum;
-  o.plan_scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
-  o.terrain_bounds = !no_terrain_bounds;
+  streamer.ram_budget_bytes = cache_mb << 20;
+  streamer.throttle = !no_throttle;
+  streamer.prefetch = !no_prefetch;
+  streamer.frustum_priority = !no_frustum;
+  streamer.planner.scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
+  streamer.terrain_bounds = !no_terrain_bounds;
   o.over_fetch = !no_over_fetch;
 
   if (save_frames->count() > 0) o.save_every = save_every;

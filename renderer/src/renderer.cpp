@@ -1,14 +1,14 @@
-// The renderer's choices by name and their defaults: buffering, texture
-// memory (stack or paged, and `auto`), the planner and pool sizes each
-// needs. Pure functions; thread-safe. The renderer itself is
-// clipmap_renderer.cpp.
+// The renderer's modes by name (the words reports and messages use) and
+// their defaults: buffering, texture memory (stack or paged, and the
+// automatic choice), the planner and pool sizes each needs. Pure functions;
+// thread-safe. Parsing the words is the programs' (cli/renderer_options.h);
+// the renderer itself is clipmap_renderer.cpp.
 #include <clipstream/renderer/renderer.h>
 
 #include <clipstream/renderer/config.h>
 
 #include <algorithm>
 #include <cmath>
-#include <string>
 
 namespace clipstream {
 
@@ -26,33 +26,9 @@ const char* textureMemoryName(TextureMemory memory) {
   return memory == TextureMemory::kPaged ? "paged" : "stack";
 }
 
-Status textureMemoryFromName(const std::string& name, TextureMemory* out) {
-  if (name == "stack") *out = TextureMemory::kStack;
-  else if (name == "paged") *out = TextureMemory::kPaged;
-  else
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "texture memory '" + name + "' is not one of: stack, paged");
-  return okStatus();
-}
-
 TextureMemory automaticTextureMemory(bool terrain, Buffering buffering) {
   const bool doubled = buffering == Buffering::kDoubleUploadTwice || buffering == Buffering::kDoubleCopy;
   return terrain || doubled ? TextureMemory::kStack : TextureMemory::kPaged;
-}
-
-Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
-                               TextureMemory* out) {
-  const bool automatic = name == "auto";
-  if (automatic) *out = automaticTextureMemory(terrain, buffering);
-  else if (!textureMemoryFromName(name, out))
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "--texture-memory " + name + " is not one of: auto, stack, paged");
-  if (!pool_given || *out == TextureMemory::kPaged) return okStatus();
-  if (!automatic)
-    return Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
-  return Status::error(ErrorCode::kInvalidArgument,
-                       std::string("--pool-mb sizes the page pool, and auto chose the stack (the pool does not draw ") +
-                           (terrain ? "--elevation" : "double buffering") + " yet)");
 }
 
 PlannerConfig plannerFor(TextureMemory memory, PlannerConfig planner) {
@@ -70,17 +46,5 @@ uint64_t defaultPoolBytes(const Viewport& viewport, uint32_t tile_px, TileConten
                          uint64_t(std::ceil(renderer_config::kDefaultPoolPagesPerScreenTile * screen_tiles)));
   return pages * pageBytes(tile_px, content);
 }
-
-Status bufferingFromName(const std::string& name, Buffering* out) {
-  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
-                      Buffering::kStaged})
-    if (name == bufferingName(b)) {
-      *out = b;
-      return okStatus();
-    }
-  return Status::error(ErrorCode::kInvalidArgument,
-                       "buffering \"" + printableText(name, 40) + "\" is not single, double-upload, double-copy or staged");
-}
-
 
 }  // namespace clipstream

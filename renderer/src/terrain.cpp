@@ -28,18 +28,6 @@ const char* terrainMethodName(TerrainMethod method) {
   return "?";
 }
 
-Status terrainMethodFromName(const std::string& name, TerrainMethod* out) {
-  for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat,
-                          TerrainMethod::kFull}) {
-    if (name == terrainMethodName(m)) {
-      *out = m;
-      return okStatus();
-    }
-  }
-  return Status::error(ErrorCode::kInvalidArgument,
-                       "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
-}
-
 // ---- TerrainRenderer: the installed API, forwarded ----
 
 TerrainRenderer::TerrainRenderer(std::unique_ptr<TerrainRendererImpl> impl) : m_impl(std::move(impl)) {}

@@ -3,6 +3,7 @@
 // its legend, recording the flown path to JSON for clipstream-fly, going
 // home and screenshots (kKeys below). Usage: docs/renderer.md.
 #include <clipstream/cli/cli.h>
+#include <clipstream/cli/renderer_options.h>
 #include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/flight.h>
@@ -227,7 +228,7 @@ int main(int argc, char** argv) {
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
   if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
   TerrainMethod method = TerrainMethod::kClipmap;
-  if (Status s = terrainMethodFromName(terrain_method, &method); !s)
+  if (Status s = cli::parseTerrainMethod(terrain_method, &method); !s)
     return cli::usageError(app, "--terrain: " + s.message);
   if ((app.count("--terrain") || app.count("--terrain-error")) && elevation_path.empty())
     return cli::usageError(app, "--terrain and --terrain-error need --elevation");
@@ -238,8 +239,8 @@ int main(int argc, char** argv) {
   if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
     return cli::usageError(app, s.message);
   TextureMemory memory = TextureMemory::kStack;
-  if (Status s = textureMemoryFromChoice(texture_memory, !elevation_path.empty(), kDefaultBuffering,
-                                         app.count("--pool-mb") > 0, &memory);
+  if (Status s = cli::parseTextureMemory(texture_memory, !elevation_path.empty(), kDefaultBuffering,
+                                        app.count("--pool-mb") > 0, &memory);
       !s)
     return cli::usageError(app, s.message);
   if (!store_path.empty() && procedural_px > 0)

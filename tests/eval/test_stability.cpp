@@ -12,17 +12,18 @@
 //  - the RAM budget is never exceeded.
 // Small viewports and short runs keep the file well under a minute on
 // llvmpipe. With CLIPSTREAM_STABILITY_OUT set, one JSON line per scenario
-// is appended to that file (the sweep's stability table).
+// (scenarioJsonLine(), report.h) is appended to that file (the sweep's
+// stability table).
 #include "test_helpers.h"
 #include "../../renderer/src/clipmap_renderer_impl.h"  // private: the slot bias
 
 #include <clipstream/eval/flight_run.h>
 #include <clipstream/eval/metrics.h>
+#include <clipstream/eval/report.h>
 #include <clipstream/renderer/config.h>
 #include <clipstream/streamer/testing/faulty_source.h>
 
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -58,36 +59,16 @@ FlightRunOptions baseOptions(std::shared_ptr<TileSource> source, const std::stri
   return o;
 }
 
-uint32_t restFramesToIdentical(const FlightRunOptions& o, const FlightRun& r) {
-  for (uint32_t i = o.frames; i < r.frames.size(); ++i)
-    if (r.frames[i].accuracy.measured && r.frames[i].accuracy.error.max_abs_error == 0) return i - o.frames;
-  return UINT32_MAX;
-}
-
 void record(const char* name, const FlightRunOptions& o, const FlightRun& r, bool passed) {
   const RunSummary& s = r.summary;
-  const uint32_t rest = restFramesToIdentical(o, r);
   std::printf("  %s: %u frames, min PSNR %.2f dB, mean %.2f dB, time to sharp max %d, p99 %.2f ms, "
               "identical after %d rest frames, RAM peak %.1f / %.1f MiB, garbage px %u in %u frames\n",
               name, s.frames, s.psnr_min_db, s.psnr_mean_db, s.time_to_sharp_max, s.frame_ms_p99,
-              rest == UINT32_MAX ? -1 : int(rest), r.streamer.ram_peak_bytes / 1048576.0,
+              restFramesToIdentical(r, o.frames), r.streamer.ram_peak_bytes / 1048576.0,
               r.streamer.ram_budget_bytes / 1048576.0, r.garbage_pixels_max, r.garbage_checked_frames);
   const char* out = std::getenv("CLIPSTREAM_STABILITY_OUT");
   if (out == nullptr) return;
-  nlohmann::json j = nlohmann::json::parse(s.toJson());
-  j["scenario"] = name;
-  j["moving_frames"] = o.frames;
-  j["rest_frames"] = o.rest_frames;
-  j["rest_frames_to_identical"] = rest == UINT32_MAX ? -1 : int(rest);
-  j["render_thread_fetches"] = r.render_thread_fetches;
-  j["ram_peak_bytes"] = r.streamer.ram_peak_bytes;
-  j["ram_budget_bytes"] = r.streamer.ram_budget_bytes;
-  j["rss_after_warmup_bytes"] = r.rss_after_warmup_bytes;
-  j["rss_end_bytes"] = r.rss_end_bytes;
-  j["garbage_checked_frames"] = r.garbage_checked_frames;
-  j["garbage_pixels_max"] = r.garbage_pixels_max;
-  j["result"] = passed ? "pass" : "FAIL";
-  std::ofstream(out, std::ios::app) << j.dump() << "\n";
+  std::ofstream(out, std::ios::app) << scenarioJsonLine(r, {name, o.frames, o.rest_frames, passed});
 }
 
 // The checks every scenario shares.

@@ -813,10 +813,6 @@ TEST(TerrainQuadtree, FlatMethodDrawsThePlaneAndRejectsBadSettings) {
   tc.patch_cells = 32;
   tc.error_px = 0.0;
   EXPECT_EQ(TerrainRenderer::create(s.field.geometry, tc, &t).code, ErrorCode::kInvalidArgument);
-  TerrainMethod m;
-  EXPECT_TRUE(terrainMethodFromName("quadtree", &m).ok());
-  EXPECT_EQ(m, TerrainMethod::kQuadtree);
-  EXPECT_FALSE(terrainMethodFromName("mesh", &m).ok());
 }
 
 }  // namespace

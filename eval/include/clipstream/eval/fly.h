@@ -45,9 +45,15 @@ struct FlyOptions {
   uint32_t frames = 0;             // 0 = the whole path at `speed`
   Viewport viewport{1280, 720};
   double speed = 1.0;              // path seconds per simulated second
-  uint64_t cache_mb = 256;         // streamer RAM budget
+  // The streamer's settings (RAM budget, loader threads, throttling,
+  // prefetch, plan scope, request trace, deterministic I/O, ...), handed to
+  // it as they are. runFly() refuses a budget under 1 MiB, more than
+  // kMaxIoThreads loaders, and deterministic reads per frame or latency
+  // outside 1..kMaxFlyIoReadsPerFrame or 1..kMaxFlyIoLatencyFrames (with
+  // deterministic I/O off too); the trace may be neither an input nor one
+  // of the run's files.
+  StreamerConfig streamer;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame;  // GPU uploads per frame
-  unsigned io_threads = 0;         // 0 = cores (a URL store: one per HTTP connection)
   RemoteOptions remote;            // a URL store: requests in flight, disk cache
   std::string out_dir = "fly-out";
   // PNGs: every Nth frame and the last; 0 = none; unset = five frames
@@ -79,17 +85,7 @@ struct FlyOptions {
   // bit-identical to it). kRgba8 under a BC1 flight measures the
   // compression error too.
   std::optional<TileContent> reference_tile_format;
-  bool throttle = true;              // StreamerConfig::throttle
-  bool prefetch = true;              // StreamerConfig::prefetch
-  bool frustum_priority = true;      // StreamerConfig::frustum_priority
-  PlanScope plan_scope = PlanScope::kSampled;  // PlannerConfig::scope
-  bool terrain_bounds = true;        // StreamerConfig::terrain_bounds
   bool path_hint = false;            // give the streamer the scripted path (Streamer::setPathHint)
-  // Repeatable runs (StreamerConfig::deterministic_io): reads land on a
-  // simulated I/O clock, so the frames do not depend on thread timing.
-  bool deterministic = false;
-  uint32_t io_reads_per_frame = kDefaultIoReadsPerFrame;   // with `deterministic`, at least 1
-  uint32_t io_latency_frames = kDefaultIoLatencyFrames;    // with `deterministic`, at least 1
   double fault_latency_ms = 0.0;     // > 0: every read waits this long (FaultSpec)
   double fault_corrupt_fraction = 0.0;  // this fraction of tiles fail as corrupt
   // Failed tile reads (per cent of the reads) past which the run fails;
@@ -102,7 +98,6 @@ struct FlyOptions {
   double rest_frame_ms = 0.0;        // rest frames last at least this wall time
   bool loop = false;                 // wrap path time instead of clamping at the end
   uint32_t teleport_frames = 30;     // the built-in teleport path jumps this often
-  std::string trace_path;            // record the streamer's request trace here
   // Terrain (docs/terrain.md): an elevation store under the colour layer.
   std::string elevation_path;        // empty: the flat plane
   double vertical_scale = 1.0;       // height exaggeration

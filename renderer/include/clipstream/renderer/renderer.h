@@ -38,10 +38,9 @@ enum class Buffering {
 // CPU wait) at the memory of one set, and measured at least as fast as
 // double-upload on llvmpipe (docs/decisions.md D231).
 inline constexpr Buffering kDefaultBuffering = Buffering::kStaged;
+// The mode's word in reports and messages ("single", "double-upload",
+// "double-copy", "staged"); programs parse it with cli::parseBuffering().
 const char* bufferingName(Buffering buffering);
-// The inverse of bufferingName(): "single", "double-upload", "double-copy"
-// or "staged". kInvalidArgument naming the choices otherwise.
-Status bufferingFromName(const std::string& name, Buffering* out);
 
 // Where the colour tiles live on the GPU.
 enum class TextureMemory {
@@ -56,21 +55,15 @@ enum class TextureMemory {
   // than the pool has is drawn from coarser levels where it falls short.
   kPaged,
 };
+// "stack" or "paged", in reports; programs parse --texture-memory with
+// cli::parseTextureMemory().
 const char* textureMemoryName(TextureMemory memory);
-// "stack" or "paged"; kInvalidArgument naming the choices otherwise.
-Status textureMemoryFromName(const std::string& name, TextureMemory* out);
 // The mode a program takes when the user does not choose (--texture-memory
 // auto, the default of clipstream-fly and clipstream-view): kPaged, whose
 // memory follows the screen, unless the frames draw terrain or double-
 // buffer the stack, which kPaged does not do yet; then kStack
 // (docs/decisions.md D224).
 TextureMemory automaticTextureMemory(bool terrain, Buffering buffering);
-// A program's --texture-memory: "auto" (automaticTextureMemory() of the
-// frames' terrain and buffering), "stack" or "paged"; kInvalidArgument
-// naming the three otherwise, or when `pool_given` (--pool-mb) but the
-// choice is not paged (saying why auto chose the stack).
-Status textureMemoryFromChoice(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
-                               TextureMemory* out);
 
 // The planner settings `memory` needs: kPaged pins the pyramid in its pool,
 // so it asks for a small one (PlannerConfig::pyramid_tiles, when 0, set to

@@ -51,9 +51,9 @@ using TerrainMapping = LayerAlignment;
 // kFull: the full-resolution mesh (TerrainConfig::full_resolution), the
 // other end point; it needs level 0 whole in the stack.
 enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat, kFull };
+// "clipmap", "quadtree", "flat", "full", in reports; programs parse
+// --terrain with cli::parseTerrainMethod().
 const char* terrainMethodName(TerrainMethod method);
-// "clipmap", "quadtree", "flat", "full"; kInvalidArgument naming the choices otherwise.
-Status terrainMethodFromName(const std::string& name, TerrainMethod* out);
 
 // Range of TerrainConfig::error_px (--terrain-error): below a hundredth of
 // a pixel every node in view splits to level 0; above 1000 none does.

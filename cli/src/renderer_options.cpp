@@ -1,0 +1,52 @@
+// The renderer's option values. See renderer_options.h. Each parser walks
+// the enum through its name function, so a program accepts exactly the
+// words the reports print.
+#include <clipstream/cli/renderer_options.h>
+
+namespace clipstream::cli {
+
+Status parseBuffering(const std::string& name, Buffering* out) {
+  for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
+                      Buffering::kStaged})
+    if (name == bufferingName(b)) {
+      *out = b;
+      return okStatus();
+    }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "buffering \"" + printableText(name, 40) + "\" is not single, double-upload, double-copy or staged");
+}
+
+Status parseTextureMemory(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
+                          TextureMemory* out) {
+  const bool automatic = name == "auto";
+  if (automatic) {
+    *out = automaticTextureMemory(terrain, buffering);
+  } else if (name == textureMemoryName(TextureMemory::kStack)) {
+    *out = TextureMemory::kStack;
+  } else if (name == textureMemoryName(TextureMemory::kPaged)) {
+    *out = TextureMemory::kPaged;
+  } else {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--texture-memory " + name + " is not one of: auto, stack, paged");
+  }
+  if (!pool_given || *out == TextureMemory::kPaged) return okStatus();
+  if (!automatic)
+    return Status::error(ErrorCode::kInvalidArgument, "--pool-mb sizes the pool of --texture-memory paged");
+  return Status::error(ErrorCode::kInvalidArgument,
+                       std::string("--pool-mb sizes the page pool, and auto chose the stack (the pool does not draw ") +
+                           (terrain ? "--elevation" : "double buffering") + " yet)");
+}
+
+Status parseTerrainMethod(const std::string& name, TerrainMethod* out) {
+  for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat,
+                          TerrainMethod::kFull}) {
+    if (name == terrainMethodName(m)) {
+      *out = m;
+      return okStatus();
+    }
+  }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
+}
+
+}  // namespace clipstream::cli
