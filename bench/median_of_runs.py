@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Median of repeated bench_store_http runs, as a Markdown table.
 
-Usage: bench/median_of_runs.py RUN1.tsv RUN2.tsv ...
+Usage: bench/median_of_runs.py [--tsv] RUN1.tsv RUN2.tsv ...
+
+--tsv: a tab-separated table instead (what docs/data/ holds).
 
 Rows are matched by (reader, protocol, rtt_ms, in_flight); the timing
 columns (open_ms, sharp_median_s, sharp_max_s, tiles_per_s) become the
@@ -21,6 +23,9 @@ def median(values):
 
 
 def main(paths):
+    tsv = bool(paths) and paths[0] == '--tsv'
+    if tsv:
+        paths = paths[1:]
     rows = collections.OrderedDict()
     header = None
     for path in paths:
@@ -37,8 +42,11 @@ def main(paths):
         sys.exit('no bench_store_http table in ' + ' '.join(paths))
     formats = {'open_ms': '%.0f', 'sharp_median_s': '%.3f', 'sharp_max_s': '%.3f',
                'tiles_per_s': '%.0f'}
-    print('| ' + ' | '.join(h.replace('_', ' ') for h in header) + ' |')
-    print('|' + '---|' * len(header))
+    if tsv:
+        print('\t'.join(header))
+    else:
+        print('| ' + ' | '.join(h.replace('_', ' ') for h in header) + ' |')
+        print('|' + '---|' * len(header))
     for runs in rows.values():
         out = list(runs[0])
         for column, fmt in formats.items():
@@ -46,7 +54,7 @@ def main(paths):
             m = median([r[i] for r in runs])
             if m is not None:
                 out[i] = fmt % m
-        print('| ' + ' | '.join(out) + ' |')
+        print('\t'.join(out) if tsv else '| ' + ' | '.join(out) + ' |')
 
 
 if __name__ == '__main__':

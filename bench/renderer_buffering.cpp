@@ -9,7 +9,9 @@
 // Tiles are fetched from the source outside the timed region; the timed
 // part is the GL work of each frame. Wall-clock times, best run of R.
 //
-//   bench_renderer_buffering [--size 1280x720] [--frames 240] [--upload-tiles 16] [--runs 3]
+//   bench_renderer_buffering [--size 1280x720] [--frames 240] [--upload-tiles 16] [--runs 3] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/renderer_buffering_run1.tsv).
 #include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/flight.h>
 #include <clipstream/renderer/gl_context.h>
@@ -28,6 +30,8 @@
 #include <ctime>
 #include <map>
 #include <set>
+
+#include "tsv_out.h"
 #include <tuple>
 
 using namespace clipstream;
@@ -161,6 +165,8 @@ Result runOnce(Buffering buffering, TileSource& source, const Viewport& vp, uint
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   Viewport vp{1280, 720};
   uint32_t frames = 240, upload_tiles = 16, runs = 3;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -181,7 +187,7 @@ int main(int argc, char** argv) {
   if (!OffscreenTarget::create(vp, &target).ok()) return 1;
   std::printf("# %s, %ux%u, procedural 2^20, %u frames, %u uploads/frame, best of %u runs (by p99)\n",
               ctx->describe().c_str(), vp.width_px, vp.height_px, frames, upload_tiles, runs);
-  std::printf("buffering\tframe_mean_ms\tframe_p50_ms\tframe_p99_ms\tframe_max_ms\tframe_sd_ms\t"
+  table.row("buffering\tframe_mean_ms\tframe_p50_ms\tframe_p99_ms\tframe_max_ms\tframe_sd_ms\t"
               "upload_mean_ms\tupload_cpu_mean_ms\tupload_p99_ms\tupload_max_ms\ttiles\tsecond_copies\n");
   for (Buffering b : {Buffering::kSingle, Buffering::kDoubleUploadTwice, Buffering::kDoubleCopy,
                       Buffering::kStaged}) {
@@ -191,10 +197,10 @@ int main(int argc, char** argv) {
       Result r = runOnce(b, *source, vp, frames, upload_tiles, *target);
       if (r.frame_p99 < best.frame_p99) best = r;
     }
-    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.3f\t%.3f\t%.3f\t%.3f\t%llu\t%llu\n",
+    table.row("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.3f\t%.3f\t%.3f\t%.3f\t%llu\t%llu\n",
                 bufferingName(b), best.frame_mean, best.frame_p50, best.frame_p99, best.frame_max,
                 best.frame_sd, best.upload_mean, best.upload_cpu_mean, best.upload_p99, best.upload_max, (unsigned long long)best.tiles,
                 (unsigned long long)best.second);
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

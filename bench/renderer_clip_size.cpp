@@ -8,7 +8,9 @@
 // against the CPU ground truth (every level at full size, reference.h) and
 // the stack's bytes for one RGBA8 set (what the clip costs).
 //
-//   bench_renderer_clip_size [--size 1280x720] [--deltas -8,-6,-4,-2,2,4] [--view NAME]
+//   bench_renderer_clip_size [--size 1280x720] [--deltas -8,-6,-4,-2,2,4] [--view NAME] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/renderer_clip_size_1280x720.tsv).
 // CLIPSTREAM_BENCH_DUMP=DIR also writes each frame there as a PPM.
 #include <clipstream/cli/sizes.h>
 #include <clipstream/eval/accuracy.h>
@@ -28,6 +30,8 @@
 #include <string>
 #include <vector>
 
+#include "tsv_out.h"
+
 using namespace clipstream;
 
 namespace {
@@ -44,6 +48,8 @@ uint64_t stackBytes(const PyramidGeometry& g, const ClipmapPlan& plan) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   Viewport vp{1280, 720};
   std::vector<int> deltas = {-8, -6, -4, -2, 2, 4};
   std::string only;  // --view NAME: that view only
@@ -86,7 +92,7 @@ int main(int argc, char** argv) {
   const uint32_t planned = planClipmap(g, vp, Camera{}, {}).clip_tiles;
   std::printf("# %s, %ux%u, procedural 2^26, planner clip %u tiles; differing pixels against the planner's clip\n",
               ctx->describe().c_str(), vp.width_px, vp.height_px, planned);
-  std::printf("view\tclip_tiles\tstack_set_mib\tdiffering_pixels\tdiffering_pct\tpsnr_db\tground_truth_psnr_db\n");
+  table.row("view\tclip_tiles\tstack_set_mib\tdiffering_pixels\tdiffering_pct\tpsnr_db\tground_truth_psnr_db\n");
   const TexelFunction truth_texels = [&spec](uint32_t level, uint64_t x, uint64_t y, uint8_t rgba[4]) {
     proceduralTexel(spec, level, x, y, rgba);
   };
@@ -119,7 +125,7 @@ int main(int argc, char** argv) {
         differing += std::memcmp(&frame[i], &base[i], 3) != 0;
       const FrameError e = compareFrames(frame, base);
       const ClipmapPlan plan = planClipmap(g, vp, cam, planner);
-      std::printf("%s\t%u\t%.1f\t%zu\t%.3f\t%.2f\t%.2f\n", v.name, planner.clip_tiles,
+      table.row("%s\t%u\t%.1f\t%zu\t%.3f\t%.2f\t%.2f\n", v.name, planner.clip_tiles,
                   double(stackBytes(g, plan)) / 1048576.0, differing,
                   100.0 * double(differing) / double(vp.width_px * vp.height_px), e.psnr_db,
                   compareFrames(frame, truth).psnr_db);
@@ -134,5 +140,5 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

@@ -7,8 +7,11 @@
 // draw + glFinish, best of N. Run with LP_NUM_THREADS=0 so llvmpipe shades on
 // that thread (then the CPU time is the whole frame's work).
 //
-//   bench_renderer_frame [--size 1280x720] [--repeats 15] [--clip-tiles C]
+//   bench_renderer_frame [--size 1280x720] [--repeats 15] [--clip-tiles C] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/renderer_frame.tsv).
 #include "plain_texture_renderer.h"
+#include "tsv_out.h"
 
 #include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/gl_context.h>
@@ -71,6 +74,8 @@ double bestMs(int repeats, OffscreenTarget& target, Draw draw) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   Viewport vp{1280, 720};
   int repeats = 15;
   PlannerConfig planner;
@@ -106,7 +111,7 @@ int main(int argc, char** argv) {
                         {"high-down", 900.0, -1.45}, {"horizon", 15.0, -0.05}};
   std::printf("# %s, %ux%u, texture %ux%u, tile %u, best of %d\n", ctx->describe().c_str(),
               vp.width_px, vp.height_px, side, side, tile, repeats);
-  std::printf("view\tplain_ms\tclipmap_single_ms\tclipmap_double_ms\tratio_double\tclipmap_bc1_ms\t"
+  table.row("view\tplain_ms\tclipmap_single_ms\tclipmap_double_ms\tratio_double\tclipmap_bc1_ms\t"
               "bc1_vs_rgba8\tstack_levels\tclipmap_paged_ms\tpaged_vs_stack\tpaged_pages\n");
   for (const View& v : views) {
     Camera cam;
@@ -170,9 +175,9 @@ int main(int argc, char** argv) {
         ms[mode] = std::min(ms[mode], bestMs(1, *target, [&] { renderers[mode]->draw(cam, vp); }));
     }
     const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, planner);
-    std::printf("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%u\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0],
+    table.row("%s\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%u\t%.2f\t%.2f\t%u\n", v.name, plain_ms, ms[0],
                 ms[1], ms[1] / plain_ms, ms[2], ms[2] / ms[0], plan.pyramid_level, ms[3], ms[3] / ms[0],
                 renderers[3]->poolPagesUsed());
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

@@ -23,7 +23,9 @@
 // block the sampler rejected decodes to black). Exit 1 with a message if not.
 //
 //   bench_renderer_sampling [--sizes 1280x720,1920x1080] [--frames 60] [--side 2048] [--layers 8]
-//                           [--upload-tiles 256]
+//                           [--upload-tiles 256] [--tsv FILE] [--upload-tsv FILE]
+// Prints Markdown tables; --tsv FILE writes the frames' table into FILE and
+// --upload-tsv FILE the uploads', tab-separated (docs/data/renderer_sampling_*.tsv).
 #include <clipstream/cli/sizes.h>
 #include <clipstream/renderer/gl_context.h>
 #include <clipstream/renderer/renderer.h>
@@ -31,6 +33,7 @@
 
 #include "gl.h"
 #include "gl_util.h"
+#include "tsv_out.h"
 
 #include <algorithm>
 #include <array>
@@ -338,6 +341,9 @@ std::vector<std::string> splitComma(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut frame_table(bench::takeOption(&argc, argv, "--tsv"));
+  bench::TsvOut upload_table(bench::takeOption(&argc, argv, "--upload-tsv"));
+  if (!frame_table.ok() || !upload_table.ok()) return 1;
   std::vector<Viewport> sizes;
   std::string sizes_text = "1280x720,1920x1080";
   uint32_t frames = 60, side = 2048, layers = 8, upload_tiles = 256;
@@ -396,6 +402,8 @@ int main(int argc, char** argv) {
               ctx->describe().c_str(), layers, side, mips, frames, threads ? threads : "(unset)");
   std::printf("| size | format | texture_MiB | frame_median_ms | frame_p90_ms | vs_RGBA8 | cpu_median_ms | "
               "cpu_vs_RGBA8 | mean_abs_diff_vs_RGBA8 |\n|---|---|---|---|---|---|---|---|---|\n");
+  frame_table.fileOnly("size\tformat\ttexture_MiB\tframe_median_ms\tframe_p90_ms\tvs_RGBA8\tcpu_median_ms\t"
+                       "cpu_vs_RGBA8\tmean_abs_diff_vs_RGBA8\n");
   for (const Viewport& vp : sizes) {
     std::unique_ptr<OffscreenTarget> target;
     if (Status s = OffscreenTarget::create(vp, &target); !s) {
@@ -450,15 +458,20 @@ int main(int argc, char** argv) {
         }
       }
     const double base = pct(wall[0], 0.5), cpu_base = pct(cpu[0], 0.5);
-    for (size_t f = 0; f < kFormatCount; ++f)
+    for (size_t f = 0; f < kFormatCount; ++f) {
       std::printf("| %ux%u | %s | %.1f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", vp.width_px, vp.height_px,
                   kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
                   pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
+      frame_table.fileOnly("%ux%u\t%s\t%.1f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\n", vp.width_px, vp.height_px,
+                           kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
+                           pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
+    }
   }
 
   // Uploads of 128^2 tiles into level 0, at tile positions over the layers,
   // with the pattern that is there already (the picture does not change).
   std::printf("\n| format | bytes_per_tile | upload_median_us | upload_p90_us | vs_RGBA8 |\n|---|---|---|---|---|\n");
+  upload_table.fileOnly("format\tbytes_per_tile\tupload_median_us\tupload_p90_us\tvs_RGBA8\n");
   const uint32_t tiles_side = side / kTilePx;
   std::vector<double> upload_us[kFormatCount];
   size_t tile_bytes[kFormatCount] = {};
@@ -481,12 +494,15 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double upload_base = pct(upload_us[0], 0.5);
-  for (size_t f = 0; f < kFormatCount; ++f)
+  for (size_t f = 0; f < kFormatCount; ++f) {
     std::printf("| %s | %zu | %.1f | %.1f | %.2f |\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
                 pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
+    upload_table.fileOnly("%s\t%zu\t%.1f\t%.1f\t%.2f\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
+                          pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
+  }
 
   glDeleteTextures(GLsizei(kFormatCount), tex);
   glDeleteVertexArrays(1, &pass.vao);
   glDeleteProgram(pass.program);
-  return 0;
+  return frame_table.commit() && upload_table.commit() ? 0 : 1;
 }

@@ -15,7 +15,9 @@
 // Usage: bench_store_http STORE.cstore [COG.tif] [--rtt 0,20,50,100]
 //                         [--connections 1,4,8,16,32,64] [--teleports 4] [--no-coalesce]
 //                         [--batch N] [--protocols http,https1,h2] [--glide N]
-//                         [--disk-cache DIR]
+//                         [--disk-cache DIR] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/store_http*.tsv).
 // --no-coalesce: one range request per tile (RemoteOptions::batch_tiles = 1).
 // --batch N: RemoteOptions::batch_tiles (tiles the streamer hands a loader).
 // --disk-cache DIR: RemoteOptions::disk_cache_dir for every store opened
@@ -35,6 +37,8 @@
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 #include <clipstream/testing/net.h>
+
+#include "tsv_out.h"
 
 #include <algorithm>
 #include <chrono>
@@ -129,6 +133,8 @@ LogTotals logSince(const test::NginxServer& server, size_t from) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   std::string store_path, cog_path;
   std::vector<double> rtts = {0, 20, 50, 100};
   std::vector<double> connections = {1, 4, 8, 16, 32, 64};
@@ -220,7 +226,7 @@ int main(int argc, char** argv) {
               geometry.tile_px, geometry.levelCount(), store_bytes / 1048576.0, teleports, kHeight,
               kViewport.width_px, kViewport.height_px, coalesce ? "on" : "off",
               coalesce ? batch : 1u);
-  std::printf("reader\tprotocol\trtt_ms\tin_flight\tconnections\topen_ms\topen_requests\t"
+  table.row("reader\tprotocol\trtt_ms\tin_flight\tconnections\topen_ms\topen_requests\t"
               "sharp_median_s\tsharp_max_s\ttiles\ttiles_per_s\trequests\trequests_per_tile\t"
               "MiB\n");
 
@@ -322,7 +328,7 @@ int main(int argc, char** argv) {
       std::sort(sorted.begin(), sorted.end());
       double total_s = 0.0;
       for (double v : seconds) total_s += v;
-      std::printf("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
+      table.row("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
                   "%.2f\n",
                   protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
                   open_ms, (unsigned long long)open_log.requests, sorted[sorted.size() / 2],
@@ -330,7 +336,7 @@ int main(int argc, char** argv) {
                   total_s > 0 ? double(tiles) / total_s : 0.0, (unsigned long long)log.requests,
                   tiles ? double(log.requests) / double(tiles) : 0.0, log.bytes / 1048576.0);
       if (glide_steps > 0) {
-        std::printf("glide\t%s\t%g\t%u\t-\t-\t-\t%.3f\t-\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
+        table.row("glide\t%s\t%g\t%u\t-\t-\t-\t%.3f\t-\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
                     protocol.c_str(), rtt, remote.connections, glide_s,
                     (unsigned long long)glide_tiles, glide_s > 0 ? double(glide_tiles) / glide_s : 0.0,
                     (unsigned long long)glide_log.requests,
@@ -360,7 +366,7 @@ int main(int argc, char** argv) {
       const double all_s = secondsSince(gdal_start);
       const LogTotals log = logSince(*server, log_from);
       if (seconds.size() != windows.size()) {
-        std::printf("gdal\thttp\t%g\t-\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
+        table.row("gdal\thttp\t%g\t-\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
         continue;
       }
       std::vector<double> sorted = seconds;
@@ -369,7 +375,7 @@ int main(int argc, char** argv) {
       for (double v : seconds) read_s += v;
       // GDAL's open is the process's run time less the reads (includes the
       // interpreter start, a few tens of milliseconds).
-      std::printf("gdal_vsicurl\thttp\t%g\t-\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
+      table.row("gdal_vsicurl\thttp\t%g\t-\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
                   (all_s - read_s) * 1000.0, sorted[sorted.size() / 2], sorted.back(),
                   (unsigned long long)log.requests, log.bytes / 1048576.0);
       std::fflush(stdout);
@@ -379,5 +385,5 @@ int main(int argc, char** argv) {
   tls_server.reset();
   std::error_code ec;
   fs::remove_all(work, ec);
-  return 0;
+  return table.commit() ? 0 : 1;
 }

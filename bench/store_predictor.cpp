@@ -1,13 +1,16 @@
 // Measures what the left-delta predictor buys on real imagery: compression
 // ratio and single-thread encode/decode MB/s for each (predictor, zstd
-// level), best of N runs. Prints a tab-separated table; asserts nothing.
+// level), best of N runs. Prints a tab-separated table (--tsv FILE: also
+// into FILE, docs/data/store_predictor.tsv); asserts nothing.
 //
-//   store_predictor_bench [--runs N] [IMAGE...]
+//   store_predictor_bench [--runs N] [--tsv FILE] [IMAGE...]
 // Without images it uses autzen.jpg, fg_globe_colors_8192x4096.jpg and
 // mt_rainier_90m.tif from CLIPSTREAM_STORE_BENCH_DATA.
 #include <clipstream/store/tile_store.h>
 
 #include <OpenImageIO/imageio.h>
+
+#include "tsv_out.h"
 
 #include <algorithm>
 #include <chrono>
@@ -85,6 +88,8 @@ std::vector<std::vector<uint8_t>> cutTiles(const Image& image, const PyramidGeom
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   int runs = 3;
   std::vector<std::string> paths;
   for (int i = 1; i < argc; ++i) {
@@ -99,7 +104,7 @@ int main(int argc, char** argv) {
     paths = {data + "/autzen.jpg", data + "/fg_globe_colors_8192x4096.jpg",
              data + "/mt_rainier_90m.tif"};
   }
-  std::printf("image\tformat\ttile_px\ttiles\tpredictor\tzstd_level\traw_MB\tstored_MB\tratio\t"
+  table.row("image\tformat\ttile_px\ttiles\tpredictor\tzstd_level\traw_MB\tstored_MB\tratio\t"
               "encode_MB_per_s\tdecode_MB_per_s\n");
   for (const std::string& path : paths) {
     Image image;
@@ -150,7 +155,7 @@ int main(int argc, char** argv) {
           best_decode_s = std::min(best_decode_s,
                                    std::chrono::duration<double>(decode_end - start).count());
         }
-        std::printf("%s\t%s\t%u\t%zu\t%s\t%d\t%.1f\t%.1f\t%.3f\t%.0f\t%.0f\n", image.name.c_str(),
+        table.row("%s\t%s\t%u\t%zu\t%s\t%d\t%.1f\t%.1f\t%.3f\t%.0f\t%.0f\n", image.name.c_str(),
                     pixelFormatName(image.format), g.tile_px, tiles.size(),
                     predictor == Predictor::kLeftDelta ? "left-delta" : "none", level, raw_mb,
                     double(stored) / 1e6, raw_mb * 1e6 / double(std::max<uint64_t>(stored, 1)),
@@ -159,5 +164,5 @@ int main(int argc, char** argv) {
       }
     }
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

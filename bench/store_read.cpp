@@ -2,9 +2,11 @@
 // checksum + zstd + predictor) with 1..N threads, and verifyAll(). The
 // store is built from an image (level l = nearest subsample by 2^l, which
 // is enough for a read benchmark) in a temporary folder and removed after.
-// Best of N runs, warm page cache. Prints tab-separated tables.
+// Best of N runs, warm page cache. Prints tab-separated tables; --tsv FILE
+// also writes the reads' table into FILE, --open-tsv FILE the open's
+// (docs/data/store_read.tsv, store_open.tsv).
 //
-//   store_read_bench [--runs N] [--threads N] [IMAGE]
+//   store_read_bench [--runs N] [--threads N] [--tsv FILE] [--open-tsv FILE] [IMAGE]
 #include <clipstream/store/tile_store.h>
 
 #include <OpenImageIO/imageio.h>
@@ -20,6 +22,8 @@
 #include <thread>
 #include <vector>
 
+#include "tsv_out.h"
+
 namespace {
 
 using namespace clipstream;
@@ -32,6 +36,9 @@ double seconds(Clock::time_point a, Clock::time_point b) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut reads_table(bench::takeOption(&argc, argv, "--tsv"));
+  bench::TsvOut open_table(bench::takeOption(&argc, argv, "--open-tsv"));
+  if (!reads_table.ok() || !open_table.ok()) return 1;
   int runs = 3;
   unsigned max_threads = 2;
   std::string path = std::string(CLIPSTREAM_STORE_BENCH_DATA) + "/fg_globe_colors_8192x4096.jpg";
@@ -103,12 +110,13 @@ int main(int argc, char** argv) {
     open_bytes = reader->bytesRead();
     file_bytes = reader->info().file_bytes;
   }
-  std::printf("store\ttiles\tfile_MB\topen_ms\topen_bytes_read\n");
-  std::printf("%s\t%zu\t%.1f\t%.3f\t%llu\n", path.substr(path.find_last_of('/') + 1).c_str(),
+  open_table.row("store\ttiles\tfile_MB\topen_ms\topen_bytes_read\n");
+  open_table.row("%s\t%zu\t%.1f\t%.3f\t%llu\n", path.substr(path.find_last_of('/') + 1).c_str(),
               keys.size(), double(file_bytes) / 1e6, best_open_s * 1e3,
               static_cast<unsigned long long>(open_bytes));
 
-  std::printf("\noperation\tthreads\ttiles_per_s\tdecoded_MB_per_s\n");
+  std::printf("\n");
+  reads_table.row("operation\tthreads\ttiles_per_s\tdecoded_MB_per_s\n");
   for (unsigned threads = 1; threads <= max_threads; ++threads) {
     double best_s = 1e30;
     for (int run = 0; run < runs; ++run) {
@@ -130,7 +138,7 @@ int main(int argc, char** argv) {
       best_s = std::min(best_s, seconds(start, Clock::now()));
       if (failed) return 1;
     }
-    std::printf("readTile\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
+    reads_table.row("readTile\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
   }
   for (unsigned threads = 1; threads <= max_threads; ++threads) {
     double best_s = 1e30;
@@ -142,8 +150,8 @@ int main(int argc, char** argv) {
       if (!reader->verifyAll(&problems, 10, {}, threads)) return 1;
       best_s = std::min(best_s, seconds(start, Clock::now()));
     }
-    std::printf("verifyAll\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
+    reads_table.row("verifyAll\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
   }
   std::filesystem::remove_all(dir);
-  return 0;
+  return open_table.commit() && reads_table.commit() ? 0 : 1;
 }

@@ -3,7 +3,9 @@
 // modes, over procedural tiles of every level of a 2^26 texture and, when
 // given, the tiles of a store.
 //
-//   bench_streamer_bc1 [STORE] [--repeats 5]
+//   bench_streamer_bc1 [STORE] [--repeats 5] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/streamer_bc1.tsv).
 #include <clipstream/streamer/bc1.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -15,6 +17,8 @@
 #include <ctime>
 #include <string>
 #include <vector>
+
+#include "tsv_out.h"
 
 using namespace clipstream;
 
@@ -47,7 +51,7 @@ std::vector<std::vector<uint8_t>> sampleTiles(TileSource& source, size_t count) 
   return tiles;
 }
 
-void run(const char* name, TileSource& source, int repeats) {
+void run(const char* name, TileSource& source, int repeats, bench::TsvOut& table) {
   const uint32_t tp = source.geometry().tile_px;
   const auto tiles = sampleTiles(source, 96);
   for (bool hq : {false, true}) {
@@ -74,7 +78,7 @@ void run(const char* name, TileSource& source, int repeats) {
       }
     }
     const double psnr = se == 0.0 ? 99.0 : 10.0 * std::log10(255.0 * 255.0 * double(n) / se);
-    std::printf("%s\t%s\t%zu\t%.3f\t%.2f\t%d\n", name, hq ? "high-quality" : "normal", tiles.size(), best, psnr,
+    table.row("%s\t%s\t%zu\t%.3f\t%.2f\t%d\n", name, hq ? "high-quality" : "normal", tiles.size(), best, psnr,
                 max_err);
   }
 }
@@ -82,6 +86,8 @@ void run(const char* name, TileSource& source, int repeats) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   std::string store;
   int repeats = 5;
   for (int i = 1; i < argc; ++i) {
@@ -90,10 +96,10 @@ int main(int argc, char** argv) {
   }
   std::printf("# stb_dxt BC1, thread CPU time per tile (best of %d passes), PSNR over RGB of the decoded tiles\n",
               repeats);
-  std::printf("source\tmode\ttiles\tencode_ms_per_tile\tpsnr_db\tmax_abs_error\n");
+  table.row("source\tmode\ttiles\tencode_ms_per_tile\tpsnr_db\tmax_abs_error\n");
   ProceduralSpec spec;
   auto procedural = makeProceduralSource(spec);
-  run("procedural 2^26", *procedural, repeats);
+  run("procedural 2^26", *procedural, repeats, table);
   if (!store.empty()) {
     Status s;
     auto source = openStoreSource(store, &s);
@@ -101,7 +107,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", s.toString().c_str());
       return 1;
     }
-    run(store.c_str(), *source, repeats);
+    run(store.c_str(), *source, repeats, table);
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

@@ -7,7 +7,10 @@
 // (Streamer::setPathHint: "hinted"). Both flights request the same tiles at
 // the same frames; OPT and LRU are the same for both.
 //
-// Usage: bench_streamer_hitrate [frames_per_path=600] [trace_dir=/tmp]
+// Usage: bench_streamer_hitrate [frames_per_path=600] [trace_dir=/tmp] [--tsv FILE] [--cost-tsv FILE]
+// Prints two tab-separated tables, the hit rates and the render thread's
+// cost per frame; --tsv FILE and --cost-tsv FILE also write them into those
+// files (docs/data/streamer_hitrate.tsv, streamer_hitrate_cost.tsv).
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/trace.h>
 
@@ -19,6 +22,8 @@
 #include <functional>
 #include <string>
 #include <vector>
+
+#include "tsv_out.h"
 
 using namespace clipstream;
 
@@ -97,6 +102,9 @@ class FlatSource final : public TileSource {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut hits_table(bench::takeOption(&argc, argv, "--tsv"));
+  bench::TsvOut cost_table(bench::takeOption(&argc, argv, "--cost-tsv"));
+  if (!hits_table.ok() || !cost_table.ok()) return 1;
   const int frames = argc > 1 ? std::atoi(argv[1]) : 600;
   const std::string dir = argc > 2 ? argv[2] : "/tmp";
   // The plans want only the tiles the frames sample (PlanScope::kSampled):
@@ -111,7 +119,7 @@ int main(int argc, char** argv) {
 
   std::printf("# %.0fx%.0f texels, tile 128, viewport 1280x720, %d frames at 60 fps per path\n",
               kSide, kSide, frames);
-  std::printf(
+  hits_table.row(
       "path\tbudget_mib\taccesses\tgpu_reentries\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%"
       "\tours_of_opt_%%"
       "\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
@@ -187,16 +195,17 @@ int main(int argc, char** argv) {
       auto ofOpt = [&](uint64_t hits) {
         return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0;
       };
-      std::printf("%s\t%.0f\t%llu\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
+      hits_table.row("%s\t%.0f\t%llu\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
                   (unsigned long long)r.accesses, (unsigned long long)r.gpu_reentries,
                   (unsigned long long)r.distinct_tiles, pct(r.hits_opt), pct(r.hits_lru),
                   pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
                   pct(r.hits_plan), ofOpt(r.hits_plan), pct(h.hits_hinted), ofOpt(h.hits_hinted));
     }
   }
-  std::printf("\nflight\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\thint_frames\thint_ignored_frames\n");
+  std::printf("\n");
+  cost_table.row("flight\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\thint_frames\thint_ignored_frames\n");
   for (const FrameCost& c : costs)
-    std::printf("%s\t%.3f\t%.3f\t%.3f\t%llu\t%llu\n", c.path.c_str(), c.mean_ms, c.p99_ms, c.max_ms,
+    cost_table.row("%s\t%.3f\t%.3f\t%.3f\t%llu\t%llu\n", c.path.c_str(), c.mean_ms, c.p99_ms, c.max_ms,
                 (unsigned long long)c.hint_frames, (unsigned long long)c.hint_ignored_frames);
-  return 0;
+  return hits_table.commit() && cost_table.commit() ? 0 : 1;
 }

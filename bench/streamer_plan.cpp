@@ -5,9 +5,10 @@
 // (the sweep's procedural texture). The streamer plans twice a frame (the
 // camera and the predicted camera), so a frame pays about twice the figure.
 //
-// Usage: bench_streamer_plan [repeats=400]
+// Usage: bench_streamer_plan [repeats=400] [--tsv FILE]
 // Prints a tab-separated table: view, viewport, scope, mean / p50 / p99 us
-// per plan, and the tiles the plan wants.
+// per plan, and the tiles the plan wants; --tsv FILE also writes it into
+// FILE (docs/data/streamer_plan.tsv).
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/planner.h>
 
@@ -17,6 +18,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <vector>
+
+#include "tsv_out.h"
 
 using namespace clipstream;
 
@@ -37,6 +40,8 @@ uint64_t wantedTiles(const ClipmapPlan& plan) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   const int repeats = argc > 1 ? std::max(1, std::atoi(argv[1])) : 400;
   PyramidGeometry g;
   if (!makePyramidGeometry(uint64_t(1) << 26, uint64_t(1) << 26, 128, PixelFormat::kRGBA8, &g)) return 1;
@@ -44,7 +49,7 @@ int main(int argc, char** argv) {
                         {"low, near the horizon (20 up, 5 deg down)", 20.0, -5.0},
                         {"high nadir (5000 up, 90 deg down)", 5000.0, -89.9}};
   const Viewport viewports[] = {{320, 180}, {1280, 720}, {1920, 1080}};
-  std::printf("view\tviewport\tscope\tmean_us\tp50_us\tp99_us\twanted_tiles\n");
+  table.row("view\tviewport\tscope\tmean_us\tp50_us\tp99_us\twanted_tiles\n");
   for (const View& v : views) {
     for (const Viewport& vp : viewports) {
       for (const PlanScope scope : {PlanScope::kSampled, PlanScope::kWindow}) {
@@ -70,12 +75,12 @@ int main(int argc, char** argv) {
         std::sort(us.begin(), us.end());
         double mean = 0.0;
         for (double x : us) mean += x / double(us.size());
-        std::printf("%s\t%ux%u\t%s\t%.1f\t%.1f\t%.1f\t%llu\n", v.name, vp.width_px, vp.height_px,
+        table.row("%s\t%ux%u\t%s\t%.1f\t%.1f\t%.1f\t%llu\n", v.name, vp.width_px, vp.height_px,
                     scope == PlanScope::kSampled ? "sampled" : "window", mean, us[us.size() / 2],
                     us[std::min(us.size() - 1, size_t(double(us.size()) * 0.99))],
                     static_cast<unsigned long long>(wanted));
       }
     }
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

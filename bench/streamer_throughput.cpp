@@ -6,7 +6,9 @@
 // pixels, store writer) in the temp directory; the file is in the page
 // cache, so "read" is a positional copy from memory.
 //
-// Usage: bench_streamer_throughput [side_px=4096] [repeats=5]
+// Usage: bench_streamer_throughput [side_px=4096] [repeats=5] [--tsv FILE]
+// Prints a tab-separated table; --tsv FILE also writes it into FILE
+// (docs/data/streamer_throughput.tsv).
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -23,6 +25,8 @@
 #include <functional>
 #include <thread>
 #include <vector>
+
+#include "tsv_out.h"
 
 using namespace clipstream;
 
@@ -52,6 +56,8 @@ void fillTile(const PyramidGeometry& g, const TileKey& key, std::vector<uint8_t>
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   const uint64_t side = argc > 1 ? std::strtoull(argv[1], nullptr, 10) : 4096;
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 5;
   const std::string path =
@@ -176,12 +182,12 @@ int main(int argc, char** argv) {
               (unsigned long long)side, (unsigned long long)side, keys.size(), raws.size(),
               double(stored) / (1024.0 * 1024.0),
               double(raws.size()) * double(g.tileBytes()) / double(stored), repeats);
-  std::printf("pipeline\tthreads\ttiles\tbest_s\ttiles_per_s\tdecoded_mib_per_s\tper_thread_vs_zstd_%%\n");
+  table.row("pipeline\tthreads\ttiles\tbest_s\ttiles_per_s\tdecoded_mib_per_s\tper_thread_vs_zstd_%%\n");
   for (const Measure& m : measures) {
     const double tiles_s = double(m.tiles) / m.best_s;
-    std::printf("%s\t%u\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", m.name, m.threads, m.tiles, m.best_s,
+    table.row("%s\t%u\t%zu\t%.4f\t%.0f\t%.1f\t%.1f\n", m.name, m.threads, m.tiles, m.best_s,
                 tiles_s, tiles_s * tile_mb, 100.0 * tiles_s / m.threads / zstd_tiles_s);
   }
   std::filesystem::remove(path);
-  return 0;
+  return table.commit() ? 0 : 1;
 }

@@ -3,7 +3,9 @@
 // (separable Lanczos-8 in linear light, double precision, edge clamp) -
 // a much wider, gamma-correct low-pass than anything the tiler offers.
 //
-//   tiler_filter_quality IMAGE STORE...   (prints: store, PSNR dB, max abs error)
+//   tiler_filter_quality IMAGE STORE... [--tsv FILE]
+// Prints a tab-separated table (store, PSNR dB, max abs error); --tsv FILE
+// also writes it into FILE (docs/data/tiler_filter_quality.tsv).
 #include <clipstream/store/tile_store.h>
 
 #include <OpenImageIO/imageio.h>
@@ -14,6 +16,8 @@
 #include <memory>
 #include <numbers>
 #include <vector>
+
+#include "tsv_out.h"
 
 namespace {
 
@@ -29,8 +33,10 @@ double toSrgb(double l) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  clipstream::bench::TsvOut table(clipstream::bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s IMAGE STORE...\n", argv[0]);
+    std::fprintf(stderr, "usage: %s IMAGE STORE... [--tsv FILE]\n", argv[0]);
     return 2;
   }
   auto in = OIIO::ImageInput::open(argv[1]);
@@ -79,7 +85,7 @@ int main(int argc, char** argv) {
         ref[(size_t(y) * ow + x) * nc + c] = toSrgb(acc) * 255.0;
       }
 
-  std::printf("store\tpsnr_db\tmax_abs_error\n");
+  table.row("store\tpsnr_db\tmax_abs_error\n");
   for (int a = 2; a < argc; ++a) {
     std::unique_ptr<clipstream::TileStoreReader> reader;
     const clipstream::Status s = clipstream::TileStoreReader::open(argv[a], &reader);
@@ -107,7 +113,7 @@ int main(int argc, char** argv) {
           }
       }
     const double mse = se / double(ow * oh * nc);
-    std::printf("%s\t%.2f\t%.1f\n", argv[a], 10.0 * std::log10(255.0 * 255.0 / mse), worst);
+    table.row("%s\t%.2f\t%.1f\n", argv[a], 10.0 * std::log10(255.0 * 255.0 / mse), worst);
   }
-  return 0;
+  return table.commit() ? 0 : 1;
 }

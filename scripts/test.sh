@@ -26,6 +26,8 @@ cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo
 cmake --build build -j "$jobs" --target installables
 # The README's and docs' commands stay runnable (scripts/check_docs.sh: options, script flags, paths).
 scripts/check_docs.sh build
+# docs/benchmarks.md is what docs/benchmarks.md.in and the tables in docs/data/ render.
+scripts/gen_benchmarks.sh --check
 
 # The README walked as written, in order, from the demo to the Debian
 # package (scripts/readme_walk.sh: what it changes to run as a test).
