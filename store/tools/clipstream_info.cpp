@@ -182,6 +182,46 @@ nlohmann::json toJson(const std::string& path, const StoreInfo& info,
   return out;
 }
 
+// --tiles: one line (or JSON object) per tile in level, row, column order,
+// with what the index records of it: a constant's value, or the stored
+// payload's size and checksum; in an elevation store its height bounds and
+// geometric error. Two stores holding the same tiles list the same, however
+// their files lay the payloads out. Reads only index pages.
+Status listTiles(const TileStoreReader& reader, bool json, nlohmann::json* out) {
+  const StoreInfo& info = reader.info();
+  const bool heights = info.elevation.present;
+  const uint32_t pixel_bytes = bytesPerPixel(info.geometry.format);
+  nlohmann::json tiles = nlohmann::json::array();
+  for (uint32_t l = 0; l < info.geometry.levelCount(); ++l) {
+    const LevelInfo& level = info.geometry.levels[l];
+    for (uint32_t y = 0; y < level.tiles_y; ++y)
+      for (uint32_t x = 0; x < level.tiles_x; ++x) {
+        TileLocation loc;
+        if (Status st = reader.locate({l, x, y}, &loc); !st) return st;
+        std::string value;
+        for (uint32_t i = 0; loc.constant && i < pixel_bytes && i < sizeof loc.constant_pixel; ++i) {
+          char hex[3];
+          std::snprintf(hex, sizeof hex, "%02x", loc.constant_pixel[i]);
+          value += hex;
+        }
+        if (json) {
+          nlohmann::json t = {{"level", l}, {"x", x}, {"y", y}};
+          if (loc.constant) t["constant"] = value;
+          else t["stored_bytes"] = loc.stored_bytes, t["checksum"] = loc.checksum;
+          if (heights) t["min_height"] = loc.min_height, t["max_height"] = loc.max_height, t["error"] = loc.error;
+          tiles.push_back(std::move(t));
+          continue;
+        }
+        if (loc.constant) std::printf("tile %u %u %u constant %s", l, x, y, value.c_str());
+        else std::printf("tile %u %u %u stored %u checksum %08x", l, x, y, loc.stored_bytes, loc.checksum);
+        if (heights) std::printf(" heights %.9g %.9g error %.9g", loc.min_height, loc.max_height, loc.error);
+        std::printf("\n");
+      }
+  }
+  if (json) (*out)["tiles"] = std::move(tiles);
+  return okStatus();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -194,6 +234,10 @@ int main(int argc, char** argv) {
   app.add_option("STORE", path, "tile store file or http(s):// URL")->required();
   app.add_flag("--verify", verify, "read, check and decode every tile");
   app.add_flag("--json", json, "print JSON on stdout instead of text");
+  bool tiles = false;
+  app.add_flag("--tiles", tiles,
+               "list every tile: a constant's value, or its stored size and checksum (and an elevation "
+               "store's height bounds), from the index only");
   app.add_option("--threads", threads, "verification threads (0 = all cores)")
       ->transform(cli::wholeInRange(0, 1024));
   RemoteOptions remote;
@@ -229,6 +273,14 @@ int main(int argc, char** argv) {
     json_out = toJson(path, reader->info(), stats_ptr);
   } else {
     printText(path, reader->info(), stats_ptr);
+  }
+
+  if (tiles && exit_code == kExitOk) {
+    if (!json) std::printf("\n");
+    if (Status st = listTiles(*reader, json, &json_out); !st) {
+      cli::printError(app, "index: " + st.toString());
+      exit_code = kExitCorrupt;
+    }
   }
 
   if (verify) {

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <span>
@@ -185,6 +186,42 @@ TEST_F(InfoTool, CrsTextThatIsNotUtf8OrHasControlBytesIsPrintedSafely) {
   ASSERT_NE(crs, std::string::npos) << text.output;
   const std::string line = text.output.substr(crs, text.output.find('\n', crs) - crs);
   EXPECT_NE(line.find("[2Jx"), std::string::npos) << line;
+}
+
+// --tiles lists what the index records of each tile: two files holding the
+// same tiles in another payload order list the same, and a store with
+// other tiles (no constant tiles) does not.
+TEST_F(InfoTool, TilesListTheSameTilesWhateverTheirPlaceInTheFile) {
+  const std::string curve = m_dir.file("curve.cst"), other = m_dir.file("other.cst");
+  WriterOptions options;
+  options.fsync = false;
+  options.geo.present = true;
+  options.geo.crs = "EPSG:2992";
+  options.geo.transform[0] = 635000.0;
+  options.geo.transform[3] = 849000.0;
+  options.payload_order = PayloadOrder::kCurve;
+  ASSERT_TRUE(test::writeSyntheticStore(curve, m_geometry, options).ok());
+  ASSERT_NE(test::readBytes(curve), test::readBytes(m_path));  // laid out differently
+  ASSERT_TRUE(test::writeSyntheticStore(other, m_geometry, options, test::ConstantTiles::kNone).ok());
+
+  const RunResult written = runInfo("--tiles '" + m_path + "'");
+  const RunResult curved = runInfo("--tiles '" + curve + "'");
+  const RunResult changed = runInfo("--tiles '" + other + "'");
+  ASSERT_EQ(written.exit_code, 0) << written.output;
+  auto tileLines = [](const std::string& text) { return text.substr(text.find("\ntile 0 0 0 ") + 1); };
+  size_t tiles = 0;
+  for (const LevelInfo& level : m_geometry.levels) tiles += size_t(level.tiles_x) * level.tiles_y;
+  const std::string list = tileLines(written.output);
+  EXPECT_EQ(size_t(std::count(list.begin(), list.end(), '\n')), tiles);
+  EXPECT_NE(list.find("tile 0 0 0 "), std::string::npos);
+  EXPECT_NE(list.find(" constant "), std::string::npos);  // one key in five is constant
+  EXPECT_EQ(tileLines(curved.output), list);
+  EXPECT_NE(tileLines(changed.output), list);
+
+  const RunResult json = runInfo("--json --tiles '" + m_path + "'");
+  ASSERT_EQ(json.exit_code, 0) << json.output;
+  EXPECT_NE(json.output.find("\"tiles\": ["), std::string::npos);
+  EXPECT_NE(json.output.find("\"checksum\""), std::string::npos);
 }
 
 }  // namespace
