@@ -157,6 +157,9 @@ std::vector<double> sampleCornerPositions(double size_px, double step_px) {
   std::vector<double> positions;
   for (double p = 0.5; p < size_px - 0.5; p += step_px) positions.push_back(p);
   positions.push_back(size_px - 0.5);
+  // A side of one pixel still has two corners, the same centre twice: one
+  // cell of no width, which samples what that column (or row) sees.
+  if (positions.size() < 2) positions.push_back(size_px - 0.5);
   return positions;
 }
 

@@ -88,6 +88,33 @@ TEST(Planner, WindowIsCentredOnTheGroundPointAndSnapped) {
   EXPECT_TRUE(plan.stack[2].visible.contains(int64_t(5000.3 / 512), int64_t(7000.2 / 512)));
 }
 
+// A viewport one pixel wide or high (a window being resized, a thin strip)
+// plans without reading outside its grid of screen cells: the pyramid is
+// wanted, as always, and a one-pixel-wide column samples the stack tiles
+// it sees. (A one-pixel-high row needs no stack level: the planner finds no
+// visible ground footprint in it, so it is drawn from the pyramid.)
+TEST(Planner, AViewportOnePixelWideOrHighPlans) {
+  const PyramidGeometry g = geometryOf(1 << 16, 1 << 16);
+  PlannerConfig cfg;
+  cfg.clip_tiles = 16;
+  ASSERT_EQ(cfg.scope, PlanScope::kSampled);
+  for (const Viewport vp : {Viewport{1, 180}, Viewport{320, 1}, Viewport{1, 1}}) {
+    SCOPED_TRACE(std::to_string(vp.width_px) + "x" + std::to_string(vp.height_px));
+    Camera cam = lookingDown(5000.3, 7000.2, 300.0);
+    cam.pitch_rad = -1.2;
+    const ClipmapPlan plan = planClipmap(g, vp, cam, cfg);
+    ASSERT_FALSE(plan.pyramid.empty());
+    EXPECT_FALSE(rankPlanTiles(g, plan, true).empty());
+    size_t sampled_tiles = 0;
+    for (const ClipLevelPlan& lp : plan.stack) {
+      if (!lp.needed) continue;
+      for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+        for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) sampled_tiles += lp.wants(x, y) ? 1 : 0;
+    }
+    if (vp.height_px > 1) EXPECT_GT(sampled_tiles, 0u);
+  }
+}
+
 TEST(Planner, WindowsStayInsideTheTextureAtItsEdges) {
   const PyramidGeometry g = geometryOf(1 << 15, 1 << 15);
   PlannerConfig cfg;

@@ -21,6 +21,8 @@ TEST(SampledScope, CornersArePixelCentresAStepApartEndingAtTheLast) {
   // A step that lands on the last centre does not list it twice.
   EXPECT_EQ(sampleCornerPositions(9.0, 4.0), (std::vector<double>{0.5, 4.5, 8.5}));
   EXPECT_EQ(sampleCornerPositions(2.0, 4.0), (std::vector<double>{0.5, 1.5}));
+  // One pixel: its centre twice, so there is one cell (of no width).
+  EXPECT_EQ(sampleCornerPositions(1.0, 4.0), (std::vector<double>{0.5, 0.5}));
   const std::vector<double> wide = sampleCornerPositions(1920.0, 20.0);
   EXPECT_EQ(wide.size(), 97u);  // 96 cells across
   EXPECT_EQ(wide.back(), 1919.5);
