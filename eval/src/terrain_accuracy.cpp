@@ -1,4 +1,5 @@
 #include <clipstream/eval/terrain_accuracy.h>
+#include <clipstream/renderer/testing/terrain_measure.h>
 
 #include <clipstream/eval/metrics.h>
 
@@ -243,15 +244,15 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
   const PyramidGeometry& g = heights.geometry();
   tc.clip_tiles = std::max(g.levels[0].tiles_x, g.levels[0].tiles_y);  // every tile its own slot
   const FewestTriangles* self = f.get();
-  tc.exact_node_error = [self](uint32_t level, int64_t x, int64_t y) -> double {
+  if (Status st = TerrainRenderer::create(g, tc, &f->m_quadtree); !st) return st;
+  setExactNodeError(*f->m_quadtree, [self](uint32_t level, int64_t x, int64_t y) -> double {
     if (level >= self->m_levels.size()) return INFINITY;
     const Level& lv = self->m_levels[level];
     // Nodes beyond the surface show its edge heights: the nearest node's.
     x = std::clamp<int64_t>(x, 0, lv.nodes_x - 1);
     y = std::clamp<int64_t>(y, 0, lv.nodes_y - 1);
     return double(lv.error[size_t(y * lv.nodes_x + x)]);
-  };
-  if (Status st = TerrainRenderer::create(g, tc, &f->m_quadtree); !st) return st;
+  });
   Status fetch_status;
   const uint32_t missing = f->m_quadtree->preloadCoarseLevels(
       [&](const TileKey& key) -> std::shared_ptr<const std::vector<uint8_t>> {

@@ -3,6 +3,7 @@
 // height uploads, the coarsest ring, the ground queries and the position
 // pass. The draws are in terrain_draw.cpp and terrain_quadtree.cpp.
 #include <clipstream/renderer/terrain.h>
+#include <clipstream/renderer/testing/terrain_measure.h>
 
 #include "clipmap_renderer_impl.h"
 #include "gl.h"
@@ -292,6 +293,10 @@ Status TerrainRendererImpl::readPositions(const Camera& camera, const Viewport& 
                      xyzw->begin() + long((viewport.height_px - 1 - y) * row));
   glBindFramebuffer(GL_FRAMEBUFFER, GLuint(previous_fbo));
   return okStatus();
+}
+
+void setExactNodeError(TerrainRenderer& terrain, std::function<double(uint32_t, int64_t, int64_t)> error) {
+  terrain.impl().setExactNodeError(std::move(error));
 }
 
 }  // namespace clipstream

@@ -27,6 +27,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -69,6 +70,12 @@ class TerrainRendererImpl {
   uint64_t textureBytes() const { return m_stack->textureBytes(); }
   const PyramidGeometry& geometry() const { return m_geometry; }
   const TerrainConfig& config() const { return m_config; }
+  // Quadtree, for measuring only (setExactNodeError()): each node's error
+  // from `error` instead of the bounds, and no restriction between
+  // neighbours. Null for display.
+  void setExactNodeError(std::function<double(uint32_t, int64_t, int64_t)> error) {
+    m_exact_node_error = std::move(error);
+  }
 
   // Sets terrain.vert's per-frame uniforms on `program` for this camera
   // (and binds the height stack to texture unit 2), as draw() does.
@@ -152,6 +159,9 @@ class TerrainRendererImpl {
 
   PyramidGeometry m_geometry;
   TerrainConfig m_config;
+  // Quadtree, for measuring only (clipstream/renderer/testing/
+  // terrain_measure.h); null for display.
+  std::function<double(uint32_t, int64_t, int64_t)> m_exact_node_error;
   // Outermost ring level: covers the whole height field and colour image
   // from the camera of the last draw (updateCoarsest()).
   uint32_t m_coarsest = 0;

@@ -34,7 +34,7 @@ class TerrainRendererImpl::NodeSelection {
   // 2. Restriction: a visible leaf's neighbours are at most one level
   // coarser. Returns the splits made only for that. Leaves the leaves.
   uint32_t restrictNeighbours();
-  // Instead of restrictNeighbours(), for measuring (TerrainConfig::exact_node_error):
+  // Instead of restrictNeighbours(), for measuring (setExactNodeError()):
   // the leaves as split, neighbours unrestricted. Returns 0 (no forced split).
   uint32_t unrestricted();
   // 3. The leaves with their coarse sides.
@@ -284,7 +284,7 @@ bool TerrainRendererImpl::cpuHeight(uint32_t level, int64_t i, int64_t j, float*
 
 double TerrainRendererImpl::nodeError(uint32_t level, int64_t x, int64_t y) {
   if (level == 0) return 0.0;
-  if (m_config.exact_node_error) return m_config.exact_node_error(level, x, y);
+  if (m_exact_node_error) return m_exact_node_error(level, x, y);
   const auto cached = m_error_cache.find(NodeId{level, x, y});
   if (cached != m_error_cache.end()) return double(cached->second);
   double error = tileErrorBound(level, x, y);
@@ -389,7 +389,7 @@ void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& view
   NodeSelection selection(*this, camera, viewport);
   const uint32_t fallbacks = selection.splitByError();
   // Unrestricted when measuring with exact node errors (no stitching).
-  const uint32_t forced = m_config.exact_node_error ? selection.unrestricted() : selection.restrictNeighbours();
+  const uint32_t forced = m_exact_node_error ? selection.unrestricted() : selection.restrictNeighbours();
   selection.leaves(&m_nodes);
   m_frame.fallback_nodes = fallbacks;
   m_frame.forced_splits = forced;

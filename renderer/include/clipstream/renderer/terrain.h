@@ -81,11 +81,6 @@ struct TerrainConfig {
   double error_px = renderer_config::kTerrainErrorPx;
   // Quadtree: cells per node side (a power of two, 4..256).
   uint32_t patch_cells = renderer_config::kTerrainPatchCells;
-  // Quadtree, for measuring only (eval's FewestTriangles): each node's
-  // error from this function (height units; level, node x, node y) instead
-  // of the bounds, and no restriction between neighbours (no stitching:
-  // cracks may open). Null for display.
-  std::function<double(uint32_t, int64_t, int64_t)> exact_node_error;
 };
 
 // What the last draw() drew.
@@ -204,6 +199,11 @@ class TerrainRenderer {
   static uint32_t windowTiles(uint32_t ring_cells, uint32_t tile_px) {
     return (ring_cells + 3 + tile_px - 1) / tile_px + 3;
   }
+
+  // The implementation, for the library's own use: its definition is not
+  // installed.
+  TerrainRendererImpl& impl() { return *m_impl; }
+  const TerrainRendererImpl& impl() const { return *m_impl; }
 
  private:
   explicit TerrainRenderer(std::unique_ptr<TerrainRendererImpl> impl);
