@@ -71,6 +71,58 @@ double bestMs(int repeats, OffscreenTarget& target, Draw draw) {
   return best;
 }
 
+// Makes the renderer of one mode for the camera and uploads every tile it
+// needs: the pyramid from its plan's level up and the stack windows, with
+// the residency the streamer would report. Modes: 0 RGBA8 single-buffered,
+// 1 RGBA8 double-buffered, 2 BC1 single-buffered (from bc1_tiles), 3 RGBA8
+// paged. False after printing why it cannot.
+bool makeFilledRenderer(int mode, TileSource& rgba_tiles, TileSource& bc1_tiles, const Viewport& vp,
+                        const Camera& cam, const PlannerConfig& planner, std::unique_ptr<ClipmapRenderer>* out) {
+  std::unique_ptr<ClipmapRenderer>& r = *out;
+  TileSource& tiles = mode == 2 ? bc1_tiles : rgba_tiles;
+  const TextureMemory memory = mode == 3 ? TextureMemory::kPaged : TextureMemory::kStack;
+  const ClipmapPlan plan = planClipmap(rgba_tiles.geometry(), vp, cam, plannerFor(memory, planner));
+  RendererConfig rc{plan.clip_tiles, plan.pyramid_level,
+                    mode == 1 ? Buffering::kDoubleUploadTwice : Buffering::kSingle, tiles.content()};
+  rc.texture_memory = memory;
+  if (memory == TextureMemory::kPaged) rc.pool_bytes = uint64_t(1) << 40;
+  if (Status s = ClipmapRenderer::create(rgba_tiles.geometry(), rc, &r); !s) {
+    std::fprintf(stderr, "%s\n", s.toString().c_str());
+    return false;
+  }
+  r->beginFrame();
+  const PyramidGeometry& g = rgba_tiles.geometry();
+  auto upload = [&](uint32_t l, int64_t x, int64_t y) {
+    auto px = std::make_shared<std::vector<uint8_t>>();
+    if (tiles.fetch({l, uint32_t(x), uint32_t(y)}, px.get()).ok())
+      r->uploadTile({l, uint32_t(x), uint32_t(y)}, px);
+  };
+  for (uint32_t l = plan.pyramid_level; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) upload(l, x, y);
+  std::vector<LevelResidency> res;
+  for (const ClipLevelPlan& lp : plan.stack) {
+    for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+      for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) upload(lp.level, x, y);
+    LevelResidency level{lp.level, lp.window,
+                         std::vector<uint8_t>(size_t(lp.window.width() * lp.window.height()), 1)};
+    // The tiles no tap reads, as the streamer says them: the stack
+    // ignores this, the pool gives pages to the others only.
+    if (!lp.sampled.empty()) {
+      level.unread.assign(level.resident.size(), 0);
+      size_t j = 0;
+      for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+        for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j) level.unread[j] = lp.wants(x, y) ? 0 : 1;
+    }
+    res.push_back(std::move(level));
+  }
+  r->setResidency(res);
+  r->endUploads();
+  r->beginFrame();
+  r->endUploads();
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -124,48 +176,7 @@ int main(int argc, char** argv) {
     constexpr int kModes = 4;
     std::unique_ptr<ClipmapRenderer> renderers[kModes];
     for (int mode = 0; mode < kModes; ++mode) {
-      std::unique_ptr<ClipmapRenderer>& r = renderers[mode];
-      TileSource& tiles = mode == 2 ? *bc1_source : *source;
-      const TextureMemory memory = mode == 3 ? TextureMemory::kPaged : TextureMemory::kStack;
-      const ClipmapPlan plan = planClipmap(source->geometry(), vp, cam, plannerFor(memory, planner));
-      RendererConfig rc{plan.clip_tiles, plan.pyramid_level,
-                        mode == 1 ? Buffering::kDoubleUploadTwice : Buffering::kSingle, tiles.content()};
-      rc.texture_memory = memory;
-      if (memory == TextureMemory::kPaged) rc.pool_bytes = uint64_t(1) << 40;
-      if (Status s = ClipmapRenderer::create(source->geometry(), rc, &r); !s) {
-        std::fprintf(stderr, "%s\n", s.toString().c_str());
-        return 1;
-      }
-      r->beginFrame();
-      const PyramidGeometry& g = source->geometry();
-      auto upload = [&](uint32_t l, int64_t x, int64_t y) {
-        auto px = std::make_shared<std::vector<uint8_t>>();
-        if (tiles.fetch({l, uint32_t(x), uint32_t(y)}, px.get()).ok())
-          r->uploadTile({l, uint32_t(x), uint32_t(y)}, px);
-      };
-      for (uint32_t l = plan.pyramid_level; l < g.levelCount(); ++l)
-        for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-          for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) upload(l, x, y);
-      std::vector<LevelResidency> res;
-      for (const ClipLevelPlan& lp : plan.stack) {
-        for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
-          for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) upload(lp.level, x, y);
-        LevelResidency level{lp.level, lp.window,
-                             std::vector<uint8_t>(size_t(lp.window.width() * lp.window.height()), 1)};
-        // The tiles no tap reads, as the streamer says them: the stack
-        // ignores this, the pool gives pages to the others only.
-        if (!lp.sampled.empty()) {
-          level.unread.assign(level.resident.size(), 0);
-          size_t j = 0;
-          for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
-            for (int64_t x = lp.window.x0; x < lp.window.x1; ++x, ++j) level.unread[j] = lp.wants(x, y) ? 0 : 1;
-        }
-        res.push_back(std::move(level));
-      }
-      r->setResidency(res);
-      r->endUploads();
-      r->beginFrame();
-      r->endUploads();
+      if (!makeFilledRenderer(mode, *source, *bc1_source, vp, cam, planner, &renderers[mode])) return 1;
     }
     // Interleaved rounds, so load from other processes hits all three alike.
     double ms[kModes] = {1e30, 1e30, 1e30, 1e30}, plain_ms = 1e30;

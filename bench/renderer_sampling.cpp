@@ -338,44 +338,160 @@ std::vector<std::string> splitComma(const std::string& s) {
   return out;
 }
 
+struct Options {
+  std::vector<Viewport> sizes;
+  uint32_t frames = 60, side = 2048, layers = 8, upload_tiles = 256;
+};
+
+// Reads the command line (less the --tsv options) into *o; false after
+// printing why it cannot.
+bool parseOptions(int argc, char** argv, Options* o) {
+  std::string sizes_text = "1280x720,1920x1080";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "%s needs a value\n", a.c_str());
+      return false;
+    }
+    const char* v = argv[++i];
+    if (a == "--sizes") sizes_text = v;
+    else if (a == "--frames") o->frames = uint32_t(std::max(1, std::atoi(v)));
+    else if (a == "--side") o->side = uint32_t(std::atoi(v));
+    else if (a == "--layers") o->layers = uint32_t(std::max(1, std::atoi(v)));
+    else if (a == "--upload-tiles") o->upload_tiles = uint32_t(std::max(1, std::atoi(v)));
+    else {
+      std::fprintf(stderr, "unknown option %s\n", a.c_str());
+      return false;
+    }
+  }
+  if (o->side < kTilePx || (o->side & (o->side - 1)) != 0) {
+    std::fprintf(stderr, "--side must be a power of two >= %u, got %u\n", kTilePx, o->side);
+    return false;
+  }
+  for (const std::string& t : splitComma(sizes_text)) {
+    Viewport vp;
+    if (Status s = cli::parseSize(t, &vp.width_px, &vp.height_px); !s) {
+      std::fprintf(stderr, "--sizes: %s\n", s.toString().c_str());
+      return false;
+    }
+    o->sizes.push_back(vp);
+  }
+  return true;
+}
+
+// The draws are real: no sampled pixel is the clear colour, and the
+// compressed frames stay near the RGBA8 one. Fills mad[f], the mean absolute
+// difference of format f's frame to the RGBA8 frame; false after printing
+// what is wrong.
+bool checkFrames(const Pass& pass, const OffscreenTarget& target, const Viewport& vp, const GLuint tex[],
+                 const Options& o, double mad[]) {
+  std::vector<uint8_t> frame[kFormatCount];
+  for (size_t f = 0; f < kFormatCount; ++f) {
+    clearTarget(target);
+    pass.draw(tex[f], vp, o.side, o.layers);
+    target.readRgba(&frame[f]);
+    for (uint32_t j = 0; j < 5; ++j)
+      for (uint32_t i = 0; i < 5; ++i) {
+        const uint32_t x = (vp.width_px - 1) * i / 4, y = (vp.height_px - 1) * j / 4;
+        const uint8_t* p = &frame[f][(size_t(y) * vp.width_px + x) * 4];
+        if (isClear(p)) {
+          std::fprintf(stderr, "%s at %ux%u: pixel (%u, %u) is the clear colour: the draw did not happen\n",
+                       kFormats[f].name, vp.width_px, vp.height_px, x, y);
+          return false;
+        }
+      }
+    uint64_t sum = 0;
+    for (size_t k = 0; k < frame[f].size(); k += 4)
+      for (size_t c = 0; c < 3; ++c) sum += uint64_t(std::abs(int(frame[f][k + c]) - int(frame[0][k + c])));
+    mad[f] = double(sum) / double(frame[f].size() / 4 * 3);
+    // BC1 of this pattern is within ~1 level; a rejected BPTC block would
+    // read as black (about 100 levels off).
+    if (mad[f] > 12.0) {
+      std::fprintf(stderr, "%s at %ux%u: mean |difference| to the RGBA8 frame is %.1f levels (> 12): "
+                   "the texture does not hold the pattern\n", kFormats[f].name, vp.width_px, vp.height_px, mad[f]);
+      return false;
+    }
+  }
+  return true;
+}
+
+// Times the frames of every format at one size, interleaved, and prints
+// their rows.
+void timeFrames(const Pass& pass, const OffscreenTarget& target, const Viewport& vp, const GLuint tex[],
+                const uint64_t tex_bytes[], const double mad[], const Options& o, bench::TsvOut* frame_table) {
+  std::vector<double> wall[kFormatCount], cpu[kFormatCount];
+  const uint32_t warmup = 3;
+  for (uint32_t round = 0; round < warmup + o.frames; ++round)
+    for (size_t k = 0; k < kFormatCount; ++k) {
+      const size_t f = (k + round) % kFormatCount;  // rotate the order too
+      clearTarget(target);
+      glFinish();
+      const double c0 = threadCpuMs();
+      const auto t0 = Clock::now();
+      pass.draw(tex[f], vp, o.side, o.layers);
+      glFinish();
+      const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+      if (round >= warmup) {
+        wall[f].push_back(ms);
+        cpu[f].push_back(threadCpuMs() - c0);
+      }
+    }
+  const double base = pct(wall[0], 0.5), cpu_base = pct(cpu[0], 0.5);
+  for (size_t f = 0; f < kFormatCount; ++f) {
+    std::printf("| %ux%u | %s | %.1f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", vp.width_px, vp.height_px,
+                kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
+                pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
+    frame_table->fileOnly("%ux%u\t%s\t%.1f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\n", vp.width_px, vp.height_px,
+                          kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
+                          pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
+  }
+}
+
+// Uploads of 128^2 tiles into level 0, at tile positions over the layers,
+// with the pattern that is there already (the picture does not change);
+// prints the uploads' table. False after printing a GL error.
+bool timeUploads(const GLuint tex[], const Options& o, bench::TsvOut* upload_table) {
+  std::printf("\n| format | bytes_per_tile | upload_median_us | upload_p90_us | vs_RGBA8 |\n|---|---|---|---|---|\n");
+  upload_table->fileOnly("format\tbytes_per_tile\tupload_median_us\tupload_p90_us\tvs_RGBA8\n");
+  const uint32_t tiles_side = o.side / kTilePx;
+  std::vector<double> upload_us[kFormatCount];
+  size_t tile_bytes[kFormatCount] = {};
+  for (uint32_t t = 0; t < o.upload_tiles; ++t) {
+    const uint32_t tx = t % tiles_side, ty = (t / tiles_side) % tiles_side, layer = t % o.layers;
+    const std::vector<uint8_t> rgba = patternImage(tx * kTilePx, ty * kTilePx, kTilePx, kTilePx, layer);
+    for (size_t k = 0; k < kFormatCount; ++k) {
+      const size_t f = (k + t) % kFormatCount;
+      const std::vector<uint8_t> data = encodeImage(kFormats[f], rgba, kTilePx);
+      tile_bytes[f] = data.size();
+      glFinish();
+      const auto t0 = Clock::now();
+      uploadImage(kFormats[f], tex[f], 0, tx * kTilePx, ty * kTilePx, layer, kTilePx, kTilePx, data);
+      glFinish();
+      upload_us[f].push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+    }
+  }
+  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
+    std::fprintf(stderr, "GL error 0x%04x after the tile uploads\n", err);
+    return false;
+  }
+  const double upload_base = pct(upload_us[0], 0.5);
+  for (size_t f = 0; f < kFormatCount; ++f) {
+    std::printf("| %s | %zu | %.1f | %.1f | %.2f |\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
+                pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
+    upload_table->fileOnly("%s\t%zu\t%.1f\t%.1f\t%.2f\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
+                           pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
+  }
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   bench::TsvOut frame_table(bench::takeOption(&argc, argv, "--tsv"));
   bench::TsvOut upload_table(bench::takeOption(&argc, argv, "--upload-tsv"));
   if (!frame_table.ok() || !upload_table.ok()) return 1;
-  std::vector<Viewport> sizes;
-  std::string sizes_text = "1280x720,1920x1080";
-  uint32_t frames = 60, side = 2048, layers = 8, upload_tiles = 256;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (i + 1 >= argc) {
-      std::fprintf(stderr, "%s needs a value\n", a.c_str());
-      return 2;
-    }
-    const char* v = argv[++i];
-    if (a == "--sizes") sizes_text = v;
-    else if (a == "--frames") frames = uint32_t(std::max(1, std::atoi(v)));
-    else if (a == "--side") side = uint32_t(std::atoi(v));
-    else if (a == "--layers") layers = uint32_t(std::max(1, std::atoi(v)));
-    else if (a == "--upload-tiles") upload_tiles = uint32_t(std::max(1, std::atoi(v)));
-    else {
-      std::fprintf(stderr, "unknown option %s\n", a.c_str());
-      return 2;
-    }
-  }
-  if (side < kTilePx || (side & (side - 1)) != 0) {
-    std::fprintf(stderr, "--side must be a power of two >= %u, got %u\n", kTilePx, side);
-    return 2;
-  }
-  for (const std::string& t : splitComma(sizes_text)) {
-    Viewport vp;
-    if (Status s = cli::parseSize(t, &vp.width_px, &vp.height_px); !s) {
-      std::fprintf(stderr, "--sizes: %s\n", s.toString().c_str());
-      return 2;
-    }
-    sizes.push_back(vp);
-  }
+  Options o;
+  if (!parseOptions(argc, argv, &o)) return 2;
 
   std::unique_ptr<HeadlessContext> ctx;
   if (Status s = HeadlessContext::create(&ctx); !s) {
@@ -391,115 +507,31 @@ int main(int argc, char** argv) {
   glCreateVertexArrays(1, &pass.vao);
 
   uint32_t mips = 1;
-  while ((side >> mips) > 0) ++mips;
+  while ((o.side >> mips) > 0) ++mips;
   GLuint tex[kFormatCount];
   uint64_t tex_bytes[kFormatCount];
-  for (size_t f = 0; f < kFormatCount; ++f) tex[f] = createStack(kFormats[f], side, layers, mips, &tex_bytes[f]);
+  for (size_t f = 0; f < kFormatCount; ++f) tex[f] = createStack(kFormats[f], o.side, o.layers, mips, &tex_bytes[f]);
 
   const char* threads = std::getenv("LP_NUM_THREADS");
   std::printf("%s, %u layers of %u^2 texels, %u mips, trilinear; %u frames per format and size, interleaved; "
               "LP_NUM_THREADS=%s\n\n",
-              ctx->describe().c_str(), layers, side, mips, frames, threads ? threads : "(unset)");
+              ctx->describe().c_str(), o.layers, o.side, mips, o.frames, threads ? threads : "(unset)");
   std::printf("| size | format | texture_MiB | frame_median_ms | frame_p90_ms | vs_RGBA8 | cpu_median_ms | "
               "cpu_vs_RGBA8 | mean_abs_diff_vs_RGBA8 |\n|---|---|---|---|---|---|---|---|---|\n");
   frame_table.fileOnly("size\tformat\ttexture_MiB\tframe_median_ms\tframe_p90_ms\tvs_RGBA8\tcpu_median_ms\t"
                        "cpu_vs_RGBA8\tmean_abs_diff_vs_RGBA8\n");
-  for (const Viewport& vp : sizes) {
+  for (const Viewport& vp : o.sizes) {
     std::unique_ptr<OffscreenTarget> target;
     if (Status s = OffscreenTarget::create(vp, &target); !s) {
       std::fprintf(stderr, "%s\n", s.toString().c_str());
       return 1;
     }
-    // The draws are real: no sampled pixel is the clear colour, and the
-    // compressed frames stay near the RGBA8 one.
-    std::vector<uint8_t> frame[kFormatCount];
     double mad[kFormatCount] = {};
-    for (size_t f = 0; f < kFormatCount; ++f) {
-      clearTarget(*target);
-      pass.draw(tex[f], vp, side, layers);
-      target->readRgba(&frame[f]);
-      for (uint32_t j = 0; j < 5; ++j)
-        for (uint32_t i = 0; i < 5; ++i) {
-          const uint32_t x = (vp.width_px - 1) * i / 4, y = (vp.height_px - 1) * j / 4;
-          const uint8_t* p = &frame[f][(size_t(y) * vp.width_px + x) * 4];
-          if (isClear(p)) {
-            std::fprintf(stderr, "%s at %ux%u: pixel (%u, %u) is the clear colour: the draw did not happen\n",
-                         kFormats[f].name, vp.width_px, vp.height_px, x, y);
-            return 1;
-          }
-        }
-      uint64_t sum = 0;
-      for (size_t k = 0; k < frame[f].size(); k += 4)
-        for (size_t c = 0; c < 3; ++c) sum += uint64_t(std::abs(int(frame[f][k + c]) - int(frame[0][k + c])));
-      mad[f] = double(sum) / double(frame[f].size() / 4 * 3);
-      // BC1 of this pattern is within ~1 level; a rejected BPTC block would
-      // read as black (about 100 levels off).
-      if (mad[f] > 12.0) {
-        std::fprintf(stderr, "%s at %ux%u: mean |difference| to the RGBA8 frame is %.1f levels (> 12): "
-                     "the texture does not hold the pattern\n", kFormats[f].name, vp.width_px, vp.height_px, mad[f]);
-        return 1;
-      }
-    }
-    std::vector<double> wall[kFormatCount], cpu[kFormatCount];
-    const uint32_t warmup = 3;
-    for (uint32_t round = 0; round < warmup + frames; ++round)
-      for (size_t k = 0; k < kFormatCount; ++k) {
-        const size_t f = (k + round) % kFormatCount;  // rotate the order too
-        clearTarget(*target);
-        glFinish();
-        const double c0 = threadCpuMs();
-        const auto t0 = Clock::now();
-        pass.draw(tex[f], vp, side, layers);
-        glFinish();
-        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        if (round >= warmup) {
-          wall[f].push_back(ms);
-          cpu[f].push_back(threadCpuMs() - c0);
-        }
-      }
-    const double base = pct(wall[0], 0.5), cpu_base = pct(cpu[0], 0.5);
-    for (size_t f = 0; f < kFormatCount; ++f) {
-      std::printf("| %ux%u | %s | %.1f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", vp.width_px, vp.height_px,
-                  kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
-                  pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
-      frame_table.fileOnly("%ux%u\t%s\t%.1f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\n", vp.width_px, vp.height_px,
-                           kFormats[f].name, double(tex_bytes[f]) / (1 << 20), pct(wall[f], 0.5), pct(wall[f], 0.9),
-                           pct(wall[f], 0.5) / base, pct(cpu[f], 0.5), pct(cpu[f], 0.5) / cpu_base, mad[f]);
-    }
+    if (!checkFrames(pass, *target, vp, tex, o, mad)) return 1;
+    timeFrames(pass, *target, vp, tex, tex_bytes, mad, o, &frame_table);
   }
 
-  // Uploads of 128^2 tiles into level 0, at tile positions over the layers,
-  // with the pattern that is there already (the picture does not change).
-  std::printf("\n| format | bytes_per_tile | upload_median_us | upload_p90_us | vs_RGBA8 |\n|---|---|---|---|---|\n");
-  upload_table.fileOnly("format\tbytes_per_tile\tupload_median_us\tupload_p90_us\tvs_RGBA8\n");
-  const uint32_t tiles_side = side / kTilePx;
-  std::vector<double> upload_us[kFormatCount];
-  size_t tile_bytes[kFormatCount] = {};
-  for (uint32_t t = 0; t < upload_tiles; ++t) {
-    const uint32_t tx = t % tiles_side, ty = (t / tiles_side) % tiles_side, layer = t % layers;
-    const std::vector<uint8_t> rgba = patternImage(tx * kTilePx, ty * kTilePx, kTilePx, kTilePx, layer);
-    for (size_t k = 0; k < kFormatCount; ++k) {
-      const size_t f = (k + t) % kFormatCount;
-      const std::vector<uint8_t> data = encodeImage(kFormats[f], rgba, kTilePx);
-      tile_bytes[f] = data.size();
-      glFinish();
-      const auto t0 = Clock::now();
-      uploadImage(kFormats[f], tex[f], 0, tx * kTilePx, ty * kTilePx, layer, kTilePx, kTilePx, data);
-      glFinish();
-      upload_us[f].push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
-    }
-  }
-  if (const GLenum err = glGetError(); err != GL_NO_ERROR) {
-    std::fprintf(stderr, "GL error 0x%04x after the tile uploads\n", err);
-    return 1;
-  }
-  const double upload_base = pct(upload_us[0], 0.5);
-  for (size_t f = 0; f < kFormatCount; ++f) {
-    std::printf("| %s | %zu | %.1f | %.1f | %.2f |\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
-                pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
-    upload_table.fileOnly("%s\t%zu\t%.1f\t%.1f\t%.2f\n", kFormats[f].name, tile_bytes[f], pct(upload_us[f], 0.5),
-                          pct(upload_us[f], 0.9), pct(upload_us[f], 0.5) / upload_base);
-  }
+  if (!timeUploads(tex, o, &upload_table)) return 1;
 
   glDeleteTextures(GLsizei(kFormatCount), tex);
   glDeleteVertexArrays(1, &pass.vao);

@@ -130,11 +130,7 @@ LogTotals logSince(const test::NginxServer& server, size_t from) {
   return totals;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
-  if (!table.ok()) return 1;
+struct Options {
   std::string store_path, cog_path;
   std::vector<double> rtts = {0, 20, 50, 100};
   std::vector<double> connections = {1, 4, 8, 16, 32, 64};
@@ -144,49 +140,229 @@ int main(int argc, char** argv) {
   size_t glide_steps = 0;
   std::string disk_cache;
   std::vector<std::string> protocols = {"http"};
+};
+
+// Reads the command line (less --tsv) into *options; false after printing
+// why it cannot.
+bool parseOptions(int argc, char** argv, Options* options) {
+  Options& o = *options;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--rtt" && i + 1 < argc) {
-      rtts = parseList(argv[++i]);
+      o.rtts = parseList(argv[++i]);
     } else if (arg == "--connections" && i + 1 < argc) {
-      connections = parseList(argv[++i]);
+      o.connections = parseList(argv[++i]);
     } else if (arg == "--no-coalesce") {
-      coalesce = false;
+      o.coalesce = false;
     } else if (arg == "--disk-cache" && i + 1 < argc) {
-      disk_cache = argv[++i];
+      o.disk_cache = argv[++i];
     } else if (arg == "--glide" && i + 1 < argc) {
-      glide_steps = std::strtoul(argv[++i], nullptr, 10);
+      o.glide_steps = std::strtoul(argv[++i], nullptr, 10);
     } else if (arg == "--batch" && i + 1 < argc) {
-      batch = unsigned(std::clamp<unsigned long>(std::strtoul(argv[++i], nullptr, 10), 1, 64));
+      o.batch = unsigned(std::clamp<unsigned long>(std::strtoul(argv[++i], nullptr, 10), 1, 64));
     } else if (arg == "--protocols" && i + 1 < argc) {
-      protocols.clear();
+      o.protocols.clear();
       std::stringstream in(argv[++i]);
       std::string item;
       while (std::getline(in, item, ',')) {
         if (item != "http" && item != "https1" && item != "h2") {
           std::fprintf(stderr, "unknown protocol %s (http, https1, h2)\n", item.c_str());
-          return 2;
+          return false;
         }
-        protocols.push_back(item);
+        o.protocols.push_back(item);
       }
     } else if (arg == "--teleports" && i + 1 < argc) {
-      teleports = std::clamp<size_t>(std::strtoul(argv[++i], nullptr, 10), 1, std::size(kPlaces));
-    } else if (store_path.empty()) {
-      store_path = arg;
-    } else if (cog_path.empty()) {
-      cog_path = arg;
+      o.teleports = std::clamp<size_t>(std::strtoul(argv[++i], nullptr, 10), 1, std::size(kPlaces));
+    } else if (o.store_path.empty()) {
+      o.store_path = arg;
+    } else if (o.cog_path.empty()) {
+      o.cog_path = arg;
     } else {
       std::fprintf(stderr, "usage: %s STORE.cstore [COG.tif] [--rtt LIST] [--connections LIST] "
                            "[--teleports N] [--no-coalesce] [--batch N] [--protocols LIST]\n",
                    argv[0]);
-      return 2;
+      return false;
     }
   }
-  if (store_path.empty()) {
+  if (o.store_path.empty()) {
     std::fprintf(stderr, "usage: %s STORE.cstore [COG.tif] [--rtt LIST] [--connections LIST] "
                          "[--teleports N] [--no-coalesce]\n", argv[0]);
-    return 2;
+    return false;
   }
+  return true;
+}
+
+// What one configuration (protocol, round trip, connections) is measured
+// against: the server that logs its requests, the URL through the proxy and
+// the store's geometry.
+struct Target {
+  const test::NginxServer* host = nullptr;
+  std::string url;
+  PyramidGeometry geometry;
+};
+
+struct GlideResult {
+  LogTotals log;
+  uint64_t tiles = 0;
+  double seconds = 0.0;
+};
+
+// The flight, on a store opened afresh (nothing cached): small steps, each
+// settled, as a smooth camera asks; counted after the first. False when the
+// store does not open (after printing why).
+bool measureGlide(const Target& target, const RemoteOptions& remote, const StreamerConfig& config,
+                  size_t glide_steps, Clock::time_point epoch, bool* timed_out,
+                  GlideResult* result) {
+  Status open_status;
+  std::shared_ptr<TileSource> glide_source = openStoreSource(target.url, remote, &open_status);
+  if (!glide_source) {
+    std::fprintf(stderr, "%s\n", open_status.toString().c_str());
+    return false;
+  }
+  Streamer glider(glide_source, config);
+  auto at = [&](size_t step) {
+    const double f = 0.2 + 0.6 * double(step) / double(glide_steps);
+    return lookingDown(f * double(target.geometry.width_px),
+                       0.5 * double(target.geometry.height_px));
+  };
+  if (!settle(glider, at(0), epoch)) *timed_out = true;
+  const size_t glide_from = target.host->requests().size();
+  const uint64_t loads_before = glider.stats().total.loads;
+  const Clock::time_point glide_start = Clock::now();
+  for (size_t step = 1; step <= glide_steps; ++step) {
+    if (!settle(glider, at(step), epoch)) *timed_out = true;
+  }
+  result->seconds = secondsSince(glide_start);
+  result->tiles = glider.stats().total.loads - loads_before;
+  result->log = logSince(*target.host, glide_from);
+  glider.shutdown();
+  return true;
+}
+
+// One clipstream row (and its glide row, with --glide): open the store, settle
+// at the start, time each teleport. Fills windows[t] with the stack windows
+// of teleport t for the GDAL rows. False on a fatal error (printed).
+bool measureClipstream(const Options& o, const Target& target, const std::string& protocol,
+                       double rtt, unsigned connections, const std::string& ca_file,
+                       std::vector<std::string>* windows, bench::TsvOut* table) {
+  const bool tls = protocol != "http";
+  RemoteOptions remote;
+  remote.connections = connections;
+  remote.batch_tiles = o.coalesce ? o.batch : 1;
+  remote.http2 = protocol == "h2";
+  remote.disk_cache_dir = o.disk_cache;
+  if (tls) remote.ca_file = ca_file;
+  const test::NginxServer& host = *target.host;
+  size_t log_from = host.requests().size();
+  const Clock::time_point open_start = Clock::now();
+  Status open_status;
+  std::shared_ptr<TileSource> source = openStoreSource(target.url, remote, &open_status);
+  if (!source) {
+    std::fprintf(stderr, "%s\n", open_status.toString().c_str());
+    return false;
+  }
+  const double open_ms = secondsSince(open_start) * 1000.0;
+  const LogTotals open_log = logSince(host, log_from);
+  StreamerConfig config;
+  config.prefetch = false;
+  Streamer streamer(source, config);
+  const Clock::time_point epoch = Clock::now();
+  const Camera start_camera = lookingDown(0.5 * double(target.geometry.width_px),
+                                          0.5 * double(target.geometry.height_px));
+  if (!settle(streamer, start_camera, epoch)) {
+    std::fprintf(stderr, "start place did not settle in %g s\n", kSettleTimeoutS);
+    return false;
+  }
+  log_from = host.requests().size();
+  std::vector<double> seconds;
+  uint64_t tiles = 0;
+  bool timed_out = false;
+  for (size_t t = 0; t < o.teleports; ++t) {
+    const Camera place = lookingDown(kPlaces[t][0] * double(target.geometry.width_px),
+                                     kPlaces[t][1] * double(target.geometry.height_px));
+    const uint64_t loads_before = streamer.stats().total.loads;
+    const Clock::time_point teleport_start = Clock::now();
+    if (!settle(streamer, place, epoch)) timed_out = true;
+    seconds.push_back(secondsSince(teleport_start));
+    tiles += streamer.stats().total.loads - loads_before;
+    (*windows)[t] = planWindows(streamer.plan());
+  }
+  const LogTotals log = logSince(host, log_from);
+  const uint64_t connections_opened = source->remoteStats().connections;
+  streamer.shutdown();
+  GlideResult glide;
+  if (o.glide_steps > 0 &&
+      !measureGlide(target, remote, config, o.glide_steps, epoch, &timed_out, &glide)) {
+    return false;
+  }
+  std::vector<double> sorted = seconds;
+  std::sort(sorted.begin(), sorted.end());
+  double total_s = 0.0;
+  for (double v : seconds) total_s += v;
+  table->row("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
+             "%.2f\n",
+             protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
+             open_ms, (unsigned long long)open_log.requests, sorted[sorted.size() / 2],
+             sorted.back(), timed_out ? " (timeout)" : "", (unsigned long long)tiles,
+             total_s > 0 ? double(tiles) / total_s : 0.0, (unsigned long long)log.requests,
+             tiles ? double(log.requests) / double(tiles) : 0.0, log.bytes / 1048576.0);
+  if (o.glide_steps > 0) {
+    table->row("glide\t%s\t%g\t%u\t-\t-\t-\t%.3f\t-\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
+               protocol.c_str(), rtt, remote.connections, glide.seconds,
+               (unsigned long long)glide.tiles,
+               glide.seconds > 0 ? double(glide.tiles) / glide.seconds : 0.0,
+               (unsigned long long)glide.log.requests,
+               glide.tiles ? double(glide.log.requests) / double(glide.tiles) : 0.0,
+               glide.log.bytes / 1048576.0);
+  }
+  std::fflush(stdout);
+  return true;
+}
+
+// The GDAL row: GDAL over the same proxy reads the stack windows of each
+// teleport from the COG.
+void measureGdal(const test::NginxServer& server, const test::DelayProxy& proxy, double rtt,
+                 const std::vector<std::string>& windows, bench::TsvOut* table) {
+  const fs::path script = CLIPSTREAM_GDAL_SCRIPT;
+  std::string command =
+      "GDAL_DISABLE_READDIR_ON_OPEN=EMPTY_DIR CPL_VSIL_CURL_ALLOWED_EXTENSIONS=.tif "
+      "/usr/bin/python3 " + script.string() + " /vsicurl/" + proxy.url("cog.tif");
+  for (const std::string& w : windows) command += " '" + w + "'";
+  const size_t log_from = server.requests().size();
+  const Clock::time_point gdal_start = Clock::now();
+  FILE* pipe = ::popen(command.c_str(), "r");
+  std::vector<double> seconds;
+  if (pipe != nullptr) {
+    int index = 0;
+    double value = 0.0;
+    while (std::fscanf(pipe, "%d %lf", &index, &value) == 2) seconds.push_back(value);
+    ::pclose(pipe);
+  }
+  const double all_s = secondsSince(gdal_start);
+  const LogTotals log = logSince(server, log_from);
+  if (seconds.size() != windows.size()) {
+    table->row("gdal\thttp\t%g\t-\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
+    return;
+  }
+  std::vector<double> sorted = seconds;
+  std::sort(sorted.begin(), sorted.end());
+  double read_s = 0.0;
+  for (double v : seconds) read_s += v;
+  // GDAL's open is the process's run time less the reads (includes the
+  // interpreter start, a few tens of milliseconds).
+  table->row("gdal_vsicurl\thttp\t%g\t-\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
+             (all_s - read_s) * 1000.0, sorted[sorted.size() / 2], sorted.back(),
+             (unsigned long long)log.requests, log.bytes / 1048576.0);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
+  Options o;
+  if (!parseOptions(argc, argv, &o)) return 2;
 
   // The server's folder: copies, so nginx (running as this user) reads them.
   char dir_template[] = "/tmp/clipstream-bench-http-XXXXXX";
@@ -196,12 +372,13 @@ int main(int argc, char** argv) {
   }
   const fs::path work = dir_template;
   fs::create_directories(work / "www");
-  fs::copy_file(store_path, work / "www/store.cstore");
-  if (!cog_path.empty()) fs::copy_file(cog_path, work / "www/cog.tif");
+  fs::copy_file(o.store_path, work / "www/store.cstore");
+  if (!o.cog_path.empty()) fs::copy_file(o.cog_path, work / "www/cog.tif");
   std::unique_ptr<test::NginxServer> server, tls_server;
   Status s = test::NginxServer::start(work.string(), (work / "www").string(), &server);
-  const bool tls_wanted = std::find(protocols.begin(), protocols.end(), "http") == protocols.end() ||
-                          protocols.size() > 1;
+  const bool tls_wanted =
+      std::find(o.protocols.begin(), o.protocols.end(), "http") == o.protocols.end() ||
+      o.protocols.size() > 1;
   if (s && tls_wanted) {
     fs::create_directories(work / "tls");
     s = test::NginxServer::start((work / "tls").string(), (work / "www").string(), &tls_server,
@@ -212,7 +389,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::unique_ptr<TileStoreReader> local;
-  if (Status open = TileStoreReader::open(store_path, &local); !open) {
+  if (Status open = TileStoreReader::open(o.store_path, &local); !open) {
     std::fprintf(stderr, "%s\n", open.toString().c_str());
     return 1;
   }
@@ -221,23 +398,16 @@ int main(int argc, char** argv) {
   local.reset();
   std::printf("# store %s: %llux%llu %s, tile %u, %u levels, %.1f MiB; %zu teleports, camera %g "
               "texels up, viewport %ux%u, prefetch off, coalescing %s, batch %u tiles\n",
-              store_path.c_str(), (unsigned long long)geometry.width_px,
+              o.store_path.c_str(), (unsigned long long)geometry.width_px,
               (unsigned long long)geometry.height_px, pixelFormatName(geometry.format),
-              geometry.tile_px, geometry.levelCount(), store_bytes / 1048576.0, teleports, kHeight,
-              kViewport.width_px, kViewport.height_px, coalesce ? "on" : "off",
-              coalesce ? batch : 1u);
+              geometry.tile_px, geometry.levelCount(), store_bytes / 1048576.0, o.teleports,
+              kHeight, kViewport.width_px, kViewport.height_px, o.coalesce ? "on" : "off",
+              o.coalesce ? o.batch : 1u);
   table.row("reader\tprotocol\trtt_ms\tin_flight\tconnections\topen_ms\topen_requests\t"
               "sharp_median_s\tsharp_max_s\ttiles\ttiles_per_s\trequests\trequests_per_tile\t"
               "MiB\n");
 
-  auto place = [&](size_t i) {
-    return lookingDown(kPlaces[i][0] * double(geometry.width_px),
-                       kPlaces[i][1] * double(geometry.height_px));
-  };
-  const Camera start_camera =
-      lookingDown(0.5 * double(geometry.width_px), 0.5 * double(geometry.height_px));
-
-  for (const double rtt : rtts) {
+  for (const double rtt : o.rtts) {
     std::unique_ptr<test::DelayProxy> proxy, tls_proxy;
     if (Status ps = test::DelayProxy::start(server->port(), rtt, &proxy); !ps) {
       std::fprintf(stderr, "%s\n", ps.toString().c_str());
@@ -249,137 +419,23 @@ int main(int argc, char** argv) {
         return 1;
       }
     }
-    std::vector<std::string> windows(teleports);
-    for (const std::string& protocol : protocols) {
-    const bool tls = protocol != "http";
-    const test::NginxServer& host = tls ? *tls_server : *server;
-    const std::string url = tls ? "https://127.0.0.1:" + std::to_string(tls_proxy->port()) +
-                                      "/store.cstore"
-                                : proxy->url("store.cstore");
-    for (const double count : connections) {
-      RemoteOptions remote;
-      remote.connections = unsigned(count);
-      remote.batch_tiles = coalesce ? batch : 1;
-      remote.http2 = protocol == "h2";
-      remote.disk_cache_dir = disk_cache;
-      if (tls) remote.ca_file = tls_server->certificateFile();
-      size_t log_from = host.requests().size();
-      const Clock::time_point open_start = Clock::now();
-      Status open_status;
-      std::shared_ptr<TileSource> source = openStoreSource(url, remote, &open_status);
-      if (!source) {
-        std::fprintf(stderr, "%s\n", open_status.toString().c_str());
-        return 1;
-      }
-      const double open_ms = secondsSince(open_start) * 1000.0;
-      const LogTotals open_log = logSince(host, log_from);
-      StreamerConfig config;
-      config.prefetch = false;
-      Streamer streamer(source, config);
-      const Clock::time_point epoch = Clock::now();
-      if (!settle(streamer, start_camera, epoch)) {
-        std::fprintf(stderr, "start place did not settle in %g s\n", kSettleTimeoutS);
-        return 1;
-      }
-      log_from = host.requests().size();
-      std::vector<double> seconds;
-      uint64_t tiles = 0;
-      bool timed_out = false;
-      for (size_t t = 0; t < teleports; ++t) {
-        const uint64_t loads_before = streamer.stats().total.loads;
-        const Clock::time_point teleport_start = Clock::now();
-        if (!settle(streamer, place(t), epoch)) timed_out = true;
-        seconds.push_back(secondsSince(teleport_start));
-        tiles += streamer.stats().total.loads - loads_before;
-        windows[t] = planWindows(streamer.plan());
-      }
-      const LogTotals log = logSince(host, log_from);
-      const uint64_t connections_opened = source->remoteStats().connections;
-      streamer.shutdown();
-      // The flight, on a store opened afresh (nothing cached): small steps,
-      // each settled, as a smooth camera asks; counted after the first.
-      LogTotals glide_log;
-      uint64_t glide_tiles = 0;
-      double glide_s = 0.0;
-      if (glide_steps > 0) {
-        std::shared_ptr<TileSource> glide_source = openStoreSource(url, remote, &open_status);
-        if (!glide_source) {
-          std::fprintf(stderr, "%s\n", open_status.toString().c_str());
+    std::vector<std::string> windows(o.teleports);
+    for (const std::string& protocol : o.protocols) {
+      const bool tls = protocol != "http";
+      Target target;
+      target.host = tls ? tls_server.get() : server.get();
+      target.url = tls ? "https://127.0.0.1:" + std::to_string(tls_proxy->port()) + "/store.cstore"
+                       : proxy->url("store.cstore");
+      target.geometry = geometry;
+      const std::string ca_file = tls ? tls_server->certificateFile() : std::string();
+      for (const double count : o.connections) {
+        if (!measureClipstream(o, target, protocol, rtt, unsigned(count), ca_file, &windows,
+                               &table)) {
           return 1;
         }
-        Streamer glider(glide_source, config);
-        auto at = [&](size_t step) {
-          const double f = 0.2 + 0.6 * double(step) / double(glide_steps);
-          return lookingDown(f * double(geometry.width_px), 0.5 * double(geometry.height_px));
-        };
-        if (!settle(glider, at(0), epoch)) timed_out = true;
-        const size_t glide_from = host.requests().size();
-        const uint64_t loads_before = glider.stats().total.loads;
-        const Clock::time_point glide_start = Clock::now();
-        for (size_t step = 1; step <= glide_steps; ++step) {
-          if (!settle(glider, at(step), epoch)) timed_out = true;
-        }
-        glide_s = secondsSince(glide_start);
-        glide_tiles = glider.stats().total.loads - loads_before;
-        glide_log = logSince(host, glide_from);
-        glider.shutdown();
       }
-      std::vector<double> sorted = seconds;
-      std::sort(sorted.begin(), sorted.end());
-      double total_s = 0.0;
-      for (double v : seconds) total_s += v;
-      table.row("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
-                  "%.2f\n",
-                  protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
-                  open_ms, (unsigned long long)open_log.requests, sorted[sorted.size() / 2],
-                  sorted.back(), timed_out ? " (timeout)" : "", (unsigned long long)tiles,
-                  total_s > 0 ? double(tiles) / total_s : 0.0, (unsigned long long)log.requests,
-                  tiles ? double(log.requests) / double(tiles) : 0.0, log.bytes / 1048576.0);
-      if (glide_steps > 0) {
-        table.row("glide\t%s\t%g\t%u\t-\t-\t-\t%.3f\t-\t%llu\t%.0f\t%llu\t%.2f\t%.2f\n",
-                    protocol.c_str(), rtt, remote.connections, glide_s,
-                    (unsigned long long)glide_tiles, glide_s > 0 ? double(glide_tiles) / glide_s : 0.0,
-                    (unsigned long long)glide_log.requests,
-                    glide_tiles ? double(glide_log.requests) / double(glide_tiles) : 0.0,
-                    glide_log.bytes / 1048576.0);
-      }
-      std::fflush(stdout);
     }
-    }
-    // GDAL over the same proxy: the stack windows of each teleport.
-    if (!cog_path.empty()) {
-      const fs::path script = CLIPSTREAM_GDAL_SCRIPT;
-      std::string command =
-          "GDAL_DISABLE_READDIR_ON_OPEN=EMPTY_DIR CPL_VSIL_CURL_ALLOWED_EXTENSIONS=.tif "
-          "/usr/bin/python3 " + script.string() + " /vsicurl/" + proxy->url("cog.tif");
-      for (const std::string& w : windows) command += " '" + w + "'";
-      const size_t log_from = server->requests().size();
-      const Clock::time_point gdal_start = Clock::now();
-      FILE* pipe = ::popen(command.c_str(), "r");
-      std::vector<double> seconds;
-      if (pipe != nullptr) {
-        int index = 0;
-        double value = 0.0;
-        while (std::fscanf(pipe, "%d %lf", &index, &value) == 2) seconds.push_back(value);
-        ::pclose(pipe);
-      }
-      const double all_s = secondsSince(gdal_start);
-      const LogTotals log = logSince(*server, log_from);
-      if (seconds.size() != windows.size()) {
-        table.row("gdal\thttp\t%g\t-\t-\t-\t-\t(failed: %s)\n", rtt, command.c_str());
-        continue;
-      }
-      std::vector<double> sorted = seconds;
-      std::sort(sorted.begin(), sorted.end());
-      double read_s = 0.0;
-      for (double v : seconds) read_s += v;
-      // GDAL's open is the process's run time less the reads (includes the
-      // interpreter start, a few tens of milliseconds).
-      table.row("gdal_vsicurl\thttp\t%g\t-\t-\t%.1f\t-\t%.3f\t%.3f\t-\t-\t%llu\t-\t%.2f\n", rtt,
-                  (all_s - read_s) * 1000.0, sorted[sorted.size() / 2], sorted.back(),
-                  (unsigned long long)log.requests, log.bytes / 1048576.0);
-      std::fflush(stdout);
-    }
+    if (!o.cog_path.empty()) measureGdal(*server, *proxy, rtt, windows, &table);
   }
   server.reset();
   tls_server.reset();

@@ -33,6 +33,79 @@ double seconds(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
 
+// Writes a store of the image to store_path in geometry g: level l is the
+// nearest subsample by 2^l. False when any step fails.
+bool writeSubsampledStore(const std::vector<uint8_t>& image, uint64_t width, uint64_t height,
+                          const PyramidGeometry& g, const std::string& store_path) {
+  WriterOptions options;  // zstd 1 + left-delta: the defaults
+  options.fsync = false;
+  std::unique_ptr<TileStoreWriter> writer;
+  if (!TileStoreWriter::create(store_path, g, options, &writer)) return false;
+  std::vector<uint8_t> tile(g.tileBytes());
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    for (uint32_t ty = 0; ty < g.levels[l].tiles_y; ++ty) {
+      for (uint32_t tx = 0; tx < g.levels[l].tiles_x; ++tx) {
+        for (uint32_t y = 0; y < g.tile_px; ++y) {
+          const uint64_t ly = std::min<uint64_t>(uint64_t(ty) * g.tile_px + y, g.levels[l].height_px - 1);
+          for (uint32_t x = 0; x < g.tile_px; ++x) {
+            const uint64_t lx = std::min<uint64_t>(uint64_t(tx) * g.tile_px + x, g.levels[l].width_px - 1);
+            const uint64_t sx = std::min(width - 1, lx << l), sy = std::min(height - 1, ly << l);
+            std::memcpy(&tile[(size_t(y) * g.tile_px + x) * 3], &image[(sy * width + sx) * 3], 3);
+          }
+        }
+        EncodedTile encoded;
+        if (!encodeTile(g, options.encoding, {l, tx, ty}, tile, &encoded) ||
+            !writer->write(std::move(encoded))) {
+          return false;
+        }
+      }
+    }
+  }
+  return bool(writer->finish());
+}
+
+// Best of `runs` times to readTile() every key with `threads` threads, each
+// run on a freshly opened reader; false when an open or a read fails.
+bool bestReadTileS(const std::string& store_path, const std::vector<TileKey>& keys, unsigned threads,
+                   int runs, double* best_s) {
+  *best_s = 1e30;
+  for (int run = 0; run < runs; ++run) {
+    std::unique_ptr<TileStoreReader> reader;  // fresh: index pages load inside the timing
+    if (!TileStoreReader::open(store_path, &reader)) return false;
+    std::atomic<size_t> next{0};
+    std::atomic<bool> failed{false};
+    const auto start = Clock::now();
+    std::vector<std::thread> pool;
+    for (unsigned t = 0; t < threads; ++t) {
+      pool.emplace_back([&] {
+        std::vector<uint8_t> pixels;
+        for (size_t i; (i = next.fetch_add(1)) < keys.size();) {
+          if (!reader->readTile(keys[i], &pixels)) failed = true;
+        }
+      });
+    }
+    for (auto& thread : pool) thread.join();
+    *best_s = std::min(*best_s, seconds(start, Clock::now()));
+    if (failed) return false;
+  }
+  return true;
+}
+
+// Best of `runs` times of verifyAll() with `threads` threads, each run on a
+// freshly opened reader; false when an open or the verification fails.
+bool bestVerifyAllS(const std::string& store_path, unsigned threads, int runs, double* best_s) {
+  *best_s = 1e30;
+  for (int run = 0; run < runs; ++run) {
+    std::unique_ptr<TileStoreReader> reader;
+    if (!TileStoreReader::open(store_path, &reader)) return false;
+    const auto start = Clock::now();
+    std::vector<TileStoreReader::Problem> problems;
+    if (!reader->verifyAll(&problems, 10, {}, threads)) return false;
+    *best_s = std::min(*best_s, seconds(start, Clock::now()));
+  }
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -66,31 +139,7 @@ int main(int argc, char** argv) {
                    ("clipstream_store_read_bench_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const std::string store_path = (dir / "bench.cst").string();
-  WriterOptions options;  // zstd 1 + left-delta: the defaults
-  options.fsync = false;
-  std::unique_ptr<TileStoreWriter> writer;
-  if (!TileStoreWriter::create(store_path, g, options, &writer)) return 1;
-  std::vector<uint8_t> tile(g.tileBytes());
-  for (uint32_t l = 0; l < g.levelCount(); ++l) {
-    for (uint32_t ty = 0; ty < g.levels[l].tiles_y; ++ty) {
-      for (uint32_t tx = 0; tx < g.levels[l].tiles_x; ++tx) {
-        for (uint32_t y = 0; y < g.tile_px; ++y) {
-          const uint64_t ly = std::min<uint64_t>(uint64_t(ty) * g.tile_px + y, g.levels[l].height_px - 1);
-          for (uint32_t x = 0; x < g.tile_px; ++x) {
-            const uint64_t lx = std::min<uint64_t>(uint64_t(tx) * g.tile_px + x, g.levels[l].width_px - 1);
-            const uint64_t sx = std::min(width - 1, lx << l), sy = std::min(height - 1, ly << l);
-            std::memcpy(&tile[(size_t(y) * g.tile_px + x) * 3], &image[(sy * width + sx) * 3], 3);
-          }
-        }
-        EncodedTile encoded;
-        if (!encodeTile(g, options.encoding, {l, tx, ty}, tile, &encoded) ||
-            !writer->write(std::move(encoded))) {
-          return 1;
-        }
-      }
-    }
-  }
-  if (!writer->finish()) return 1;
+  if (!writeSubsampledStore(image, width, height, g, store_path)) return 1;
 
   std::vector<TileKey> keys;
   for (uint32_t l = 0; l < g.levelCount(); ++l) {
@@ -118,38 +167,13 @@ int main(int argc, char** argv) {
   std::printf("\n");
   reads_table.row("operation\tthreads\ttiles_per_s\tdecoded_MB_per_s\n");
   for (unsigned threads = 1; threads <= max_threads; ++threads) {
-    double best_s = 1e30;
-    for (int run = 0; run < runs; ++run) {
-      std::unique_ptr<TileStoreReader> reader;  // fresh: index pages load inside the timing
-      if (!TileStoreReader::open(store_path, &reader)) return 1;
-      std::atomic<size_t> next{0};
-      std::atomic<bool> failed{false};
-      const auto start = Clock::now();
-      std::vector<std::thread> pool;
-      for (unsigned t = 0; t < threads; ++t) {
-        pool.emplace_back([&] {
-          std::vector<uint8_t> pixels;
-          for (size_t i; (i = next.fetch_add(1)) < keys.size();) {
-            if (!reader->readTile(keys[i], &pixels)) failed = true;
-          }
-        });
-      }
-      for (auto& thread : pool) thread.join();
-      best_s = std::min(best_s, seconds(start, Clock::now()));
-      if (failed) return 1;
-    }
+    double best_s = 0.0;
+    if (!bestReadTileS(store_path, keys, threads, runs, &best_s)) return 1;
     reads_table.row("readTile\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
   }
   for (unsigned threads = 1; threads <= max_threads; ++threads) {
-    double best_s = 1e30;
-    for (int run = 0; run < runs; ++run) {
-      std::unique_ptr<TileStoreReader> reader;
-      if (!TileStoreReader::open(store_path, &reader)) return 1;
-      const auto start = Clock::now();
-      std::vector<TileStoreReader::Problem> problems;
-      if (!reader->verifyAll(&problems, 10, {}, threads)) return 1;
-      best_s = std::min(best_s, seconds(start, Clock::now()));
-    }
+    double best_s = 0.0;
+    if (!bestVerifyAllS(store_path, threads, runs, &best_s)) return 1;
     reads_table.row("verifyAll\t%u\t%.0f\t%.0f\n", threads, double(keys.size()) / best_s, decoded_mb / best_s);
   }
   std::filesystem::remove_all(dir);

@@ -32,6 +32,10 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kSide = 4194304.0;  // 2^22 texels
 constexpr double kFps = 60.0;
+// The plans want only the tiles the frames sample (PlanScope::kSampled):
+// every path's distinct tiles fit 256 MiB (2,377 tiles at most), so the
+// budgets where eviction decides anything are the small ones.
+constexpr double kBudgetsMb[] = {32, 48, 64, 96, 128, 256};
 
 struct Path {
   const char* name;
@@ -99,6 +103,58 @@ class FlatSource final : public TileSource {
   PyramidGeometry m_geometry;
 };
 
+struct FrameCost {
+  std::string path;
+  double mean_ms, p99_ms, max_ms;
+  uint64_t hint_frames, hint_ignored_frames;
+};
+
+// Flies one path for `frames` frames, recording its trace; returns the
+// render-thread cost of update() + takeReady(64) per frame (plan, hint
+// lookahead, ranking, queue rebuild on plan changes, hand-off, residency
+// bitmaps).
+FrameCost fly(const std::shared_ptr<TileSource>& source, const Viewport& vp, int frames, const Path& p,
+              const StreamerConfig& cfg, const PathHint* hint, const std::string& label) {
+  std::vector<double> frame_ms;
+  StreamerStats stats;
+  {
+    Streamer s(source, cfg);
+    if (hint) s.setPathHint(*hint);
+    for (int f = 0; f < frames; ++f) {
+      const auto t0 = std::chrono::steady_clock::now();
+      s.update(p.at(f / kFps), vp, f / kFps);
+      (void)s.takeReady(64);
+      frame_ms.push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    }
+    stats = s.stats();
+  }
+  std::sort(frame_ms.begin(), frame_ms.end());
+  double sum = 0.0;
+  for (double v : frame_ms) sum += v;
+  return {label, sum / double(frame_ms.size()), frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)],
+          frame_ms.back(), stats.path_hint_frames, stats.path_hint_ignored_frames};
+}
+
+// One row per budget: the path's two traces replayed under each policy.
+void replayRows(const Path& p, const std::vector<TraceEvent>& events, const std::vector<TraceEvent>& hinted_events,
+                const ReplayHint& hint, uint64_t entry_bytes, bench::TsvOut* hits_table) {
+  for (double mb : kBudgetsMb) {
+    const uint64_t capacity = uint64_t(mb * 1048576.0) / entry_bytes;
+    const ReplayResult r = replayTrace(events, capacity);
+    const ReplayResult h = replayTrace(hinted_events, capacity, &hint);
+    auto pct = [&](uint64_t hits) { return r.accesses ? 100.0 * double(hits) / double(r.accesses) : 0.0; };
+    auto ofOpt = [&](uint64_t hits) {
+      return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0;
+    };
+    hits_table->row("%s\t%.0f\t%llu\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
+                    (unsigned long long)r.accesses, (unsigned long long)r.gpu_reentries,
+                    (unsigned long long)r.distinct_tiles, pct(r.hits_opt), pct(r.hits_lru),
+                    pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
+                    pct(r.hits_plan), ofOpt(r.hits_plan), pct(h.hits_hinted), ofOpt(h.hits_hinted));
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -107,10 +163,6 @@ int main(int argc, char** argv) {
   if (!hits_table.ok() || !cost_table.ok()) return 1;
   const int frames = argc > 1 ? std::atoi(argv[1]) : 600;
   const std::string dir = argc > 2 ? argv[2] : "/tmp";
-  // The plans want only the tiles the frames sample (PlanScope::kSampled):
-  // every path's distinct tiles fit 256 MiB (2,377 tiles at most), so the
-  // budgets where eviction decides anything are the small ones.
-  const double budgets_mb[] = {32, 48, 64, 96, 128, 256};
   const uint64_t entry_bytes = 128 * 128 * 4 + kCacheEntryOverheadBytes;
   PyramidGeometry geometry;
   makePyramidGeometry(uint64_t(kSide), uint64_t(kSide), 128, PixelFormat::kRGBA8, &geometry);
@@ -123,43 +175,13 @@ int main(int argc, char** argv) {
       "path\tbudget_mib\taccesses\tgpu_reentries\tdistinct\topt_hit_%%\tlru_hit_%%\tours_hit_%%"
       "\tours_of_opt_%%"
       "\tprotect_gpu_hit_%%\tprotect_gpu_of_opt_%%\thinted_hit_%%\thinted_of_opt_%%\n");
-  struct FrameCost {
-    std::string path;
-    double mean_ms, p99_ms, max_ms;
-    uint64_t hint_frames, hint_ignored_frames;
-  };
   std::vector<FrameCost> costs;
-  // Flies one path, recording its trace; the render-thread cost of update()
-  // + takeReady(64) per frame (plan, hint lookahead, ranking, queue rebuild
-  // on plan changes, hand-off, residency bitmaps).
-  auto fly = [&](const Path& p, const StreamerConfig& cfg, const PathHint* hint, const std::string& label) {
-    std::vector<double> frame_ms;
-    StreamerStats stats;
-    {
-      Streamer s(source, cfg);
-      if (hint) s.setPathHint(*hint);
-      for (int f = 0; f < frames; ++f) {
-        const auto t0 = std::chrono::steady_clock::now();
-        s.update(p.at(f / kFps), vp, f / kFps);
-        (void)s.takeReady(64);
-        frame_ms.push_back(
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      }
-      stats = s.stats();
-    }
-    std::sort(frame_ms.begin(), frame_ms.end());
-    double sum = 0.0;
-    for (double v : frame_ms) sum += v;
-    costs.push_back({label, sum / double(frame_ms.size()),
-                     frame_ms[size_t(double(frame_ms.size() - 1) * 0.99)], frame_ms.back(),
-                     stats.path_hint_frames, stats.path_hint_ignored_frames});
-  };
   for (const Path& p : paths()) {
     StreamerConfig cfg;
     cfg.io_threads = 1;
     cfg.ram_budget_bytes = uint64_t(64) << 20;
     cfg.trace_path = dir + "/clipstream_" + p.name + ".trace";
-    fly(p, cfg, nullptr, p.name);
+    costs.push_back(fly(source, vp, frames, p, cfg, nullptr, p.name));
     // The same flight with its path given to the streamer.
     ReplayHint hint;
     hint.path.camera_at = p.at;
@@ -167,7 +189,7 @@ int main(int argc, char** argv) {
     hint.planner = cfg.planner;
     StreamerConfig hinted_cfg = cfg;
     hinted_cfg.trace_path = dir + "/clipstream_" + p.name + "_hinted.trace";
-    fly(p, hinted_cfg, &hint.path, std::string(p.name) + " hinted");
+    costs.push_back(fly(source, vp, frames, p, hinted_cfg, &hint.path, std::string(p.name) + " hinted"));
     std::vector<TraceEvent> events, hinted_events;
     for (auto [path, out] :
          {std::pair{&cfg.trace_path, &events}, std::pair{&hinted_cfg.trace_path, &hinted_events}}) {
@@ -187,20 +209,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s: the hinted flight requested other tiles or at other frames\n", p.name);
       return 1;
     }
-    for (double mb : budgets_mb) {
-      const uint64_t capacity = uint64_t(mb * 1048576.0) / entry_bytes;
-      const ReplayResult r = replayTrace(events, capacity);
-      const ReplayResult h = replayTrace(hinted_events, capacity, &hint);
-      auto pct = [&](uint64_t hits) { return r.accesses ? 100.0 * double(hits) / double(r.accesses) : 0.0; };
-      auto ofOpt = [&](uint64_t hits) {
-        return r.hits_opt ? 100.0 * double(hits) / double(r.hits_opt) : 100.0;
-      };
-      hits_table.row("%s\t%.0f\t%llu\t%llu\t%llu\t%.2f\t%.2f\t%.2f\t%.1f\t%.2f\t%.1f\t%.2f\t%.1f\n", p.name, mb,
-                  (unsigned long long)r.accesses, (unsigned long long)r.gpu_reentries,
-                  (unsigned long long)r.distinct_tiles, pct(r.hits_opt), pct(r.hits_lru),
-                  pct(r.hits_gpu_first), ofOpt(r.hits_gpu_first),
-                  pct(r.hits_plan), ofOpt(r.hits_plan), pct(h.hits_hinted), ofOpt(h.hits_hinted));
-    }
+    replayRows(p, events, hinted_events, hint, entry_bytes, &hits_table);
   }
   std::printf("\n");
   cost_table.row("flight\tupdate_takeready_mean_ms\tp99_ms\tmax_ms\thint_frames\thint_ignored_frames\n");

@@ -53,6 +53,81 @@ void fillTile(const PyramidGeometry& g, const TileKey& key, std::vector<uint8_t>
     }
 }
 
+// Writes the bench's store of side x side synthetic pixels to path; false
+// after printing why it cannot.
+bool writeBenchStore(const std::string& path, const PyramidGeometry& g) {
+  WriterOptions options;
+  options.fsync = false;
+  std::unique_ptr<TileStoreWriter> writer;
+  Status s = TileStoreWriter::create(path, g, options, &writer);
+  std::vector<uint8_t> pixels;
+  for (uint32_t l = 0; l < g.levelCount() && s; ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y && s; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x && s; ++x) {
+        fillTile(g, {l, x, y}, &pixels);
+        EncodedTile e;
+        s = encodeTile(g, options.encoding, {l, x, y}, pixels, &e);
+        if (s) s = writer->write(std::move(e));
+      }
+  if (s) s = writer->finish();
+  if (!s) {
+    std::fprintf(stderr, "cannot write bench store: %s\n", s.toString().c_str());
+    return false;
+  }
+  return true;
+}
+
+// Reads every tile of the store raw: all keys, the non-constant payloads and
+// the stored bytes. False when a tile does not read.
+bool readAllRaw(const TileStoreReader& reader, std::vector<TileKey>* keys, std::vector<RawTile>* raws,
+                uint64_t* stored) {
+  const PyramidGeometry& g = reader.geometry();
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        RawTile raw;
+        if (!reader.readRaw({l, x, y}, &raw)) return false;
+        keys->push_back({l, x, y});
+        *stored += raw.payload.size();
+        if (!raw.payload.empty()) raws->push_back(std::move(raw));
+      }
+  return true;
+}
+
+// The store source's whole path: every key fetched (read, verify, decode,
+// convert to RGBA8) by `threads` threads taking keys in turn.
+void fetchAll(TileSource& source, const std::vector<TileKey>& keys, unsigned threads) {
+  std::atomic<size_t> next{0};
+  std::atomic<size_t> failures{0};
+  std::vector<std::thread> pool;
+  for (unsigned i = 0; i < threads; ++i)
+    pool.emplace_back([&] {
+      std::vector<uint8_t> rgba;
+      for (size_t k; (k = next.fetch_add(1)) < keys.size();)
+        if (!source.fetch(keys[k], &rgba)) failures++;
+    });
+  for (std::thread& t : pool) t.join();
+  if (failures) std::fprintf(stderr, "%zu fetches failed\n", failures.load());
+}
+
+struct Measure {
+  const char* name;
+  unsigned threads;
+  size_t tiles;
+  std::function<void()> body;
+  double best_s = 1e30;
+};
+
+// Runs every body `repeats` times, interleaved, keeping each one's best time.
+void runInterleaved(int repeats, std::vector<Measure>* measures) {
+  for (int r = 0; r < repeats; ++r)
+    for (Measure& m : *measures) {
+      const double t0 = nowS();
+      m.body();
+      m.best_s = std::min(m.best_s, nowS() - t0);
+    }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -65,41 +140,14 @@ int main(int argc, char** argv) {
 
   PyramidGeometry g;
   if (!makePyramidGeometry(side, side, 128, PixelFormat::kRGB8, &g)) return 1;
-  {
-    WriterOptions options;
-    options.fsync = false;
-    std::unique_ptr<TileStoreWriter> writer;
-    Status s = TileStoreWriter::create(path, g, options, &writer);
-    std::vector<uint8_t> pixels;
-    for (uint32_t l = 0; l < g.levelCount() && s; ++l)
-      for (uint32_t y = 0; y < g.levels[l].tiles_y && s; ++y)
-        for (uint32_t x = 0; x < g.levels[l].tiles_x && s; ++x) {
-          fillTile(g, {l, x, y}, &pixels);
-          EncodedTile e;
-          s = encodeTile(g, options.encoding, {l, x, y}, pixels, &e);
-          if (s) s = writer->write(std::move(e));
-        }
-    if (s) s = writer->finish();
-    if (!s) {
-      std::fprintf(stderr, "cannot write bench store: %s\n", s.toString().c_str());
-      return 1;
-    }
-  }
+  if (!writeBenchStore(path, g)) return 1;
   std::unique_ptr<TileStoreReader> reader;
   Status s = TileStoreReader::open(path, &reader);
   if (!s) return 1;
   std::vector<TileKey> keys;
   std::vector<RawTile> raws;
   uint64_t stored = 0;
-  for (uint32_t l = 0; l < g.levelCount(); ++l)
-    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
-        RawTile raw;
-        if (!reader->readRaw({l, x, y}, &raw)) return 1;
-        keys.push_back({l, x, y});
-        stored += raw.payload.size();
-        if (!raw.payload.empty()) raws.push_back(std::move(raw));
-      }
+  if (!readAllRaw(*reader, &keys, &raws, &stored)) return 1;
   const double tile_mb = double(g.tileBytes()) / (1024.0 * 1024.0);
 
   Status open_status;
@@ -113,26 +161,6 @@ int main(int argc, char** argv) {
   ZSTD_DCtx* dctx = ZSTD_createDCtx();
   std::vector<uint8_t> decoded(g.tileBytes());
   std::vector<uint8_t> rgba_out(size_t(g.tile_px) * g.tile_px * 4);
-  auto pipeline = [&](unsigned threads) {
-    std::atomic<size_t> next{0};
-    std::atomic<size_t> failures{0};
-    std::vector<std::thread> pool;
-    for (unsigned i = 0; i < threads; ++i)
-      pool.emplace_back([&] {
-        std::vector<uint8_t> rgba;
-        for (size_t k; (k = next.fetch_add(1)) < keys.size();)
-          if (!source->fetch(keys[k], &rgba)) failures++;
-      });
-    for (std::thread& t : pool) t.join();
-    if (failures) std::fprintf(stderr, "%zu fetches failed\n", failures.load());
-  };
-  struct Measure {
-    const char* name;
-    unsigned threads;
-    size_t tiles;
-    std::function<void()> body;
-    double best_s = 1e30;
-  };
   std::vector<Measure> measures = {
       // Raw zstd: decompress every non-constant payload on one thread.
       {"raw_zstd", 1, raws.size(),
@@ -165,15 +193,10 @@ int main(int argc, char** argv) {
          for (const RawTile& raw : raws)
            (void)decodeTileRgba8(g, reader->info().encoding, raw, rgba_out);
        }},
-      {"read_verify_decode_rgba8", 1, keys.size(), [&] { pipeline(1); }},
-      {"read_verify_decode_rgba8", 2, keys.size(), [&] { pipeline(2); }},
+      {"read_verify_decode_rgba8", 1, keys.size(), [&] { fetchAll(*source, keys, 1); }},
+      {"read_verify_decode_rgba8", 2, keys.size(), [&] { fetchAll(*source, keys, 2); }},
   };
-  for (int r = 0; r < repeats; ++r)
-    for (Measure& m : measures) {
-      const double t0 = nowS();
-      m.body();
-      m.best_s = std::min(m.best_s, nowS() - t0);
-    }
+  runInterleaved(repeats, &measures);
   ZSTD_freeDCtx(dctx);
 
   const double zstd_tiles_s = double(raws.size()) / measures[0].best_s;

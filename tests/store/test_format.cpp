@@ -196,6 +196,8 @@ std::vector<uint8_t> writeKnownStore(const PyramidGeometry& g, const WriterOptio
   return bytes;
 }
 
+// Long: one known store checked against docs/tile-store.md section by section, field by field,
+// in the order the document lists them; it reads best as one walk through the file.
 TEST(StoreFormat, KnownStoreHeaderMatchesTheDocumentedLayout) {
   PyramidGeometry g;
   // Values chosen so that no two neighbouring header fields hold the same

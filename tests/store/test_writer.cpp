@@ -179,6 +179,33 @@ TEST(TileStoreWriter, ConcurrentWritersInAnyOrderProduceAReadableStore) {
   }
 }
 
+// Counts the aligned squares of side x side tiles (over every level) whose
+// stored payloads lie back to back in the file (*together) and those that do
+// not (*apart); squares of constant tiles only are not counted.
+void countAlignedSquares(const TileStoreReader& reader, uint32_t side, size_t* together, size_t* apart) {
+  const PyramidGeometry& g = reader.geometry();
+  *together = *apart = 0;
+  for (uint32_t l = 0; l < g.levelCount(); ++l) {
+    for (uint32_t by = 0; by + side <= g.levels[l].tiles_y; by += side) {
+      for (uint32_t bx = 0; bx + side <= g.levels[l].tiles_x; bx += side) {
+        uint64_t first = UINT64_MAX, end = 0, bytes = 0;
+        for (uint32_t y = by; y < by + side; ++y) {
+          for (uint32_t x = bx; x < bx + side; ++x) {
+            TileLocation location;
+            ASSERT_TRUE(reader.locate({l, x, y}, &location).ok());
+            if (location.constant) continue;
+            first = std::min(first, location.offset);
+            end = std::max(end, location.offset + location.stored_bytes);
+            bytes += location.stored_bytes;
+          }
+        }
+        if (bytes == 0) continue;
+        (end - first == bytes ? *together : *apart) += 1;
+      }
+    }
+  }
+}
+
 // PayloadOrder::kCurve: the same tiles, the same reader, another layout:
 // every aligned square of 2, 4 and 8 tiles lies in one stretch of the file
 // (its payloads back to back), which the written order (row by row) does
@@ -192,29 +219,6 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
   for (uint32_t l = 0; l < g.levelCount(); ++l)
     for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
       for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
-  // Squares of `side` tiles lying back to back, and those that do not.
-  auto squares = [&](const TileStoreReader& reader, uint32_t side, size_t* together, size_t* apart) {
-    *together = *apart = 0;
-    for (uint32_t l = 0; l < g.levelCount(); ++l) {
-      for (uint32_t by = 0; by + side <= g.levels[l].tiles_y; by += side) {
-        for (uint32_t bx = 0; bx + side <= g.levels[l].tiles_x; bx += side) {
-          uint64_t first = UINT64_MAX, end = 0, bytes = 0;
-          for (uint32_t y = by; y < by + side; ++y) {
-            for (uint32_t x = bx; x < bx + side; ++x) {
-              TileLocation location;
-              ASSERT_TRUE(reader.locate({l, x, y}, &location).ok());
-              if (location.constant) continue;
-              first = std::min(first, location.offset);
-              end = std::max(end, location.offset + location.stored_bytes);
-              bytes += location.stored_bytes;
-            }
-          }
-          if (bytes == 0) continue;
-          (end - first == bytes ? *together : *apart) += 1;
-        }
-      }
-    }
-  };
   uint64_t written_bytes = 0;
   for (const PayloadOrder order : {PayloadOrder::kWritten, PayloadOrder::kCurve}) {
     SCOPED_TRACE(payloadOrderName(order));
@@ -236,7 +240,7 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
               order == PayloadOrder::kCurve ? BatchShape::kSquare : BatchShape::kRow);
     for (const uint32_t side : {2u, 4u, 8u}) {
       size_t together = 0, apart = 0;
-      squares(*reader, side, &together, &apart);
+      countAlignedSquares(*reader, side, &together, &apart);
       if (order == PayloadOrder::kCurve) {
         EXPECT_EQ(apart, 0u) << side << " x " << side;
         EXPECT_GT(together, 0u);
@@ -283,7 +287,7 @@ TEST(TileStoreWriter, CurveOrderLaysAlignedSquaresTogetherAndReadsTheSameTiles) 
     ASSERT_EQ(pixels, syntheticTile(g, key));
   }
   size_t together = 0, apart = 0;
-  squares(*reader, 8, &together, &apart);
+  countAlignedSquares(*reader, 8, &together, &apart);
   EXPECT_EQ(apart, 0u);
   EXPECT_EQ(dir.entries().size(), 3u) << "no temporary left";
 }
