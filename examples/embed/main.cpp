@@ -59,6 +59,8 @@ cs::Camera orbitCamera(const cs::PyramidGeometry& geometry, double turn) {
 
 }  // namespace
 
+// Long: the example a newcomer reads top to bottom: every call of the
+// embedding (open, create, frame loop, shutdown) in order, in one place.
 int main(int argc, char** argv) {
   std::string store_path;
   unsigned long frames = 240;

@@ -85,6 +85,21 @@ struct ClipmapRenderer::Impl {
   // the window's centre first), fills their borders and mip 1, and writes
   // the indirection maps into set `target`.
   void endUploadsPaged(uint32_t target);
+  // endUploadsPaged()'s steps, in order. Drops the pixels kept for stack
+  // tiles no longer resident, re-indexes the pages when the windows moved;
+  // each stack level's residency where it is drawn (else null).
+  std::vector<const LevelResidency*> keepResidentPages();
+  // Keeps the pages of the tiles the frame reads and places the others,
+  // coarse levels first, near each window's centre first, while the pool
+  // has pages.
+  void placeWantedPages(const std::vector<const LevelResidency*>& by_level);
+  // Mip 1 of every page from its parent's page (only after a page moved).
+  void copyMip1FromParents();
+  // The usable map over what has a page, computed again only when that
+  // changed; clears m_pages_changed.
+  void updatePagedUsableMap(const std::vector<const LevelResidency*>& by_level);
+  // Writes the indirection map into set `target` when it holds an older one.
+  void writeIndirectionMap(uint32_t target);
   // Takes a page for `key` and writes `pixels` into it (with its borders
   // from the neighbours' pages); kNoPage when the pool is full this frame.
   uint32_t placePage(const TileKey& key, const uint8_t* pixels, bool pin);

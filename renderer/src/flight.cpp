@@ -209,6 +209,51 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
   return okStatus();
 }
 
+namespace {
+
+// The frame's per-level counters: RAM hits, misses and bytes read since
+// `before` (of the colour layer), and GPU hits and misses of the needed
+// stack levels' visible tiles; then their totals.
+void countLevels(const StreamerStats& now, const StreamerStats& before, uint32_t levels, const ClipmapPlan& plan,
+                 const UsableMap& usable, FrameSample* f) {
+  f->levels.resize(levels);
+  // The colour layer's counters (with terrain, `levels` sums both layers).
+  const std::vector<LevelCounters>& now_levels = now.layers.empty() ? now.levels : now.layers[0].levels;
+  const std::vector<LevelCounters>& before_levels =
+      before.layers.empty() ? before.levels : before.layers[0].levels;
+  for (uint32_t l = 0; l < levels; ++l) {
+    const LevelCounters c = l < now_levels.size() ? now_levels[l] : LevelCounters{};
+    const LevelCounters b = l < before_levels.size() ? before_levels[l] : LevelCounters{};
+    LevelFrame& lf = f->levels[l];
+    lf.ram_hits = c.ram_hits - b.ram_hits;
+    lf.ram_misses = c.ram_misses - b.ram_misses;
+    lf.bytes_read = c.bytes_read - b.bytes_read;
+  }
+  // GPU hits: visible tiles of the needed stack levels the shader may sample
+  // (usable) this frame; misses draw from a coarser level.
+  for (const ClipLevelPlan& lp : plan.stack) {
+    if (!lp.needed || lp.level >= usable.usable.size() || lp.level >= levels) continue;
+    LevelFrame& lf = f->levels[lp.level];
+    for (int64_t y = lp.visible.y0; y < lp.visible.y1; ++y)
+      for (int64_t x = lp.visible.x0; x < lp.visible.x1; ++x) {
+        const bool ok =
+            usable.windows[lp.level].contains(x, y) &&
+            usable.usable[lp.level][size_t(toroidalSlot(y, usable.clip_tiles)) * usable.clip_tiles +
+                                    toroidalSlot(x, usable.clip_tiles)] != 0;
+        (ok ? lf.gpu_hits : lf.gpu_misses)++;
+      }
+  }
+  for (const LevelFrame& lf : f->levels) {
+    f->total.ram_hits += lf.ram_hits;
+    f->total.ram_misses += lf.ram_misses;
+    f->total.bytes_read += lf.bytes_read;
+    f->total.gpu_hits += lf.gpu_hits;
+    f->total.gpu_misses += lf.gpu_misses;
+  }
+}
+
+}  // namespace
+
 FrameSample Flight::step(const Camera& camera) {
   return step(camera, double(m_steps) * renderer_config::kSimulatedFrameSeconds);
 }
@@ -300,42 +345,7 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   f.in_flight = now.in_flight;
   f.ram_bytes = now.ram_bytes;
   f.tiles_loaded = now.total.loads - m_before.total.loads;
-  const uint32_t levels = m_source->geometry().levelCount();
-  f.levels.resize(levels);
-  // The colour layer's counters (with terrain, `levels` sums both layers).
-  const std::vector<LevelCounters>& now_levels = now.layers.empty() ? now.levels : now.layers[0].levels;
-  const std::vector<LevelCounters>& before_levels =
-      m_before.layers.empty() ? m_before.levels : m_before.layers[0].levels;
-  for (uint32_t l = 0; l < levels; ++l) {
-    const LevelCounters c = l < now_levels.size() ? now_levels[l] : LevelCounters{};
-    const LevelCounters b = l < before_levels.size() ? before_levels[l] : LevelCounters{};
-    LevelFrame& lf = f.levels[l];
-    lf.ram_hits = c.ram_hits - b.ram_hits;
-    lf.ram_misses = c.ram_misses - b.ram_misses;
-    lf.bytes_read = c.bytes_read - b.bytes_read;
-  }
-  // GPU hits: visible tiles of the needed stack levels the shader may sample
-  // (usable) this frame; misses draw from a coarser level.
-  const UsableMap& usable = m_renderer->usableMap();
-  for (const ClipLevelPlan& lp : plan.stack) {
-    if (!lp.needed || lp.level >= usable.usable.size() || lp.level >= levels) continue;
-    LevelFrame& lf = f.levels[lp.level];
-    for (int64_t y = lp.visible.y0; y < lp.visible.y1; ++y)
-      for (int64_t x = lp.visible.x0; x < lp.visible.x1; ++x) {
-        const bool ok =
-            usable.windows[lp.level].contains(x, y) &&
-            usable.usable[lp.level][size_t(toroidalSlot(y, usable.clip_tiles)) * usable.clip_tiles +
-                                    toroidalSlot(x, usable.clip_tiles)] != 0;
-        (ok ? lf.gpu_hits : lf.gpu_misses)++;
-      }
-  }
-  for (const LevelFrame& lf : f.levels) {
-    f.total.ram_hits += lf.ram_hits;
-    f.total.ram_misses += lf.ram_misses;
-    f.total.bytes_read += lf.bytes_read;
-    f.total.gpu_hits += lf.gpu_hits;
-    f.total.gpu_misses += lf.gpu_misses;
-  }
+  countLevels(now, m_before, m_source->geometry().levelCount(), plan, m_renderer->usableMap(), &f);
   if (f.warmup) m_warmup_loads += f.tiles_loaded;
   m_before = now;
   return f;

@@ -298,10 +298,21 @@ uint32_t ClipmapRenderer::Impl::pageOf(uint32_t level, int64_t x, int64_t y) con
 
 void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
   ++m_frame;
-  const uint32_t pyramid = m_config.pyramid_level;
-  const uint32_t levels = m_geometry.levelCount();
-  const uint32_t c = m_slots;
+  const std::vector<const LevelResidency*> by_level = keepResidentPages();
+  placeWantedPages(by_level);
+  // Only a page placed (this frame's, or a pyramid tile's since the last
+  // frame) changes what follows from the pages: their borders, mip 1 and
+  // the maps' page numbers.
+  if (m_pages_changed) copyMip1FromParents();
+  const auto usable_start = std::chrono::steady_clock::now();
+  updatePagedUsableMap(by_level);
+  writeIndirectionMap(target);
+  m_stats.usable_ms = msSince(usable_start);
+}
 
+std::vector<const LevelResidency*> ClipmapRenderer::Impl::keepResidentPages() {
+  const uint32_t pyramid = m_config.pyramid_level;
+  const uint32_t c = m_slots;
   // Stack tiles are kept while their window holds them resident.
   std::vector<const LevelResidency*> by_level(pyramid, nullptr);
   for (const LevelResidency& r : m_residency)
@@ -330,7 +341,11 @@ void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
     m_page_windows = std::move(windows);
     indexPages();
   }
+  return by_level;
+}
 
+void ClipmapRenderer::Impl::placeWantedPages(const std::vector<const LevelResidency*>& by_level) {
+  const uint32_t pyramid = m_config.pyramid_level;
   // The tiles the frame reads, coarse levels first (every finer tile needs
   // its ancestors), near the window's centre first within a level (the
   // windows lie around the camera's ground point). Those with a page keep
@@ -372,33 +387,34 @@ void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
   }
   // The index above predates this frame's pages (and what they evicted).
   if (m_stats.pages_filled != filled_before) indexPages();
+}
 
-  // Only a page placed (this frame's, or a pyramid tile's since the last
-  // frame) changes what follows from the pages: their borders, mip 1 and
-  // the maps' page numbers.
-  if (m_pages_changed) {
-    // Mip 1 of every page: the parent's texels over it, copied again when
-    // the parent's page has borders it did not have at the last copy.
-    const uint32_t tp = m_geometry.tile_px, b = m_page_border;
-    for (uint32_t page = 1; page < m_pages->pages(); ++page) {
-      if (!m_pages->holds(page)) continue;
-      const uint16_t from = m_pages->mip1From(page);
-      if (from == kAllBorders) continue;  // the parent has nothing more to give
-      const TileKey& k = m_pages->key(page);
-      if (k.level + 1 >= levels) continue;
-      const uint32_t parent = pageOf(k.level + 1, k.x / 2, k.y / 2);
-      if (parent == PageTable::kNoPage) continue;
-      const uint16_t has = m_pages->borders(parent);
-      if (from != PageTable::kMip1Empty && (has & ~from) == 0) continue;
-      copyPageRegion(parent, 0, b + (k.x & 1) * (tp / 2) - b / 2, b + (k.y & 1) * (tp / 2) - b / 2, page, 1, 0, 0,
-                     tp / 2 + b, tp / 2 + b);
-      m_pages->setMip1From(page, has);
-    }
+void ClipmapRenderer::Impl::copyMip1FromParents() {
+  const uint32_t levels = m_geometry.levelCount();
+  // Mip 1 of every page: the parent's texels over it, copied again when
+  // the parent's page has borders it did not have at the last copy.
+  const uint32_t tp = m_geometry.tile_px, b = m_page_border;
+  for (uint32_t page = 1; page < m_pages->pages(); ++page) {
+    if (!m_pages->holds(page)) continue;
+    const uint16_t from = m_pages->mip1From(page);
+    if (from == kAllBorders) continue;  // the parent has nothing more to give
+    const TileKey& k = m_pages->key(page);
+    if (k.level + 1 >= levels) continue;
+    const uint32_t parent = pageOf(k.level + 1, k.x / 2, k.y / 2);
+    if (parent == PageTable::kNoPage) continue;
+    const uint16_t has = m_pages->borders(parent);
+    if (from != PageTable::kMip1Empty && (has & ~from) == 0) continue;
+    copyPageRegion(parent, 0, b + (k.x & 1) * (tp / 2) - b / 2, b + (k.y & 1) * (tp / 2) - b / 2, page, 1, 0, 0,
+                   tp / 2 + b, tp / 2 + b);
+    m_pages->setMip1From(page, has);
   }
+}
 
+void ClipmapRenderer::Impl::updatePagedUsableMap(const std::vector<const LevelResidency*>& by_level) {
+  const uint32_t pyramid = m_config.pyramid_level;
+  const uint32_t c = m_slots;
   // The usable map over what has a page, computed again only when that
   // changed (the windows, residency or pages).
-  const auto usable_start = std::chrono::steady_clock::now();
   std::vector<LevelResidency> paged;
   paged.reserve(m_residency.size());
   for (const LevelResidency& r : m_residency) {
@@ -433,7 +449,12 @@ void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
     ++m_map_generation;
   }
   m_pages_changed = false;
+}
 
+void ClipmapRenderer::Impl::writeIndirectionMap(uint32_t target) {
+  const uint32_t pyramid = m_config.pyramid_level;
+  const uint32_t levels = m_geometry.levelCount();
+  const uint32_t c = m_slots;
   // Per slot of every level: usableCode() | levels up << 8 | page << 16,
   // the page of the finest usable tile over the slot's tile (its ancestor
   // `up` levels coarser). Stack levels: their window's tiles; the pyramid's
@@ -467,7 +488,6 @@ void ClipmapRenderer::Impl::endUploadsPaged(uint32_t target) {
                         GL_UNSIGNED_INT, flat.data());
     m_map_written[target] = m_map_generation;
   }
-  m_stats.usable_ms = msSince(usable_start);
 }
 
 }  // namespace clipstream

@@ -177,6 +177,8 @@ void legend(Hud& hud, float x, float bottom, uint32_t levels, bool terrain, floa
 
 }  // namespace
 
+// Long: the options, their checks, the window and the frame loop share its
+// locals (the loop reads most options); to be split as clipstream-tile's was.
 int main(int argc, char** argv) {
   CLI::App app{"Interactive clipmap viewer (GLFW window).", "clipstream-view"};
   std::string store_path, size = "1280x720", record_path = "recorded_path.json", elevation_path;
