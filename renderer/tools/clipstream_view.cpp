@@ -175,100 +175,111 @@ void legend(Hud& hud, float x, float bottom, uint32_t levels, bool terrain, floa
   }
 }
 
-}  // namespace
-
-// Long: the options, their checks, the window and the frame loop share its
-// locals (the loop reads most options); to be split as clipstream-tile's was.
-int main(int argc, char** argv) {
-  CLI::App app{"Interactive clipmap viewer (GLFW window).", "clipstream-view"};
+// The command line, as parsed.
+struct Args {
   std::string store_path, size = "1280x720", record_path = "recorded_path.json", elevation_path;
   double vertical_scale = 1.0;
   bool stretch_elevation = false;
   uint64_t procedural_px = 0, cache_mb = 512;
   uint32_t upload_tiles = renderer_config::kDefaultUploadTilesPerFrame, max_frames = 0;
-  app.add_option("store", store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   RemoteOptions remote;
-  cli::addRemoteOptions(app, &remote);
-  app.add_option("--procedural", procedural_px, "Procedural texture of this side instead")
-      ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
-  app.add_option("--size", size, "Window WIDTHxHEIGHT");
-  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
-      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
-  app.add_option("--upload-tiles", upload_tiles, "GPU tile uploads per frame")
-      ->transform(cli::wholeInRange(1, 1000000));
   std::string tile_format = "rgba8";
-  app.add_option("--tile-format", tile_format,
-                 "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
   std::string texture_memory = "auto";
-  app.add_option("--texture-memory", texture_memory,
+  uint64_t pool_mb = 0;
+  std::string screenshot_dir = ".";
+  std::string terrain_method = "clipmap";
+  double terrain_error_px = renderer_config::kTerrainErrorPx;
+};
+
+// What the checked options chose.
+struct Choices {
+  Viewport vp;
+  TerrainMethod method = TerrainMethod::kClipmap;
+  TileContent tile_content = TileContent::kRgba8;
+  TextureMemory memory = TextureMemory::kStack;
+};
+
+void addOptions(CLI::App& app, Args* a) {
+  app.add_option("store", a->store_path, "Tile store file or http(s):// URL (omit with --procedural)");
+  cli::addRemoteOptions(app, &a->remote);
+  app.add_option("--procedural", a->procedural_px, "Procedural texture of this side instead")
+      ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
+  app.add_option("--size", a->size, "Window WIDTHxHEIGHT");
+  app.add_option("--cache-mb", a->cache_mb, "Streamer RAM budget in MiB")
+      ->transform(cli::wholeInRange(1, int64_t(1) << 30));
+  app.add_option("--upload-tiles", a->upload_tiles, "GPU tile uploads per frame")
+      ->transform(cli::wholeInRange(1, 1000000));
+  app.add_option("--tile-format", a->tile_format,
+                 "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads)");
+  app.add_option("--texture-memory", a->texture_memory,
                  "Where colour tiles live on the GPU: stack (every level's whole window), paged (a "
                  "fixed pool of pages holding the tiles the frames sample), or auto: paged, but stack "
                  "with --elevation, which paged does not draw yet");
-  uint64_t pool_mb = 0;
-  app.add_option("--pool-mb", pool_mb,
+  app.add_option("--pool-mb", a->pool_mb,
                  "The page pool's size with --texture-memory paged (default: 5.5 pages of 128^2 per 128^2 "
                  "of the viewport, 59 MiB of RGBA8 at 1920x1080)")
       ->transform(cli::wholeInRange(1, 65536));
-  app.add_option("--record-out", record_path, "Where R writes the recorded path");
-  std::string screenshot_dir = ".";
-  app.add_option("--screenshot-dir", screenshot_dir, "Where P writes clipstream-view-NNN.png");
-  app.add_option("--frames", max_frames, "Exit after this many frames (0 = run until closed)")
+  app.add_option("--record-out", a->record_path, "Where R writes the recorded path");
+  app.add_option("--screenshot-dir", a->screenshot_dir, "Where P writes clipstream-view-NNN.png");
+  app.add_option("--frames", a->max_frames, "Exit after this many frames (0 = run until closed)")
       ->transform(cli::wholeInRange(0, UINT32_MAX));
-  app.add_option("--elevation", elevation_path, "Elevation store under the texture: fly over terrain");
-  app.add_option("--vertical-scale", vertical_scale, "Height exaggeration (with --elevation)")
+  app.add_option("--elevation", a->elevation_path, "Elevation store under the texture: fly over terrain");
+  app.add_option("--vertical-scale", a->vertical_scale, "Height exaggeration (with --elevation)")
       ->transform(cli::inRange(0.001, 1000.0));
-  app.add_flag("--stretch-elevation", stretch_elevation,
+  app.add_flag("--stretch-elevation", a->stretch_elevation,
                "Stretch the elevation store over the texture instead of placing it by georeference");
-  std::string terrain_method = "clipmap";
-  double terrain_error_px = renderer_config::kTerrainErrorPx;
-  app.add_option("--terrain", terrain_method,
+  app.add_option("--terrain", a->terrain_method,
                  "Terrain geometry with --elevation: clipmap (default), quadtree, flat or full");
-  app.add_option("--terrain-error", terrain_error_px,
+  app.add_option("--terrain-error", a->terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
   app.footer(std::string("Keys:\n") + kKeys +
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
-  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
-  TerrainMethod method = TerrainMethod::kClipmap;
-  if (Status s = cli::parseTerrainMethod(terrain_method, &method); !s)
-    return cli::usageError(app, "--terrain: " + s.message);
-  if ((app.count("--terrain") || app.count("--terrain-error")) && elevation_path.empty())
-    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
+}
 
-  Viewport vp;
-  if (Status s = cli::parseSize(size, &vp.width_px, &vp.height_px); !s) return cli::usageError(app, s.message);
-  TileContent tile_content = TileContent::kRgba8;
-  if (Status s = colourTileContentFromName(tile_format, &tile_content); !s)
+// The options' checks, in the order they are reported; an exit code when
+// one fails.
+std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
+  if (Status s = cli::parseTerrainMethod(a.terrain_method, &c->method); !s)
+    return cli::usageError(app, "--terrain: " + s.message);
+  if ((app.count("--terrain") || app.count("--terrain-error")) && a.elevation_path.empty())
+    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
+  if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
-  TextureMemory memory = TextureMemory::kStack;
-  if (Status s = cli::parseTextureMemory(texture_memory, !elevation_path.empty(), kDefaultBuffering,
-                                        app.count("--pool-mb") > 0, &memory);
+  if (Status s = colourTileContentFromName(a.tile_format, &c->tile_content); !s)
+    return cli::usageError(app, s.message);
+  if (Status s = cli::parseTextureMemory(a.texture_memory, !a.elevation_path.empty(), kDefaultBuffering,
+                                        app.count("--pool-mb") > 0, &c->memory);
       !s)
     return cli::usageError(app, s.message);
-  if (!store_path.empty() && procedural_px > 0)
+  if (!a.store_path.empty() && a.procedural_px > 0)
     return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
-  {
-    std::error_code ec;
-    if (!store_path.empty() && !isStoreUrl(store_path) &&
-        (sameFile(store_path, record_path) || std::filesystem::weakly_canonical(store_path, ec) ==
-                                                   std::filesystem::weakly_canonical(record_path, ec)))
-      return cli::usageError(app, "--record-out " + record_path + " is the store being viewed");
-    OutputOptions record_options;
-    record_options.existing = ExistingOutput::kReplaceRegular;
-    if (Status s = checkOutputPath(record_path, record_options); !s) {
-      cli::printError(app, "--record-out: " + s.toString());
-      return cli::kExitFailure;
-    }
+  std::error_code ec;
+  if (!a.store_path.empty() && !isStoreUrl(a.store_path) &&
+      (sameFile(a.store_path, a.record_path) || std::filesystem::weakly_canonical(a.store_path, ec) ==
+                                                    std::filesystem::weakly_canonical(a.record_path, ec)))
+    return cli::usageError(app, "--record-out " + a.record_path + " is the store being viewed");
+  OutputOptions record_options;
+  record_options.existing = ExistingOutput::kReplaceRegular;
+  if (Status s = checkOutputPath(a.record_path, record_options); !s) {
+    cli::printError(app, "--record-out: " + s.toString());
+    return cli::kExitFailure;
   }
-  cli::installSignalHandlers();
+  return std::nullopt;
+}
+
+// The colour source (a store, or the procedural texture; BC1 transcoded if
+// asked) and the terrain under it; an exit code when one cannot be had.
+std::optional<int> openScene(CLI::App& app, const Args& a, const Choices& c, std::shared_ptr<TileSource>* out,
+                             std::optional<TerrainLayerConfig>* terrain) {
   std::shared_ptr<TileSource> source;
-  if (procedural_px > 0) {
+  if (a.procedural_px > 0) {
     ProceduralSpec spec;
-    spec.width_px = spec.height_px = procedural_px;
+    spec.width_px = spec.height_px = a.procedural_px;
     source = makeProceduralSource(spec);
-  } else if (!store_path.empty()) {
+  } else if (!a.store_path.empty()) {
     Status s;
-    source = openStoreSource(store_path, remote, &s);
+    source = openStoreSource(a.store_path, a.remote, &s);
     if (!source) {
       cli::printError(app, s.toString());
       return 1;
@@ -277,7 +288,7 @@ int main(int argc, char** argv) {
   if (!source) {
     return cli::usageError(app, "give a STORE or --procedural SIDE");
   }
-  if (tile_content == TileContent::kBc1) {
+  if (c.tile_content == TileContent::kBc1) {
     Status s;
     source = makeBc1Source(source, &s);
     if (!source) {
@@ -285,27 +296,31 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  const PyramidGeometry& g = source->geometry();
-  std::optional<TerrainLayerConfig> terrain;
-  if (!elevation_path.empty()) {
+  if (!a.elevation_path.empty()) {
     TerrainLayerConfig layer;
     std::vector<std::string> notes;
-    if (Status s = openTerrainLayer(procedural_px > 0 ? std::string() : store_path, g, elevation_path,
-                                    vertical_scale, stretch_elevation,
-                                    renderer_config::kTerrainRingCells, &layer, &notes, remote);
+    if (Status s = openTerrainLayer(a.procedural_px > 0 ? std::string() : a.store_path, source->geometry(),
+                                    a.elevation_path, a.vertical_scale, a.stretch_elevation,
+                                    renderer_config::kTerrainRingCells, &layer, &notes, a.remote);
         !s) {
       cli::printError(app, s.toString());
       return 1;
     }
     for (const std::string& w : notes) cli::printError(app, "warning: " + w);
-    layer.method = method;
-    layer.error_px = terrain_error_px;
-    terrain = std::move(layer);
+    layer.method = c.method;
+    layer.error_px = a.terrain_error_px;
+    *terrain = std::move(layer);
   }
+  *out = std::move(source);
+  return std::nullopt;
+}
 
+// The window with an OpenGL 4.5 core context, current, its input going to
+// *input; null (with the reason on stderr, GLFW terminated) when none.
+GLFWwindow* openWindow(const Viewport& vp, Input* input) {
   if (!glfwInit()) {
     std::cerr << "clipstream-view: GLFW could not initialise (no display?)\n";
-    return 1;
+    return nullptr;
   }
   glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
   glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
@@ -316,12 +331,11 @@ int main(int argc, char** argv) {
   if (window == nullptr) {
     std::cerr << "clipstream-view: no OpenGL 4.5 core window\n";
     glfwTerminate();
-    return 1;
+    return nullptr;
   }
   glfwMakeContextCurrent(window);
   glfwSwapInterval(1);
-  Input input;
-  glfwSetWindowUserPointer(window, &input);
+  glfwSetWindowUserPointer(window, input);
   glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int mods) {
     if (action != GLFW_PRESS) return;
     Input* in = inputOf(w);
@@ -356,6 +370,71 @@ int main(int argc, char** argv) {
     in->last_x = x;
     in->last_y = y;
   });
+  return window;
+}
+
+// One frame's move of the camera by the keys and the mouse, at `speed`
+// (texels a second, returned: Shift multiplies it), kept near the scene and
+// above the ground.
+double moveCamera(GLFWwindow* window, Input& input, const Flight& flight, const PyramidGeometry& g,
+                  double scene_side, double dt, Camera* camera_io, double* ground_below) {
+  Camera& camera = *camera_io;
+  camera.heading_rad += input.d_heading;
+  camera.pitch_rad = std::clamp(camera.pitch_rad + input.d_pitch, -1.55, 1.2);
+  input.d_heading = input.d_pitch = 0;
+  *ground_below = 0.0;
+  const bool over_ground = flight.groundHeight({camera.position.x, camera.position.z}, ground_below);
+  double speed = std::clamp(input.speed_per_height * std::max(camera.position.y - *ground_below, 1.0), 1.0,
+                            kMaxSceneFractionPerSecond * scene_side);
+  if (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ||
+      glfwGetKey(window, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS)
+    speed *= 10.0;
+  const glm::dvec3 fwd{std::sin(camera.heading_rad), 0.0, -std::cos(camera.heading_rad)};
+  const glm::dvec3 right = camera.right();
+  glm::dvec3 move{0.0};
+  if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move += fwd;
+  if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move -= fwd;
+  if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) move += right;
+  if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) move -= right;
+  if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) move.y += 1.0;
+  if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
+  camera.position += move * (speed * dt);
+  // Within the scene's neighbourhood: a key held too long never loses it.
+  camera.position.x = std::clamp(camera.position.x, -kBoundsMargin * scene_side,
+                                 double(g.width_px) + kBoundsMargin * scene_side);
+  camera.position.z = std::clamp(camera.position.z, -kBoundsMargin * scene_side,
+                                 double(g.height_px) + kBoundsMargin * scene_side);
+  camera.position.y = std::clamp(camera.position.y, 1.0, (over_ground ? *ground_below : 0.0) + 2.0 * scene_side);
+  if (double ground = 0.0; flight.groundHeight({camera.position.x, camera.position.z}, &ground)) {
+    // Over terrain the camera never goes under the ground (nor closer
+    // than the clearance, where the near plane would cut the slope).
+    camera.position.y = std::max(camera.position.y, ground + renderer_config::kTerrainClearance);
+  }
+  return speed;
+}
+
+}  // namespace
+
+// Long: the frame loop (keys, recording, the step, screenshots, the HUD,
+// the title) keeps its state from frame to frame in these locals; the rest
+// of the program is in the functions above.
+int main(int argc, char** argv) {
+  CLI::App app{"Interactive clipmap viewer (GLFW window).", "clipstream-view"};
+  Args args;
+  addOptions(app, &args);
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  Choices choices;
+  if (std::optional<int> code = checkArgs(app, args, &choices)) return *code;
+  const Viewport vp = choices.vp;
+  cli::installSignalHandlers();
+  std::shared_ptr<TileSource> source;
+  std::optional<TerrainLayerConfig> terrain;
+  if (std::optional<int> code = openScene(app, args, choices, &source, &terrain)) return *code;
+  const PyramidGeometry& g = source->geometry();
+
+  Input input;
+  GLFWwindow* window = openWindow(vp, &input);
+  if (window == nullptr) return 1;
 
   Camera camera;
   camera.position = {double(g.width_px) * 0.5, std::min<double>(std::max(g.width_px, g.height_px) * 0.2, 5000.0),
@@ -372,10 +451,10 @@ int main(int argc, char** argv) {
   // is loaded before any frame, so there is always something correct to draw.
   FlightConfig fc;
   fc.viewport = vp;
-  fc.streamer.ram_budget_bytes = cache_mb << 20;
-  fc.upload_tiles = upload_tiles;
-  fc.texture_memory = memory;
-  fc.pool_bytes = pool_mb << 20;
+  fc.streamer.ram_budget_bytes = args.cache_mb << 20;
+  fc.upload_tiles = args.upload_tiles;
+  fc.texture_memory = choices.memory;
+  fc.pool_bytes = args.pool_mb << 20;
   fc.offscreen = false;
   fc.terrain = terrain;
   {
@@ -409,7 +488,7 @@ int main(int argc, char** argv) {
   auto last = start;
   double title_timer = 0.0, frame_ms_avg = 0.0;
   uint32_t frames = 0;
-  while (!glfwWindowShouldClose(window) && (max_frames == 0 || frames < max_frames)) {
+  while (!glfwWindowShouldClose(window) && (args.max_frames == 0 || frames < args.max_frames)) {
     glfwPollEvents();
     const auto now = std::chrono::steady_clock::now();
     const double dt = std::min(std::chrono::duration<double>(now - last).count(), 0.1);
@@ -421,37 +500,8 @@ int main(int argc, char** argv) {
       camera = home;
       input.speed_per_height = kDefaultSpeedPerHeight;
     }
-    camera.heading_rad += input.d_heading;
-    camera.pitch_rad = std::clamp(camera.pitch_rad + input.d_pitch, -1.55, 1.2);
-    input.d_heading = input.d_pitch = 0;
     double ground_below = 0.0;
-    const bool over_ground = flight->groundHeight({camera.position.x, camera.position.z}, &ground_below);
-    double speed = std::clamp(input.speed_per_height * std::max(camera.position.y - ground_below, 1.0), 1.0,
-                              kMaxSceneFractionPerSecond * scene_side);
-    if (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS ||
-        glfwGetKey(window, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS)
-      speed *= 10.0;
-    const glm::dvec3 fwd{std::sin(camera.heading_rad), 0.0, -std::cos(camera.heading_rad)};
-    const glm::dvec3 right = camera.right();
-    glm::dvec3 move{0.0};
-    if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move += fwd;
-    if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move -= fwd;
-    if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) move += right;
-    if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) move -= right;
-    if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) move.y += 1.0;
-    if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
-    camera.position += move * (speed * dt);
-    // Within the scene's neighbourhood: a key held too long never loses it.
-    camera.position.x = std::clamp(camera.position.x, -kBoundsMargin * scene_side,
-                                   double(g.width_px) + kBoundsMargin * scene_side);
-    camera.position.z = std::clamp(camera.position.z, -kBoundsMargin * scene_side,
-                                   double(g.height_px) + kBoundsMargin * scene_side);
-    camera.position.y = std::clamp(camera.position.y, 1.0, (over_ground ? ground_below : 0.0) + 2.0 * scene_side);
-    if (double ground = 0.0; flight->groundHeight({camera.position.x, camera.position.z}, &ground)) {
-      // Over terrain the camera never goes under the ground (nor closer
-      // than the clearance, where the near plane would cut the slope).
-      camera.position.y = std::max(camera.position.y, ground + renderer_config::kTerrainClearance);
-    }
+    const double speed = moveCamera(window, input, *flight, g, scene_side, dt, &camera, &ground_below);
 
     if (input.overlay_toggled) {
       ClipmapRenderer& renderer = flight->renderer();
@@ -465,8 +515,8 @@ int main(int argc, char** argv) {
         recording = FlightPath{};
         last_key_s = -1.0;
       } else {
-        Status s = recording.save(record_path);
-        cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
+        Status s = recording.save(args.record_path);
+        cli::printError(app, s ? "recorded path written to " + args.record_path : s.toString());
       }
     }
     if (recording_on && (last_key_s < 0 || t - last_key_s >= 0.25)) {
@@ -485,7 +535,7 @@ int main(int argc, char** argv) {
     const auto screenshot = [&] {
       input.screenshot = false;
       std::string path;
-      Status s = saveScreenshot(screenshot_dir, fc.framebuffer.width_px, fc.framebuffer.height_px, &path);
+      Status s = saveScreenshot(args.screenshot_dir, fc.framebuffer.width_px, fc.framebuffer.height_px, &path);
       char where[160];
       std::snprintf(where, sizeof where, " (camera %.2f %.2f %.2f, heading %.2f, pitch %.2f degrees)",
                     camera.position.x, camera.position.y, camera.position.z,
@@ -536,8 +586,8 @@ int main(int argc, char** argv) {
     }
   }
   if (recording_on) {
-    Status s = recording.save(record_path);
-    cli::printError(app, s ? "recorded path written to " + record_path : s.toString());
+    Status s = recording.save(args.record_path);
+    cli::printError(app, s ? "recorded path written to " + args.record_path : s.toString());
     if (!s) code = cli::kExitFailure;
   }
   flight->finish();
