@@ -222,6 +222,42 @@ Status listTiles(const TileStoreReader& reader, bool json, nlohmann::json* out) 
   return okStatus();
 }
 
+// --verify: reads, checks and decodes every tile on `threads` threads with a
+// progress bar, then reports it as text or into *json_out. False when a
+// tile failed.
+bool verifyStore(const TileStoreReader& reader, bool json, unsigned threads, nlohmann::json* json_out) {
+  std::fflush(stdout);  // the table before the progress line on a terminal
+  constexpr size_t kMaxProblems = 1000;
+  uint64_t total_tiles = 0;
+  for (const LevelInfo& level : reader.geometry().levels) {
+    total_tiles += uint64_t(level.tiles_x) * level.tiles_y;
+  }
+  cli::ProgressBar bar("verify", total_tiles, cli::progressEnabledByDefault(), "tiles");
+  std::vector<TileStoreReader::Problem> problems;
+  const Status verify_status = reader.verifyAll(
+      &problems, kMaxProblems, [&](uint64_t done, uint64_t) { bar.update(done); }, threads);
+  bar.finish();
+  std::vector<std::string> lines;
+  for (const auto& problem : problems) lines.push_back(problemLine(problem));
+  if (json) {
+    (*json_out)["verify"] = {{"ok", verify_status.ok()},
+                             {"tiles", total_tiles},
+                             {"message", verify_status.ok() ? "" : verify_status.message},
+                             {"problems", lines}};
+  } else {
+    if (verify_status) {
+      std::printf("\nverify: OK (%" PRIu64 " tiles)\n", total_tiles);
+    } else {
+      std::printf("\nverify: FAILED: %s\n", verify_status.message.c_str());
+      for (const std::string& line : lines) std::printf("%s\n", line.c_str());
+      if (problems.size() >= kMaxProblems) {
+        std::printf("(only the first %zu problems are listed)\n", kMaxProblems);
+      }
+    }
+  }
+  return verify_status.ok();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -283,38 +319,7 @@ int main(int argc, char** argv) {
     }
   }
 
-  if (verify) {
-    std::fflush(stdout);  // the table before the progress line on a terminal
-    constexpr size_t kMaxProblems = 1000;
-    uint64_t total_tiles = 0;
-    for (const LevelInfo& level : reader->geometry().levels) {
-      total_tiles += uint64_t(level.tiles_x) * level.tiles_y;
-    }
-    cli::ProgressBar bar("verify", total_tiles, cli::progressEnabledByDefault(), "tiles");
-    std::vector<TileStoreReader::Problem> problems;
-    const Status verify_status = reader->verifyAll(
-        &problems, kMaxProblems, [&](uint64_t done, uint64_t) { bar.update(done); }, threads);
-    bar.finish();
-    std::vector<std::string> lines;
-    for (const auto& problem : problems) lines.push_back(problemLine(problem));
-    if (json) {
-      json_out["verify"] = {{"ok", verify_status.ok()},
-                            {"tiles", total_tiles},
-                            {"message", verify_status.ok() ? "" : verify_status.message},
-                            {"problems", lines}};
-    } else {
-      if (verify_status) {
-        std::printf("\nverify: OK (%" PRIu64 " tiles)\n", total_tiles);
-      } else {
-        std::printf("\nverify: FAILED: %s\n", verify_status.message.c_str());
-        for (const std::string& line : lines) std::printf("%s\n", line.c_str());
-        if (problems.size() >= kMaxProblems) {
-          std::printf("(only the first %zu problems are listed)\n", kMaxProblems);
-        }
-      }
-    }
-    if (!verify_status) exit_code = kExitCorrupt;
-  }
+  if (verify && !verifyStore(*reader, json, threads, &json_out)) exit_code = kExitCorrupt;
   if (reader->remoteStats().disk_cache_folders_refused > 0)
     std::fprintf(stderr,
                  "clipstream-info: warning: the disk cache did not cache this store: its sub-folder there is a "
