@@ -82,8 +82,246 @@ FrameRecord recordOf(const FlightRunFrame& f) {
   return r;
 }
 
+// Mean absolute grey change per pixel between two RGBA8 frames.
+double meanGreyChange(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  double sum = 0.0;
+  for (size_t k = 0; k + 3 < a.size() && k + 3 < b.size(); k += 4)
+    sum += std::abs((int(a[k]) + a[k + 1] + a[k + 2]) - (int(b[k]) + b[k + 1] + b[k + 2])) / 3.0;
+  return a.empty() ? 0.0 : sum / double(a.size() / 4);
+}
+
+// A blurry judged frame kept for the garbage check after the flight.
+struct GarbageCandidate {
+  double psnr_db;
+  Camera camera;
+  Viewport viewport;
+  std::vector<uint8_t> rgba;
+};
+
+// The terrain frames judged: this frame's pictures and the last judged
+// frame's, for the change between consecutive judged frames.
+struct TerrainJudging {
+  std::vector<uint8_t> streamed_rgba, reference_rgba;
+  std::vector<uint8_t> previous_streamed, previous_reference;
+  uint32_t previous_judged = UINT32_MAX;
+  std::vector<float> reference_xyzw;
+};
+
+// Judges recorded frame i over terrain: geometric error against the
+// full-resolution surface, PSNR against the full-resolution mesh with the
+// ideal texture, the fewest triangles (when `fewest`), and the change from
+// the last judged frame; adds them to the run's sums (averaged at the end).
+Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, const Camera& camera,
+                         const ReferenceSurface& surface, TerrainReference& terrain_reference,
+                         FewestTriangles* fewest, Flight& flight, TerrainJudging* judging, FlightRunFrame* frame,
+                         FlightRun* run) {
+  TerrainJudging& j = *judging;
+  FlightRunFrame& f = *frame;
+  std::vector<float> xyzw;
+  if (Status s = flight.terrain()->readPositions(camera, flight.viewport(), flight.renderer(), &xyzw); !s)
+    return s;
+  f.geometry = geometricError(xyzw, camera, flight.viewport(), surface);
+  flight.target()->readRgba(&j.streamed_rgba);
+  if (Status s = terrain_reference.render(camera, &j.reference_rgba, &j.reference_xyzw); !s) return s;
+  const TerrainFrameError te = compareTerrainFrames(j.streamed_rgba, xyzw, j.reference_rgba, j.reference_xyzw, flight.viewport());
+  f.accuracy.measured = true;
+  f.accuracy.error = te.error;
+  f.terrain_agree_pixels = te.agree_pixels;
+  f.terrain_agree_mismatched = te.agree_mismatched;
+  if (fewest) {
+    if (Status s = fewest->count(camera, flight.viewport(), flight.renderer(), surface, kFewestErrorPx,
+                                 &f.fewest_triangles);
+        !s)
+      return s;
+  }
+  if (!j.previous_streamed.empty() && j.previous_judged + 1 == i && !f.sample.cut) {
+    run->change_pairs += 1;
+    run->change_mean += meanGreyChange(j.streamed_rgba, j.previous_streamed);
+    run->reference_change_mean += meanGreyChange(j.reference_rgba, j.previous_reference);
+  }
+  j.previous_judged = i;
+  j.previous_streamed = j.streamed_rgba;
+  j.previous_reference = j.reference_rgba;
+  if (i + 1 == total) run->final_max_abs_error = te.error.max_abs_error;
+  if (i >= o.frames) {
+    run->terrain_rest_agree_pixels += te.agree_pixels;
+    run->terrain_rest_agree_mismatched += te.agree_mismatched;
+  }
+  if (f.geometry.pixels > 0) {
+    const bool rest = i >= o.frames;
+    run->geometry_frames += 1;
+    run->geometry_mean_px += f.geometry.mean_px;
+    run->geometry_p95_px += f.geometry.p95_px;
+    run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
+    run->judged_triangles_mean += double(f.sample.terrain_triangles);
+    run->fewest_triangles_mean += double(f.fewest_triangles);
+    if (rest) {
+      run->geometry_rest_frames += 1;
+      run->geometry_rest_mean_px += f.geometry.mean_px;
+      run->geometry_rest_p95_px += f.geometry.p95_px;
+      run->geometry_rest_max_px = std::max(run->geometry_rest_max_px, f.geometry.max_px);
+    }
+  }
+  return okStatus();
+}
+
+// Judges recorded frame i against the flat reference (every
+// o.reference_every frames, every rest frame and the last) and the CPU
+// ground truth; keeps the o.garbage_checks blurriest frames as garbage
+// check candidates, sharpest dropped first.
+Status judgeFlatFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, const Camera& camera,
+                      FlyAccuracy& accuracy, Flight& flight, std::vector<GarbageCandidate>* candidates_out,
+                      FlightRunFrame* frame, FlightRun* run) {
+  std::vector<GarbageCandidate>& candidates = *candidates_out;
+  FlightRunFrame& f = *frame;
+  const bool compare =
+      o.reference_every > 0 && (i % o.reference_every == 0 || i >= o.frames || i + 1 == total);
+  const bool truth = compare && o.ground_truth_every > 0 && i % o.ground_truth_every == 0;
+  if (Status s = accuracy.measure(camera, *flight.target(), compare, truth, &f.accuracy); !s) return s;
+  const AccuracyFrame& a = f.accuracy;
+  if (a.measured) {
+    if (i + 1 == total) run->final_max_abs_error = a.error.max_abs_error;
+    if (a.hole_pixels > 0) ++run->frames_with_holes;
+    if (o.garbage_checks > 0 && a.error.psnr_db < kSharpPsnrDb) {
+      candidates.push_back({a.error.psnr_db, camera, flight.viewport(), accuracy.lastStreamed()});
+      std::sort(candidates.begin(), candidates.end(),
+                [](const GarbageCandidate& x, const GarbageCandidate& y) { return x.psnr_db < y.psnr_db; });
+      if (candidates.size() > o.garbage_checks) candidates.pop_back();
+    }
+  }
+  if (a.ground_truth_measured) {
+    run->ground_truth_psnr_min_db = run->ground_truth_frames == 0
+                                        ? a.ground_truth.psnr_db
+                                        : std::min(run->ground_truth_psnr_min_db, a.ground_truth.psnr_db);
+    run->ground_truth_psnr_mean_db += a.ground_truth.psnr_db;
+    ++run->ground_truth_frames;
+  }
+  return okStatus();
+}
+
+// The references a terrain flight is judged by: the full-resolution
+// surface, the fewest-triangles counter (when asked) and the
+// full-resolution mesh with the ideal texture, drawn from `reference`.
+Status createTerrainReferences(const FlightRunOptions& o, const std::shared_ptr<TileSource>& reference,
+                               std::unique_ptr<ReferenceSurface>* surface,
+                               std::unique_ptr<FewestTriangles>* fewest,
+                               std::unique_ptr<TerrainReference>* terrain_reference) {
+  if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, surface); !s) return s;
+  if (o.fewest_triangles)
+    if (Status s = FewestTriangles::create(**surface, *o.terrain->source, fewest); !s) return s;
+  TerrainConfig tc;
+  tc.ring_cells = o.terrain->ring_cells;
+  tc.mapping = o.terrain->alignment;
+  if (Status s = TerrainReference::create(reference, *o.terrain->source, tc, o.viewport, o.streamer.planner,
+                                          terrain_reference);
+      !s)
+    return s;
+  return okStatus();
+}
+
+// The run's summary from its frames (over-fetch ratios included), and the
+// per-judged-frame sums turned into means. `accuracy` is null without the
+// flat reference; over terrain `terrain_sampled` holds the sampled tiles.
+void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyAccuracy* accuracy,
+                     const std::unordered_set<uint64_t>& terrain_sampled, FlightRun* run) {
+  std::vector<FrameRecord> records;
+  records.reserve(run->frames.size());
+  for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
+  run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : terrain_sampled.size(),
+                              peakRssBytes());
+  if (run->geometry_frames > 0) {
+    run->geometry_mean_px /= run->geometry_frames;
+    run->geometry_p95_px /= run->geometry_frames;
+    run->judged_triangles_mean /= run->geometry_frames;
+    run->fewest_triangles_mean /= run->geometry_frames;
+  }
+  if (run->change_pairs > 0) {
+    run->change_mean /= run->change_pairs;
+    run->reference_change_mean /= run->change_pairs;
+  }
+  if (run->geometry_rest_frames > 0) {
+    run->geometry_rest_mean_px /= run->geometry_rest_frames;
+    run->geometry_rest_p95_px /= run->geometry_rest_frames;
+  }
+  if (!run->frames.empty()) {
+    for (const FlightRunFrame& f : run->frames) run->render_cpu_ms_mean += f.sample.cpu_ms;
+    run->render_cpu_ms_mean /= double(run->frames.size());
+  }
+  if (o.terrain && !run->frames.empty()) {
+    double triangles = 0.0;
+    for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
+    run->terrain_triangles_mean = triangles / double(run->frames.size());
+    run->terrain_method = terrainMethodName(o.terrain->method);
+  }
+  // Loads include the streamer's reads of the pyramid, as sampled tiles
+  // include the pyramid tiles seen. Over terrain, the colour layer's loads
+  // only: height tiles are not sampled by the texture.
+  const uint64_t colour_loads = o.terrain && !run->streamer.layers.empty()
+                                    ? run->streamer.layers[0].total.loads
+                                    : run->summary.tiles_loaded + run->warmup_loads;
+  if (run->summary.tiles_sampled > 0)
+    run->summary.over_fetch_ratio = double(colour_loads) / double(run->summary.tiles_sampled);
+  // Without the pyramid: the clip levels' loads over their sampled tiles.
+  const uint32_t pyramid_level = flight.firstPlan().pyramid_level;
+  const std::unordered_set<uint64_t>& sampled = accuracy ? accuracy->sampledSet() : terrain_sampled;
+  for (uint64_t key : sampled)
+    if ((key >> 58) < pyramid_level) ++run->summary.tiles_sampled_stack;
+  if (!run->streamer.layers.empty()) {
+    const std::vector<LevelCounters>& levels = run->streamer.layers[0].levels;
+    for (uint32_t l = 0; l < pyramid_level && l < levels.size(); ++l)
+      run->summary.tiles_loaded_stack += levels[l].loads;
+  }
+  if (run->summary.tiles_sampled_stack > 0)
+    run->summary.over_fetch_stack_ratio =
+        double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
+}
+
+// The flight's settings from the run's options.
+FlightConfig flightConfigOf(const FlightRunOptions& o) {
+  FlightConfig fc;
+  fc.viewport = o.viewport;
+  fc.streamer = o.streamer;
+  fc.upload_tiles = o.upload_tiles;
+  fc.buffering = o.buffering;
+  fc.texture_memory = o.texture_memory;
+  fc.pool_bytes = o.pool_bytes;
+  fc.overlay = o.overlay;
+  fc.warmup_frames = o.warmup_frames;
+  fc.offscreen = true;  // frames are judged and saved from the flight's own target
+  fc.terrain = o.terrain;
+  return fc;
+}
+
+// The flat reference (and the over-fetch sampling), drawn from `reference`.
+Status createFlatReference(const FlightRunOptions& o, const std::shared_ptr<TileSource>& reference,
+                           std::unique_ptr<FlyAccuracy>* accuracy) {
+  AccuracyOptions ao;
+  ao.ground_truth = o.ground_truth_every > 0;
+  ao.sample_tiles = o.sample_tiles;
+  ao.reference = o.reference_every > 0;
+  ao.texture_memory = o.texture_memory;
+  if (Status s = FlyAccuracy::create(reference, o.viewport, o.streamer.planner, ao, accuracy); !s) return s;
+  return okStatus();
+}
+
+// Counts the garbage pixels (texels of no level in reach) of the kept
+// blurry frames; the run records the worst frame's count.
+void checkGarbage(const FlightRunOptions& o, const PyramidGeometry& geometry,
+                  const std::vector<GarbageCandidate>& candidates, FlightRun* run) {
+  const TexelFunction texels = o.garbage_texels ? o.garbage_texels : texelsFromSource(o.source);
+  for (const GarbageCandidate& c : candidates) {
+    ++run->garbage_checked_frames;
+    run->garbage_pixels_max = std::max(
+        run->garbage_pixels_max,
+        countGarbagePixels(c.rgba, geometry, texels, c.camera, c.viewport, o.garbage_tolerance));
+  }
+}
+
 }  // namespace
 
+// Long: the measured loop in its order (references before the streamer,
+// warm-up, recorded frames, finish, summary) shares the flight, its
+// lambdas and the trace guard; judging, references and totals are split out.
 Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   *run = FlightRun{};
   if (!o.source) return Status::error(ErrorCode::kInvalidArgument, "flight: no tile source");
@@ -106,17 +344,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   };
 
   auto watched = std::make_shared<ThreadWatchSource>(o.source);
-  FlightConfig fc;
-  fc.viewport = o.viewport;
-  fc.streamer = o.streamer;
-  fc.upload_tiles = o.upload_tiles;
-  fc.buffering = o.buffering;
-  fc.texture_memory = o.texture_memory;
-  fc.pool_bytes = o.pool_bytes;
-  fc.overlay = o.overlay;
-  fc.warmup_frames = o.warmup_frames;
-  fc.offscreen = true;  // frames are judged and saved from the flight's own target
-  fc.terrain = o.terrain;
+  const FlightConfig fc = flightConfigOf(o);
   // The reference (its own renderer and a synchronous pyramid load) is set
   // up before the flight's streamer exists, as clipstream-fly always did:
   // with the streamer created first, a timing-sensitive flight reached sharp
@@ -128,14 +356,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   const std::shared_ptr<TileSource>& reference = o.reference_source ? o.reference_source : o.source;
   // This reference draws the flat plane; over terrain the TerrainReference
   // below judges the frames instead (docs/terrain.md, "Accuracy").
-  if (!o.terrain && (o.reference_every > 0 || o.sample_tiles)) {
-    AccuracyOptions ao;
-    ao.ground_truth = o.ground_truth_every > 0;
-    ao.sample_tiles = o.sample_tiles;
-    ao.reference = o.reference_every > 0;
-    ao.texture_memory = o.texture_memory;
-    if (Status s = FlyAccuracy::create(reference, o.viewport, o.streamer.planner, ao, &accuracy); !s) return s;
-  }
+  if (!o.terrain && (o.reference_every > 0 || o.sample_tiles))
+    if (Status s = createFlatReference(o, reference, &accuracy); !s) return s;
   // Before the flight exists no height is known: the first camera is put
   // above the highest ground, then every frame above the ground under it.
   Camera first = o.path.sample(0.0);
@@ -149,18 +371,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   std::unique_ptr<ReferenceSurface> surface;
   std::unique_ptr<FewestTriangles> fewest;
   std::unique_ptr<TerrainReference> terrain_reference;
-  if (o.terrain && o.terrain->source && o.reference_every > 0) {
-    if (Status s = ReferenceSurface::load(*o.terrain->source, o.terrain->alignment, &surface); !s) return s;
-    if (o.fewest_triangles)
-      if (Status s = FewestTriangles::create(*surface, *o.terrain->source, &fewest); !s) return s;
-    TerrainConfig tc;
-    tc.ring_cells = o.terrain->ring_cells;
-    tc.mapping = o.terrain->alignment;
-    if (Status s = TerrainReference::create(reference, *o.terrain->source, tc, o.viewport, o.streamer.planner,
-                                            &terrain_reference);
-        !s)
-      return s;
-  }
+  if (o.terrain && o.terrain->source && o.reference_every > 0)
+    if (Status s = createTerrainReferences(o, reference, &surface, &fewest, &terrain_reference); !s) return s;
   std::unique_ptr<Flight> flight;
   if (Status s = Flight::create(watched, fc, first, &flight); !s) return s;
   auto onGround = [&](const Camera& path_camera) {
@@ -211,24 +423,8 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
 
   if (o.on_start)
     if (Status s = o.on_start(); !s) return s;
-  struct Candidate {
-    double psnr_db;
-    Camera camera;
-    Viewport viewport;
-    std::vector<uint8_t> rgba;
-  };
-  std::vector<Candidate> candidates;
-  std::vector<uint8_t> streamed_rgba, reference_rgba;  // terrain frames judged
-  std::vector<uint8_t> previous_streamed, previous_reference;  // the last judged frame's
-  uint32_t previous_judged = UINT32_MAX;
-  // Mean absolute grey change per pixel between two RGBA8 frames.
-  auto change = [](const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
-    double sum = 0.0;
-    for (size_t k = 0; k + 3 < a.size() && k + 3 < b.size(); k += 4)
-      sum += std::abs((int(a[k]) + a[k + 1] + a[k + 2]) - (int(b[k]) + b[k + 1] + b[k + 2])) / 3.0;
-    return a.empty() ? 0.0 : sum / double(a.size() / 4);
-  };
-  std::vector<float> reference_xyzw;
+  std::vector<GarbageCandidate> candidates;
+  TerrainJudging judging;
   run->frames.reserve(std::min<uint32_t>(total, 100000));  // grows past that as frames come
   const auto run_start = Clock::now();
   watched->arm(true);
@@ -275,77 +471,14 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     }
     if (surface && flight->terrain() &&
         (i % o.reference_every == 0 || i >= o.frames || i + 1 == total)) {
-      std::vector<float> xyzw;
-      if (Status s = flight->terrain()->readPositions(camera, flight->viewport(), flight->renderer(), &xyzw); !s)
+      if (Status s = judgeTerrainFrame(o, i, total, camera, *surface, *terrain_reference, fewest.get(), *flight,
+                                       &judging, &f, run);
+          !s)
         return s;
-      f.geometry = geometricError(xyzw, camera, flight->viewport(), *surface);
-      flight->target()->readRgba(&streamed_rgba);
-      if (Status s = terrain_reference->render(camera, &reference_rgba, &reference_xyzw); !s) return s;
-      const TerrainFrameError te = compareTerrainFrames(streamed_rgba, xyzw, reference_rgba, reference_xyzw, flight->viewport());
-      f.accuracy.measured = true;
-      f.accuracy.error = te.error;
-      f.terrain_agree_pixels = te.agree_pixels;
-      f.terrain_agree_mismatched = te.agree_mismatched;
-      if (fewest) {
-        if (Status s = fewest->count(camera, flight->viewport(), flight->renderer(), *surface, kFewestErrorPx,
-                                     &f.fewest_triangles);
-            !s)
-          return s;
-      }
-      if (!previous_streamed.empty() && previous_judged + 1 == i && !f.sample.cut) {
-        run->change_pairs += 1;
-        run->change_mean += change(streamed_rgba, previous_streamed);
-        run->reference_change_mean += change(reference_rgba, previous_reference);
-      }
-      previous_judged = i;
-      previous_streamed = streamed_rgba;
-      previous_reference = reference_rgba;
-      if (i + 1 == total) run->final_max_abs_error = te.error.max_abs_error;
-      if (i >= o.frames) {
-        run->terrain_rest_agree_pixels += te.agree_pixels;
-        run->terrain_rest_agree_mismatched += te.agree_mismatched;
-      }
-      if (f.geometry.pixels > 0) {
-        const bool rest = i >= o.frames;
-        run->geometry_frames += 1;
-        run->geometry_mean_px += f.geometry.mean_px;
-        run->geometry_p95_px += f.geometry.p95_px;
-        run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
-        run->judged_triangles_mean += double(f.sample.terrain_triangles);
-        run->fewest_triangles_mean += double(f.fewest_triangles);
-        if (rest) {
-          run->geometry_rest_frames += 1;
-          run->geometry_rest_mean_px += f.geometry.mean_px;
-          run->geometry_rest_p95_px += f.geometry.p95_px;
-          run->geometry_rest_max_px = std::max(run->geometry_rest_max_px, f.geometry.max_px);
-        }
-      }
     }
     // Judged after the frame is timed: the reference fetches synchronously.
-    if (accuracy) {
-      const bool compare =
-          o.reference_every > 0 && (i % o.reference_every == 0 || i >= o.frames || i + 1 == total);
-      const bool truth = compare && o.ground_truth_every > 0 && i % o.ground_truth_every == 0;
-      if (Status s = accuracy->measure(camera, *flight->target(), compare, truth, &f.accuracy); !s) return s;
-      const AccuracyFrame& a = f.accuracy;
-      if (a.measured) {
-        if (i + 1 == total) run->final_max_abs_error = a.error.max_abs_error;
-        if (a.hole_pixels > 0) ++run->frames_with_holes;
-        if (o.garbage_checks > 0 && a.error.psnr_db < kSharpPsnrDb) {
-          candidates.push_back({a.error.psnr_db, camera, flight->viewport(), accuracy->lastStreamed()});
-          std::sort(candidates.begin(), candidates.end(),
-                    [](const Candidate& x, const Candidate& y) { return x.psnr_db < y.psnr_db; });
-          if (candidates.size() > o.garbage_checks) candidates.pop_back();
-        }
-      }
-      if (a.ground_truth_measured) {
-        run->ground_truth_psnr_min_db = run->ground_truth_frames == 0
-                                            ? a.ground_truth.psnr_db
-                                            : std::min(run->ground_truth_psnr_min_db, a.ground_truth.psnr_db);
-        run->ground_truth_psnr_mean_db += a.ground_truth.psnr_db;
-        ++run->ground_truth_frames;
-      }
-    }
+    if (accuracy)
+      if (Status s = judgeFlatFrame(o, i, total, camera, *accuracy, *flight, &candidates, &f, run); !s) return s;
     run->frames.push_back(std::move(f));
     if (i == total / 4) run->rss_after_warmup_bytes = currentRssBytes();
     // Rest frames at display pace: a slow source gets real time to land.
@@ -358,15 +491,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   run->run_ms = msSince(run_start);
   if (run->ground_truth_frames > 0) run->ground_truth_psnr_mean_db /= run->ground_truth_frames;
 
-  if (!candidates.empty()) {
-    const TexelFunction texels = o.garbage_texels ? o.garbage_texels : texelsFromSource(o.source);
-    for (const Candidate& c : candidates) {
-      ++run->garbage_checked_frames;
-      run->garbage_pixels_max = std::max(
-          run->garbage_pixels_max,
-          countGarbagePixels(c.rgba, geometry, texels, c.camera, c.viewport, o.garbage_tolerance));
-    }
-  }
+  if (!candidates.empty()) checkGarbage(o, geometry, candidates, run);
   // The renderer in use at the end (after a resize, the new one).
   run->clip_tiles = flight->firstPlan().clip_tiles;
   run->pyramid_level = flight->firstPlan().pyramid_level;
@@ -390,56 +515,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   if (o.terrain && o.terrain->source) run->remote += o.terrain->source->remoteStats();
   run->rss_end_bytes = currentRssBytes();
 
-  std::vector<FrameRecord> records;
-  records.reserve(run->frames.size());
-  for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
-  run->summary = summarizeRun(records, accuracy ? accuracy->tilesSampled() : terrain_sampled.size(),
-                              peakRssBytes());
-  if (run->geometry_frames > 0) {
-    run->geometry_mean_px /= run->geometry_frames;
-    run->geometry_p95_px /= run->geometry_frames;
-    run->judged_triangles_mean /= run->geometry_frames;
-    run->fewest_triangles_mean /= run->geometry_frames;
-  }
-  if (run->change_pairs > 0) {
-    run->change_mean /= run->change_pairs;
-    run->reference_change_mean /= run->change_pairs;
-  }
-  if (run->geometry_rest_frames > 0) {
-    run->geometry_rest_mean_px /= run->geometry_rest_frames;
-    run->geometry_rest_p95_px /= run->geometry_rest_frames;
-  }
-  if (!run->frames.empty()) {
-    for (const FlightRunFrame& f : run->frames) run->render_cpu_ms_mean += f.sample.cpu_ms;
-    run->render_cpu_ms_mean /= double(run->frames.size());
-  }
-  if (o.terrain && !run->frames.empty()) {
-    double triangles = 0.0;
-    for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
-    run->terrain_triangles_mean = triangles / double(run->frames.size());
-    run->terrain_method = terrainMethodName(o.terrain->method);
-  }
-  // Loads include the streamer's reads of the pyramid, as sampled tiles
-  // include the pyramid tiles seen. Over terrain, the colour layer's loads
-  // only: height tiles are not sampled by the texture.
-  const uint64_t colour_loads = o.terrain && !run->streamer.layers.empty()
-                                    ? run->streamer.layers[0].total.loads
-                                    : run->summary.tiles_loaded + run->warmup_loads;
-  if (run->summary.tiles_sampled > 0)
-    run->summary.over_fetch_ratio = double(colour_loads) / double(run->summary.tiles_sampled);
-  // Without the pyramid: the clip levels' loads over their sampled tiles.
-  const uint32_t pyramid_level = flight->firstPlan().pyramid_level;
-  const std::unordered_set<uint64_t>& sampled = accuracy ? accuracy->sampledSet() : terrain_sampled;
-  for (uint64_t key : sampled)
-    if ((key >> 58) < pyramid_level) ++run->summary.tiles_sampled_stack;
-  if (!run->streamer.layers.empty()) {
-    const std::vector<LevelCounters>& levels = run->streamer.layers[0].levels;
-    for (uint32_t l = 0; l < pyramid_level && l < levels.size(); ++l)
-      run->summary.tiles_loaded_stack += levels[l].loads;
-  }
-  if (run->summary.tiles_sampled_stack > 0)
-    run->summary.over_fetch_stack_ratio =
-        double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
+  summarizeFlight(o, *flight, accuracy.get(), terrain_sampled, run);
   return okStatus();
 }
 

@@ -190,10 +190,14 @@ Status checkFailedReads(const FlyOptions& o, const FlightRun& run, std::ostream&
   return okStatus();
 }
 
-}  // namespace
-
-Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
-  if (Status s = checkFlyOptions(o); !s) return s;
+// Opens the flight's tile source (store or procedural, behind the fault
+// injector and the BC1 encoder when asked) into out->source, the
+// reference's tiles into out->reference_source and the elevation layer into
+// out->terrain; *geometry_out is the colour pyramid's. The terrain layer's
+// warnings go to `notes_out`.
+Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometry* geometry_out,
+                      std::ostream& notes_out) {
+  FlightRunOptions& r = *out;
   // Source.
   std::shared_ptr<TileSource> source;
   if (o.procedural_px > 0) {
@@ -216,6 +220,7 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     source = makeFaultySource(source, fault);
   }
   const PyramidGeometry geometry = source->geometry();
+  *geometry_out = geometry;
   std::shared_ptr<TileSource> rgba8_source = source;
   if (o.tile_format == TileContent::kBc1) {
     Status s;
@@ -223,7 +228,6 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
     if (!source) return s;
   }
 
-  FlightRunOptions r;
   r.source = source;
   if (o.reference_tile_format && *o.reference_tile_format != o.tile_format) {
     Status s;
@@ -240,11 +244,17 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
                                     o.terrain_ring, &terrain, &notes, remote);
         !s)
       return s;
-    for (const std::string& w : notes) (warnings ? *warnings : log) << "clipstream-fly: warning: " << w << "\n";
+    for (const std::string& w : notes) notes_out << "clipstream-fly: warning: " << w << "\n";
     terrain.method = o.terrain_method;
     terrain.error_px = o.terrain_error_px;
     r.terrain = std::move(terrain);
   }
+  return okStatus();
+}
+
+// The path, its frame count and the flight's settings from the options.
+Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, FlightRunOptions* out) {
+  FlightRunOptions& r = *out;
   {
     const auto names = FlightPath::builtinNames();
     Status s = std::find(names.begin(), names.end(), o.path) != names.end()
@@ -285,6 +295,17 @@ Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
   r.ground_truth_every = o.reference ? o.ground_truth_every : 0;
   r.sample_tiles = o.reference && o.over_fetch;
   r.fewest_triangles = o.fewest_triangles;
+  return okStatus();
+}
+
+}  // namespace
+
+Status runFly(const FlyOptions& o, std::ostream& log, std::ostream* warnings) {
+  if (Status s = checkFlyOptions(o); !s) return s;
+  FlightRunOptions r;
+  PyramidGeometry geometry;
+  if (Status s = openFlySources(o, &r, &geometry, warnings ? *warnings : log); !s) return s;
+  if (Status s = setFlightPlan(o, geometry, &r); !s) return s;
 
   // Outputs are checked before any work, and none of them may be an input.
   if (Status s = checkFlyOutputs(o); !s) return s;

@@ -116,52 +116,54 @@ uint32_t pagesWantedMax(const FlightRun& run) {
   for (const FlightRunFrame& f : run.frames) n = std::max(n, f.sample.pages_wanted);
   return n;
 }
-}  // namespace
-
-std::string framesJson(const FlightRun& run, const RunDescription& d) {
-  nlohmann::json jframes = nlohmann::json::array();
-  for (const FlightRunFrame& f : run.frames) {
-    const FrameSample& r = f.sample;
-    nlohmann::json jl = nlohmann::json::array();
-    for (const LevelFrame& lf : r.levels)
-      jl.push_back({{"ram_hits", lf.ram_hits}, {"ram_misses", lf.ram_misses}, {"gpu_hits", lf.gpu_hits},
-                    {"gpu_misses", lf.gpu_misses}, {"bytes_read", lf.bytes_read}});
-    nlohmann::json j = {{"frame", r.frame}, {"t_s", f.t_s}, {"frame_ms", r.frame_ms},
-                        {"streamer_ms", r.streamer_ms}, {"upload_ms", r.upload_ms},
-                        {"draw_ms", r.draw_ms}, {"readback_ms", f.readback_ms},
-                        {"tiles_uploaded", r.tiles_uploaded},
-                        {"second_copies", r.second_copies}, {"max_texture_lod", r.max_texture_lod},
-                        {"finest_needed", r.finest_needed}, {"queue_depth", r.queue_depth},
-                        {"in_flight", r.in_flight}, {"ram_bytes", r.ram_bytes},
-                        {"bytes_read", r.total.bytes_read}, {"ram_hits", r.total.ram_hits},
-                        {"ram_misses", r.total.ram_misses}, {"gpu_hits", r.total.gpu_hits},
-                        {"gpu_misses", r.total.gpu_misses}, {"tiles_loaded", r.tiles_loaded},
-                        {"cut", r.cut}, {"levels", jl}};
-    if (f.geometry.measured) {
-      j["geo_error_mean_px"] = f.geometry.mean_px;
-      j["geo_error_p95_px"] = f.geometry.p95_px;
-      j["geo_error_max_px"] = f.geometry.max_px;
-      j["texture_agree_pixels"] = f.terrain_agree_pixels;
-      j["texture_agree_mismatched"] = f.terrain_agree_mismatched;
-    }
-    if (r.terrain_rings > 0 || r.height_tiles_uploaded > 0) {
-      j["terrain_triangles"] = r.terrain_triangles;
-      j["terrain_rings"] = r.terrain_rings;
-      j["terrain_finest_level"] = r.terrain_finest_level;
-      j["height_tiles_uploaded"] = r.height_tiles_uploaded;
-      j["ground_height"] = r.ground_height;
-    }
-    if (f.accuracy.measured) {
-      j["psnr_db"] = f.accuracy.error.psnr_db;
-      j["max_abs_error"] = f.accuracy.error.max_abs_error;
-      j["hole_pixels"] = f.accuracy.hole_pixels;
-    }
-    if (f.accuracy.ground_truth_measured) {
-      j["gt_psnr_db"] = f.accuracy.ground_truth.psnr_db;
-      j["gt_max_abs_error"] = f.accuracy.ground_truth.max_abs_error;
-    }
-    jframes.push_back(std::move(j));
+// One recorded frame's object in frames.json: its timings and counters,
+// then what was measured of it (geometry, terrain, accuracy) when it was.
+nlohmann::json frameJson(const FlightRunFrame& f) {
+  const FrameSample& r = f.sample;
+  nlohmann::json jl = nlohmann::json::array();
+  for (const LevelFrame& lf : r.levels)
+    jl.push_back({{"ram_hits", lf.ram_hits}, {"ram_misses", lf.ram_misses}, {"gpu_hits", lf.gpu_hits},
+                  {"gpu_misses", lf.gpu_misses}, {"bytes_read", lf.bytes_read}});
+  nlohmann::json j = {{"frame", r.frame}, {"t_s", f.t_s}, {"frame_ms", r.frame_ms},
+                      {"streamer_ms", r.streamer_ms}, {"upload_ms", r.upload_ms},
+                      {"draw_ms", r.draw_ms}, {"readback_ms", f.readback_ms},
+                      {"tiles_uploaded", r.tiles_uploaded},
+                      {"second_copies", r.second_copies}, {"max_texture_lod", r.max_texture_lod},
+                      {"finest_needed", r.finest_needed}, {"queue_depth", r.queue_depth},
+                      {"in_flight", r.in_flight}, {"ram_bytes", r.ram_bytes},
+                      {"bytes_read", r.total.bytes_read}, {"ram_hits", r.total.ram_hits},
+                      {"ram_misses", r.total.ram_misses}, {"gpu_hits", r.total.gpu_hits},
+                      {"gpu_misses", r.total.gpu_misses}, {"tiles_loaded", r.tiles_loaded},
+                      {"cut", r.cut}, {"levels", jl}};
+  if (f.geometry.measured) {
+    j["geo_error_mean_px"] = f.geometry.mean_px;
+    j["geo_error_p95_px"] = f.geometry.p95_px;
+    j["geo_error_max_px"] = f.geometry.max_px;
+    j["texture_agree_pixels"] = f.terrain_agree_pixels;
+    j["texture_agree_mismatched"] = f.terrain_agree_mismatched;
   }
+  if (r.terrain_rings > 0 || r.height_tiles_uploaded > 0) {
+    j["terrain_triangles"] = r.terrain_triangles;
+    j["terrain_rings"] = r.terrain_rings;
+    j["terrain_finest_level"] = r.terrain_finest_level;
+    j["height_tiles_uploaded"] = r.height_tiles_uploaded;
+    j["ground_height"] = r.ground_height;
+  }
+  if (f.accuracy.measured) {
+    j["psnr_db"] = f.accuracy.error.psnr_db;
+    j["max_abs_error"] = f.accuracy.error.max_abs_error;
+    j["hole_pixels"] = f.accuracy.hole_pixels;
+  }
+  if (f.accuracy.ground_truth_measured) {
+    j["gt_psnr_db"] = f.accuracy.ground_truth.psnr_db;
+    j["gt_max_abs_error"] = f.accuracy.ground_truth.max_abs_error;
+  }
+  return j;
+}
+
+// The run's "accuracy" object in frames.json: the summary's accuracy
+// fields, the streamer's settings and the terrain measurements.
+nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   const RunSummary& s = run.summary;
   nlohmann::json acc = nlohmann::json::parse(s.toJson(), nullptr, false);
   acc["reference"] = d.reference;
@@ -213,6 +215,16 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
   acc["geo_error_rest_max_px"] = run.geometry_rest_max_px;
   acc["texture_agree_pixels_rest"] = run.terrain_rest_agree_pixels;
   acc["texture_agree_mismatched_rest"] = run.terrain_rest_agree_mismatched;
+  return acc;
+}
+
+}  // namespace
+
+std::string framesJson(const FlightRun& run, const RunDescription& d) {
+  nlohmann::json jframes = nlohmann::json::array();
+  for (const FlightRunFrame& f : run.frames) jframes.push_back(frameJson(f));
+  const RunSummary& s = run.summary;
+  const nlohmann::json acc = accuracyJson(run, d);
   const Means m = meansOf(run);
   nlohmann::json summary = {
       {"source", run.source},
@@ -352,17 +364,61 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   return keys + "\n" + values + "\n";
 }
 
+namespace {
+
+// One row of the summary table: NAME, a tab, the value as `fmt` prints it.
+void printRow(std::ostream& out, const char* name, double v, const char* fmt) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, fmt, v);
+  out << name << "\t" << buf << "\n";
+}
+
+// The summary table's rows of a flight over terrain: triangles, geometric
+// error, frame-to-frame change, the rest frames and the levels seen.
+void printTerrainRows(std::ostream& out, const FlightRun& run) {
+  const RunSummary& s = run.summary;
+  auto row = [&](const char* name, double v, const char* fmt) { printRow(out, name, v, fmt); };
+  row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
+  row("render_cpu_ms_mean", run.render_cpu_ms_mean, "%.2f");
+  row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
+  if (run.geometry_frames > 0) {
+    row("geo_error_mean_px", run.geometry_mean_px, "%.3f");
+    row("geo_error_p95_px", run.geometry_p95_px, "%.3f");
+    row("geo_error_max_px", run.geometry_max_px, "%.2f");
+    // Triangles of the judged frames against the fewest that model them
+    // within kFewestErrorPx (FewestTriangles).
+    row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");
+    if (run.fewest_triangles_mean > 0) row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
+  }
+  if (run.change_pairs > 0) {
+    row("change_mean", run.change_mean, "%.3f");
+    row("reference_change_mean", run.reference_change_mean, "%.3f");
+  }
+  if (run.geometry_rest_frames > 0) {
+    row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");
+    row("geo_error_rest_p95_px", run.geometry_rest_p95_px, "%.3f");
+    // Where the geometry agrees with the full-resolution mesh to the bit,
+    // the texture must too.
+    row("texture_agree_pixels_rest", double(run.terrain_rest_agree_pixels), "%.0f");
+    row("texture_agree_mismatched_rest", double(run.terrain_rest_agree_mismatched), "%.0f");
+  }
+  if (run.seen_frames > 0) {
+    row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
+    row("over_fetch_stack_ratio", s.over_fetch_stack_ratio, "%.3f");
+    row("needed_coarser_frames", double(run.needed_coarser_frames), "%.0f");
+    row("needed_finer_frames", double(run.needed_finer_frames), "%.0f");
+  }
+}
+
+}  // namespace
+
 void printSummary(std::ostream& out, const FlightRun& run, const RunDescription& d) {
   const RunSummary& s = run.summary;
   const Means m = meansOf(run);
-  char buf[256];
   out << "clipstream-fly: " << run.source << ", path " << d.path << ", " << run.frames.size()
       << " frames at " << viewportText(d.viewport) << " on " << run.gl << "\n";
   out << "metric\tvalue\n";
-  auto row = [&](const char* name, double v, const char* fmt) {
-    std::snprintf(buf, sizeof buf, fmt, v);
-    out << name << "\t" << buf << "\n";
-  };
+  auto row = [&](const char* name, double v, const char* fmt) { printRow(out, name, v, fmt); };
   row("frame_ms_mean", s.frame_ms_mean, "%.2f");
   row("streamer_ms_mean", m.streamer, "%.2f");
   row("upload_ms_mean", m.upload, "%.2f");
@@ -409,38 +465,7 @@ void printSummary(std::ostream& out, const FlightRun& run, const RunDescription&
     row("pool_pages_wanted_max", double(pagesWantedMax(run)), "%.0f");
   }
   row("tiles_loaded", double(s.tiles_loaded), "%.0f");
-  if (run.height_texture_bytes > 0) {
-    row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
-    row("render_cpu_ms_mean", run.render_cpu_ms_mean, "%.2f");
-    row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
-    if (run.geometry_frames > 0) {
-      row("geo_error_mean_px", run.geometry_mean_px, "%.3f");
-      row("geo_error_p95_px", run.geometry_p95_px, "%.3f");
-      row("geo_error_max_px", run.geometry_max_px, "%.2f");
-      // Triangles of the judged frames against the fewest that model them
-      // within kFewestErrorPx (FewestTriangles).
-      row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");
-      if (run.fewest_triangles_mean > 0) row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
-    }
-    if (run.change_pairs > 0) {
-      row("change_mean", run.change_mean, "%.3f");
-      row("reference_change_mean", run.reference_change_mean, "%.3f");
-    }
-    if (run.geometry_rest_frames > 0) {
-      row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");
-      row("geo_error_rest_p95_px", run.geometry_rest_p95_px, "%.3f");
-      // Where the geometry agrees with the full-resolution mesh to the bit,
-      // the texture must too.
-      row("texture_agree_pixels_rest", double(run.terrain_rest_agree_pixels), "%.0f");
-      row("texture_agree_mismatched_rest", double(run.terrain_rest_agree_mismatched), "%.0f");
-    }
-    if (run.seen_frames > 0) {
-      row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");
-    row("over_fetch_stack_ratio", s.over_fetch_stack_ratio, "%.3f");
-      row("needed_coarser_frames", double(run.needed_coarser_frames), "%.0f");
-      row("needed_finer_frames", double(run.needed_finer_frames), "%.0f");
-    }
-  }
+  if (run.height_texture_bytes > 0) printTerrainRows(out, run);
   if (d.reference) {
     row("psnr_mean_db", s.psnr_mean_db, "%.2f");
     row("psnr_min_db", s.psnr_min_db, "%.2f");

@@ -11,27 +11,48 @@
 #include <iostream>
 #include <memory>
 #include <new>
+#include <optional>
+#include <string>
 #include <system_error>
 
-int main(int argc, char** argv) {
+namespace {
+
+// The command line as given, before it is checked: each option's variable,
+// holding its default until parse(). Options that map one to one onto
+// FlyOptions are bound to `o` directly.
+struct Args {
+  clipstream::FlyOptions o;
+  std::string size = "1280x720", buffering = clipstream::bufferingName(o.buffering);
+  uint64_t cache_mb = o.streamer.ram_budget_bytes >> 20;
+  uint32_t save_every = 0;
+  CLI::Option* save_frames = nullptr;
+  std::string texture_memory = "auto";
+  std::string tile_format = clipstream::tileContentName(o.tile_format), reference_tile_format;
+  std::string resize;
+  bool no_throttle = false, no_prefetch = false, no_frustum = false, no_terrain_bounds = false;
+  bool no_over_fetch = false;
+  std::string plan_scope = "sampled";
+  std::string terrain_method = clipstream::terrainMethodName(o.terrain_method);
+};
+
+// Declares every option and the footer, in the order --help lists them,
+// each bound to its variable in *args (which must outlive the parse).
+// Long: one declaration per option in --help order, a flat list to read down.
+void addOptions(CLI::App& app, Args* args) {
   using namespace clipstream;
-  CLI::App app{"Headless clipmap flythrough: renders a flight path over a tile store and "
-               "writes per-frame statistics (CSV, JSON) and PNG frames.",
-               "clipstream-fly"};
-  FlyOptions o;
+  Args& a = *args;
+  FlyOptions& o = a.o;
   StreamerConfig& streamer = o.streamer;
-  std::string size = "1280x720", buffering = bufferingName(o.buffering);
   const auto frames = cli::wholeInRange(1, kMaxFlyFrames);
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
   app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom, valley) or JSON file");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
       ->transform(frames);
-  app.add_option("--size", size, "Viewport WIDTHxHEIGHT");
+  app.add_option("--size", a.size, "Viewport WIDTHxHEIGHT");
   app.add_option("--speed", o.speed, "Path seconds per simulated second")
       ->transform(cli::inRange(0.001, kMaxFlySpeed));
-  uint64_t cache_mb = streamer.ram_budget_bytes >> 20;
-  app.add_option("--cache-mb", cache_mb, "Streamer RAM budget in MiB")
+  app.add_option("--cache-mb", a.cache_mb, "Streamer RAM budget in MiB")
       ->transform(cli::wholeInRange(1, int64_t(1) << 30));
   app.add_option("--upload-tiles", o.upload_tiles, "GPU tile uploads per frame")
       ->transform(cli::wholeInRange(1, 1000000));
@@ -42,17 +63,15 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out_dir,
                  "Output directory (holds one run: an earlier run's frames and statistics there are "
                  "removed first)");
-  uint32_t save_every = 0;
-  CLI::Option* save_frames =
-      app.add_option("--save-frames", save_every,
+  a.save_frames =
+      app.add_option("--save-frames", a.save_every,
                      "Save every Nth frame (and the last) as PNG; 0 = none (default: five frames, "
                      "the first, one each quarter of the run and the last)")
           ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--procedural", o.procedural_px, "Use a procedural texture of this side (texels)")
       ->transform(cli::wholeInRange(1, int64_t(kMaxProceduralSidePx)));
-  app.add_option("--buffering", buffering, "single, double-upload, double-copy or staged");
-  std::string texture_memory = "auto";
-  app.add_option("--texture-memory", texture_memory,
+  app.add_option("--buffering", a.buffering, "single, double-upload, double-copy or staged");
+  app.add_option("--texture-memory", a.texture_memory,
                  "Where colour tiles live on the GPU: stack (every level's whole window), paged (a "
                  "fixed pool of pages holding the tiles the frames sample; docs/renderer.md), or auto: "
                  "paged, but stack with --elevation or double buffering, which paged does not draw yet");
@@ -60,15 +79,12 @@ int main(int argc, char** argv) {
                  "The page pool's size with --texture-memory paged (default: 5.5 pages of 128^2 per 128^2 "
                  "of the viewport, 59 MiB of RGBA8 at 1920x1080)")
       ->transform(cli::wholeInRange(1, 65536));
-  std::string tile_format = tileContentName(o.tile_format), reference_tile_format;
-  app.add_option("--tile-format", tile_format,
+  app.add_option("--tile-format", a.tile_format,
                  "Colour tiles on the GPU: rgba8, or bc1 (transcoded by the loader threads, an eighth of "
                  "the video memory)");
-  app.add_option("--reference-tile-format", reference_tile_format,
+  app.add_option("--reference-tile-format", a.reference_tile_format,
                  "Tiles of the ideal reference (with --reference): rgba8 or bc1; default: --tile-format");
   app.add_flag("--overlay", o.overlay, "Tint by level, mark missing/throttled tiles");
-  std::string resize;
-  bool no_throttle = false, no_prefetch = false, no_frustum = false, no_terrain_bounds = false;
   app.add_flag("--reference", o.reference,
                "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
   app.add_flag("--fewest-triangles", o.fewest_triangles,
@@ -76,23 +92,21 @@ int main(int argc, char** argv) {
                "frame within 1 px p95 (docs/terrain.md; a dozen position passes a judged frame)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
       ->transform(frames);
-  bool no_over_fetch = false;
-  app.add_flag("--no-over-fetch", no_over_fetch,
+  app.add_flag("--no-over-fetch", a.no_over_fetch,
                "With --reference: skip the over-fetch ratio (which traces every pixel of every frame on the "
                "CPU, judged or not: most of a judged run's time at 3840x2160); it reads 0");
   app.add_option("--ground-truth-every", o.ground_truth_every,
                  "Also compare the reference with the CPU ground truth every Nth frame (0 = never)")
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
-  app.add_flag("--no-throttle", no_throttle, "Never lower MaxTextureLOD");
-  app.add_flag("--no-prefetch", no_prefetch, "No velocity-predictive prefetch");
-  app.add_flag("--no-frustum-priority", no_frustum, "Load visible tiles no earlier than hidden ones");
-  std::string plan_scope = "sampled";
-  app.add_option("--plan-scope", plan_scope,
+  app.add_flag("--no-throttle", a.no_throttle, "Never lower MaxTextureLOD");
+  app.add_flag("--no-prefetch", a.no_prefetch, "No velocity-predictive prefetch");
+  app.add_flag("--no-frustum-priority", a.no_frustum, "Load visible tiles no earlier than hidden ones");
+  app.add_option("--plan-scope", a.plan_scope,
                  "What of each clip level is loaded: sampled (the tiles the frames sample and their "
                  "ancestors, the default) or window (the whole clip window, the classic clipmap); over "
                  "terrain always the window")
       ->check(CLI::IsMember({"sampled", "window"}));
-  app.add_flag("--no-terrain-bounds", no_terrain_bounds,
+  app.add_flag("--no-terrain-bounds", a.no_terrain_bounds,
                "Over terrain, plan against the plane under the camera and the resident heights' relief "
                "instead of the elevation store's per-tile height bounds");
   app.add_flag("--path-hint", o.path_hint,
@@ -122,7 +136,7 @@ int main(int argc, char** argv) {
                  "Fail the run (exit 1, after writing its statistics) when more than this per cent of "
                  "the tile reads failed, or reads failed and none loaded")
       ->transform(cli::inRange(0.0, 100.0));
-  app.add_option("--resize-at", resize, "Resize the viewport before frame F: F:WxH");
+  app.add_option("--resize-at", a.resize, "Resize the viewport before frame F: F:WxH");
   app.add_option("--rest-frames", o.rest_frames, "Then hold the last camera for N more frames")
       ->transform(cli::wholeInRange(0, kMaxFlyFrames));
   app.add_option("--warmup-frames", o.warmup_frames,
@@ -142,8 +156,7 @@ int main(int argc, char** argv) {
                "Stretch the elevation store over the colour image instead of placing it by georeference");
   app.add_option("--terrain-ring", o.terrain_ring, "Cells per geometry clipmap ring side (power of two, 16..1024)")
       ->transform(cli::wholeInRange(16, 1024));
-  std::string terrain_method = terrainMethodName(o.terrain_method);
-  app.add_option("--terrain", terrain_method,
+  app.add_option("--terrain", a.terrain_method,
                  "Terrain geometry with --elevation: clipmap (default), quadtree; for comparison flat "
                  "(the plane) or full (the full-resolution mesh)");
   app.add_option("--terrain-error", o.terrain_error_px,
@@ -154,40 +167,71 @@ int main(int argc, char** argv) {
       "tile reads failed past --max-failed-reads; nothing half-written is left), 2 command-line\n"
       "mistake, killed by INT/TERM/HUP after removing its temporaries (shell status 128+N).\n"
       "docs/cli.md.");
-  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
-  if (Status s = cli::parseTerrainMethod(terrain_method, &o.terrain_method); !s)
-    return cli::usageError(app, "--terrain: " + s.message);
+  app.footer(
+      "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written,\n"
+      "tile reads failed past --max-failed-reads; nothing half-written is left), 2 command-line\n"
+      "mistake, killed by INT/TERM/HUP after removing its temporaries (shell status 128+N).\n"
+      "docs/cli.md.");
+}
+
+// Checks what the options alone cannot and completes a.o from the parsed
+// command line. Returns the usage error to report, or nothing when the
+// command line is whole.
+std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
+  using namespace clipstream;
+  FlyOptions& o = a.o;
+  StreamerConfig& streamer = o.streamer;
+  if (Status s = cli::parseTerrainMethod(a.terrain_method, &o.terrain_method); !s)
+    return "--terrain: " + s.message;
   if ((app.count("--terrain") || app.count("--terrain-error")) && o.elevation_path.empty())
-    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
+    return "--terrain and --terrain-error need --elevation";
 
   if (o.store_path.empty() && o.procedural_px == 0)
-    return cli::usageError(app, "give a STORE or --procedural SIDE");
+    return "give a STORE or --procedural SIDE";
   if (!o.store_path.empty() && o.procedural_px > 0)
-    return cli::usageError(app, "give a STORE or --procedural SIDE, not both");
-  Status s = cli::parseSize(size, &o.viewport.width_px, &o.viewport.height_px);
-  if (s) s = cli::parseBuffering(buffering, &o.buffering);
+    return "give a STORE or --procedural SIDE, not both";
+  Status s = cli::parseSize(a.size, &o.viewport.width_px, &o.viewport.height_px);
+  if (s) s = cli::parseBuffering(a.buffering, &o.buffering);
   if (s)
-    s = cli::parseTextureMemory(texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
+    s = cli::parseTextureMemory(a.texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
                                 &o.texture_memory);
-  if (s) s = colourTileContentFromName(tile_format, &o.tile_format);
-  if (s && !reference_tile_format.empty()) {
+  if (s) s = colourTileContentFromName(a.tile_format, &o.tile_format);
+  if (s && !a.reference_tile_format.empty()) {
     TileContent reference = TileContent::kRgba8;
-    s = colourTileContentFromName(reference_tile_format, &reference);
+    s = colourTileContentFromName(a.reference_tile_format, &reference);
     o.reference_tile_format = reference;
   }
-  if (s && !resize.empty())
-    s = cli::parseResize(resize, kMaxFlyFrames, &o.resize_at_frame, &o.resize_to.width_px,
+  if (s && !a.resize.empty())
+    s = cli::parseResize(a.resize, kMaxFlyFrames, &o.resize_at_frame, &o.resize_to.width_px,
                          &o.resize_to.height_px);
-  if (!s) return cli::usageError(app, s.message);
-  streamer.ram_budget_bytes = cache_mb << 20;
-  streamer.throttle = !no_throttle;
-  streamer.prefetch = !no_prefetch;
-  streamer.frustum_priority = !no_frustum;
-  streamer.planner.scope = plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
-  streamer.terrain_bounds = !no_terrain_bounds;
-  o.over_fetch = !no_over_fetch;
+  if (!s) return s.message;
+  streamer.ram_budget_bytes = a.cache_mb << 20;
+  streamer.throttle = !a.no_throttle;
+  streamer.prefetch = !a.no_prefetch;
+  streamer.frustum_priority = !a.no_frustum;
+  streamer.planner.scope = a.plan_scope == "window" ? PlanScope::kWindow : PlanScope::kSampled;
+  streamer.terrain_bounds = !a.no_terrain_bounds;
+  o.over_fetch = !a.no_over_fetch;
 
-  if (save_frames->count() > 0) o.save_every = save_every;
+  if (a.save_frames->count() > 0) o.save_every = a.save_every;
+  return std::nullopt;
+}
+
+}  // namespace
+
+// The program in its steps: declare and parse the options, turn them into
+// the flight's options, fly with signals caught, then report failure.
+int main(int argc, char** argv) {
+  using namespace clipstream;
+  CLI::App app{"Headless clipmap flythrough: renders a flight path over a tile store and "
+               "writes per-frame statistics (CSV, JSON) and PNG frames.",
+               "clipstream-fly"};
+  Args args;
+  addOptions(app, &args);
+  if (std::optional<int> code = cli::parse(app, argc, argv)) return *code;
+  if (std::optional<std::string> problem = toFlyOptions(app, args)) return cli::usageError(app, *problem);
+  FlyOptions& o = args.o;
+  Status s;
   // A progress line on a terminal (CLIPSTREAM_PROGRESS=0/1 overrides),
   // finished before the summary table is printed.
   std::unique_ptr<cli::ProgressBar> bar;

@@ -166,6 +166,92 @@ TEST(Stability, StoreWithCorruptTiles) {
   checkScenario("10% corrupt tiles", o);
 }
 
+// The tile of `level` nearest to pixel (px, py)'s ground that the view
+// really draws at that level: sampled there by the CPU reference and
+// usable when everything is loaded (a window's outer ring never is), so
+// its damage shows. Never `avoid`.
+TileKey drawnTileNear(const PyramidGeometry& g, const Viewport& vp, const PlannerConfig& planner, const Camera& c,
+                      uint32_t level, double px, double py, TileKey avoid) {
+  const ClipmapPlan plan = planClipmap(g, vp, c, planner);
+  const uint32_t slots = (plan.clip_tiles / 2) * 2 + 2;
+  const UsableMap map = computeUsableMap(g, slots, plan.pyramid_level, test::fullResidency(plan));
+  std::unordered_set<uint64_t> sampled;
+  sampledTiles(g, c, vp, &sampled);
+  glm::dvec2 hit{0.0, 0.0};
+  EXPECT_TRUE(groundHit(c, vp, px, py, &hit));
+  const double tile_texels = std::ldexp(double(g.tile_px), int(level));
+  const TileRect& w = plan.stack.at(level).window;
+  TileKey best{level, 0, 0};
+  double best_d = 1e300;
+  for (int64_t y = w.y0; y < w.y1; ++y)
+    for (int64_t x = w.x0; x < w.x1; ++x) {
+      if (!map.usable[level][size_t(toroidalSlot(y, slots)) * slots + toroidalSlot(x, slots)] ||
+          TileKey{level, uint32_t(x), uint32_t(y)} == avoid ||
+          sampled.count(packTileKey(TileKey{level, uint32_t(x), uint32_t(y)})) == 0)
+        continue;
+      const double d =
+          std::hypot((x + 0.5) * tile_texels - hit.x, (y + 0.5) * tile_texels - hit.y);
+      if (d < best_d) best_d = d, best = TileKey{level, uint32_t(x), uint32_t(y)};
+    }
+  EXPECT_LT(best_d, 1e300) << "no usable tile at level " << level;
+  return best;
+}
+
+// What the ground is where tiles are damaged: a damaged stack tile has no
+// texels (texelsFromSource() gives magenta, which no correct frame
+// shows), so its pixels must match a coarser level; a damaged pyramid
+// tile is its parent magnified (ClipmapRenderer::fillMissingPyramidTiles:
+// a bilinear 2x blit), and finer levels blend into that.
+struct DamagedGround {
+  TexelFunction stored;
+  PyramidGeometry g;
+  TileKey pyramid_tile, pyramid_parent;
+  void operator()(uint32_t level, uint64_t x, uint64_t y, uint8_t rgba[4]) const {
+    const TileKey key{level, uint32_t(x / g.tile_px), uint32_t(y / g.tile_px)};
+    if (!(key == pyramid_tile || key == pyramid_parent)) return stored(level, x, y, rgba);
+    const double u = (x + 0.5) / 2.0 - 0.5, v = (y + 0.5) / 2.0 - 0.5;
+    const int64_t max_x = int64_t(g.levels[level + 1].tiles_x) * g.tile_px - 1;
+    const int64_t max_y = int64_t(g.levels[level + 1].tiles_y) * g.tile_px - 1;
+    const double fu = std::floor(u), fv = std::floor(v);
+    double acc[4] = {0, 0, 0, 0};
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        uint8_t p[4];
+        (*this)(level + 1, uint64_t(std::clamp<int64_t>(int64_t(fu) + i, 0, max_x)),
+               uint64_t(std::clamp<int64_t>(int64_t(fv) + j, 0, max_y)), p);
+        const double w = (i ? u - fu : 1.0 - (u - fu)) * (j ? v - fv : 1.0 - (v - fv));
+        for (int c = 0; c < 4; ++c) acc[c] += w * p[c];
+      }
+    for (int c = 0; c < 4; ++c) rgba[c] = uint8_t(std::clamp(std::lround(acc[c]), 0l, 255l));
+  }
+};
+
+// The damage is in view and drawn as described: each camera's view differs
+// from the undamaged store's, without holes, every pixel some level of
+// `ground`. (At rest the streamed frame is bit-identical to the damaged
+// store's reference, checked by checkScenario().)
+void checkDamageInView(const std::shared_ptr<TileSource>& clean, const std::shared_ptr<TileSource>& damaged,
+                       const TexelFunction& ground, const Viewport& vp, const FlightRunOptions& o,
+                       std::initializer_list<Camera> cameras) {
+  const PyramidGeometry& g = clean->geometry();
+  std::unique_ptr<IdealReference> with_damage, without;
+  ASSERT_TRUE(IdealReference::create(damaged, vp, o.streamer.planner, &with_damage).ok());
+  ASSERT_TRUE(IdealReference::create(clean, vp, o.streamer.planner, &without).ok());
+  for (const Camera& camera : cameras) {
+    std::vector<uint8_t> shown, undamaged;
+    ASSERT_TRUE(with_damage->render(camera, &shown).ok());
+    ASSERT_TRUE(without->render(camera, &undamaged).ok());
+    const FrameError e = compareFrames(shown, undamaged);
+    const uint32_t garbage = countGarbagePixels(shown, g, ground, camera, vp, o.garbage_tolerance);
+    std::printf("  damaged vs undamaged store: %.2f dB, max abs error %d, %u garbage pixels\n",
+                e.psnr_db, e.max_abs_error, garbage);
+    EXPECT_GT(e.max_abs_error, 0) << "no damaged tile in view";
+    EXPECT_EQ(countHolePixels(shown, undamaged), 0u) << "a damaged tile left a hole";
+    EXPECT_LE(garbage, kGarbagePixelsAllowed)
+        << "a damaged tile drawn as something else than its ancestor";
+  }
+}
+
 // The same on a real file: a tile store written to disk, damaged in place
 // and read through the store source. Damaged: a tile in the first frame's
 // view, two tiles of the resting view at two stack levels, and a pyramid
@@ -194,35 +280,9 @@ TEST(Stability, RealStoreWithDamagedTiles) {
   const Camera first = o.path.sample(0.0);
   const Camera last =
       o.path.sample((o.frames - 1) * renderer_config::kSimulatedFrameSeconds * o.speed);
-  // The tile of `level` nearest to pixel (px, py)'s ground that the view
-  // really draws at that level: sampled there by the CPU reference and
-  // usable when everything is loaded (a window's outer ring never is), so
-  // its damage shows.
   auto drawnNear = [&](const Camera& c, uint32_t level, double px, double py,
                        TileKey avoid = TileKey{~0u, 0, 0}) {
-    const ClipmapPlan plan = planClipmap(g, vp, c, o.streamer.planner);
-    const uint32_t slots = (plan.clip_tiles / 2) * 2 + 2;
-    const UsableMap map = computeUsableMap(g, slots, plan.pyramid_level, test::fullResidency(plan));
-    std::unordered_set<uint64_t> sampled;
-    sampledTiles(g, c, vp, &sampled);
-    glm::dvec2 hit{0.0, 0.0};
-    EXPECT_TRUE(groundHit(c, vp, px, py, &hit));
-    const double tile_texels = std::ldexp(double(g.tile_px), int(level));
-    const TileRect& w = plan.stack.at(level).window;
-    TileKey best{level, 0, 0};
-    double best_d = 1e300;
-    for (int64_t y = w.y0; y < w.y1; ++y)
-      for (int64_t x = w.x0; x < w.x1; ++x) {
-        if (!map.usable[level][size_t(toroidalSlot(y, slots)) * slots + toroidalSlot(x, slots)] ||
-            TileKey{level, uint32_t(x), uint32_t(y)} == avoid ||
-            sampled.count(packTileKey(TileKey{level, uint32_t(x), uint32_t(y)})) == 0)
-          continue;
-        const double d =
-            std::hypot((x + 0.5) * tile_texels - hit.x, (y + 0.5) * tile_texels - hit.y);
-        if (d < best_d) best_d = d, best = TileKey{level, uint32_t(x), uint32_t(y)};
-      }
-    EXPECT_LT(best_d, 1e300) << "no usable tile at level " << level;
-    return best;
+    return drawnTileNear(g, vp, o.streamer.planner, c, level, px, py, avoid);
   };
   const ClipmapPlan p0 = planClipmap(g, vp, first, o.streamer.planner);
   const ClipmapPlan p1 = planClipmap(g, vp, last, o.streamer.planner);
@@ -261,32 +321,8 @@ TEST(Stability, RealStoreWithDamagedTiles) {
         << "level " << d.key.level << " tile (" << d.key.x << ", " << d.key.y << ")";
   }
 
-  // What the ground is where tiles are damaged: a damaged stack tile has no
-  // texels (texelsFromSource() gives magenta, which no correct frame
-  // shows), so its pixels must match a coarser level; a damaged pyramid
-  // tile is its parent magnified (ClipmapRenderer::fillMissingPyramidTiles:
-  // a bilinear 2x blit), and finer levels blend into that.
-  const TexelFunction stored = texelsFromSource(damaged);
-  std::function<void(uint32_t, uint64_t, uint64_t, uint8_t*)> ground;
-  ground = [&](uint32_t level, uint64_t x, uint64_t y, uint8_t rgba[4]) {
-    const TileKey key{level, uint32_t(x / g.tile_px), uint32_t(y / g.tile_px)};
-    if (!(key == pyramid_tile || key == pyramid_parent)) return stored(level, x, y, rgba);
-    const double u = (x + 0.5) / 2.0 - 0.5, v = (y + 0.5) / 2.0 - 0.5;
-    const int64_t max_x = int64_t(g.levels[level + 1].tiles_x) * g.tile_px - 1;
-    const int64_t max_y = int64_t(g.levels[level + 1].tiles_y) * g.tile_px - 1;
-    const double fu = std::floor(u), fv = std::floor(v);
-    double acc[4] = {0, 0, 0, 0};
-    for (int j = 0; j < 2; ++j)
-      for (int i = 0; i < 2; ++i) {
-        uint8_t p[4];
-        ground(level + 1, uint64_t(std::clamp<int64_t>(int64_t(fu) + i, 0, max_x)),
-               uint64_t(std::clamp<int64_t>(int64_t(fv) + j, 0, max_y)), p);
-        const double w = (i ? u - fu : 1.0 - (u - fu)) * (j ? v - fv : 1.0 - (v - fv));
-        for (int c = 0; c < 4; ++c) acc[c] += w * p[c];
-      }
-    for (int c = 0; c < 4; ++c) rgba[c] = uint8_t(std::clamp(std::lround(acc[c]), 0l, 255l));
-  };
-
+  // What the ground is where tiles are damaged (DamagedGround).
+  const TexelFunction ground = DamagedGround{texelsFromSource(damaged), g, pyramid_tile, pyramid_parent};
   o.source = damaged;
   o.garbage_texels = ground;
   FlightRun r;
@@ -298,26 +334,8 @@ TEST(Stability, RealStoreWithDamagedTiles) {
   EXPECT_LE(r.tile_failures, damage.size() + pyramid_damaged) << "a damaged tile was read again";
   EXPECT_GE(r.tile_failures, damage.size() - 1 + pyramid_damaged);
 
-  // The damage is in view and drawn as described: the first and the
-  // resting view differ from the undamaged store's, without holes, every
-  // pixel some level of that ground. (At rest the streamed frame is
-  // bit-identical to this reference, checked above.)
-  std::unique_ptr<IdealReference> with_damage, without;
-  ASSERT_TRUE(IdealReference::create(damaged, vp, o.streamer.planner, &with_damage).ok());
-  ASSERT_TRUE(IdealReference::create(clean, vp, o.streamer.planner, &without).ok());
-  for (const Camera& camera : {first, last}) {
-    std::vector<uint8_t> shown, undamaged;
-    ASSERT_TRUE(with_damage->render(camera, &shown).ok());
-    ASSERT_TRUE(without->render(camera, &undamaged).ok());
-    const FrameError e = compareFrames(shown, undamaged);
-    const uint32_t garbage = countGarbagePixels(shown, g, ground, camera, vp, o.garbage_tolerance);
-    std::printf("  damaged vs undamaged store: %.2f dB, max abs error %d, %u garbage pixels\n",
-                e.psnr_db, e.max_abs_error, garbage);
-    EXPECT_GT(e.max_abs_error, 0) << "no damaged tile in view";
-    EXPECT_EQ(countHolePixels(shown, undamaged), 0u) << "a damaged tile left a hole";
-    EXPECT_LE(garbage, kGarbagePixelsAllowed)
-        << "a damaged tile drawn as something else than its ancestor";
-  }
+  // The damage is in view and drawn as described (checkDamageInView).
+  checkDamageInView(clean, damaged, ground, vp, o, {first, last});
 }
 
 TEST(Stability, ProceduralTextureOf2To26Texels) {
