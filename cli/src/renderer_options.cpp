@@ -37,6 +37,16 @@ Status parseTextureMemory(const std::string& name, bool terrain, Buffering buffe
                            (terrain ? "--elevation" : "double buffering") + " yet)");
 }
 
+Status parseTileFormat(const std::string& name, TileContent* out) {
+  for (TileContent c : {TileContent::kRgba8, TileContent::kBc1})
+    if (name == tileContentName(c)) {
+      *out = c;
+      return okStatus();
+    }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "tile format \"" + printableText(name, 40) + "\" is not rgba8 or bc1");
+}
+
 Status parseTerrainMethod(const std::string& name, TerrainMethod* out) {
   for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree, TerrainMethod::kFlat,
                           TerrainMethod::kFull}) {

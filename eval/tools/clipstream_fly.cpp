@@ -195,10 +195,10 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
   if (s)
     s = cli::parseTextureMemory(a.texture_memory, !o.elevation_path.empty(), o.buffering, app.count("--pool-mb") > 0,
                                 &o.texture_memory);
-  if (s) s = colourTileContentFromName(a.tile_format, &o.tile_format);
+  if (s) s = cli::parseTileFormat(a.tile_format, &o.tile_format);
   if (s && !a.reference_tile_format.empty()) {
     TileContent reference = TileContent::kRgba8;
-    s = colourTileContentFromName(a.reference_tile_format, &reference);
+    s = cli::parseTileFormat(a.reference_tile_format, &reference);
     o.reference_tile_format = reference;
   }
   if (s && !a.resize.empty())

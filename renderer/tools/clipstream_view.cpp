@@ -246,7 +246,7 @@ std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
     return cli::usageError(app, "--terrain and --terrain-error need --elevation");
   if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
-  if (Status s = colourTileContentFromName(a.tile_format, &c->tile_content); !s)
+  if (Status s = cli::parseTileFormat(a.tile_format, &c->tile_content); !s)
     return cli::usageError(app, s.message);
   if (Status s = cli::parseTextureMemory(a.texture_memory, !a.elevation_path.empty(), kDefaultBuffering,
                                         app.count("--pool-mb") > 0, &c->memory);

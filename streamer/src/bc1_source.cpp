@@ -21,16 +21,6 @@ const char* tileContentName(TileContent content) {
   return "?";
 }
 
-Status colourTileContentFromName(const std::string& name, TileContent* out) {
-  for (TileContent c : {TileContent::kRgba8, TileContent::kBc1})
-    if (name == tileContentName(c)) {
-      *out = c;
-      return okStatus();
-    }
-  return Status::error(ErrorCode::kInvalidArgument,
-                       "tile format \"" + printableText(name, 40) + "\" is not rgba8 or bc1");
-}
-
 namespace {
 
 class Bc1Source final : public TileSource {

@@ -76,4 +76,17 @@ TEST(RendererOptions, TextureMemoryAutoFollowsTheRendererAndThePoolNeedsPaged) {
 }
 
 }  // namespace
+TEST(RendererOptions, ParsesTheColourTileFormatsOnly) {
+  TileContent c = TileContent::kRgba8;
+  EXPECT_TRUE(cli::parseTileFormat("bc1", &c).ok());
+  EXPECT_EQ(c, TileContent::kBc1);
+  EXPECT_TRUE(cli::parseTileFormat("rgba8", &c).ok());
+  EXPECT_EQ(c, TileContent::kRgba8);
+  const Status bc7 = cli::parseTileFormat("bc7", &c);
+  EXPECT_EQ(bc7.code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(bc7.message, "tile format \"bc7\" is not rgba8 or bc1");
+  EXPECT_EQ(cli::parseTileFormat("f32", &c).code, ErrorCode::kInvalidArgument);  // heights are not colour
+  EXPECT_EQ(c, TileContent::kRgba8);  // untouched on failure
+}
+
 }  // namespace clipstream::cli

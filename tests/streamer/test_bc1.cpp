@@ -182,11 +182,6 @@ TEST(Bc1Source, RefusesHeightsAndTilesThatAreNotWholeBlocks) {
   EXPECT_EQ(s.code, ErrorCode::kInvalidArgument);
   EXPECT_NE(s.message.find("multiple of 4"), std::string::npos) << s.message;
   EXPECT_FALSE(makeBc1Source(nullptr, &s));
-  TileContent c = TileContent::kRgba8;
-  EXPECT_TRUE(colourTileContentFromName("bc1", &c).ok());
-  EXPECT_EQ(c, TileContent::kBc1);
-  EXPECT_EQ(colourTileContentFromName("bc7", &c).code, ErrorCode::kInvalidArgument);
-  EXPECT_EQ(colourTileContentFromName("f32", &c).code, ErrorCode::kInvalidArgument);
 }
 
 TEST(Bc1Source, TheStreamerHandsOutAndCachesCompressedTiles) {

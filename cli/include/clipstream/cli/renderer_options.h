@@ -1,6 +1,7 @@
 // The renderer's option values on the command line of the programs that
-// draw (clipstream-fly, clipstream-view): --buffering, --texture-memory and
-// --terrain turned into the renderer's enums. The other way, enum to word,
+// draw (clipstream-fly, clipstream-view): --buffering, --texture-memory,
+// --tile-format and --terrain turned into the renderer's and the streamer's
+// enums. The other way, enum to word,
 // stays with each enum (bufferingName(), textureMemoryName(),
 // terrainMethodName()): the reports and the renderer's messages use it, and
 // these parsers accept exactly those words (docs/decisions.md D274).
@@ -29,6 +30,12 @@ Status parseBuffering(const std::string& name, Buffering* out);
 // (saying why auto chose the stack).
 Status parseTextureMemory(const std::string& name, bool terrain, Buffering buffering, bool pool_given,
                           TextureMemory* out);
+
+// --tile-format (and --reference-tile-format): the colour tiles on the GPU,
+// "rgba8" or "bc1" (tileContentName()). kInvalidArgument naming the two
+// otherwise (heights are not a colour tile format); *out is set only on
+// success.
+Status parseTileFormat(const std::string& name, TileContent* out);
 
 // --terrain: "clipmap", "quadtree", "flat" or "full" (terrainMethodName()).
 // kInvalidArgument naming the choices otherwise; *out is set only on

@@ -45,11 +45,9 @@ struct TileHeightBounds {
 // bc1TileBytes(tile_px) for kBc1. The streamer's RAM cache counts these.
 uint64_t tileContentBytes(TileContent content, uint32_t tile_px);
 
-// Colour tile contents by name, for command lines: "rgba8" and "bc1".
-// The inverse returns kInvalidArgument naming the choices for anything else
-// (heights are not a colour tile format).
+// A tile content's name: "rgba8", "f32" or "bc1" (reports and messages
+// use it; programs parse it with cli::parseTileFormat()).
 const char* tileContentName(TileContent content);
-Status colourTileContentFromName(const std::string& name, TileContent* out);
 
 // Thread-safe: fetch() may be called from any number of threads at once and
 // must not hold a lock across I/O or decompression.
