@@ -61,13 +61,17 @@ void RamCache::buildVictimLists() {
   m_order_dirty = false;
 }
 
-void RamCache::evict(Map::iterator it) {
-  const LayerTile key = it->first;
-  Layer& layer = m_layers[key.layer];
+void RamCache::remove(Map::iterator it) {
+  Layer& layer = m_layers[it->first.layer];
   m_bytes -= layer.entry_bytes;
   layer.bytes -= layer.entry_bytes;
   layer.entries--;
   m_map.erase(it);
+}
+
+void RamCache::evict(Map::iterator it) {
+  const LayerTile key = it->first;
+  remove(it);
   if (m_on_evict) m_on_evict(key);
 }
 
@@ -122,12 +126,7 @@ void RamCache::fill(const LayerTile& key, std::shared_ptr<const std::vector<uint
 
 void RamCache::erase(const LayerTile& key) {
   auto it = m_map.find(key);
-  if (it == m_map.end()) return;
-  Layer& layer = m_layers[key.layer];
-  m_bytes -= layer.entry_bytes;
-  layer.bytes -= layer.entry_bytes;
-  layer.entries--;
-  m_map.erase(it);
+  if (it != m_map.end()) remove(it);
 }
 
 void RamCache::setRanks(Ranks ranks) {

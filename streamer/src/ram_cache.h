@@ -107,6 +107,8 @@ class RamCache {
 
   bool scoredWhenOnGpu(const LayerTile& key) const;
   void buildVictimLists();
+  // Drops an entry and uncharges its layer; evict() also tells on_evict.
+  void remove(Map::iterator it);
   void evict(Map::iterator it);
 
   uint64_t m_budget;
