@@ -120,9 +120,9 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
   std::vector<float> xyzw;
   if (Status s = flight.terrain()->readPositions(camera, flight.viewport(), flight.renderer(), &xyzw); !s)
     return s;
-  f.geometry = geometricError(xyzw, camera, flight.viewport(), surface);
   flight.target()->readRgba(&j.streamed_rgba);
   if (Status s = terrain_reference.render(camera, &j.reference_rgba, &j.reference_xyzw); !s) return s;
+  f.geometry = geometricError(xyzw, camera, flight.viewport(), surface, &j.reference_xyzw);
   const TerrainFrameError te = compareTerrainFrames(j.streamed_rgba, xyzw, j.reference_rgba, j.reference_xyzw, flight.viewport());
   f.accuracy.measured = true;
   f.accuracy.error = te.error;
@@ -130,7 +130,7 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
   f.terrain_agree_mismatched = te.agree_mismatched;
   if (fewest) {
     if (Status s = fewest->count(camera, flight.viewport(), flight.renderer(), surface, kFewestErrorPx,
-                                 &f.fewest_triangles);
+                                 &f.fewest_triangles, &j.reference_xyzw);
         !s)
       return s;
   }
@@ -153,6 +153,10 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
     run->geometry_mean_px += f.geometry.mean_px;
     run->geometry_p95_px += f.geometry.p95_px;
     run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
+    run->coverage_pixels_mean += double(f.geometry.coverage_pixels);
+    run->silhouette_mean_px += f.geometry.silhouette_mean_px;
+    run->silhouette_p95_px += f.geometry.silhouette_p95_px;
+    run->silhouette_max_px = std::max(run->silhouette_max_px, f.geometry.silhouette_max_px);
     run->judged_triangles_mean += double(f.sample.terrain_triangles);
     run->fewest_triangles_mean += double(f.fewest_triangles);
     if (rest) {
@@ -232,6 +236,9 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
   if (run->geometry_frames > 0) {
     run->geometry_mean_px /= run->geometry_frames;
     run->geometry_p95_px /= run->geometry_frames;
+    run->coverage_pixels_mean /= run->geometry_frames;
+    run->silhouette_mean_px /= run->geometry_frames;
+    run->silhouette_p95_px /= run->geometry_frames;
     run->judged_triangles_mean /= run->geometry_frames;
     run->fewest_triangles_mean /= run->geometry_frames;
   }

@@ -54,6 +54,13 @@ bool readRemotely(const FlightRun& run) { return run.remote.requests > 0 || run.
 // The RAM budget as the reports name it: cache_mb, whole MiB.
 uint64_t cacheMib(const RunDescription& d) { return d.streamer.ram_budget_bytes >> 20; }
 
+// A summary.tsv number: four decimals, 0 for a value that is not finite.
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4f", std::isfinite(v) ? v : 0.0);
+  return std::string(b);
+}
+
 }  // namespace
 
 std::string framesCsv(const FlightRun& run, uint32_t levels) {
@@ -62,7 +69,8 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
       "finest_needed,queue_depth,in_flight,ram_bytes,bytes_read,ram_hits,ram_misses,gpu_hits,"
       "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error,"
       "terrain_triangles,terrain_rings,terrain_finest_level,height_tiles_uploaded,ground_height,"
-      "geo_error_mean_px,geo_error_p95_px,geo_error_max_px";
+      "geo_error_mean_px,geo_error_p95_px,geo_error_max_px,geo_coverage_pixels,geo_silhouette_mean_px,"
+      "geo_silhouette_p95_px";
   for (uint32_t l = 0; l < levels; ++l)
     for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
       csv += ",L" + std::to_string(l) + "_" + f;
@@ -89,6 +97,13 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
     csv += buf;
     if (f.geometry.measured) {
       std::snprintf(buf, sizeof buf, ",%.4f,%.4f,%.4f", f.geometry.mean_px, f.geometry.p95_px, f.geometry.max_px);
+      csv += buf;
+    } else {
+      csv += ",,,";
+    }
+    if (f.geometry.coverage) {
+      std::snprintf(buf, sizeof buf, ",%u,%.4f,%.4f", f.geometry.coverage_pixels, f.geometry.silhouette_mean_px,
+                    f.geometry.silhouette_p95_px);
       csv += buf;
     } else {
       csv += ",,,";
@@ -139,6 +154,13 @@ nlohmann::json frameJson(const FlightRunFrame& f) {
     j["geo_error_mean_px"] = f.geometry.mean_px;
     j["geo_error_p95_px"] = f.geometry.p95_px;
     j["geo_error_max_px"] = f.geometry.max_px;
+    if (f.geometry.coverage) {
+      j["geo_coverage_pixels"] = f.geometry.coverage_pixels;
+      j["geo_silhouette_pixels"] = f.geometry.silhouette_pixels;
+      j["geo_silhouette_mean_px"] = f.geometry.silhouette_mean_px;
+      j["geo_silhouette_p95_px"] = f.geometry.silhouette_p95_px;
+      j["geo_silhouette_max_px"] = f.geometry.silhouette_max_px;
+    }
     j["texture_agree_pixels"] = f.terrain_agree_pixels;
     j["texture_agree_mismatched"] = f.terrain_agree_mismatched;
   }
@@ -209,6 +231,10 @@ nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   acc["geo_error_mean_px"] = run.geometry_mean_px;
   acc["geo_error_p95_px"] = run.geometry_p95_px;
   acc["geo_error_max_px"] = run.geometry_max_px;
+  acc["geo_coverage_pixels_mean"] = run.coverage_pixels_mean;
+  acc["geo_silhouette_mean_px"] = run.silhouette_mean_px;
+  acc["geo_silhouette_p95_px"] = run.silhouette_p95_px;
+  acc["geo_silhouette_max_px"] = run.silhouette_max_px;
   acc["geometry_rest_frames"] = run.geometry_rest_frames;
   acc["geo_error_rest_mean_px"] = run.geometry_rest_mean_px;
   acc["geo_error_rest_p95_px"] = run.geometry_rest_p95_px;
@@ -271,11 +297,6 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   auto add = [&](const std::string& k, const std::string& v) {
     keys += (keys.empty() ? "" : "\t") + k;
     values += (values.empty() ? "" : "\t") + v;
-  };
-  auto num = [](double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.4f", std::isfinite(v) ? v : 0.0);
-    return std::string(b);
   };
   add("frames", std::to_string(s.frames));
   add("speed", num(d.speed));
@@ -361,6 +382,12 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("http_retries", remoteCount(run.remote.retries));
   add("disk_cache_hits", remoteCount(run.remote.disk_cache_hits));
   add("disk_cache_misses", remoteCount(run.remote.disk_cache_misses));
+  // Coverage and the silhouette figure (GeometryError), when judged.
+  auto whenJudged = [&](double v) { return run.geometry_frames ? num(v) : std::string(); };
+  add("geo_coverage_pixels_mean", whenJudged(run.coverage_pixels_mean));
+  add("geo_silhouette_mean_px", whenJudged(run.silhouette_mean_px));
+  add("geo_silhouette_p95_px", whenJudged(run.silhouette_p95_px));
+  add("geo_silhouette_max_px", whenJudged(run.silhouette_max_px));
   return keys + "\n" + values + "\n";
 }
 
@@ -385,6 +412,11 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
     row("geo_error_mean_px", run.geometry_mean_px, "%.3f");
     row("geo_error_p95_px", run.geometry_p95_px, "%.3f");
     row("geo_error_max_px", run.geometry_max_px, "%.2f");
+    // Pixels that are terrain in one frame and sky in the other (counted
+    // above), and the distance between the two outlines.
+    row("geo_coverage_pixels_mean", run.coverage_pixels_mean, "%.1f");
+    row("geo_silhouette_mean_px", run.silhouette_mean_px, "%.3f");
+    row("geo_silhouette_p95_px", run.silhouette_p95_px, "%.3f");
     // Triangles of the judged frames against the fewest that model them
     // within kFewestErrorPx (FewestTriangles).
     row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");

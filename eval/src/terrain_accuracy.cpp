@@ -61,18 +61,139 @@ double ReferenceSurface::heightAt(double x, double z) const {
   return h * a.world_per_height;
 }
 
-GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera,
-                             const Viewport& viewport, const ReferenceSurface& surface) {
+namespace {
+
+// Squared distance (pixels) from every pixel to the nearest pixel where
+// `feature` is set (Felzenszwalb & Huttenlocher's exact transform: a lower
+// envelope of parabolas per column, then per row); kNone where there is no
+// feature at all.
+constexpr double kNone = 1e30;
+std::vector<double> squaredDistanceTo(const std::vector<uint8_t>& feature, uint32_t w, uint32_t h) {
+  std::vector<double> d(feature.size());
+  for (size_t p = 0; p < feature.size(); ++p) d[p] = feature[p] ? 0.0 : kNone;
+  const uint32_t n_max = std::max(w, h);
+  std::vector<double> f(n_max), out(n_max), z(n_max + 1);
+  std::vector<uint32_t> v(n_max);
+  auto pass = [&](uint32_t n) {  // f[0..n) -> out[0..n)
+    uint32_t first = 0;
+    while (first < n && f[first] >= kNone) ++first;
+    if (first == n) {
+      std::fill(out.begin(), out.begin() + n, kNone);
+      return;
+    }
+    uint32_t k = 0;
+    v[0] = first;
+    z[0] = -kNone;
+    z[1] = kNone;
+    auto meet = [&](uint32_t q, uint32_t r) {  // where parabolas q and r cross
+      return ((f[q] + double(q) * q) - (f[r] + double(r) * r)) / (2.0 * (double(q) - double(r)));
+    };
+    for (uint32_t q = first + 1; q < n; ++q) {
+      if (f[q] >= kNone) continue;
+      double s = meet(q, v[k]);
+      while (s <= z[k]) s = meet(q, v[--k]);  // z[0] = -kNone ends it
+      ++k;
+      v[k] = q;
+      z[k] = s;
+      z[k + 1] = kNone;
+    }
+    k = 0;
+    for (uint32_t q = 0; q < n; ++q) {
+      while (z[k + 1] < double(q)) ++k;
+      const double dq = double(q) - v[k];
+      out[q] = dq * dq + f[v[k]];
+    }
+  };
+  for (uint32_t x = 0; x < w; ++x) {
+    for (uint32_t y = 0; y < h; ++y) f[y] = d[size_t(y) * w + x];
+    pass(h);
+    for (uint32_t y = 0; y < h; ++y) d[size_t(y) * w + x] = out[y];
+  }
+  for (uint32_t y = 0; y < h; ++y) {
+    std::copy_n(d.begin() + size_t(y) * w, w, f.begin());
+    pass(w);
+    std::copy_n(out.begin(), w, d.begin() + size_t(y) * w);
+  }
+  return d;
+}
+
+// Pixels showing terrain (w >= 1) in a position buffer.
+std::vector<uint8_t> terrainMask(const std::vector<float>& xyzw, size_t pixels) {
+  std::vector<uint8_t> m(pixels);
+  for (size_t p = 0; p < pixels; ++p) m[p] = xyzw[p * 4 + 3] >= 1.0f;
+  return m;
+}
+
+// Terrain pixels with a 4-neighbour inside the viewport that is not terrain.
+std::vector<uint8_t> outline(const std::vector<uint8_t>& terrain, uint32_t w, uint32_t h) {
+  std::vector<uint8_t> o(terrain.size(), 0);
+  for (uint32_t y = 0; y < h; ++y)
+    for (uint32_t x = 0; x < w; ++x) {
+      const size_t p = size_t(y) * w + x;
+      if (!terrain[p]) continue;
+      o[p] = (x > 0 && !terrain[p - 1]) || (x + 1 < w && !terrain[p + 1]) || (y > 0 && !terrain[p - w]) ||
+             (y + 1 < h && !terrain[p + w]);
+    }
+  return o;
+}
+
+double farPx(const Viewport& viewport) { return std::hypot(double(viewport.width_px), double(viewport.height_px)); }
+
+// The silhouette figure: each frame's outline pixels against the other's outline.
+void measureSilhouette(const std::vector<uint8_t>& ours, const std::vector<uint8_t>& theirs,
+                       const Viewport& viewport, GeometryError* e) {
+  const uint32_t w = viewport.width_px, h = viewport.height_px;
+  const std::vector<uint8_t> a = outline(ours, w, h), b = outline(theirs, w, h);
+  const std::vector<double> to_a = squaredDistanceTo(a, w, h), to_b = squaredDistanceTo(b, w, h);
+  std::vector<double> d;
+  for (size_t p = 0; p < a.size(); ++p) {
+    if (a[p]) d.push_back(to_b[p] >= kNone ? farPx(viewport) : std::sqrt(to_b[p]));
+    if (b[p]) d.push_back(to_a[p] >= kNone ? farPx(viewport) : std::sqrt(to_a[p]));
+  }
+  e->silhouette_pixels = uint32_t(d.size());
+  if (d.empty()) return;
+  double sum = 0.0;
+  for (double v : d) {
+    sum += v;
+    e->silhouette_max_px = std::max(e->silhouette_max_px, v);
+  }
+  e->silhouette_mean_px = sum / double(d.size());
+  e->silhouette_p95_px = percentileOf(std::move(d), 0.95);
+}
+
+}  // namespace
+
+GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera, const Viewport& viewport,
+                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw) {
   GeometryError e;
   const size_t pixels = size_t(viewport.width_px) * viewport.height_px;
   if (xyzw.size() < pixels * 4) return e;
+  const bool coverage = reference_xyzw && reference_xyzw->size() >= pixels * 4;
+  std::vector<uint8_t> ours, theirs;
+  std::vector<double> to_ours, to_theirs;
+  if (coverage) {
+    ours = terrainMask(xyzw, pixels);
+    theirs = terrainMask(*reference_xyzw, pixels);
+    to_ours = squaredDistanceTo(ours, viewport.width_px, viewport.height_px);
+    to_theirs = squaredDistanceTo(theirs, viewport.width_px, viewport.height_px);
+  }
+  auto coverageError = [&](const std::vector<double>& to_other, size_t p) {
+    return to_other[p] >= kNone ? farPx(viewport) : std::sqrt(to_other[p]);
+  };
   const glm::dmat4 vp = cameraProjection(camera, viewport, 1e9) * cameraRelativeView(camera);
   std::vector<double> errors;
   errors.reserve(pixels / 2);
   for (uint32_t py = 0; py < viewport.height_px; ++py)
     for (uint32_t px = 0; px < viewport.width_px; ++px) {
-      const float* p = xyzw.data() + (size_t(py) * viewport.width_px + px) * 4;
-      if (p[3] < 1.0f) continue;
+      const size_t i = size_t(py) * viewport.width_px + px;
+      const float* p = xyzw.data() + i * 4;
+      if (p[3] < 1.0f) {
+        if (coverage && theirs[i]) {  // terrain in the reference only
+          errors.push_back(coverageError(to_ours, i));
+          ++e.coverage_pixels;
+        }
+        continue;
+      }
       const double wx = camera.position.x + double(p[0]), wz = camera.position.z + double(p[2]);
       const double y_rel = surface.heightAt(wx, wz) - camera.position.y;
       const glm::dvec4 clip = vp * glm::dvec4(double(p[0]), y_rel, double(p[2]), 1.0);
@@ -82,9 +203,15 @@ GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camer
         const double sy = (0.5 - clip.y / clip.w * 0.5) * viewport.height_px;
         err = std::hypot(sx - (px + 0.5), sy - (py + 0.5));
       }
+      if (coverage && !theirs[i]) {  // terrain in this frame only
+        err = std::max(err, coverageError(to_theirs, i));
+        ++e.coverage_pixels;
+      }
       errors.push_back(err);
     }
   e.measured = true;
+  e.coverage = coverage;
+  if (coverage) measureSilhouette(ours, theirs, viewport, &e);
   e.pixels = uint32_t(errors.size());
   if (errors.empty()) return e;
   double sum = 0.0;
@@ -269,7 +396,8 @@ Status FewestTriangles::create(const ReferenceSurface& surface, TileSource& heig
 }
 
 Status FewestTriangles::count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
-                              const ReferenceSurface& surface, double p95_px, uint64_t* triangles) {
+                              const ReferenceSurface& surface, double p95_px, uint64_t* triangles,
+                              const std::vector<float>* reference_xyzw) {
   if (m_last_camera && m_last_camera->position == camera.position &&
       m_last_camera->heading_rad == camera.heading_rad && m_last_camera->pitch_rad == camera.pitch_rad &&
       m_last_camera->vfov_rad == camera.vfov_rad && m_last_viewport.width_px == viewport.width_px &&
@@ -289,7 +417,7 @@ Status FewestTriangles::count(const Camera& camera, const Viewport& viewport, co
       return 0.0;
     }
     *count = m_quadtree->lastFrame().triangles;
-    const GeometryError e = geometricError(xyzw, camera, viewport, surface);
+    const GeometryError e = geometricError(xyzw, camera, viewport, surface, reference_xyzw);
     return e.pixels == 0 ? 0.0 : e.p95_px;
   };
   double lo = std::log(kMinTerrainErrorPx), hi = std::log(kMaxTerrainErrorPx);

@@ -172,6 +172,10 @@ struct FlightRun {
   uint32_t geometry_frames = 0, geometry_rest_frames = 0;
   double geometry_mean_px = 0.0, geometry_p95_px = 0.0, geometry_max_px = 0.0;
   double geometry_rest_mean_px = 0.0, geometry_rest_p95_px = 0.0, geometry_rest_max_px = 0.0;
+  // Coverage and the silhouette figure (GeometryError; means over the judged
+  // frames, and the largest).
+  double coverage_pixels_mean = 0.0;
+  double silhouette_mean_px = 0.0, silhouette_p95_px = 0.0, silhouette_max_px = 0.0;
   // Over the judged rest frames: pixels where the geometry agrees with the
   // reference to the bit, and of them those whose colour differs (0 when
   // the texture is bit-identical wherever the geometry agrees).

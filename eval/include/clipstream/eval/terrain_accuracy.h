@@ -58,8 +58,14 @@ class ReferenceSurface {
 
 struct GeometryError {
   bool measured = false;
-  uint32_t pixels = 0;  // pixels showing terrain
+  uint32_t pixels = 0;  // pixels measured: terrain in the frame, or in the reference (coverage)
   double mean_px = 0.0, p95_px = 0.0, max_px = 0.0;
+  // With the reference's positions (coverage counted):
+  bool coverage = false;
+  uint32_t coverage_pixels = 0;    // terrain in one of the two frames, sky or background in the other
+  uint32_t silhouette_pixels = 0;  // pixels on either frame's terrain outline
+  // Distance from each outline pixel to the other frame's outline.
+  double silhouette_mean_px = 0.0, silhouette_p95_px = 0.0, silhouette_max_px = 0.0;
 };
 
 // For every pixel showing terrain in `xyzw` (TerrainRenderer::
@@ -67,8 +73,18 @@ struct GeometryError {
 // pixels between the pixel's centre and where the ground point (x, z) at
 // the full-resolution surface's height projects for this camera. A point
 // behind the camera counts as the viewport's width.
-GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera,
-                             const Viewport& viewport, const ReferenceSurface& surface);
+//
+// With `reference_xyzw` (the full-resolution mesh's positions for the same
+// camera, TerrainReference::render()) coverage counts too: a pixel that
+// shows terrain in one frame and sky or background in the other is
+// measured by its distance to the nearest pixel showing terrain in the
+// other frame (how far the outline is displaced there; at least 1), and
+// joins the mean, p95 and max. The silhouette figure compares the two
+// outlines alone: an outline pixel shows terrain and has a 4-neighbour
+// that does not (the viewport's border is no outline); each frame's
+// outline pixels are measured by their distance to the other's outline.
+GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera, const Viewport& viewport,
+                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw = nullptr);
 
 // The fewest triangles that model a frame's terrain within a geometric
 // error target: a quadtree of small patches (kFewestPatchCells cells) whose
@@ -92,8 +108,11 @@ class FewestTriangles {
   // a p95 geometric error <= p95_px (`colour` gives the image's extent).
   // Into *triangles; kOutOfMemory / kUnavailable if the quadtree's
   // position target cannot be made.
+  // With `reference_xyzw` (the reference's positions for `camera`), the
+  // p95 counts coverage (geometricError()).
   [[nodiscard]] Status count(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour,
-                             const ReferenceSurface& surface, double p95_px, uint64_t* triangles);
+                             const ReferenceSurface& surface, double p95_px, uint64_t* triangles,
+                             const std::vector<float>* reference_xyzw = nullptr);
 
  private:
   FewestTriangles() = default;
