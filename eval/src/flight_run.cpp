@@ -105,6 +105,7 @@ struct TerrainJudging {
   std::vector<uint8_t> previous_streamed, previous_reference;
   uint32_t previous_judged = UINT32_MAX;
   std::vector<float> reference_xyzw;
+  std::vector<glm::vec2> displacement, previous_displacement;  // geometricError()'s
 };
 
 // Judges recorded frame i over terrain: geometric error against the
@@ -122,7 +123,7 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
     return s;
   flight.target()->readRgba(&j.streamed_rgba);
   if (Status s = terrain_reference.render(camera, &j.reference_rgba, &j.reference_xyzw); !s) return s;
-  f.geometry = geometricError(xyzw, camera, flight.viewport(), surface, &j.reference_xyzw);
+  f.geometry = geometricError(xyzw, camera, flight.viewport(), surface, &j.reference_xyzw, &j.displacement);
   const TerrainFrameError te = compareTerrainFrames(j.streamed_rgba, xyzw, j.reference_rgba, j.reference_xyzw, flight.viewport());
   f.accuracy.measured = true;
   f.accuracy.error = te.error;
@@ -138,7 +139,11 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
     run->change_pairs += 1;
     run->change_mean += meanGreyChange(j.streamed_rgba, j.previous_streamed);
     run->reference_change_mean += meanGreyChange(j.reference_rgba, j.previous_reference);
+    const double moved = displacementChange(j.displacement, j.previous_displacement);
+    run->geometry_change_mean += moved;
+    run->geometry_change_max = std::max(run->geometry_change_max, moved);
   }
+  std::swap(j.displacement, j.previous_displacement);
   j.previous_judged = i;
   j.previous_streamed = j.streamed_rgba;
   j.previous_reference = j.reference_rgba;
@@ -245,6 +250,7 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
   if (run->change_pairs > 0) {
     run->change_mean /= run->change_pairs;
     run->reference_change_mean /= run->change_pairs;
+    run->geometry_change_mean /= run->change_pairs;
   }
   if (run->geometry_rest_frames > 0) {
     run->geometry_rest_mean_px /= run->geometry_rest_frames;

@@ -222,6 +222,8 @@ nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   acc["change_pairs"] = run.change_pairs;
   acc["change_mean"] = run.change_mean;
   acc["reference_change_mean"] = run.reference_change_mean;
+  acc["geometry_change_mean_px"] = run.geometry_change_mean;
+  acc["geometry_change_max_px"] = run.geometry_change_max;
   acc["plans_on_terrain"] = run.plans_on_terrain;
   acc["seen_level_frames"] = run.seen_frames;
   acc["needed_coarser_frames"] = run.needed_coarser_frames;
@@ -290,6 +292,21 @@ std::string framesJson(const FlightRun& run, const RunDescription& d) {
       {"accuracy", acc}};
   return nlohmann::json{{"summary", summary}, {"frames", jframes}}.dump(1) + "\n";
 }
+
+namespace {
+// summary.tsv's coverage, silhouette and geometry-only change columns
+// (empty when not measured).
+std::vector<std::pair<std::string, std::string>> terrainMeasureColumns(const FlightRun& run) {
+  auto judged = [&](double v) { return run.geometry_frames ? num(v) : std::string(); };
+  auto paired = [&](double v) { return run.change_pairs ? num(v) : std::string(); };
+  return {{"geo_coverage_pixels_mean", judged(run.coverage_pixels_mean)},
+          {"geo_silhouette_mean_px", judged(run.silhouette_mean_px)},
+          {"geo_silhouette_p95_px", judged(run.silhouette_p95_px)},
+          {"geo_silhouette_max_px", judged(run.silhouette_max_px)},
+          {"geometry_change_mean_px", paired(run.geometry_change_mean)},
+          {"geometry_change_max_px", paired(run.geometry_change_max)}};
+}
+}  // namespace
 
 std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   const RunSummary& s = run.summary;
@@ -382,12 +399,7 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("http_retries", remoteCount(run.remote.retries));
   add("disk_cache_hits", remoteCount(run.remote.disk_cache_hits));
   add("disk_cache_misses", remoteCount(run.remote.disk_cache_misses));
-  // Coverage and the silhouette figure (GeometryError), when judged.
-  auto whenJudged = [&](double v) { return run.geometry_frames ? num(v) : std::string(); };
-  add("geo_coverage_pixels_mean", whenJudged(run.coverage_pixels_mean));
-  add("geo_silhouette_mean_px", whenJudged(run.silhouette_mean_px));
-  add("geo_silhouette_p95_px", whenJudged(run.silhouette_p95_px));
-  add("geo_silhouette_max_px", whenJudged(run.silhouette_max_px));
+  for (const auto& [k, v] : terrainMeasureColumns(run)) add(k, v);
   return keys + "\n" + values + "\n";
 }
 
@@ -425,6 +437,8 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
   if (run.change_pairs > 0) {
     row("change_mean", run.change_mean, "%.3f");
     row("reference_change_mean", run.reference_change_mean, "%.3f");
+    row("geometry_change_mean_px", run.geometry_change_mean, "%.4f");
+    row("geometry_change_max_px", run.geometry_change_max, "%.4f");
   }
   if (run.geometry_rest_frames > 0) {
     row("geo_error_rest_mean_px", run.geometry_rest_mean_px, "%.3f");

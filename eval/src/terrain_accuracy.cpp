@@ -164,9 +164,11 @@ void measureSilhouette(const std::vector<uint8_t>& ours, const std::vector<uint8
 }  // namespace
 
 GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera, const Viewport& viewport,
-                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw) {
+                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw,
+                             std::vector<glm::vec2>* displacement) {
   GeometryError e;
   const size_t pixels = size_t(viewport.width_px) * viewport.height_px;
+  if (displacement) displacement->assign(xyzw.size() >= pixels * 4 ? pixels : 0, glm::vec2(NAN));
   if (xyzw.size() < pixels * 4) return e;
   const bool coverage = reference_xyzw && reference_xyzw->size() >= pixels * 4;
   std::vector<uint8_t> ours, theirs;
@@ -202,6 +204,7 @@ GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camer
         const double sx = (clip.x / clip.w * 0.5 + 0.5) * viewport.width_px;
         const double sy = (0.5 - clip.y / clip.w * 0.5) * viewport.height_px;
         err = std::hypot(sx - (px + 0.5), sy - (py + 0.5));
+        if (displacement) (*displacement)[i] = glm::vec2(float(sx - (px + 0.5)), float(sy - (py + 0.5)));
       }
       if (coverage && !theirs[i]) {  // terrain in this frame only
         err = std::max(err, coverageError(to_theirs, i));
@@ -222,6 +225,18 @@ GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camer
   e.mean_px = sum / double(errors.size());
   e.p95_px = percentileOf(std::move(errors), 0.95);
   return e;
+}
+
+double displacementChange(const std::vector<glm::vec2>& a, const std::vector<glm::vec2>& b) {
+  if (a.size() != b.size()) return 0.0;
+  double sum = 0.0;
+  size_t n = 0;
+  for (size_t p = 0; p < a.size(); ++p) {
+    if (std::isnan(a[p].x) || std::isnan(b[p].x)) continue;
+    sum += double(glm::length(a[p] - b[p]));
+    ++n;
+  }
+  return n ? sum / double(n) : 0.0;
 }
 
 Status TerrainReference::create(std::shared_ptr<TileSource> colour, TileSource& heights,

@@ -45,8 +45,9 @@ class TerrainCoverage : public ::testing::Test {
 
   // Each pixel's ray marched to the surface where `inside(x, z)` holds (the
   // ground drawn there; elsewhere none, as clip planes leave it), as a
-  // renderer of that ground would read its positions back.
-  std::vector<float> positions(const std::function<bool(double, double)>& inside) const {
+  // renderer of that ground would read its positions back; with `lift`, to
+  // the surface raised by as much.
+  std::vector<float> positions(const std::function<bool(double, double)>& inside, double lift = 0.0) const {
     std::vector<float> xyzw(size_t(m_vp.width_px) * m_vp.height_px * 4, 0.0f);
     const double tan_half = std::tan(m_camera.vfov_rad * 0.5);
     const double aspect = double(m_vp.width_px) / m_vp.height_px;
@@ -57,7 +58,7 @@ class TerrainCoverage : public ::testing::Test {
                                             m_camera.up() * (ny * tan_half));
         auto below = [&](double t) {
           const glm::dvec3 p = m_camera.position + d * t;
-          return inside(p.x, p.z) && p.y <= m_surface->heightAt(p.x, p.z);
+          return inside(p.x, p.z) && p.y <= m_surface->heightAt(p.x, p.z) + lift;
         };
         double t0 = 0.0, t1 = 0.0;
         for (double t = 1.0; t < 4000.0; t += 0.5) {  // march, then bisect
@@ -142,6 +143,26 @@ TEST_F(TerrainCoverage, MissingGroundCountsToo) {
   EXPECT_GT(e.max_px, 2.0);
   EXPECT_GT(e.silhouette_mean_px, 1.0);
   EXPECT_GT(e.silhouette_p95_px, 2.0);
+}
+
+// The geometry-only change: none between a frame and itself, some where
+// the surface drawn rises (a level switching under a camera at rest).
+TEST_F(TerrainCoverage, DisplacementChangeSeesTheSurfaceMove) {
+  const std::vector<float> on = positions(onDem);
+  const std::vector<float> lifted = positions(onDem, 5.0);  // the surface drawn 5 units higher
+  std::vector<glm::vec2> a, a2, b;
+  const GeometryError ea = geometricError(on, m_camera, m_vp, *m_surface, nullptr, &a);
+  geometricError(on, m_camera, m_vp, *m_surface, nullptr, &a2);
+  const GeometryError eb = geometricError(lifted, m_camera, m_vp, *m_surface, nullptr, &b);
+  ASSERT_EQ(a.size(), size_t(m_vp.width_px) * m_vp.height_px);
+  size_t shown = 0;
+  for (const glm::vec2& d : a) shown += !std::isnan(d.x);
+  EXPECT_EQ(shown, ea.pixels);
+  EXPECT_EQ(displacementChange(a, a2), 0.0);
+  const double moved = displacementChange(a, b);
+  EXPECT_GT(moved, 0.5);
+  EXPECT_NEAR(moved, eb.mean_px, 0.05 + 0.05 * eb.mean_px);  // from ~0 to the lifted frame's error
+  EXPECT_EQ(displacementChange(a, {}), 0.0);
 }
 
 // The silhouette figure against a brute-force search, on random blobs (the

@@ -190,6 +190,10 @@ struct FlightRun {
   // shows as the streamed change above the reference's. 0 pairs: not measured.
   uint32_t change_pairs = 0;
   double change_mean = 0.0, reference_change_mean = 0.0;
+  // Over terrain, the geometry alone: the mean change of each pixel's
+  // displacement from the full-resolution surface (displacementChange()),
+  // and its largest over a pair of frames (a pop).
+  double geometry_change_mean = 0.0, geometry_change_max = 0.0;
 };
 
 // The bound FlightRun::fewest_triangles_mean is counted for: the geometric

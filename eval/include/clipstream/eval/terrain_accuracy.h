@@ -18,6 +18,8 @@
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/tile_source.h>
 
+#include <glm/glm.hpp>
+
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -83,8 +85,22 @@ struct GeometryError {
 // outlines alone: an outline pixel shows terrain and has a 4-neighbour
 // that does not (the viewport's border is no outline); each frame's
 // outline pixels are measured by their distance to the other's outline.
+//
+// With `displacement`, also per pixel (top row first) the screen offset
+// (x, y; pixels) from the pixel's centre to where its ground point lies on
+// the full-resolution surface; NaN where the frame shows no terrain or the
+// point is behind the camera.
 GeometryError geometricError(const std::vector<float>& xyzw, const Camera& camera, const Viewport& viewport,
-                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw = nullptr);
+                             const ReferenceSurface& surface, const std::vector<float>* reference_xyzw = nullptr,
+                             std::vector<glm::vec2>* displacement = nullptr);
+
+// The geometry-only change between two frames (consecutive, from a camera
+// that moved a little): the mean length of the change of displacement
+// (geometricError()'s) over the pixels with one in both frames; 0 when
+// none has. The full-resolution surface's displacement is 0 everywhere, so
+// this is the drawn surface moving against it (a level switching pops it),
+// whatever the texture does. Pure.
+double displacementChange(const std::vector<glm::vec2>& a, const std::vector<glm::vec2>& b);
 
 // The fewest triangles that model a frame's terrain within a geometric
 // error target: a quadtree of small patches (kFewestPatchCells cells) whose
