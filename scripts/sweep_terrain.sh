@@ -16,9 +16,14 @@
 #             300 m cliff, spikes) under a 16384^2 procedural texture, built-in orbit.
 # Per run: triangles a frame, frame time and render-thread CPU time, geometric
 # error (mean, p95) and PSNR against the full-resolution mesh with the ideal
-# texture, the fewest triangles within 1 px p95 (FewestTriangles); then the same
-# setting on a slow stretch of the flight judged every frame: the mean per-pixel
-# change between consecutive frames against the reference's own change.
+# texture, coverage (ground in one frame, sky in the other) included, the
+# silhouette figure (outline to outline), the fewest triangles that model each
+# judged frame within its own p95 (FewestTriangles), the quadtree's achieved
+# error bound (its triangle budget), the over-fetch of the colour and height
+# layers; then the same setting on a slow stretch of the flight judged every
+# frame: the mean per-pixel grey change between consecutive frames against the
+# reference's own, and the geometry-only change (the drawn surface moving
+# against the full-resolution one).
 # Writes docs/data/terrain_methods.csv, docs/charts/terrain_*.png and the part of
 # docs/terrain.md between <!-- terrain-sweep:begin --> and <!-- terrain-sweep:end -->.
 # Needs gnuplot and, for the rough DEM, python3-gdal (scripts/deps.sh --bench).
@@ -71,11 +76,27 @@ SCENE[rainier]="--procedural 65536 --elevation $WORK/rainier.cstore --stretch-el
 SPEED[rainier]=10
 
 value() { awk -F'\t' -v k="$2" 'NR==1{for(i=1;i<=NF;i++) c[$i]=i} NR==2{print $(c[k])}' "$1/summary.tsv"; }
+# A number of frames.json's summary (its streamer and accuracy objects
+# included), empty when absent.
+jvalue() {
+  /usr/bin/python3 - "$1/frames.json" "$2" <<'PY'
+import json, sys
+def find(o, k):
+    if isinstance(o, dict):
+        if k in o and not isinstance(o[k], (dict, list)): return o[k]
+        for v in o.values():
+            r = find(v, k)
+            if r is not None: return r
+    return None
+v = find(json.load(open(sys.argv[1])).get("summary", {}), sys.argv[2])
+print("" if v is None else v)
+PY
+}
 
 # ---- runs -------------------------------------------------------------------
 tmp_csv=$CSV.tmp.$$
 trap 'rm -f "$tmp_csv" "$WORK"/*.png.tmp' EXIT
-echo "scene,method,setting,triangles,fewest_triangles,frame_ms,render_cpu_ms,geo_mean_px,geo_p95_px,psnr_db,change,reference_change" >"$tmp_csv"
+echo "scene,method,setting,triangles,fewest_triangles,frame_ms,render_cpu_ms,geo_mean_px,geo_p95_px,psnr_db,change,reference_change,silhouette_mean_px,silhouette_p95_px,coverage_pixels,geometry_change_px,geometry_change_max_px,error_bound_px,over_fetch,height_over_fetch" >"$tmp_csv"
 run() {  # scene method setting, then clipstream-fly arguments
   local scene=$1 method=$2 setting=$3
   shift 3
@@ -90,16 +111,21 @@ run() {  # scene method setting, then clipstream-fly arguments
   local slow_speed
   slow_speed=$(awk -v s="${SPEED[$scene]}" 'BEGIN{printf "%g", s / 5}')
   mkdir -p "$out/slow"
-  printf 'change_mean\treference_change_mean\n0\t0\n' >"$out/slow/summary.tsv"
+  printf 'change_mean\treference_change_mean\tgeometry_change_mean_px\tgeometry_change_max_px\n0\t0\t0\t0\n' \
+    >"$out/slow/summary.tsv"
   # shellcheck disable=SC2086
   [ "$method" = full ] || "$BUILD/eval/clipstream-fly" ${SCENE[$scene]} --speed "$slow_speed" --frames "$SLOW" \
     --warmup-frames 10 --size "$SIZE" --reference --reference-every 1 --terrain "$method" "$@" \
     --save-frames 0 --out "$out/slow" >/dev/null 2>&1
-  printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$scene" "$method" "$setting" \
+  printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$scene" "$method" "$setting" \
     "$(value "$out" judged_triangles_mean)" "$(value "$out" fewest_triangles_mean)" \
     "$(value "$out" frame_ms_mean)" "$(value "$out" render_cpu_ms_mean)" \
     "$(value "$out" geo_error_mean_px)" "$(value "$out" geo_error_p95_px)" "$(value "$out" psnr_mean_db)" \
-    "$(value "$out/slow" change_mean)" "$(value "$out/slow" reference_change_mean)" >>"$tmp_csv"
+    "$(value "$out/slow" change_mean)" "$(value "$out/slow" reference_change_mean)" \
+    "$(value "$out" geo_silhouette_mean_px)" "$(value "$out" geo_silhouette_p95_px)" \
+    "$(value "$out" geo_coverage_pixels_mean)" "$(value "$out/slow" geometry_change_mean_px)" \
+    "$(value "$out/slow" geometry_change_max_px)" "$(value "$out" terrain_error_px_mean)" \
+    "$(value "$out" over_fetch_ratio)" "$(jvalue "$out" height_over_fetch_ratio)" >>"$tmp_csv"
   echo "  $scene $method $setting: $(tail -n 1 "$tmp_csv")"
 }
 for scene in $SCENES; do
@@ -125,7 +151,7 @@ panel() {  # y column, y label, y log (1/0), x column, x label, x kind (err|psnr
   echo "set ylabel \"$yl\""
   local y="\$$yc" fewest=""
   [ "$yc" = 4 ] && [ "$xk" = err ] && [ "$xc" = 9 ] &&
-    fewest="\"\" using (sel(\"quadtree\") ? 1 : 1/0):5 with points pt 2 ps 2 title \"fewest within 1 px p95 (at 1 px)\", "
+    fewest="\"\" using ((sel(\"clipmap\") || sel(\"quadtree\")) ? err(\$9) : 1/0):5 with points pt 2 ps 1.5 title \"fewest at the same p95\", "
   echo "plot \"$CSV\" using (sel(\"clipmap\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 7 title \"clipmap (ring 32..256)\", \
     \"\" using (sel(\"quadtree\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 5 title \"quadtree (bound 24..4 px)\", \
     $fewest\"\" using (sel(\"flat\") ? $x : 1/0):($y > 0 ? $y : 1) with points pt 9 ps 2 title \"flat\", \
@@ -157,6 +183,7 @@ gnuplot <<EOF
 set terminal $term
 set output "$png.tmp"
 set datafile separator ","
+set multiplot layout 2,1
 set title "Temporal stability on a slow flight: mean grey change between consecutive frames, streamed minus the reference's (popping shows above 0)"
 set style data histograms
 set style histogram clustered gap 1
@@ -166,6 +193,12 @@ set key bottom left
 set xtics rotate by -45
 set grid y
 plot "$CSV" every ::1 using (\$11 - \$12):xtic(strcol(1)."/".strcol(2)."/".strcol(3)) title "streamed - reference"
+set title "The geometry alone: mean change of each pixel's offset from the full-resolution surface between consecutive frames"
+set ylabel "geometry change (px)"
+set key top left
+plot "$CSV" every ::1 using 16:xtic(strcol(1)."/".strcol(2)."/".strcol(3)) title "mean over the frame pairs", \
+     "" every ::1 using 17 title "largest pair"
+unset multiplot
 EOF
 mv "$png.tmp" "$png"
 
@@ -175,14 +208,25 @@ GEN=$WORK/terrain_section.md
   echo "<!-- terrain-sweep:begin -->"
   echo "Generated by \`bash scripts/sweep_terrain.sh\` ($(date -u +%Y-%m-%d), $SIZE, $FRAMES frames judged every"
   echo "$EVERY, slow stretch $SLOW frames at a fifth of the speed judged every frame; this machine, llvmpipe)."
-  echo "Triangles are the judged frames' mean; fewest: the fewest triangles within 1 px p95 on the same frames."
+  echo "Triangles are the judged frames' mean; fewest: the fewest triangles that model each judged frame within"
+  echo "its own p95 (the ratio is what a setting models beyond the frame's need); × flat: the frame time against the"
+  echo "flat plane's; the geometric error counts coverage (ground in one frame, sky in the other); silhouette: each"
+  echo "outline pixel's distance to the other frame's outline; grey change: the slow stretch's change between"
+  echo "consecutive frames minus the reference's; geometry change: the drawn surface moving against the"
+  echo "full-resolution one between consecutive frames (mean / largest pair); bound: the quadtree's achieved error"
+  echo "bound (above its setting where the triangle budget binds); over-fetch: tiles loaded over tiles the frames"
+  echo "sample, colour / height."
   echo
-  echo "| scene | method | setting | triangles | fewest (1 px p95) | ratio | frame ms | render CPU ms | geo mean px | geo p95 px | PSNR dB | change − reference's |"
-  echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-  awk -F, 'NR>1{ratio = ($5 > 0) ? sprintf("%.2f", $4 / $5) : "";
+  echo "| scene | method | setting | triangles | fewest | ratio | frame ms | × flat | geo mean / p95 px | silhouette mean / p95 px | coverage px | PSNR dB | grey change | geometry change px | bound px | over-fetch |"
+  echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+  awk -F, 'NR==FNR { if ($2 == "flat") flat[$1] = $6; next }
+           FNR>1{ratio = ($5 > 0) ? sprintf("%.2f", $4 / $5) : "";
                 set = ($2=="clipmap") ? "ring " $3 : ($2=="quadtree") ? $3 " px" : "";
-                printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %.1f | %.3f | %.3f | %.2f | %+.3f |\n",
-                $1, $2, set, $4, $5, ratio, $6, $7, $8, $9, $10, $11 - $12}' "$CSV"
+                cost = (flat[$1] > 0) ? sprintf("%.2f", $6 / flat[$1]) : "";
+                bound = ($18 != "") ? sprintf("%.1f", $18) : "";
+                hof = ($20 != "" && $20 > 0) ? sprintf("%.2f", $20) : "–";
+                printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %s | %.3f / %.3f | %.2f / %.2f | %.0f | %.2f | %+.3f | %.4f / %.3f | %s | %.2f / %s |\n",
+                $1, $2, set, $4, $5, ratio, $6, cost, $8, $9, $13, $14, $15, $10, $11 - $12, $16, $17, bound, $19, hof}' "$CSV" "$CSV"
   echo
   for scene in $SCENES; do echo "![terrain methods, $scene](charts/terrain_$scene.png)"; echo; done
   echo "![temporal stability](charts/terrain_stability.png)"

@@ -130,7 +130,10 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
   f.terrain_agree_pixels = te.agree_pixels;
   f.terrain_agree_mismatched = te.agree_mismatched;
   if (fewest) {
-    if (Status s = fewest->count(camera, flight.viewport(), flight.renderer(), surface, kFewestErrorPx,
+    // At the error this frame achieved (not below kFewestFloorPx): what it
+    // draws beyond that is what it models beyond the frame's need.
+    if (Status s = fewest->count(camera, flight.viewport(), flight.renderer(), surface,
+                                 std::max(f.geometry.p95_px, kFewestFloorPx),
                                  &f.fewest_triangles, &j.reference_xyzw);
         !s)
       return s;

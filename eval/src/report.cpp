@@ -430,7 +430,7 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
     row("geo_silhouette_mean_px", run.silhouette_mean_px, "%.3f");
     row("geo_silhouette_p95_px", run.silhouette_p95_px, "%.3f");
     // Triangles of the judged frames against the fewest that model them
-    // within kFewestErrorPx (FewestTriangles).
+    // within their own p95 (FewestTriangles).
     row("judged_triangles_mean", run.judged_triangles_mean, "%.0f");
     if (run.fewest_triangles_mean > 0) row("fewest_triangles_mean", run.fewest_triangles_mean, "%.0f");
   }

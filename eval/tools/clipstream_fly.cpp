@@ -89,7 +89,7 @@ void addOptions(CLI::App& app, Args* args) {
                "Compare each frame with the ideal reference (PSNR, max abs error; docs/accuracy.md)");
   app.add_flag("--fewest-triangles", o.fewest_triangles,
                "Over terrain, with --reference: also count the fewest triangles that model each judged "
-               "frame within 1 px p95 (docs/terrain.md; a dozen position passes a judged frame)");
+               "frame within its own p95 geometric error (docs/terrain.md; a dozen position passes a judged frame)");
   app.add_option("--reference-every", o.reference_every, "Compare every Nth frame (with --reference)")
       ->transform(frames);
   app.add_flag("--no-over-fetch", a.no_over_fetch,

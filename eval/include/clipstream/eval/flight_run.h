@@ -73,8 +73,9 @@ struct FlightRunOptions {
   uint32_t ground_truth_every = 0;  // also the reference against the CPU ground truth; 0 = never
   bool sample_tiles = true;         // collect sampledTiles() (warm-up too) for the over-fetch ratio;
                                     // over terrain sampledTilesOfPositions(), a position pass a frame
-  // Over terrain, judged frames also count the fewest triangles within
-  // kFewestErrorPx (FewestTriangles: a dozen position passes a frame).
+  // Over terrain, judged frames also count the fewest triangles that model
+  // them as well as they are drawn (FewestTriangles at the frame's own p95
+  // geometric error: a dozen position passes a frame).
   bool fewest_triangles = false;
   // Frames checked with countGarbagePixels(): the lowest-PSNR measured
   // frames below kSharpPsnrDb, at most this many (CPU-heavy).
@@ -181,8 +182,8 @@ struct FlightRun {
   // the texture is bit-identical wherever the geometry agrees).
   uint64_t terrain_rest_agree_pixels = 0, terrain_rest_agree_mismatched = 0;
   // Over the judged frames with terrain in view: the triangles drawn and
-  // the fewest that model the frame within kFewestErrorPx (FewestTriangles),
-  // means. 0 when not measured.
+  // the fewest that model the frame within its own p95 geometric error
+  // (FewestTriangles; not below kFewestFloorPx), means. 0 when not measured.
   double judged_triangles_mean = 0.0, fewest_triangles_mean = 0.0;
   // Temporal stability, over pairs of consecutive judged frames (every
   // frame with reference_every 1): the mean absolute change of a pixel's
@@ -196,9 +197,11 @@ struct FlightRun {
   double geometry_change_mean = 0.0, geometry_change_max = 0.0;
 };
 
-// The bound FlightRun::fewest_triangles_mean is counted for: the geometric
-// error target (pixels).
-inline constexpr double kFewestErrorPx = 1.0;
+// The least p95 error the fewest triangles are counted at (pixels): below
+// half a pixel a tree cut by one bound everywhere is no longer the fewest
+// (a quadtree frame at rest with p95 0.055 px drew 23.1k triangles where
+// the 4-cell tree needed 26.7k; docs/decisions.md D281).
+inline constexpr double kFewestFloorPx = 0.5;
 
 // The camera of a terrain flight: `path_camera` with its height taken as
 // height above `ground` (world units), at least
