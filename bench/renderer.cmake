@@ -36,3 +36,11 @@ add_executable(bench_renderer_sampling ${CMAKE_CURRENT_LIST_DIR}/renderer_sampli
 target_include_directories(bench_renderer_sampling PRIVATE ${PROJECT_SOURCE_DIR}/renderer/src)
 target_link_libraries(bench_renderer_sampling PRIVATE clipstream::renderer clipstream::streamer clipstream::cli
   clipstream_warnings OpenGL::OpenGL)
+
+# The quadtree terrain's node selection against its reference (the full
+# rescan of the restriction) and with the triangle budget; built with the renderer's
+# private terrain header for its reference switch.
+add_executable(bench_renderer_quadtree_select ${CMAKE_CURRENT_LIST_DIR}/renderer_quadtree_select.cpp)
+target_include_directories(bench_renderer_quadtree_select PRIVATE ${PROJECT_SOURCE_DIR}/renderer/src)
+target_link_libraries(bench_renderer_quadtree_select PRIVATE clipstream::renderer clipstream::tiler clipstream::cli
+  clipstream_warnings OpenGL::OpenGL)

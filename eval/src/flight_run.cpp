@@ -267,6 +267,12 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
     double triangles = 0.0;
     for (const FlightRunFrame& f : run->frames) triangles += double(f.sample.terrain_triangles);
     run->terrain_triangles_mean = triangles / double(run->frames.size());
+    double bound = 0.0;
+    for (const FlightRunFrame& f : run->frames) {
+      bound += f.sample.terrain_error_px;
+      run->terrain_error_px_max = std::max(run->terrain_error_px_max, f.sample.terrain_error_px);
+    }
+    run->terrain_error_px_mean = bound / double(run->frames.size());
     run->terrain_method = terrainMethodName(o.terrain->method);
   }
   // Loads include the streamer's reads of the pyramid, as sampled tiles

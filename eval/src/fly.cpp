@@ -247,6 +247,7 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
     for (const std::string& w : notes) notes_out << "clipstream-fly: warning: " << w << "\n";
     terrain.method = o.terrain_method;
     terrain.error_px = o.terrain_error_px;
+    terrain.triangle_budget = o.terrain_triangle_budget;
     r.terrain = std::move(terrain);
   }
   return okStatus();

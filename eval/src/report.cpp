@@ -70,7 +70,7 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
       "gpu_misses,tiles_loaded,cut,psnr_db,max_abs_error,hole_pixels,gt_psnr_db,gt_max_abs_error,"
       "terrain_triangles,terrain_rings,terrain_finest_level,height_tiles_uploaded,ground_height,"
       "geo_error_mean_px,geo_error_p95_px,geo_error_max_px,geo_coverage_pixels,geo_silhouette_mean_px,"
-      "geo_silhouette_p95_px";
+      "geo_silhouette_p95_px,terrain_error_px,terrain_select_ms";
   for (uint32_t l = 0; l < levels; ++l)
     for (const char* f : {"ram_hits", "ram_misses", "gpu_hits", "gpu_misses"})
       csv += ",L" + std::to_string(l) + "_" + f;
@@ -108,6 +108,9 @@ std::string framesCsv(const FlightRun& run, uint32_t levels) {
     } else {
       csv += ",,,";
     }
+    // The quadtree's achieved error bound (0 for the other methods) and selection time.
+    std::snprintf(buf, sizeof buf, ",%.3f,%.3f", r.terrain_error_px, r.terrain_select_ms);
+    csv += buf;
     for (uint32_t l = 0; l < levels; ++l) {
       const LevelFrame lf = l < r.levels.size() ? r.levels[l] : LevelFrame{};
       csv += "," + std::to_string(lf.ram_hits) + "," + std::to_string(lf.ram_misses) + "," +
@@ -168,6 +171,8 @@ nlohmann::json frameJson(const FlightRunFrame& f) {
     j["terrain_triangles"] = r.terrain_triangles;
     j["terrain_rings"] = r.terrain_rings;
     j["terrain_finest_level"] = r.terrain_finest_level;
+    j["terrain_error_px"] = r.terrain_error_px;
+    j["terrain_select_ms"] = r.terrain_select_ms;
     j["height_tiles_uploaded"] = r.height_tiles_uploaded;
     j["ground_height"] = r.ground_height;
   }
@@ -216,6 +221,8 @@ nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
   acc["terrain_method"] = run.terrain_method;
+  acc["terrain_error_px_mean"] = run.terrain_error_px_mean;
+  acc["terrain_error_px_max"] = run.terrain_error_px_max;
   acc["render_cpu_ms_mean"] = run.render_cpu_ms_mean;
   acc["judged_triangles_mean"] = run.judged_triangles_mean;
   acc["fewest_triangles_mean"] = run.fewest_triangles_mean;
@@ -400,6 +407,11 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("disk_cache_hits", remoteCount(run.remote.disk_cache_hits));
   add("disk_cache_misses", remoteCount(run.remote.disk_cache_misses));
   for (const auto& [k, v] : terrainMeasureColumns(run)) add(k, v);
+  // The quadtree's error bound met (its --terrain-error, or more where the
+  // triangle budget bound); empty for the other methods.
+  const bool quadtree = run.terrain_error_px_max > 0;
+  add("terrain_error_px_mean", quadtree ? num(run.terrain_error_px_mean) : std::string());
+  add("terrain_error_px_max", quadtree ? num(run.terrain_error_px_max) : std::string());
   return keys + "\n" + values + "\n";
 }
 
@@ -418,6 +430,12 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
   const RunSummary& s = run.summary;
   auto row = [&](const char* name, double v, const char* fmt) { printRow(out, name, v, fmt); };
   row("terrain_triangles_mean", run.terrain_triangles_mean, "%.0f");
+  if (run.terrain_error_px_max > 0) {
+    // The quadtree's error bound met: its --terrain-error, or more where
+    // the triangle budget bound.
+    row("terrain_error_px_mean", run.terrain_error_px_mean, "%.2f");
+    row("terrain_error_px_max", run.terrain_error_px_max, "%.2f");
+  }
   row("render_cpu_ms_mean", run.render_cpu_ms_mean, "%.2f");
   row("height_texture_mib", mib(run.height_texture_bytes), "%.1f");
   if (run.geometry_frames > 0) {

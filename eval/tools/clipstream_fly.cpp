@@ -162,6 +162,11 @@ void addOptions(CLI::App& app, Args* args) {
   app.add_option("--terrain-error", o.terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
+  app.add_option("--terrain-triangle-budget", o.terrain_triangle_budget,
+                 "Quadtree: the most triangles a frame draws, 0 for none (default " +
+                     std::to_string(renderer_config::kTerrainTriangleBudget) +
+                     "); over it the frame's error bound rises, the largest errors split first")
+      ->transform(cli::wholeInRange(0, int64_t(1) << 32));
   app.footer(
       "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written,\n"
       "tile reads failed past --max-failed-reads; nothing half-written is left), 2 command-line\n"
@@ -183,8 +188,9 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
   StreamerConfig& streamer = o.streamer;
   if (Status s = cli::parseTerrainMethod(a.terrain_method, &o.terrain_method); !s)
     return "--terrain: " + s.message;
-  if ((app.count("--terrain") || app.count("--terrain-error")) && o.elevation_path.empty())
-    return "--terrain and --terrain-error need --elevation";
+  if ((app.count("--terrain") || app.count("--terrain-error") || app.count("--terrain-triangle-budget")) &&
+      o.elevation_path.empty())
+    return "--terrain, --terrain-error and --terrain-triangle-budget need --elevation";
 
   if (o.store_path.empty() && o.procedural_px == 0)
     return "give a STORE or --procedural SIDE";

@@ -107,7 +107,9 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
   f->m_config.streamer.planner = plannerFor(config.texture_memory, config.streamer.planner);
   if (Status s = f->makeRenderer(config.viewport, first, &f->m_preload_ms); !s) return s;
   if (config.terrain) {
-    if (Status s = f->makeTerrain(); !s) return s;
+    const TerrainLayerConfig& t = *config.terrain;
+    if (!t.source || t.source->content() != TileContent::kHeightF32)
+      return Status::error(ErrorCode::kInvalidArgument, "flight: the terrain layer is not a height source");
     // Two layers through one cache: the colour texels are the world; the
     // elevation's texel under world (x, z) is (x - sample0) / spacing + 0.5
     // (sample i's centre lies at texel i + 0.5).
@@ -121,6 +123,8 @@ Status Flight::create(std::shared_ptr<TileSource> source, const FlightConfig& co
     std::vector<StreamLayer> layers{colour, heights};
     if (Status s = checkStreamLayers(layers); !s) return s;
     f->m_streamer = std::make_unique<Streamer>(std::move(layers), f->m_config.streamer);
+    // After the streamer: the terrain takes the height bounds it read.
+    if (Status s = f->makeTerrain(); !s) return s;
   } else {
     f->m_streamer = std::make_unique<Streamer>(f->m_source, f->m_config.streamer);
   }
@@ -159,22 +163,23 @@ Status Flight::makeRenderer(const Viewport& viewport, const Camera& camera, doub
 
 Status Flight::makeTerrain() {
   const TerrainLayerConfig& t = *m_config.terrain;
-  if (!t.source || t.source->content() != TileContent::kHeightF32) {
-    return Status::error(ErrorCode::kInvalidArgument, "flight: the terrain layer is not a height source");
-  }
   TerrainConfig tc;
   tc.ring_cells = t.ring_cells;
   tc.clip_tiles = TerrainRenderer::windowTiles(t.ring_cells, t.source->geometry().tile_px);
   tc.mapping = t.alignment;
   tc.method = t.method;
   tc.error_px = t.error_px;
+  tc.triangle_budget = t.triangle_budget;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
   if (t.method == TerrainMethod::kQuadtree || t.method == TerrainMethod::kFlat) {
-    // The per-tile errors the quadtree refines by (index pages, read once).
-    std::shared_ptr<const TerrainBounds> bounds;
-    if (loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &bounds).ok())
-      terrain->setBounds(std::move(bounds));
+    // The per-tile errors the quadtree refines by: the streamer's, read
+    // once for its planner; a streamer planning against the plane reads
+    // none, so then they are read here, once (kept for resize()).
+    if (!m_terrain_bounds) m_terrain_bounds = m_streamer->terrainBounds();
+    if (!m_terrain_bounds && !m_config.streamer.terrain_bounds)
+      (void)loadTerrainBounds(*t.source, kTerrainBoundsMaxLevelTiles, &m_terrain_bounds);
+    if (m_terrain_bounds) terrain->setBounds(m_terrain_bounds);
   }
   TileSource& source = *t.source;
   m_preload_failures += terrain->preloadCoarseLevels(
@@ -319,6 +324,8 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
     f.terrain_rings = tf.rings;
     f.terrain_finest_level = tf.finest_level;
     f.terrain_triangles = tf.triangles;
+    f.terrain_error_px = tf.achieved_error_px;
+    f.terrain_select_ms = tf.select_ms;
   } else {
     m_renderer->draw(camera, m_config.viewport);
   }

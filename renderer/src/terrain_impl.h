@@ -76,6 +76,13 @@ class TerrainRendererImpl {
   void setExactNodeError(std::function<double(uint32_t, int64_t, int64_t)> error) {
     m_exact_node_error = std::move(error);
   }
+  // Quadtree, for tests and the selection benchmark only: the selection as
+  // it was before the triangle budget and the restriction's worklist (issue
+  // #33), their reference: split depth first, no budget, the restriction by
+  // a full scan of the leaves after each mend, no cached visibility.
+  void setReferenceSelection(bool reference) { m_reference_selection = reference; }
+  // The per-tile bounds of setBounds() (null: none).
+  const std::shared_ptr<const TerrainBounds>& bounds() const { return m_bounds; }
 
   // Sets terrain.vert's per-frame uniforms on `program` for this camera
   // (and binds the height stack to texture unit 2), as draw() does.
@@ -162,6 +169,7 @@ class TerrainRendererImpl {
   // Quadtree, for measuring only (clipstream/renderer/testing/
   // terrain_measure.h); null for display.
   std::function<double(uint32_t, int64_t, int64_t)> m_exact_node_error;
+  bool m_reference_selection = false;  // setReferenceSelection()
   // Outermost ring level: covers the whole height field and colour image
   // from the camera of the last draw (updateCoarsest()).
   uint32_t m_coarsest = 0;

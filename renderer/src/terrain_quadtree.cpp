@@ -1,15 +1,20 @@
 // The quadtree terrain method of TerrainRenderer (terrain.h,
 // TerrainMethod::kQuadtree) and the flat plane drawn the same way: node
-// selection by projected geometric error, the restriction to neighbours
-// within one level, and the draws with the edge patterns that stitch a
-// node to a coarser neighbour. docs/terrain.md, "Quadtree", explains it.
+// selection by projected geometric error, largest first and within the
+// triangle budget, the restriction to neighbours within one level (a
+// worklist), and the draws with the edge patterns that stitch a node to a
+// coarser neighbour. docs/terrain.md, "Geometry: a restricted quadtree",
+// explains it.
 #include "terrain_impl.h"
 
 #include "gl.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <queue>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -21,40 +26,88 @@ int64_t floorDiv(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) 
 }  // namespace
 
 // One frame's choice of leaves, in three steps (selectNodes()): split by
-// error from the roots down, restrict neighbours to one level apart, list
-// the leaves with their coarse sides. Lives for one selectNodes() call, on
-// the GL thread.
+// error from the roots down, largest projected error first, within the
+// triangle budget; restrict neighbours to one level apart; list the leaves
+// with their coarse sides. Lives for one selectNodes() call, on the GL
+// thread.
 class TerrainRendererImpl::NodeSelection {
  public:
   using NodeKey = NodeId;
   NodeSelection(TerrainRendererImpl& terrain, const Camera& camera, const Viewport& viewport);
-  // 1. Top-down: splits while the error asks and the children are resident.
-  // Returns the nodes that wanted to split but could not (drawn coarser).
-  uint32_t splitByError();
+  // 1. Best first from the roots: splits the node of largest projected
+  // error while that exceeds error_px and its children are resident. A
+  // child's error is capped by its parent's, so the first n splits are
+  // exactly those of one bound (the split rule at the next one's error).
+  // The splits, in order: splitCount() of them.
+  void splitByError();
+  // The most of the first splits that draw at most `budget_triangles`,
+  // each drawn node a whole patch (2 P^2 triangles); all when all fit.
+  size_t splitsWithin(uint64_t budget_triangles) const;
+  // Instead, the reference (setReferenceSelection()): depth first, no
+  // budget, visibility not cached. Returns the fallbacks.
+  uint32_t splitDepthFirst();
+  size_t splitCount() const { return m_order.size(); }
+  // Keeps the first `count` splits (a tree), undoing any restriction.
+  void keepSplits(size_t count);
   // 2. Restriction: a visible leaf's neighbours are at most one level
   // coarser. Returns the splits made only for that. Leaves the leaves.
-  uint32_t restrictNeighbours();
-  // Instead of restrictNeighbours(), for measuring (setExactNodeError()):
-  // the leaves as split, neighbours unrestricted. Returns 0 (no forced split).
+  // Over a budget, searches for the most of step 1's splits (*kept) that fit.
+  uint32_t restrictWithin(uint64_t budget_triangles, size_t* kept);
+  // Instead, the reference: a full scan of the leaves after each mend.
+  uint32_t restrictNeighboursByRescan();
+  // Instead, for measuring (setExactNodeError()): the leaves as split,
+  // neighbours unrestricted. Returns 0 (no forced split).
   uint32_t unrestricted();
+  // The bound (pixels) the first `count` splits meet: error_px when they
+  // are every split the error asks for, else the next split's error
+  // (at most kMaxTerrainErrorPx).
+  double boundWith(size_t count) const;
+  // Nodes that wanted to split, children not resident, among the roots and
+  // the children of the first `count` splits.
+  uint32_t fallbacksWith(size_t count) const;
+  // Leaves the restriction drew coarser (a neighbour could not split).
+  uint32_t coarsened() const { return m_coarsened; }
   // 3. The leaves with their coarse sides.
   void leaves(std::vector<TerrainNode>* out) const;
 
  private:
   static NodeKey parentOf(const NodeKey& k) { return {k.level + 1, floorDiv(k.x, 2), floorDiv(k.y, 2)}; }
-  // Whether `a` is `k` or one of its ancestors.
-  static bool isAncestorOrSelf(const NodeKey& a, NodeKey k) {
-    while (k.level < a.level) k = parentOf(k);
-    return k == a;
-  }
-  bool visible(const NodeKey& k) const {
-    return m_terrain.nodeVisible(m_camera, m_terrain.nodeBox(m_camera, k.level, k.x, k.y));
-  }
+  static NodeKey childOf(const NodeKey& k, int c) { return {k.level - 1, 2 * k.x + (c & 1), 2 * k.y + (c >> 1)}; }
+  // Visibility of a node's box, computed once a selection.
+  bool visible(const NodeKey& k) const;
+  // Drawn when a leaf: visible, and its samples (one beyond) resident.
+  bool drawn(const NodeKey& k) const;
   bool childrenResident(const NodeKey& k) const;
-  bool wantsSplit(const NodeKey& k, const NodeBox& b) const;
+  // Whether the node's error asks for a split; *projected_px: its error
+  // projected at its nearest point (infinite with the camera in its box).
+  bool wantsSplit(const NodeKey& k, const NodeBox& b, double* projected_px) const;
+  enum class Want { kNo, kSplit, kFallback };
+  Want evaluate(const NodeKey& k, double* projected_px) const;
+  bool inRoots(const NodeKey& k) const;
+  bool isLeaf(const NodeKey& k) const;
   bool leafAt(uint32_t level, int64_t x, int64_t y, NodeKey* leaf) const;
+  // A visible leaf beside `l` on side `s` two or more levels coarser.
+  bool coarserNeighbour(const NodeKey& l, int s, NodeKey* nb) const;
   void collectLeaves();
+  uint32_t restrictNeighbours();
+  uint64_t leafTriangles() const;
+  int64_t splitTriangles(size_t count) const { return m_drawn_after[count] * 2 * m_patch * m_patch; }
 
+  // The restriction's worklist: leaves in collectLeaves()' order (roots
+  // last to first, children 3 to 0, depth first), so the first leaf it
+  // mends is the one a scan of every leaf would mend first.
+  struct Queued {
+    uint64_t root, path;  // the root's rank; child digits 3 - c, two bits each from the top
+    uint32_t depth;       // below the root (an ancestor comes before its descendants)
+    NodeKey key;
+    bool operator>(const Queued& o) const {
+      return root != o.root ? root > o.root : path != o.path ? path > o.path : depth > o.depth;
+    }
+  };
+  using Worklist = std::priority_queue<Queued, std::vector<Queued>, std::greater<Queued>>;
+  Queued queued(const NodeKey& k) const;
+  void eraseSubtree(const NodeKey& a);
+  void pushLeavesAround(const NodeKey& a, Worklist* work) const;  // the leaves touching a's sides
   // Sides in PatchSide order: top, right, bottom, left.
   static constexpr int kSideDx[4] = {0, 1, 0, -1}, kSideDy[4] = {-1, 0, 1, 0};
   TerrainRendererImpl& m_terrain;
@@ -67,11 +120,27 @@ class TerrainRendererImpl::NodeSelection {
   std::vector<NodeKey> m_roots;
   std::unordered_set<NodeKey, NodeIdHash> m_split;
   std::vector<NodeKey> m_leaves;
+  mutable std::unordered_map<NodeKey, bool, NodeIdHash> m_visible;
+  const bool m_reference;  // setReferenceSelection(): visibility not cached
+  // Step 1's splits in order, with what each changed.
+  struct Split {
+    NodeKey key;
+    double error_px;     // projected, capped by the parent's
+    uint32_t fallbacks;  // children that wanted to split, not resident
+  };
+  std::vector<Split> m_order;
+  std::vector<int64_t> m_drawn_after;  // [n]: nodes drawn after the first n splits
+  uint32_t m_root_fallbacks = 0;
+  uint32_t m_coarsened = 0;
 };
 
 TerrainRendererImpl::NodeSelection::NodeSelection(TerrainRendererImpl& terrain, const Camera& camera,
                                                   const Viewport& viewport)
-    : m_terrain(terrain), m_camera(camera), m_patch(terrain.m_config.patch_cells), m_root(terrain.rootLevel()) {
+    : m_terrain(terrain),
+      m_camera(camera),
+      m_patch(terrain.m_config.patch_cells),
+      m_root(terrain.rootLevel()),
+      m_reference(terrain.m_reference_selection) {
   const TerrainMapping& m = terrain.m_config.mapping;
   m_pixels = double(viewport.height_px) / (2.0 * std::tan(camera.vfov_rad / 2.0));
   const glm::dvec2 img0 = (-m.sample0_world) / m.world_per_sample;
@@ -86,6 +155,21 @@ TerrainRendererImpl::NodeSelection::NodeSelection(TerrainRendererImpl& terrain, 
     for (int64_t x = m_rx0; x <= m_rx1; ++x) m_roots.push_back({m_root, x, y});
 }
 
+bool TerrainRendererImpl::NodeSelection::visible(const NodeKey& k) const {
+  const auto it = m_reference ? m_visible.end() : m_visible.find(k);
+  if (it != m_visible.end()) return it->second;
+  const bool v = m_terrain.nodeVisible(m_camera, m_terrain.nodeBox(m_camera, k.level, k.x, k.y));
+  if (!m_reference) m_visible.emplace(k, v);
+  return v;
+}
+
+bool TerrainRendererImpl::NodeSelection::drawn(const NodeKey& k) const {
+  // A root whose heights are not resident yet is not drawn (children are
+  // only made where they are).
+  const glm::i64vec2 s0(k.x * m_patch - 1, k.y * m_patch - 1);
+  return visible(k) && m_terrain.samplesResident(k.level, s0, s0 + glm::i64vec2(m_patch + 2, m_patch + 2));
+}
+
 bool TerrainRendererImpl::NodeSelection::childrenResident(const NodeKey& k) const {
   // A node may split when its four children can be drawn: their samples
   // (one beyond, for normals) are resident.
@@ -93,52 +177,154 @@ bool TerrainRendererImpl::NodeSelection::childrenResident(const NodeKey& k) cons
   return m_terrain.samplesResident(k.level - 1, s0, s0 + glm::i64vec2(2 * m_patch + 2, 2 * m_patch + 2));
 }
 
-bool TerrainRendererImpl::NodeSelection::wantsSplit(const NodeKey& k, const NodeBox& b) const {
+bool TerrainRendererImpl::NodeSelection::wantsSplit(const NodeKey& k, const NodeBox& b, double* projected_px) const {
   if (k.level == 0 || m_terrain.m_config.method == TerrainMethod::kFlat) return false;
-  const double e = m_terrain.nodeError(k.level, k.x, k.y) * m_terrain.m_config.mapping.world_per_height;
-  if (!(e > 0.0)) return false;
+  const double world_per_height = m_terrain.m_config.mapping.world_per_height;
   // Distance from the camera (the origin) to the box.
   const glm::dvec3 d = glm::max(glm::max(b.lo, -b.hi), glm::dvec3(0.0));
   const double dist = glm::length(d);
+  // The tiles' bound first: the node's is never above it (nor rounded to a
+  // float), so where it asks for no split nodeError()'s exact pass (most
+  // of a selection on a cold cache: a first frame, a teleport) is skipped.
+  if (!m_terrain.m_exact_node_error && !m_reference && dist > 0.0 &&
+      !(m_terrain.tileErrorBound(k.level, k.x, k.y) * (1.0 + 1e-6) * world_per_height * m_pixels / dist >
+        m_terrain.m_config.error_px))
+    return false;
+  const double e = m_terrain.nodeError(k.level, k.x, k.y) * world_per_height;
+  if (!(e > 0.0)) return false;
+  *projected_px = dist > 0.0 ? e * m_pixels / dist : INFINITY;
   return dist <= 0.0 || e * m_pixels / dist > m_terrain.m_config.error_px;
 }
 
-uint32_t TerrainRendererImpl::NodeSelection::splitByError() {
+TerrainRendererImpl::NodeSelection::Want TerrainRendererImpl::NodeSelection::evaluate(const NodeKey& k,
+                                                                                       double* projected_px) const {
+  const NodeBox b = m_terrain.nodeBox(m_camera, k.level, k.x, k.y);
+  const bool v = m_terrain.nodeVisible(m_camera, b);
+  m_visible.emplace(k, v);
+  if (!v || !wantsSplit(k, b, projected_px)) return Want::kNo;
+  return childrenResident(k) ? Want::kSplit : Want::kFallback;
+}
+
+void TerrainRendererImpl::NodeSelection::splitByError() {
+  struct Candidate {
+    double error_px;
+    NodeKey key;
+    bool operator<(const Candidate& o) const { return error_px < o.error_px; }
+  };
+  std::priority_queue<Candidate> candidates;
+  int64_t drawn_nodes = 0;
+  for (const NodeKey& r : m_roots) {
+    double e = 0.0;
+    const Want w = evaluate(r, &e);
+    if (drawn(r)) ++drawn_nodes;
+    if (w == Want::kFallback) ++m_root_fallbacks;
+    if (w == Want::kSplit) candidates.push({e, r});
+  }
+  m_drawn_after.assign(1, drawn_nodes);
+  while (!candidates.empty()) {
+    const Candidate c = candidates.top();
+    candidates.pop();
+    // The split draws its visible children (resident: it may split)
+    // instead of itself (drawn unless a root whose heights are missing).
+    Split split{c.key, c.error_px, 0};
+    int64_t delta = c.key.level < m_root || drawn(c.key) ? -1 : 0;
+    Candidate children[4];
+    int wanting = 0;
+    for (int i = 0; i < 4; ++i) {
+      const NodeKey child = childOf(c.key, i);
+      double e = 0.0;
+      const Want w = evaluate(child, &e);
+      if (visible(child)) ++delta;
+      if (w == Want::kFallback) ++split.fallbacks;
+      if (w == Want::kSplit) children[wanting++] = {std::min(e, c.error_px), child};
+    }
+    drawn_nodes += delta;
+    m_split.insert(c.key);
+    m_order.push_back(split);
+    m_drawn_after.push_back(drawn_nodes);
+    for (int i = 0; i < wanting; ++i) candidates.push(children[i]);
+  }
+}
+
+uint32_t TerrainRendererImpl::NodeSelection::splitDepthFirst() {
   std::vector<NodeKey> stack = m_roots;
   uint32_t fallbacks = 0;
   while (!stack.empty()) {
     const NodeKey k = stack.back();
     stack.pop_back();
     const NodeBox b = m_terrain.nodeBox(m_camera, k.level, k.x, k.y);
-    if (!m_terrain.nodeVisible(m_camera, b) || !wantsSplit(k, b)) continue;
+    double e = 0.0;
+    if (!m_terrain.nodeVisible(m_camera, b) || !wantsSplit(k, b, &e)) continue;
     if (!childrenResident(k)) {
       ++fallbacks;
       continue;
     }
     m_split.insert(k);
-    for (int c = 0; c < 4; ++c) stack.push_back({k.level - 1, 2 * k.x + (c & 1), 2 * k.y + (c >> 1)});
+    for (int c = 0; c < 4; ++c) stack.push_back(childOf(k, c));
   }
   return fallbacks;
+}
+
+size_t TerrainRendererImpl::NodeSelection::splitsWithin(uint64_t budget_triangles) const {
+  // The triangles drawn need not grow with every split (one whose children
+  // are culled draws fewer), so the longest prefix that fits, not the
+  // first that does not.
+  size_t n = m_order.size();
+  if (budget_triangles == 0) return n;
+  while (n > 0 && splitTriangles(n) > int64_t(budget_triangles)) --n;
+  return n;
+}
+
+void TerrainRendererImpl::NodeSelection::keepSplits(size_t count) {
+  m_split.clear();
+  for (size_t i = 0; i < count && i < m_order.size(); ++i) m_split.insert(m_order[i].key);
+}
+
+double TerrainRendererImpl::NodeSelection::boundWith(size_t count) const {
+  const double error_px = m_terrain.m_config.error_px;
+  const double next = count < m_order.size() ? m_order[count].error_px : error_px;
+  // Above kMaxTerrainErrorPx (a node nearer than its error is high, or
+  // with the camera in its box: infinite) the bound reported is that.
+  return std::min(std::max(error_px, next), kMaxTerrainErrorPx);
+}
+
+uint32_t TerrainRendererImpl::NodeSelection::fallbacksWith(size_t count) const {
+  uint32_t n = m_root_fallbacks;
+  for (size_t i = 0; i < count && i < m_order.size(); ++i) n += m_order[i].fallbacks;
+  return n;
+}
+
+bool TerrainRendererImpl::NodeSelection::inRoots(const NodeKey& k) const {
+  NodeKey r = k;
+  while (r.level < m_root) r = parentOf(r);
+  return r.x >= m_rx0 && r.x <= m_rx1 && r.y >= m_ry0 && r.y <= m_ry1;
+}
+
+bool TerrainRendererImpl::NodeSelection::isLeaf(const NodeKey& k) const {
+  if (m_split.count(k)) return false;
+  return k.level == m_root ? inRoots(k) : m_split.count(parentOf(k)) > 0;
 }
 
 bool TerrainRendererImpl::NodeSelection::leafAt(uint32_t level, int64_t x, int64_t y, NodeKey* leaf) const {
   // The leaf holding the level-`level` square (x, y): its deepest ancestor
   // (or itself) that is not split, if a root holds it.
   NodeKey k{level, x, y};
-  std::vector<NodeKey> chain;
+  NodeKey chain[renderer_config::kMaxLevels + 1];
+  size_t depth = 0;
   while (k.level < m_root) {
-    chain.push_back(k);
+    chain[depth++] = k;
     k = parentOf(k);
   }
   if (k.x < m_rx0 || k.x > m_rx1 || k.y < m_ry0 || k.y > m_ry1) return false;
   // Walk down from the root while split.
-  while (m_split.count(k) && !chain.empty()) {
-    k = chain.back();
-    chain.pop_back();
-  }
+  while (depth > 0 && m_split.count(k)) k = chain[--depth];
   if (m_split.count(k)) return false;  // finer than `level` there
   *leaf = k;
   return true;
+}
+
+bool TerrainRendererImpl::NodeSelection::coarserNeighbour(const NodeKey& l, int s, NodeKey* nb) const {
+  return leafAt(l.level, l.x + kSideDx[s], l.y + kSideDy[s], nb) && nb->level > l.level + 1 && visible(*nb);
 }
 
 void TerrainRendererImpl::NodeSelection::collectLeaves() {
@@ -151,16 +337,144 @@ void TerrainRendererImpl::NodeSelection::collectLeaves() {
       m_leaves.push_back(k);
       continue;
     }
-    for (int c = 0; c < 4; ++c) s.push_back({k.level - 1, 2 * k.x + (c & 1), 2 * k.y + (c >> 1)});
+    for (int c = 0; c < 4; ++c) s.push_back(childOf(k, c));
+  }
+}
+
+uint32_t TerrainRendererImpl::NodeSelection::restrictWithin(uint64_t budget_triangles, size_t* kept) {
+  uint32_t forced = restrictNeighbours();
+  const uint64_t drawn_triangles = leafTriangles();
+  if (budget_triangles == 0 || drawn_triangles <= budget_triangles || *kept == 0) return forced;
+  // The forced splits took the frame over the budget: the most of step 1's
+  // splits whose restricted frame fits, between `lo` splits (fits; 0: the
+  // roots alone) and `hi` (over), by false position on the triangles
+  // drawn, every other step halving. Past kTerrainBudgetSearchSteps the
+  // last that fitted stays (its bound a little above the lowest).
+  size_t lo = 0, hi = *kept, restricted = hi;
+  double drawn_lo = double(splitTriangles(0)), drawn_hi = double(drawn_triangles);
+  for (uint32_t step = 0; step < renderer_config::kTerrainBudgetSearchSteps && hi - lo > 1; ++step) {
+    const double share = (double(budget_triangles) - drawn_lo) / std::max(drawn_hi - drawn_lo, 1.0);
+    size_t n = step % 2 ? lo + (hi - lo) / 2 : lo + size_t(std::max(share, 0.0) * double(hi - lo));
+    n = std::clamp(n, lo + 1, hi - 1);
+    keepSplits(n);
+    forced = restrictNeighbours();
+    restricted = n;
+    const uint64_t drawn = leafTriangles();
+    (drawn <= budget_triangles ? lo : hi) = n;
+    (drawn <= budget_triangles ? drawn_lo : drawn_hi) = double(drawn);
+  }
+  if (restricted != lo) {
+    keepSplits(lo);
+    forced = restrictNeighbours();
+  }
+  *kept = lo;
+  return forced;
+}
+
+TerrainRendererImpl::NodeSelection::Queued TerrainRendererImpl::NodeSelection::queued(const NodeKey& k) const {
+  Queued q{0, 0, m_root - k.level, k};
+  NodeKey a = k;
+  for (uint32_t d = q.depth; d > 0; --d) {  // d: depth of `a` below the root
+    const uint64_t c = uint64_t(a.x & 1) | (uint64_t(a.y & 1) << 1);
+    q.path |= (3 - c) << (64 - 2 * d);
+    a = parentOf(a);
+  }
+  const int64_t index = (a.y - m_ry0) * (m_rx1 - m_rx0 + 1) + (a.x - m_rx0);
+  q.root = uint64_t(int64_t(m_roots.size()) - 1 - index);
+  return q;
+}
+
+void TerrainRendererImpl::NodeSelection::eraseSubtree(const NodeKey& a) {
+  // Split nodes form a tree: split descendants lie under split nodes.
+  std::vector<NodeKey> s{a};
+  while (!s.empty()) {
+    const NodeKey k = s.back();
+    s.pop_back();
+    if (m_split.erase(k))
+      for (int c = 0; c < 4; ++c) s.push_back(childOf(k, c));
+  }
+}
+
+void TerrainRendererImpl::NodeSelection::pushLeavesAround(const NodeKey& a, Worklist* work) const {
+  // Each side's square of a's size, and where it is split, its children
+  // along the side facing a (top: its bottom two; right: its left two...).
+  static constexpr int kFacing[4][2] = {{2, 3}, {0, 2}, {0, 1}, {1, 3}};
+  for (int s = 0; s < 4; ++s) {
+    const NodeKey square{a.level, a.x + kSideDx[s], a.y + kSideDy[s]};
+    NodeKey leaf;
+    if (leafAt(square.level, square.x, square.y, &leaf)) {
+      work->push(queued(leaf));
+      continue;
+    }
+    if (!inRoots(square)) continue;
+    std::vector<NodeKey> split{square};
+    while (!split.empty()) {
+      const NodeKey k = split.back();
+      split.pop_back();
+      for (int c : kFacing[s]) {
+        const NodeKey child = childOf(k, c);
+        if (m_split.count(child))
+          split.push_back(child);
+        else
+          work->push(queued(child));
+      }
+    }
   }
 }
 
 uint32_t TerrainRendererImpl::NodeSelection::restrictNeighbours() {
   // A coarser neighbour is split; one that cannot be (its children not
-  // resident) instead coarsens the finer side (the leaf's ancestor one
-  // level finer than the neighbour becomes a leaf, and is never split again
-  // this frame, so this ends).
+  // resident, or frozen) instead coarsens the finer side: the leaf's
+  // ancestor one level finer than the neighbour becomes a leaf, frozen
+  // (never split again this frame, so this ends). The worklist holds every
+  // leaf that may need mending: all at first; then a split's children and
+  // the leaf that asked (it may need more), or the coarsened node and the
+  // leaves around it (their neighbour grew coarser). A split never makes a
+  // leaf outside it need mending (its neighbours only grow finer). Popped
+  // in collectLeaves()' order, the mends are those of a full scan of the
+  // leaves after each one (restrictNeighboursByRescan(), the reference).
   std::unordered_set<NodeKey, NodeIdHash> frozen;
+  m_coarsened = 0;
+  uint32_t forced = 0;
+  collectLeaves();
+  std::vector<Queued> first;
+  first.reserve(m_leaves.size());
+  for (const NodeKey& l : m_leaves)
+    if (visible(l)) first.push_back(queued(l));
+  Worklist work(std::greater<Queued>(), std::move(first));
+  while (!work.empty()) {
+    const NodeKey l = work.top().key;
+    work.pop();
+    if (!isLeaf(l) || !visible(l)) continue;
+    NodeKey nb;
+    int side = 0;
+    while (side < 4 && !coarserNeighbour(l, side, &nb)) ++side;
+    if (side == 4) continue;
+    if (!frozen.count(nb) && childrenResident(nb)) {
+      m_split.insert(nb);
+      ++forced;
+      for (int c = 0; c < 4; ++c) work.push(queued(childOf(nb, c)));
+      work.push(queued(l));
+    } else {
+      NodeKey a = l;
+      while (a.level + 1 < nb.level) a = parentOf(a);
+      eraseSubtree(a);
+      frozen.insert(a);
+      ++m_coarsened;
+      work.push(queued(a));
+      pushLeavesAround(a, &work);
+    }
+  }
+  collectLeaves();
+  return forced;
+}
+
+uint32_t TerrainRendererImpl::NodeSelection::restrictNeighboursByRescan() {
+  // The restriction restrictNeighbours() replaced: after each
+  // mend, every leaf is scanned again from the first. Kept as the reference
+  // of the tests and the selection benchmark (setReferenceSelection()).
+  std::unordered_set<NodeKey, NodeIdHash> frozen;
+  m_coarsened = 0;
   uint32_t forced = 0;
   for (bool changed = true; changed;) {
     changed = false;
@@ -177,9 +491,9 @@ uint32_t TerrainRendererImpl::NodeSelection::restrictNeighbours() {
         } else {
           NodeKey a = l;
           while (a.level + 1 < nb.level) a = parentOf(a);
-          for (auto it = m_split.begin(); it != m_split.end();)
-            it = isAncestorOrSelf(a, *it) ? m_split.erase(it) : std::next(it);
+          eraseSubtree(a);
           frozen.insert(a);
+          ++m_coarsened;
         }
         changed = true;
       }
@@ -194,16 +508,19 @@ uint32_t TerrainRendererImpl::NodeSelection::unrestricted() {
   return 0;
 }
 
+uint64_t TerrainRendererImpl::NodeSelection::leafTriangles() const {
+  uint64_t n = 0;
+  for (const NodeKey& l : m_leaves) n += drawn(l) ? 1 : 0;
+  return n * uint64_t(2 * m_patch * m_patch);
+}
+
 void TerrainRendererImpl::NodeSelection::leaves(std::vector<TerrainNode>* out) const {
   for (const NodeKey& l : m_leaves) {
     TerrainNode node;
     node.level = l.level;
     node.x = l.x;
     node.y = l.y;
-    // A root whose heights are not resident yet is not drawn (children
-    // are only made where they are).
-    const glm::i64vec2 s0(l.x * m_patch - 1, l.y * m_patch - 1);
-    node.drawn = visible(l) && m_terrain.samplesResident(l.level, s0, s0 + glm::i64vec2(m_patch + 2, m_patch + 2));
+    node.drawn = drawn(l);
     for (int s = 0; s < 4; ++s) {
       NodeKey nb;
       if (leafAt(l.level, l.x + kSideDx[s], l.y + kSideDy[s], &nb) && nb.level > l.level)
@@ -305,24 +622,33 @@ double TerrainRendererImpl::nodeError(uint32_t level, int64_t x, int64_t y) {
   if (error > 0.0 && inside && samplesResident(level - 1, f0, f0 + glm::i64vec2(2 * p, 2 * p))) {
     double local = 0.0;
     bool ok = true;
+    // The node's own (P + 1)^2 samples, each read once.
+    const int64_t n = p + 1;
+    std::vector<float> coarse(size_t(n * n));
+    for (int64_t j = 0; j < n && ok; ++j)
+      for (int64_t i = 0; i < n && ok; ++i) ok = cpuHeight(level, x * p + i, y * p + j, &coarse[size_t(j * n + i)]);
     for (int64_t j = f0.y; j <= f0.y + 2 * p && ok; ++j)
       for (int64_t i = f0.x; i <= f0.x + 2 * p && ok; ++i) {
         // The coarser surface at finer sample (i, j): the coarse cell's
-        // diagonal cut (terrain.vert's coarseAt()).
-        float fine = 0, c0 = 0, c1 = 0;
-        ok = cpuHeight(level - 1, i, j, &fine) && cpuHeight(level, i >> 1, j >> 1, &c0) &&
-             cpuHeight(level, (i + 1) >> 1, (j + 1) >> 1, &c1);
+        // diagonal cut (terrain.vert's coarseAt()), the mean of coarse
+        // samples (i >> 1, j >> 1) and ((i + 1) >> 1, (j + 1) >> 1).
+        float fine = 0;
+        ok = cpuHeight(level - 1, i, j, &fine);
+        const float c0 = coarse[size_t(((j >> 1) - y * p) * n + (i >> 1) - x * p)];
+        const float c1 = coarse[size_t((((j + 1) >> 1) - y * p) * n + ((i + 1) >> 1) - x * p)];
         local = std::max(local, std::abs(double(fine) - 0.5 * (double(c0) + double(c1))));
       }
-    if (ok) {
-      double children = 0.0;
-      for (int c = 0; c < 4; ++c)
-        children = std::max(children, nodeError(level - 1, 2 * x + (c & 1), 2 * y + (c >> 1)));
-      error = std::min(error, local + children);
-    }
+    // The children's bounds only while they can still make it tighter
+    // (each is a recursion down to the finest resident level).
+    double children = 0.0;
+    for (int c = 0; c < 4 && ok && local + children < error; ++c)
+      children = std::max(children, nodeError(level - 1, 2 * x + (c & 1), 2 * y + (c >> 1)));
+    if (ok) error = std::min(error, local + children);
   }
-  m_error_cache[NodeId{level, x, y}] = float(error);
-  return error;
+  // As cached, so that a bound never depends on whether it was cached.
+  const float rounded = float(error);
+  m_error_cache[NodeId{level, x, y}] = rounded;
+  return double(rounded);
 }
 
 double TerrainRendererImpl::tileErrorBound(uint32_t level, int64_t x, int64_t y) const {
@@ -384,15 +710,29 @@ double TerrainRendererImpl::tileErrorBound(uint32_t level, int64_t x, int64_t y)
 }
 
 void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& viewport) {
+  const auto start = std::chrono::steady_clock::now();
   m_nodes.clear();
   m_frustum_cache = frustum(camera, viewport);
   NodeSelection selection(*this, camera, viewport);
-  const uint32_t fallbacks = selection.splitByError();
-  // Unrestricted when measuring with exact node errors (no stitching).
-  const uint32_t forced = m_exact_node_error ? selection.unrestricted() : selection.restrictNeighbours();
+  size_t kept = 0;
+  if (m_reference_selection) {
+    m_frame.fallback_nodes = selection.splitDepthFirst();
+    m_frame.forced_splits = selection.restrictNeighboursByRescan();
+  } else {
+    // Measuring with exact node errors: no budget, and unrestricted (no
+    // stitching).
+    const uint64_t budget = m_exact_node_error ? 0 : m_config.triangle_budget;
+    selection.splitByError();
+    kept = selection.splitsWithin(budget);
+    if (kept < selection.splitCount()) selection.keepSplits(kept);
+    m_frame.forced_splits = m_exact_node_error ? selection.unrestricted() : selection.restrictWithin(budget, &kept);
+    m_frame.fallback_nodes = selection.fallbacksWith(kept);
+  }
   selection.leaves(&m_nodes);
-  m_frame.fallback_nodes = fallbacks;
-  m_frame.forced_splits = forced;
+  m_frame.coarsened_nodes = selection.coarsened();
+  m_frame.achieved_error_px = selection.boundWith(kept);
+  m_frame.select_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
 void TerrainRendererImpl::forgetNodeErrors(const TileKey& key) {

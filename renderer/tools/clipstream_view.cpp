@@ -189,6 +189,7 @@ struct Args {
   std::string screenshot_dir = ".";
   std::string terrain_method = "clipmap";
   double terrain_error_px = renderer_config::kTerrainErrorPx;
+  uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
 };
 
 // What the checked options chose.
@@ -233,6 +234,11 @@ void addOptions(CLI::App& app, Args* a) {
   app.add_option("--terrain-error", a->terrain_error_px,
                  "Quadtree: split a node while its projected error bound exceeds this many pixels")
       ->transform(cli::inRange(kMinTerrainErrorPx, kMaxTerrainErrorPx));
+  app.add_option("--terrain-triangle-budget", a->terrain_triangle_budget,
+                 "Quadtree: the most triangles a frame draws, 0 for none (default " +
+                     std::to_string(renderer_config::kTerrainTriangleBudget) +
+                     "); over it the frame's error bound rises, the largest errors split first")
+      ->transform(cli::wholeInRange(0, int64_t(1) << 32));
   app.footer(std::string("Keys:\n") + kKeys +
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
 }
@@ -242,8 +248,9 @@ void addOptions(CLI::App& app, Args* a) {
 std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
   if (Status s = cli::parseTerrainMethod(a.terrain_method, &c->method); !s)
     return cli::usageError(app, "--terrain: " + s.message);
-  if ((app.count("--terrain") || app.count("--terrain-error")) && a.elevation_path.empty())
-    return cli::usageError(app, "--terrain and --terrain-error need --elevation");
+  if ((app.count("--terrain") || app.count("--terrain-error") || app.count("--terrain-triangle-budget")) &&
+      a.elevation_path.empty())
+    return cli::usageError(app, "--terrain, --terrain-error and --terrain-triangle-budget need --elevation");
   if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
   if (Status s = cli::parseTileFormat(a.tile_format, &c->tile_content); !s)
@@ -309,6 +316,7 @@ std::optional<int> openScene(CLI::App& app, const Args& a, const Choices& c, std
     for (const std::string& w : notes) cli::printError(app, "warning: " + w);
     layer.method = c.method;
     layer.error_px = a.terrain_error_px;
+    layer.triangle_budget = a.terrain_triangle_budget;
     *terrain = std::move(layer);
   }
   *out = std::move(source);

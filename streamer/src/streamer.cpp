@@ -396,6 +396,11 @@ bool Streamer::plansOnTerrain() const {
   return false;
 }
 
+std::shared_ptr<const TerrainBounds> Streamer::terrainBounds() const {
+  const Impl& s = *m_impl;
+  return s.terrain_layer >= 0 ? s.layers[size_t(s.terrain_layer)].terrain.bounds : nullptr;
+}
+
 Status Streamer::traceStatus() const { return m_impl->trace.status(); }
 
 void Streamer::discardTrace() { m_impl->trace.discard(); }

@@ -194,6 +194,7 @@ TEST(TerrainQuadtree, FlatGroundStaysCoarseAndRoughGroundIsRefined) {
   auto drawWith = [&](double error_px) {
     TerrainConfig tc = s.terrain->config();
     tc.error_px = error_px;
+    tc.triangle_budget = 0;  // the bound alone decides
     std::unique_ptr<TerrainRenderer> t;
     EXPECT_TRUE(TerrainRenderer::create(s.field.geometry, tc, &t).ok());
     t->setBounds(bounds);

@@ -159,6 +159,9 @@ struct FlightRun {
   // triangles drawn per recorded frame.
   uint64_t height_texture_bytes = 0;
   double terrain_triangles_mean = 0.0;
+  // Quadtree: the error bound the recorded frames met (FrameSample::
+  // terrain_error_px), mean and largest; 0 for the other methods.
+  double terrain_error_px_mean = 0.0, terrain_error_px_max = 0.0;
   std::string terrain_method;     // terrainMethodName(), empty without terrain
   double render_cpu_ms_mean = 0.0;  // FrameSample::cpu_ms over the recorded frames
   bool plans_on_terrain = false;  // the streamer planned against the height bounds (Streamer::plansOnTerrain())

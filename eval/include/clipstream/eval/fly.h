@@ -105,6 +105,8 @@ struct FlyOptions {
   uint32_t terrain_ring = renderer_config::kTerrainRingCells;  // cells per ring side
   TerrainMethod terrain_method = TerrainMethod::kClipmap;     // --terrain
   double terrain_error_px = renderer_config::kTerrainErrorPx; // quadtree: --terrain-error
+  // Quadtree: --terrain-triangle-budget (0: none; TerrainConfig::triangle_budget).
+  uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
 };
 
 // Largest --vertical-scale: beyond it every slope is a wall.

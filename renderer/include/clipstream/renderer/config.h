@@ -78,6 +78,20 @@ inline constexpr uint32_t kTerrainPatchCells = 16;
 // under 1 px on both real DEMs of the terrain sweep (0.81 px on the demo
 // orbit, 0.90 on Rainier; docs/terrain.md, "The two methods side by side").
 inline constexpr double kTerrainErrorPx = 10.0;
+// Quadtree terrain: the most triangles a frame draws (TerrainConfig::
+// triangle_budget, --terrain-triangle-budget; 0: none). Twice a full ring
+// of the clipmap at its default kTerrainRingCells (2 x 2 x 128^2), which
+// is about what the clipmap draws at 1280x720 (28k-57k on the terrain
+// sweep's scenes), so on rough ground the quadtree costs about what the
+// clipmap does instead of 5-8x (435k triangles, 138 ms a frame on the
+// rough DEM at 10 px), while at the default bound the real DEMs stay
+// under it (27k on St Helens, 60k on Rainier on the sweep's orbits).
+inline constexpr uint64_t kTerrainTriangleBudget = 65536;
+// Quadtree terrain: when the restriction's forced splits take a budgeted
+// frame over, the selection searches for the most splits that fit with at
+// most this many restrictions more (false position, every other step
+// halving: ~1,000 splits are narrowed to one in 8-10).
+inline constexpr uint32_t kTerrainBudgetSearchSteps = 10;
 // Share of the light that does not depend on the sun (Lambert + ambient).
 inline constexpr float kTerrainAmbient = 0.35f;
 

@@ -77,6 +77,8 @@ struct TerrainLayerConfig {
   uint32_t ring_cells = renderer_config::kTerrainRingCells;
   TerrainMethod method = TerrainMethod::kClipmap;       // --terrain
   double error_px = renderer_config::kTerrainErrorPx;   // quadtree: --terrain-error
+  // Quadtree: --terrain-triangle-budget (TerrainConfig::triangle_budget; 0: none).
+  uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
 };
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a
@@ -144,6 +146,10 @@ struct FrameSample {
   uint32_t terrain_rings = 0;
   uint32_t terrain_finest_level = 0;
   uint64_t terrain_triangles = 0;
+  // Quadtree: the error bound the frame met (TerrainFrame::achieved_error_px)
+  // and the node selection's time; 0 for the other methods.
+  double terrain_error_px = 0.0;
+  double terrain_select_ms = 0.0;
   uint32_t height_tiles_uploaded = 0;
   double ground_height = 0.0;  // world units under the camera (0 without terrain)
 };
@@ -210,6 +216,10 @@ class Flight {
   std::unique_ptr<TerrainRenderer> m_terrain;
   std::unique_ptr<OffscreenTarget> m_target;
   std::unique_ptr<Streamer> m_streamer;
+  // The elevation layer's per-tile bounds the quadtree refines by: the
+  // streamer's (Streamer::terrainBounds()), or read here when the streamer
+  // plans against the plane; null: none. Kept for resize().
+  std::shared_ptr<const TerrainBounds> m_terrain_bounds;
   ClipmapPlan m_first_plan;
   StreamerStats m_before;
   Camera m_previous;

@@ -81,6 +81,16 @@ struct TerrainConfig {
   double error_px = renderer_config::kTerrainErrorPx;
   // Quadtree: cells per node side (a power of two, 4..256).
   uint32_t patch_cells = renderer_config::kTerrainPatchCells;
+  // Quadtree: the most triangles a frame draws (0: no budget). Nodes split
+  // in order of their projected error, largest first, and the splitting
+  // stops before the budget would be passed, so the bound the frame meets
+  // (TerrainFrame::achieved_error_px) is the lowest the budget allows:
+  // error_px, or higher where the ground asks for more triangles. Each
+  // drawn node counts as a whole patch (2 P^2 triangles; stitched sides
+  // draw up to P / 2 fewer each), the restriction's forced splits
+  // included. The only excess: the roots in view (at most 9 nodes) are
+  // drawn whatever the budget.
+  uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
 };
 
 // What the last draw() drew.
@@ -97,6 +107,15 @@ struct TerrainFrame {
   uint32_t nodes = 0;
   uint32_t fallback_nodes = 0;
   uint32_t forced_splits = 0;
+  // Quadtree: leaves the restriction drew coarser because a neighbour could
+  // not be split (its children's heights not resident).
+  uint32_t coarsened_nodes = 0;
+  // Quadtree: the screen-space error bound the selection met (pixels):
+  // TerrainConfig::error_px, or more where the triangle budget stopped the
+  // splits (the projected error of the first node left whole, capped at
+  // kMaxTerrainErrorPx, beyond which nothing splits). 0 for the other methods.
+  double achieved_error_px = 0.0;
+  double select_ms = 0.0;  // quadtree: the node selection's time on this thread
 };
 
 // A leaf of the quadtree drawn last (TerrainRenderer::lastNodes()): level-L

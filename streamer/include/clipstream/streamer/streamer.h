@@ -15,8 +15,9 @@
 // PathHint::camera_at run anywhere else), except that with
 // DeterministicIo::enabled update() waits for the reads due that frame
 // (a benchmark mode; the source is still only called on the workers). stats(), queuedTiles() and
-// queuedLayerTiles() are thread-safe; layerCount(), layer() and geometry()
-// return what the constructor fixed, on any thread.
+// queuedLayerTiles() are thread-safe; layerCount(), layer(), geometry(),
+// plansOnTerrain() and terrainBounds() return what the constructor fixed,
+// on any thread.
 // Shutdown order: shutdown() stops accepting work, cancels queued requests,
 // lets in-flight reads finish, joins the workers; the destructor calls it.
 #pragma once
@@ -24,6 +25,7 @@
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/stats.h>
+#include <clipstream/streamer/terrain_bounds.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <cstdint>
@@ -274,6 +276,14 @@ class Streamer {
   // must be the real one (its y the height in world units, not the height
   // above the ground). Fixed at construction; any thread.
   bool plansOnTerrain() const;
+
+  // The per-tile height bounds the constructor read for the planner
+  // (loadTerrainBounds() of the first elevation layer with world_per_height
+  // > 0, once); null when it read none (plansOnTerrain() false). A renderer
+  // that refines by them (the quadtree) takes these rather than reading
+  // the index again. Fixed at construction; any thread. The bounds are
+  // immutable and shared read-only (terrain_bounds.h's rule).
+  std::shared_ptr<const TerrainBounds> terrainBounds() const;
 
   // Render thread. Layer 0's hand-off: up to max_tiles tiles and max_bytes
   // bytes (0 = no byte limit) of layer 0 that are decoded and needed, in
