@@ -215,7 +215,7 @@ GEN=$WORK/terrain_section.md
   echo "consecutive frames minus the reference's; geometry change: the drawn surface moving against the"
   echo "full-resolution one between consecutive frames (mean / largest pair); bound: the quadtree's achieved error"
   echo "bound (above its setting where the triangle budget binds); over-fetch: tiles loaded over tiles the frames"
-  echo "sample, colour / height."
+  echo "sample, colour / height (–: not measured)."
   echo
   echo "| scene | method | setting | triangles | fewest | ratio | frame ms | × flat | geo mean / p95 px | silhouette mean / p95 px | coverage px | PSNR dB | grey change | geometry change px | bound px | over-fetch |"
   echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
@@ -223,7 +223,7 @@ GEN=$WORK/terrain_section.md
            FNR>1{ratio = ($5 > 0) ? sprintf("%.2f", $4 / $5) : "";
                 set = ($2=="clipmap") ? "ring " $3 : ($2=="quadtree") ? $3 " px" : "";
                 cost = (flat[$1] > 0) ? sprintf("%.2f", $6 / flat[$1]) : "";
-                bound = ($18 != "") ? sprintf("%.1f", $18) : "";
+                bound = ($2 == "quadtree" && $18 != "") ? sprintf("%.1f", $18) : "";
                 hof = ($20 != "" && $20 > 0) ? sprintf("%.2f", $20) : "–";
                 printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %s | %.3f / %.3f | %.2f / %.2f | %.0f | %.2f | %+.3f | %.4f / %.3f | %s | %.2f / %s |\n",
                 $1, $2, set, $4, $5, ratio, $6, cost, $8, $9, $13, $14, $15, $10, $11 - $12, $16, $17, bound, $19, hof}' "$CSV" "$CSV"
