@@ -106,7 +106,10 @@ class TerrainRendererImpl::NodeSelection {
   };
   using Worklist = std::priority_queue<Queued, std::vector<Queued>, std::greater<Queued>>;
   Queued queued(const NodeKey& k) const;
-  void eraseSubtree(const NodeKey& a);
+  // Coarsens the finer side of leaf l's too-coarse neighbour nb: l's
+  // ancestor one level finer than nb becomes a leaf (its split subtree
+  // erased) and is frozen for the frame. Returns that ancestor.
+  NodeKey coarsenBeside(const NodeKey& l, const NodeKey& nb, std::unordered_set<NodeKey, NodeIdHash>* frozen);
   void pushLeavesAround(const NodeKey& a, Worklist* work) const;  // the leaves touching a's sides
   // Sides in PatchSide order: top, right, bottom, left.
   static constexpr int kSideDx[4] = {0, 1, 0, -1}, kSideDy[4] = {-1, 0, 1, 0};
@@ -384,7 +387,12 @@ TerrainRendererImpl::NodeSelection::Queued TerrainRendererImpl::NodeSelection::q
   return q;
 }
 
-void TerrainRendererImpl::NodeSelection::eraseSubtree(const NodeKey& a) {
+TerrainRendererImpl::NodeSelection::NodeKey TerrainRendererImpl::NodeSelection::coarsenBeside(
+    const NodeKey& l, const NodeKey& nb, std::unordered_set<NodeKey, NodeIdHash>* frozen) {
+  NodeKey a = l;
+  while (a.level + 1 < nb.level) a = parentOf(a);
+  frozen->insert(a);
+  ++m_coarsened;
   // Split nodes form a tree: split descendants lie under split nodes.
   std::vector<NodeKey> s{a};
   while (!s.empty()) {
@@ -393,6 +401,7 @@ void TerrainRendererImpl::NodeSelection::eraseSubtree(const NodeKey& a) {
     if (m_split.erase(k))
       for (int c = 0; c < 4; ++c) s.push_back(childOf(k, c));
   }
+  return a;
 }
 
 void TerrainRendererImpl::NodeSelection::pushLeavesAround(const NodeKey& a, Worklist* work) const {
@@ -456,11 +465,7 @@ uint32_t TerrainRendererImpl::NodeSelection::restrictNeighbours() {
       for (int c = 0; c < 4; ++c) work.push(queued(childOf(nb, c)));
       work.push(queued(l));
     } else {
-      NodeKey a = l;
-      while (a.level + 1 < nb.level) a = parentOf(a);
-      eraseSubtree(a);
-      frozen.insert(a);
-      ++m_coarsened;
+      const NodeKey a = coarsenBeside(l, nb, &frozen);
       work.push(queued(a));
       pushLeavesAround(a, &work);
     }
@@ -489,11 +494,7 @@ uint32_t TerrainRendererImpl::NodeSelection::restrictNeighboursByRescan() {
           m_split.insert(nb);
           ++forced;
         } else {
-          NodeKey a = l;
-          while (a.level + 1 < nb.level) a = parentOf(a);
-          eraseSubtree(a);
-          frozen.insert(a);
-          ++m_coarsened;
+          coarsenBeside(l, nb, &frozen);
         }
         changed = true;
       }
