@@ -80,7 +80,8 @@ struct GeometryError {
 // camera, TerrainReference::render()) coverage counts too: a pixel that
 // shows terrain in one frame and sky or background in the other is
 // measured by its distance to the nearest pixel showing terrain in the
-// other frame (how far the outline is displaced there; at least 1), and
+// other frame (how far the outline is displaced there; at least 1; for
+// terrain in this frame alone, the larger of that and its projection), and
 // joins the mean, p95 and max. The silhouette figure compares the two
 // outlines alone: an outline pixel shows terrain and has a 4-neighbour
 // that does not (the viewport's border is no outline); each frame's
