@@ -731,7 +731,8 @@ void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& view
   }
   selection.leaves(&m_nodes);
   m_frame.coarsened_nodes = selection.coarsened();
-  m_frame.achieved_error_px = selection.boundWith(kept);
+  // The flat method selects its roots here too; it has no bound to meet.
+  m_frame.achieved_error_px = m_config.method == TerrainMethod::kQuadtree ? selection.boundWith(kept) : 0.0;
   m_frame.select_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
