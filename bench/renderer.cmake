@@ -44,3 +44,10 @@ add_executable(bench_renderer_quadtree_select ${CMAKE_CURRENT_LIST_DIR}/renderer
 target_include_directories(bench_renderer_quadtree_select PRIVATE ${PROJECT_SOURCE_DIR}/renderer/src)
 target_link_libraries(bench_renderer_quadtree_select PRIVATE clipstream::renderer clipstream::tiler clipstream::cli
   clipstream_warnings OpenGL::OpenGL)
+
+# What per-pixel lighting (and the other detail beyond the data) costs a
+# terrain frame against the frame without it, alternated in one run.
+add_executable(bench_renderer_terrain_detail ${CMAKE_CURRENT_LIST_DIR}/renderer_terrain_detail.cpp)
+target_include_directories(bench_renderer_terrain_detail PRIVATE ${PROJECT_SOURCE_DIR}/renderer/src)
+target_link_libraries(bench_renderer_terrain_detail PRIVATE clipstream::renderer clipstream::tiler clipstream::cli
+  clipstream_warnings OpenGL::OpenGL)

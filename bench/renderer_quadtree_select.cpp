@@ -25,6 +25,7 @@
 
 #include "gl.h"
 #include "terrain_impl.h"
+#include "terrain_scene.h"
 #include "tsv_out.h"
 
 #include <unistd.h>
@@ -41,6 +42,9 @@
 #include <vector>
 
 using namespace clipstream;
+using clipstream::bench::cameras;
+using clipstream::bench::storeFor;
+using clipstream::bench::uploadAll;
 
 namespace {
 
@@ -57,54 +61,6 @@ const Mode kModes[] = {{"before (rescan)", true, 0},
 struct Row {
   double leaves = 0, forced = 0, triangles = 0, select_ms = 0, select_max_ms = 0, frame_ms = 0, bound_px = 0;
 };
-
-// An elevation store for `path`: itself, or a GeoTIFF tiled into `temporary`.
-std::string storeFor(const std::string& path, const std::string& temporary) {
-  if (path.size() < 4 || (path.compare(path.size() - 4, 4, ".tif") != 0 && path.compare(path.size() - 5, 5, ".tiff") != 0))
-    return path;
-  TilerOptions t;
-  t.input_path = path;
-  t.output_path = temporary;
-  t.fsync = false;
-  TilerSummary summary;
-  if (Status s = tileImage(t, &summary); !s) {
-    std::fprintf(stderr, "%s: %s\n", path.c_str(), s.toString().c_str());
-    return "";
-  }
-  return temporary;
-}
-
-// Every tile of every level of `heights` into `terrain`.
-void uploadAll(TerrainRenderer& terrain, TileSource& heights) {
-  const PyramidGeometry& g = heights.geometry();
-  std::vector<uint8_t> bytes;
-  for (uint32_t l = 0; l < g.levelCount(); ++l)
-    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
-      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x)
-        if (heights.fetch({l, x, y}, &bytes).ok()) terrain.uploadTile({l, x, y}, reinterpret_cast<const float*>(bytes.data()));
-}
-
-// Random cameras over the DEM, 20 to 1000 world units above its ground,
-// looking 10 to 70 degrees down.
-std::vector<Camera> cameras(const TerrainRenderer& t, const TerrainLayerConfig& layer, int count) {
-  std::mt19937 rng(20261207);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  const PyramidGeometry& g = layer.source->geometry();
-  const glm::dvec2 lo = layer.alignment.sample0_world;
-  const glm::dvec2 hi = lo + glm::dvec2(double(g.width_px), double(g.height_px)) * layer.alignment.world_per_sample;
-  std::vector<Camera> out;
-  for (int i = 0; i < count; ++i) {
-    Camera c;
-    const glm::dvec2 at = lo + (hi - lo) * glm::dvec2(u(rng), u(rng));
-    double ground = 0.0;
-    if (!t.groundHeight(at, &ground)) ground = 0.0;
-    c.position = {at.x, ground + 20.0 * std::pow(50.0, u(rng)), at.y};
-    c.heading_rad = 6.2831853 * u(rng);
-    c.pitch_rad = -0.17 - 1.05 * u(rng);
-    out.push_back(c);
-  }
-  return out;
-}
 
 // One DEM at one bound: every mode over the same cameras, alternated.
 void measure(const TerrainLayerConfig& layer, const ClipmapRenderer& colour, const OffscreenTarget& target,
@@ -281,22 +237,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: %s [--size WxH] [--cameras N] [--repeat N] [--errors A,B] [--tsv FILE] DEM...\n", argv[0]);
     return 2;
   }
-  std::unique_ptr<HeadlessContext> context;
-  if (Status s = HeadlessContext::create(&context); !s) {
-    std::fprintf(stderr, "%s\n", s.toString().c_str());
-    return 1;
-  }
-  keepHeapForSoftwareGl();
-  auto colour_source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
-  std::unique_ptr<ClipmapRenderer> colour;
-  std::unique_ptr<OffscreenTarget> target;
-  uint32_t failures = 0;
-  Camera first;
-  first.position = {1024.0, 500.0, 1024.0};
-  if (!createClipmapRenderer(*colour_source, vp, first, {}, Buffering::kSingle, &colour, &failures).ok() ||
-      !OffscreenTarget::create(vp, &target).ok())
-    return 1;
-  std::printf("# %s, %ux%u, %d cameras, best of %d draws each\n", context->describe().c_str(), vp.width_px,
+  bench::WhiteGround ground;
+  if (!ground.create(vp)) return 1;
+  const auto& colour_source = ground.source;
+  const auto& colour = ground.colour;
+  const auto& target = ground.target;
+  std::printf("# %s, %ux%u, %d cameras, best of %d draws each\n", ground.context->describe().c_str(), vp.width_px,
               vp.height_px, camera_count, repeat);
   table.row("dem\terror_px\tselection\tleaves\tforced_splits\ttriangles\tselect_ms_mean\tselect_ms_max\t"
             "frame_ms_mean\tbound_px_mean\n");

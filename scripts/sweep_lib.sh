@@ -1,5 +1,5 @@
-# Sourced by scripts/sweep.sh, sweep_terrain.sh and sweep_paged.sh: what the
-# three share.
+# Sourced by scripts/sweep.sh, sweep_terrain.sh, sweep_detail.sh and
+# sweep_paged.sh: what they share.
 #
 # Their one optional argument, as QUICK and CHARTS_ONLY:
 #   --quick        fewer frames, for a smoke run (CSV, charts and docs still written)

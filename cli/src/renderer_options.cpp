@@ -59,4 +59,15 @@ Status parseTerrainMethod(const std::string& name, TerrainMethod* out) {
                        "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
 }
 
+Status parseTerrainLighting(const std::string& name, TerrainLighting* out) {
+  for (TerrainLighting l : {TerrainLighting::kVertex, TerrainLighting::kPixel}) {
+    if (name == terrainLightingName(l)) {
+      *out = l;
+      return okStatus();
+    }
+  }
+  return Status::error(ErrorCode::kInvalidArgument,
+                       "terrain lighting '" + printableText(name, 40) + "': must be vertex or pixel");
+}
+
 }  // namespace clipstream::cli

@@ -154,6 +154,7 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
   if (i >= o.frames) {
     run->terrain_rest_agree_pixels += te.agree_pixels;
     run->terrain_rest_agree_mismatched += te.agree_mismatched;
+    run->terrain_rest_agree_max_diff = std::max(run->terrain_rest_agree_max_diff, te.agree_max_diff);
   }
   if (f.geometry.pixels > 0) {
     const bool rest = i >= o.frames;
@@ -224,6 +225,7 @@ Status createTerrainReferences(const FlightRunOptions& o, const std::shared_ptr<
   TerrainConfig tc;
   tc.ring_cells = o.terrain->ring_cells;
   tc.mapping = o.terrain->alignment;
+  tc.lighting = o.reference_lighting.value_or(o.terrain->lighting);
   if (Status s = TerrainReference::create(reference, *o.terrain->source, tc, o.viewport, o.streamer.planner,
                                           terrain_reference);
       !s)
@@ -274,6 +276,8 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
     }
     run->terrain_error_px_mean = bound / double(run->frames.size());
     run->terrain_method = terrainMethodName(o.terrain->method);
+    run->terrain_lighting = terrainLightingName(o.terrain->lighting);
+    run->reference_lighting = terrainLightingName(o.reference_lighting.value_or(o.terrain->lighting));
   }
   // Loads include the streamer's reads of the pyramid, as sampled tiles
   // include the pyramid tiles seen. Over terrain, the colour layer's loads

@@ -248,6 +248,7 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
     terrain.method = o.terrain_method;
     terrain.error_px = o.terrain_error_px;
     terrain.triangle_budget = o.terrain_triangle_budget;
+    terrain.lighting = o.terrain_lighting;
     r.terrain = std::move(terrain);
   }
   return okStatus();
@@ -296,6 +297,7 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
   r.ground_truth_every = o.reference ? o.ground_truth_every : 0;
   r.sample_tiles = o.reference && o.over_fetch;
   r.fewest_triangles = o.fewest_triangles;
+  r.reference_lighting = o.reference_lighting;
   return okStatus();
 }
 

@@ -221,6 +221,8 @@ nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   acc["terrain"] = run.height_texture_bytes > 0;
   acc["terrain_triangles_mean"] = run.terrain_triangles_mean;
   acc["terrain_method"] = run.terrain_method;
+  acc["terrain_lighting"] = run.terrain_lighting;
+  acc["reference_lighting"] = run.reference_lighting;
   acc["terrain_error_px_mean"] = run.terrain_error_px_mean;
   acc["terrain_error_px_max"] = run.terrain_error_px_max;
   acc["render_cpu_ms_mean"] = run.render_cpu_ms_mean;

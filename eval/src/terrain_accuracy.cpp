@@ -329,7 +329,12 @@ TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba
           !same[size_t(y2) * w + (x ^ 1u)])
         continue;
       ++e.agree_pixels;
-      if (std::memcmp(&streamed_rgba[p * 4], &reference_rgba[p * 4], 3) != 0) ++e.agree_mismatched;
+      if (std::memcmp(&streamed_rgba[p * 4], &reference_rgba[p * 4], 3) != 0) {
+        ++e.agree_mismatched;
+        for (size_t c = 0; c < 3; ++c)
+          e.agree_max_diff = std::max(e.agree_max_diff,
+                                      uint32_t(std::abs(int(streamed_rgba[p * 4 + c]) - int(reference_rgba[p * 4 + c]))));
+      }
     }
   }
   return e;

@@ -33,6 +33,7 @@ struct Args {
   bool no_over_fetch = false;
   std::string plan_scope = "sampled";
   std::string terrain_method = clipstream::terrainMethodName(o.terrain_method);
+  std::string terrain_lighting = clipstream::terrainLightingName(o.terrain_lighting), reference_lighting;
 };
 
 // Declares every option and the footer, in the order --help lists them,
@@ -167,6 +168,12 @@ void addOptions(CLI::App& app, Args* args) {
                      std::to_string(renderer_config::kTerrainTriangleBudget) +
                      "); over it the frame's error bound rises, the largest errors split first")
       ->transform(cli::wholeInRange(0, int64_t(1) << 32));
+  app.add_option("--terrain-lighting", a.terrain_lighting,
+                 "Terrain lit by vertex (default: the vertices' normals) or by pixel (the normal of the "
+                 "finest resident heights under each pixel)");
+  app.add_option("--reference-lighting", a.reference_lighting,
+                 "The terrain reference's lighting (with --reference): vertex or pixel; default: "
+                 "--terrain-lighting");
   app.footer(
       "Exit codes: 0 success, 1 failure (store, GL context, an output that cannot be written,\n"
       "tile reads failed past --max-failed-reads; nothing half-written is left), 2 command-line\n"
@@ -191,6 +198,16 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
   if ((app.count("--terrain") || app.count("--terrain-error") || app.count("--terrain-triangle-budget")) &&
       o.elevation_path.empty())
     return "--terrain, --terrain-error and --terrain-triangle-budget need --elevation";
+  if (Status s = cli::parseTerrainLighting(a.terrain_lighting, &o.terrain_lighting); !s)
+    return "--terrain-lighting: " + s.message;
+  if (app.count("--terrain-lighting") && o.elevation_path.empty()) return "--terrain-lighting needs --elevation";
+  if (!a.reference_lighting.empty()) {
+    TerrainLighting reference = TerrainLighting::kVertex;
+    if (Status s = cli::parseTerrainLighting(a.reference_lighting, &reference); !s)
+      return "--reference-lighting: " + s.message;
+    if (o.elevation_path.empty() || !o.reference) return "--reference-lighting needs --elevation and --reference";
+    o.reference_lighting = reference;
+  }
 
   if (o.store_path.empty() && o.procedural_px == 0)
     return "give a STORE or --procedural SIDE";

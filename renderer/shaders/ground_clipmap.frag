@@ -133,7 +133,7 @@ void main() {
   }
 #endif
 #ifdef TERRAIN
-  color.rgb = shadeTerrain(color.rgb);
+  color.rgb = shadeTerrain(color.rgb, gx, gy);
 #ifdef OVERLAY
   color.rgb = mix(color.rgb, vec3(1.0, 0.0, 1.0), 0.5 * vMorph);  // transition bands
 #endif

@@ -8,21 +8,17 @@
 // Transition: in the outer uTransition cells of a ring a vertex moves from
 // its own level's height towards the coarser level's surface, reaching it
 // exactly on the ring's outer edge, where the coarser ring takes over.
+//
+// terrain_heights.glsl (heightAt(), normalAt() and their uniforms) comes first.
 layout(location = 0) in ivec2 aGrid;  // vertex index in the ring, 0..N
 
-uniform sampler2DArray uHeights;  // R32F, layer l = height level l, toroidal (period uHeightSlots)
 uniform int uN;                   // cells per ring side
 uniform int uLevel;               // this ring's height level
 uniform int uCoarsest;            // no transition on the coarsest ring
 uniform int uTransition;          // cells of the transition band
 uniform ivec2 uOriginRel;         // ring origin (level-0 samples) minus the camera's integer sample
 uniform ivec2 uOriginLevel;       // ring origin in this level's samples (even)
-uniform ivec2 uLevelSize[MAX_LEVELS];  // samples of each stored height level
-uniform int uStoredLevels;        // levels in the height pyramid; coarser rings decimate the last
-uniform int uHeightPeriod;        // texels per stack layer side (toroidal period)
 uniform vec2 uCamFrac;            // camera position minus its integer sample (level-0 samples)
-uniform vec2 uWorldPerSample;     // world units (level-0 colour texels) per level-0 sample, x and z
-uniform float uWorldPerHeight;    // world units per height unit (vertical scale included)
 uniform float uCamY;              // camera height in world units
 uniform mat4 uViewProj;           // camera-relative view-projection
 uniform vec4 uImageRel;           // colour image relative to the camera: x0, z0, x1, z1
@@ -38,19 +34,6 @@ out float vMorph;   // transition weight (overlay)
 out float vHeight;  // height in the store's units after the transition (tests)
 out float vRelY;    // camera-relative height, world units (position pass)
 
-float heightAt(int level, ivec2 s) {
-  if (level >= uStoredLevels) {
-    // A ring coarser than the pyramid's last level (one tile): its samples
-    // are every 2^k-th sample of that level, as decimation would make them.
-    s = s << (level - uStoredLevels + 1);
-    level = uStoredLevels - 1;
-  }
-  ivec2 size = uLevelSize[level];
-  s = clamp(s, ivec2(0), size - 1);
-  ivec2 t = s - uHeightPeriod * (s / uHeightPeriod);  // s >= 0: plain remainder
-  return texelFetch(uHeights, ivec3(t, level), 0).r;
-}
-
 // The coarser level's surface at this level's sample s: its own samples at
 // even s, the mean of the two ends along an odd axis, and the mean of the
 // cell diagonal (the coarse cells' triangulation) when both are odd.
@@ -58,14 +41,6 @@ float coarseAt(ivec2 s) {
   ivec2 c0 = s >> 1;
   ivec2 c1 = (s + 1) >> 1;
   return 0.5 * (heightAt(uLevel + 1, c0) + heightAt(uLevel + 1, c1));
-}
-
-vec3 normalAt(int level, ivec2 s, float spacing) {
-  float dx = heightAt(level, s + ivec2(1, 0)) - heightAt(level, s - ivec2(1, 0));
-  float dz = heightAt(level, s + ivec2(0, 1)) - heightAt(level, s - ivec2(0, 1));
-  // Central differences in world units: heights scaled, distances 2 samples.
-  vec2 slope = vec2(dx, dz) * uWorldPerHeight / (2.0 * spacing * uWorldPerSample);
-  return normalize(vec3(-slope.x, 1.0, -slope.y));
 }
 
 void main() {

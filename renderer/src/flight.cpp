@@ -170,6 +170,7 @@ Status Flight::makeTerrain() {
   tc.method = t.method;
   tc.error_px = t.error_px;
   tc.triangle_budget = t.triangle_budget;
+  tc.lighting = t.lighting;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
   if (t.method == TerrainMethod::kQuadtree || t.method == TerrainMethod::kFlat) {

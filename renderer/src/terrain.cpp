@@ -29,6 +29,14 @@ const char* terrainMethodName(TerrainMethod method) {
   return "?";
 }
 
+const char* terrainLightingName(TerrainLighting lighting) {
+  switch (lighting) {
+    case TerrainLighting::kVertex: return "vertex";
+    case TerrainLighting::kPixel: return "pixel";
+  }
+  return "?";
+}
+
 // ---- TerrainRenderer: the installed API, forwarded ----
 
 TerrainRenderer::TerrainRenderer(std::unique_ptr<TerrainRendererImpl> impl) : m_impl(std::move(impl)) {}
@@ -60,6 +68,7 @@ bool TerrainRenderer::groundRange(const Camera& camera, double* lowest, double* 
 }
 void TerrainRenderer::setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_impl->setBounds(std::move(bounds)); }
 void TerrainRenderer::setErrorBound(double error_px) { m_impl->setErrorBound(error_px); }
+Status TerrainRenderer::setLighting(TerrainLighting lighting) { return m_impl->setLighting(lighting); }
 const TerrainFrame& TerrainRenderer::lastFrame() const { return m_impl->lastFrame(); }
 const std::vector<TerrainNode>& TerrainRenderer::lastNodes() const { return m_impl->lastNodes(); }
 uint64_t TerrainRenderer::textureBytes() const { return m_impl->textureBytes(); }
@@ -82,12 +91,15 @@ Status TerrainRendererImpl::create(const PyramidGeometry& heights, const Terrain
   // decimated further in the shader). Until the first frame: the field
   // seen from its centre.
   r->m_coarsest = r->coarsestFor(glm::dvec2(heights.width_px, heights.height_px) * 0.5);
-  if (Status s = TerrainPrograms::create(&r->m_programs); !s) return s;
+  if (Status s = TerrainPrograms::create(r->m_config.full_resolution, &r->m_programs); !s) return s;
   if (Status s = r->buildMeshes(); !s) return s;
   // The full-resolution mesh holds level 0 alone.
   const uint32_t layers = r->m_config.full_resolution ? 1 : heights.levelCount();
   const uint32_t slots = TerrainHeightStack::slotsFor(heights, r->m_config);
-  if (Status s = TerrainHeightStack::create(heights, slots, layers, &r->m_stack); !s) return s;
+  // Per-pixel lighting reads stored gradients; the full-resolution mesh
+  // (the reference) computes its own from level 0.
+  const bool gradients = config.lighting == TerrainLighting::kPixel && !r->m_config.full_resolution;
+  if (Status s = TerrainHeightStack::create(heights, slots, layers, gradients, &r->m_stack); !s) return s;
   *out = std::move(r);
   return okStatus();
 }
@@ -260,7 +272,8 @@ bool TerrainRendererImpl::groundHeight(const glm::dvec2& world_xz, double* heigh
 }
 
 void TerrainRendererImpl::draw(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour) {
-  const GLuint p = m_programs->ground(colour.overlay() != Overlay::kOff);
+  const GLuint p =
+      m_programs->ground(colour.overlay() != Overlay::kOff, m_config.lighting == TerrainLighting::kPixel);
   updateCoarsest(camera, colour);
   colour.impl().bindColour(p, camera, viewport);
   setFrameUniforms(p, camera, viewport);

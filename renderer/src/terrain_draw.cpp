@@ -66,6 +66,29 @@ void TerrainRendererImpl::setFrameUniforms(uint32_t p, const Camera& camera,
   glProgramUniform3f(p, loc(p, "uSunDir"), sun.x, sun.y, sun.z);
   glProgramUniform1i(p, loc(p, "uHeights"), 2);
   glBindTextureUnit(2, m_stack->texture());
+  // Per-pixel lighting: the camera's sample, whole (the shader splits it by
+  // level), and the stored gradients with what the shader needs to find
+  // them (the reference computes its own from level 0).
+  glProgramUniform2i(p, loc(p, "uCamSample"), GLint(cam_int.x), GLint(cam_int.y));
+  if (m_stack->gradientsTexture() != 0) {
+    glProgramUniform1i(p, loc(p, "uGradients"), 3);
+    glBindTextureUnit(3, m_stack->gradientsTexture());
+    // Per level: the block of samples whose tiles are held around the
+    // camera, and where the camera's sample lies in the level's layer.
+    std::array<GLint, 4 * renderer_config::kMaxLevels> resident{};
+    std::array<GLint, 2 * renderer_config::kMaxLevels> texel{};
+    const int64_t period = int64_t(m_stack->slots()) * m_geometry.tile_px;
+    for (uint32_t l = 0; l < m_geometry.levelCount(); ++l) {
+      const glm::i64vec4 r = m_stack->residentSamples(l, glm::i64vec2(cam_int));
+      for (int k = 0; k < 4; ++k) resident[size_t(4 * l + k)] = GLint(r[k]);
+      for (int k = 0; k < 2; ++k) {
+        const int64_t s = int64_t(cam_int[k]) >> l;
+        texel[size_t(2 * l + k)] = GLint(((s % period) + period) % period);
+      }
+    }
+    glProgramUniform4iv(p, loc(p, "uResidentSamples"), GLsizei(m_geometry.levelCount()), resident.data());
+    glProgramUniform2iv(p, loc(p, "uCamTexel"), GLsizei(m_geometry.levelCount()), texel.data());
+  }
 }
 
 void TerrainRendererImpl::setRingUniforms(uint32_t p, const Camera& camera, uint32_t level,

@@ -32,18 +32,23 @@ TerrainMeshBuffers::~TerrainMeshBuffers() {
   glDeleteBuffers(1, &m_indices);
 }
 
-Status TerrainPrograms::create(std::unique_ptr<TerrainPrograms>* out) {
+Status TerrainPrograms::create(bool whole_level0, std::unique_ptr<TerrainPrograms>* out) {
   out->reset();
   std::unique_ptr<TerrainPrograms> p(new TerrainPrograms());
+  const std::string vertex = std::string(shaders::k_terrain_heights_glsl) + "\n" + shaders::k_terrain_vert;
   const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" +
                                shaders::k_ground_clipmap_frag;
-  for (int overlay = 0; overlay < 2; ++overlay) {
-    Status s = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &p->m_ground[overlay],
-                                     std::string("#define TERRAIN 1\n") +
-                                         (overlay ? "#define OVERLAY 1\n" : ""));
+  for (int i = 0; i < 4; ++i) {
+    const bool overlay = (i & 1) != 0, pixel = (i & 2) != 0;
+    // Lit by vertex, the fragment shader reads no heights.
+    Status s = gl_util::buildProgram(
+        vertex, pixel ? std::string(shaders::k_terrain_heights_glsl) + "\n" + fragment : fragment, &p->m_ground[i],
+        std::string("#define TERRAIN 1\n") + (overlay ? "#define OVERLAY 1\n" : "") +
+            (pixel ? "#define PIXEL_LIGHTING 1\n" : "") + (whole_level0 ? "#define WHOLE_LEVEL0 1\n" : ""));
     if (!s) return s;
   }
-  Status s = gl_util::buildProgram(shaders::k_terrain_vert, shaders::k_terrain_position_frag, &p->m_position);
+  Status s = gl_util::buildProgram(vertex, shaders::k_terrain_position_frag, &p->m_position,
+                                   whole_level0 ? "#define WHOLE_LEVEL0 1\n" : "");
   if (!s) return s;
   *out = std::move(p);
   return okStatus();

@@ -37,22 +37,26 @@ class TerrainMeshBuffers {
 };
 
 // terrain.vert linked with the ground's fragment shader, without and with
-// the level overlay (draw()), and with terrain_position.frag
-// (readPositions()).
+// the level overlay and lit by vertex or by pixel (draw()), and with
+// terrain_position.frag (readPositions()).
 class TerrainPrograms {
  public:
   // kUnavailable with the compiler log when a program does not build.
-  static Status create(std::unique_ptr<TerrainPrograms>* out);
+  // `whole_level0`: for the full-resolution mesh, whose stack holds level 0
+  // alone (terrain_heights.glsl's WHOLE_LEVEL0).
+  static Status create(bool whole_level0, std::unique_ptr<TerrainPrograms>* out);
   ~TerrainPrograms();
   TerrainPrograms(const TerrainPrograms&) = delete;
   TerrainPrograms& operator=(const TerrainPrograms&) = delete;
 
-  uint32_t ground(bool overlay) const { return m_ground[overlay ? 1 : 0]; }
+  uint32_t ground(bool overlay, bool pixel_lighting) const {
+    return m_ground[(overlay ? 1 : 0) + (pixel_lighting ? 2 : 0)];
+  }
   uint32_t position() const { return m_position; }
 
  private:
   TerrainPrograms() = default;
-  uint32_t m_ground[2] = {0, 0};  // without / with the overlay
+  uint32_t m_ground[4] = {0, 0, 0, 0};  // overlay + 2 pixel_lighting
   uint32_t m_position = 0;
 };
 

@@ -33,9 +33,10 @@ class TerrainHeightStack {
 
   // Allocates `layers` layers of slots x slots tiles of `heights`' tile
   // size, cleared to height 0, and the CPU bookkeeping for every level of
-  // `heights`. kUnavailable when the layer side exceeds
+  // `heights`; with `gradients` (per-pixel lighting) also the gradients
+  // texture. kUnavailable when the layer side exceeds
   // GL_MAX_TEXTURE_SIZE; kOutOfMemory / kUnavailable when GL cannot make it.
-  static Status create(const PyramidGeometry& heights, uint32_t slots, uint32_t layers,
+  static Status create(const PyramidGeometry& heights, uint32_t slots, uint32_t layers, bool gradients,
                        std::unique_ptr<TerrainHeightStack>* out);
   ~TerrainHeightStack();
   TerrainHeightStack(const TerrainHeightStack&) = delete;
@@ -43,7 +44,9 @@ class TerrainHeightStack {
 
   // Uploads tile `key` (tile_px^2 heights in store units; the caller checks
   // that the key is in the pyramid and its level has a layer) into its slot
-  // and records it there: its heights and their bounds.
+  // and records it there: its heights and their bounds; with gradients,
+  // also its samples' gradients and those of the samples beside it in the
+  // neighbouring slots.
   void upload(const TileKey& key, const float* heights);
   // Records, for the tile just uploaded with `key`, the largest twist
   // |a - b - c + d| / 4 of its cells in each block of `block_cells` cells a
@@ -53,7 +56,22 @@ class TerrainHeightStack {
 
   uint32_t slots() const { return m_slots; }
   uint32_t texture() const { return m_texture; }  // the R32F array texture's GL name
-  uint64_t textureBytes() const { return m_texture_bytes; }
+  // With gradients (else 0): an RG32F array texture laid out as
+  // texture(), each sample's height differences across it in x and z
+  // (clamped to the level), or kNoGradient where the tiles holding them are
+  // not all in their slots. Kept true as slots change: an upload rewrites
+  // its tile and the facing samples of the four slots beside it, so a
+  // sample that is not kNoGradient has its right neighbours' heights.
+  // Makes it (filled from the tiles held) unless it exists; kOutOfMemory /
+  // kUnavailable when GL cannot.
+  Status enableGradients();
+  uint32_t gradientsTexture() const { return m_gradients_texture; }
+  // A gradient whose heights are not all resident (or were not, when its
+  // sample was written): far above any real one, so that a bilinear blend
+  // with any weight on it stays above terrain_heights.glsl's
+  // kNoGradientAbove, and finite, so that no blend overflows.
+  static constexpr float kNoGradient = 1e30f;
+  uint64_t textureBytes() const { return m_texture_bytes; }  // both textures
 
   // Whether level `level`'s slot of tile (tx, ty) holds that tile.
   bool holds(uint32_t level, int64_t tx, int64_t ty) const {
@@ -78,6 +96,13 @@ class TerrainHeightStack {
   // resident tiles' bounds; (-inf, inf) when one of them is not resident.
   glm::vec2 heightBounds(uint32_t ring_level, glm::i64vec2 s0, glm::i64vec2 s1) const;
 
+  // The samples of `level` (first x, first y, last x, last y) whose tiles
+  // are all held: the largest block of held tiles grown from the one under
+  // level-0 sample `camera` (clamped to the level), a row or column at a
+  // time; a side on the level's edge reaches far beyond it (samples there
+  // clamp to the edge). Empty (first > last) when that tile is not held.
+  glm::i64vec4 residentSamples(uint32_t level, const glm::i64vec2& camera) const;
+
   // Whether every tile the ring of `ring_cells` at `ring_level` with vertex
   // (0, 0) at `ring_origin` reads is resident: its (n + 1)^2 vertices and
   // one more sample on each side (normals), clamped to the level.
@@ -91,10 +116,15 @@ class TerrainHeightStack {
     return uint32_t(s < 0 ? s + m_slots : s);
   }
   size_t slotIndex(int64_t tx, int64_t ty) const { return size_t(slotOf(ty)) * m_slots + slotOf(tx); }
+  // Computes and uploads the gradients of held tile (tx, ty)'s samples
+  // [x0, x1] x [y0, y1] (within the tile).
+  void writeGradients(uint32_t level, int64_t tx, int64_t ty, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1);
 
   PyramidGeometry m_geometry;
   uint32_t m_slots = 0;    // tiles per layer side (the toroidal period in tiles)
+  uint32_t m_layers = 0;   // levels with a layer (from level 0)
   uint32_t m_texture = 0;  // R32F array texture, a layer per level held
+  uint32_t m_gradients_texture = 0;  // gradientsTexture()
   uint64_t m_texture_bytes = 0;
   // Per level, per slot: which tile it holds (tileId(), or kNoTile), a CPU
   // copy of its heights, their bounds (min, max) and its twist blocks.

@@ -65,6 +65,13 @@ class TerrainRendererImpl {
   bool groundRange(const Camera& camera, double* lowest, double* highest) const;
   void setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_bounds = std::move(bounds); }
   void setErrorBound(double error_px) { m_config.error_px = error_px; }
+  Status setLighting(TerrainLighting lighting) {
+    // The full-resolution mesh computes its gradients from level 0.
+    if (lighting == TerrainLighting::kPixel && !m_config.full_resolution)
+      if (Status s = m_stack->enableGradients(); !s) return s;
+    m_config.lighting = lighting;
+    return okStatus();
+  }
   const TerrainFrame& lastFrame() const { return m_frame; }
   const std::vector<TerrainNode>& lastNodes() const { return m_nodes; }
   uint64_t textureBytes() const { return m_stack->textureBytes(); }

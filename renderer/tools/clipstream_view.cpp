@@ -53,6 +53,7 @@ constexpr const char* kKeys =
     "wheel        slower, faster\n"
     "H, Home      back to the starting view\n"
     "O            overlay: clipmap levels, missing tiles, throttling\n"
+    "L            terrain lit by vertex or by pixel (with --elevation)\n"
     "I            statistics on screen, on and off\n"
     "P, F12       screenshot (PNG in --screenshot-dir; Shift: with this text)\n"
     "R            record the flown path (again: write --record-out)\n"
@@ -71,6 +72,7 @@ constexpr double kBoundsMargin = 0.5;
 struct Input {
   double speed_per_height = kDefaultSpeedPerHeight;
   bool overlay_toggled = false;
+  bool lighting_toggled = false;
   bool record_toggled = false;
   bool home = false;
   bool screenshot = false;
@@ -190,12 +192,14 @@ struct Args {
   std::string terrain_method = "clipmap";
   double terrain_error_px = renderer_config::kTerrainErrorPx;
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
+  std::string terrain_lighting = "vertex";
 };
 
 // What the checked options chose.
 struct Choices {
   Viewport vp;
   TerrainMethod method = TerrainMethod::kClipmap;
+  TerrainLighting lighting = TerrainLighting::kVertex;
   TileContent tile_content = TileContent::kRgba8;
   TextureMemory memory = TextureMemory::kStack;
 };
@@ -239,6 +243,9 @@ void addOptions(CLI::App& app, Args* a) {
                      std::to_string(renderer_config::kTerrainTriangleBudget) +
                      "); over it the frame's error bound rises, the largest errors split first")
       ->transform(cli::wholeInRange(0, int64_t(1) << 32));
+  app.add_option("--terrain-lighting", a->terrain_lighting,
+                 "Terrain lit by vertex (default: the vertices' normals) or by pixel (the normal of the "
+                 "finest resident heights under each pixel)");
   app.footer(std::string("Keys:\n") + kKeys +
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
 }
@@ -251,6 +258,10 @@ std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
   if ((app.count("--terrain") || app.count("--terrain-error") || app.count("--terrain-triangle-budget")) &&
       a.elevation_path.empty())
     return cli::usageError(app, "--terrain, --terrain-error and --terrain-triangle-budget need --elevation");
+  if (Status s = cli::parseTerrainLighting(a.terrain_lighting, &c->lighting); !s)
+    return cli::usageError(app, "--terrain-lighting: " + s.message);
+  if (app.count("--terrain-lighting") && a.elevation_path.empty())
+    return cli::usageError(app, "--terrain-lighting needs --elevation");
   if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
   if (Status s = cli::parseTileFormat(a.tile_format, &c->tile_content); !s)
@@ -317,6 +328,7 @@ std::optional<int> openScene(CLI::App& app, const Args& a, const Choices& c, std
     layer.method = c.method;
     layer.error_px = a.terrain_error_px;
     layer.triangle_budget = a.terrain_triangle_budget;
+    layer.lighting = c.lighting;
     *terrain = std::move(layer);
   }
   *out = std::move(source);
@@ -348,6 +360,7 @@ GLFWwindow* openWindow(const Viewport& vp, Input* input) {
     if (action != GLFW_PRESS) return;
     Input* in = inputOf(w);
     if (key == GLFW_KEY_O) in->overlay_toggled = true;
+    if (key == GLFW_KEY_L) in->lighting_toggled = true;
     if (key == GLFW_KEY_R) in->record_toggled = true;
     if (key == GLFW_KEY_H || key == GLFW_KEY_HOME) in->home = true;
     if (key == GLFW_KEY_P || key == GLFW_KEY_F12) {
@@ -515,6 +528,15 @@ int main(int argc, char** argv) {
       ClipmapRenderer& renderer = flight->renderer();
       renderer.setOverlay(renderer.overlay() == Overlay::kOff ? Overlay::kLevels : Overlay::kOff);
       input.overlay_toggled = false;
+    }
+    if (input.lighting_toggled) {
+      input.lighting_toggled = false;
+      if (TerrainRenderer* terrain = flight->terrain()) {
+        const TerrainLighting next = terrain->config().lighting == TerrainLighting::kPixel ? TerrainLighting::kVertex
+                                                                                           : TerrainLighting::kPixel;
+        if (Status s = terrain->setLighting(next); !s)
+          std::cerr << "clipstream-view: " << s.toString() << "\n";
+      }
     }
     if (input.record_toggled) {
       input.record_toggled = false;

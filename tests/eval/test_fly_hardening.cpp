@@ -120,7 +120,9 @@ TEST(FlyHardening, AbsurdNumbersAreCommandLineMistakes) {
       // Terrain choices without terrain would be ignored; a method that
       // does not exist, or a bound of no pixels, cannot be flown.
       {"--terrain", "quadtree"},  {"--terrain-error", "0"},   {"--terrain-error", "nan"},
-      {"--terrain", "mesh", "--elevation", "dem.cst"}};
+      {"--terrain", "mesh", "--elevation", "dem.cst"},
+      {"--terrain-lighting", "pixel"},  {"--terrain-lighting", "phong", "--elevation", "dem.cst"},
+      {"--reference-lighting", "pixel", "--elevation", "dem.cst"}};
   for (std::vector<std::string> args : cases) {
     const std::string what = args[0] + (args.size() > 1 ? " " + args[1] : "");
     args.insert(args.begin(), {"--procedural", "4096", "--out", dir.file("out")});

@@ -42,7 +42,8 @@ std::vector<glm::vec4> ringVertices(const TerrainRendererImpl& terrain, const Ca
   if (level >= terrain.geometry().levelCount()) return {};
   GLuint p = 0;
   const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" + shaders::k_ground_clipmap_frag;
-  const Status built = gl_util::buildProgram(shaders::k_terrain_vert, fragment, &p, "#define TERRAIN 1\n",
+  const std::string vertex = std::string(shaders::k_terrain_heights_glsl) + "\n" + shaders::k_terrain_vert;
+  const Status built = gl_util::buildProgram(vertex, fragment, &p, "#define TERRAIN 1\n",
                                              {"vNormal", "vHeight"});
   EXPECT_TRUE(built.ok()) << built.toString();
   if (!built) return {};
@@ -76,7 +77,7 @@ TEST(TerrainHeightStack, ATileTakesItsToroidalSlotFromTheTileThatHadIt) {
   const uint32_t slots = TerrainHeightStack::slotsFor(f.geometry, config);
   ASSERT_LT(slots, 8u) << "the test needs two tiles of a level sharing a slot";
   std::unique_ptr<TerrainHeightStack> stack;
-  ASSERT_TRUE(TerrainHeightStack::create(f.geometry, slots, f.geometry.levelCount(), &stack).ok());
+  ASSERT_TRUE(TerrainHeightStack::create(f.geometry, slots, f.geometry.levelCount(), false, &stack).ok());
   const int64_t t = f.geometry.tile_px;
   // Level 0's texels of slot (sx, sy), read back from the texture.
   auto slotTexels = [&](uint32_t sx, uint32_t sy) {

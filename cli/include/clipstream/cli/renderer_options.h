@@ -42,4 +42,9 @@ Status parseTileFormat(const std::string& name, TileContent* out);
 // success.
 Status parseTerrainMethod(const std::string& name, TerrainMethod* out);
 
+// --terrain-lighting (and --reference-lighting): "vertex" or "pixel"
+// (terrainLightingName()). kInvalidArgument naming the choices otherwise;
+// *out is set only on success.
+Status parseTerrainLighting(const std::string& name, TerrainLighting* out);
+
 }  // namespace clipstream::cli

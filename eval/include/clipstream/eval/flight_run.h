@@ -67,6 +67,8 @@ struct FlightRunOptions {
   // kTerrainClearance; judged frames (reference_every) are compared with
   // the TerrainReference (PSNR) and measure the geometric error.
   std::optional<TerrainLayerConfig> terrain;
+  // The TerrainReference's lighting; unset: terrain->lighting.
+  std::optional<TerrainLighting> reference_lighting;
 
   // Measurement.
   uint32_t reference_every = 1;     // compare every Nth frame (and every rest frame); 0 = never
@@ -163,6 +165,8 @@ struct FlightRun {
   // terrain_error_px), mean and largest; 0 for the other methods.
   double terrain_error_px_mean = 0.0, terrain_error_px_max = 0.0;
   std::string terrain_method;     // terrainMethodName(), empty without terrain
+  std::string terrain_lighting;   // terrainLightingName(), empty without terrain
+  std::string reference_lighting; // the TerrainReference's, empty without terrain
   double render_cpu_ms_mean = 0.0;  // FrameSample::cpu_ms over the recorded frames
   bool plans_on_terrain = false;  // the streamer planned against the height bounds (Streamer::plansOnTerrain())
   // Recorded frames with a seen_level, and those whose plan needed a level
@@ -184,6 +188,7 @@ struct FlightRun {
   // reference to the bit, and of them those whose colour differs (0 when
   // the texture is bit-identical wherever the geometry agrees).
   uint64_t terrain_rest_agree_pixels = 0, terrain_rest_agree_mismatched = 0;
+  uint32_t terrain_rest_agree_max_diff = 0;  // the largest channel difference of those
   // Over the judged frames with terrain in view: the triangles drawn and
   // the fewest that model the frame within its own p95 geometric error
   // (FewestTriangles; not below kFewestFloorPx), means. 0 when not measured.

@@ -107,6 +107,11 @@ struct FlyOptions {
   double terrain_error_px = renderer_config::kTerrainErrorPx; // quadtree: --terrain-error
   // Quadtree: --terrain-triangle-budget (0: none; TerrainConfig::triangle_budget).
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
+  TerrainLighting terrain_lighting = TerrainLighting::kVertex;  // --terrain-lighting
+  // The terrain reference's lighting (--reference-lighting); unset: the
+  // flight's. Both lightings judged against one per-pixel reference
+  // compare them.
+  std::optional<TerrainLighting> reference_lighting;
 };
 
 // Largest --vertical-scale: beyond it every slope is a wall.

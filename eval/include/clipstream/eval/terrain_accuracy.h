@@ -183,6 +183,7 @@ struct TerrainFrameError {
   FrameError error;              // PSNR over the whole frame
   uint32_t agree_pixels = 0;     // pixels where the geometry agrees (compareTerrainFrames())
   uint32_t agree_mismatched = 0; // ... of them, pixels whose colour differs
+  uint32_t agree_max_diff = 0;   // ... and their largest difference in a channel (0..255)
 };
 
 // Compares colour and positions of a streamed frame with the reference's

@@ -79,6 +79,7 @@ struct TerrainLayerConfig {
   double error_px = renderer_config::kTerrainErrorPx;   // quadtree: --terrain-error
   // Quadtree: --terrain-triangle-budget (TerrainConfig::triangle_budget; 0: none).
   uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
+  TerrainLighting lighting = TerrainLighting::kVertex;  // --terrain-lighting
 };
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a

@@ -55,6 +55,18 @@ enum class TerrainMethod : uint8_t { kClipmap, kQuadtree, kFlat, kFull };
 // --terrain with cli::parseTerrainMethod().
 const char* terrainMethodName(TerrainMethod method);
 
+// How the terrain is lit (--terrain-lighting): by the vertices' normals,
+// interpolated across each triangle (the normals of the level the
+// geometry is drawn at), or per pixel: the normal of the heights under
+// each pixel, from the level its footprint asks for (as the colour's
+// level) or the finest resident one above it, blended across levels. The
+// same Lambert and ambient light either way; kVertex draws the frames it
+// drew before per-pixel lighting existed, bit for bit.
+enum class TerrainLighting : uint8_t { kVertex, kPixel };
+// "vertex", "pixel"; programs parse --terrain-lighting with
+// cli::parseTerrainLighting().
+const char* terrainLightingName(TerrainLighting lighting);
+
 // Range of TerrainConfig::error_px (--terrain-error): below a hundredth of
 // a pixel every node in view splits to level 0; above 1000 none does.
 inline constexpr double kMinTerrainErrorPx = 0.01;
@@ -91,6 +103,7 @@ struct TerrainConfig {
   // included. The only excess: the roots in view (at most 9 nodes) are
   // drawn whatever the budget.
   uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
+  TerrainLighting lighting = TerrainLighting::kVertex;
 };
 
 // What the last draw() drew.
@@ -201,6 +214,11 @@ class TerrainRenderer {
   void setBounds(std::shared_ptr<const TerrainBounds> bounds);
   // Quadtree: a new TerrainConfig::error_px (within its range) for the next draws.
   void setErrorBound(double error_px);
+  // A new TerrainConfig::lighting for the next draws. The first switch to
+  // kPixel makes the height gradients from the tiles held (video memory:
+  // twice the height stack's); kOutOfMemory / kUnavailable, the lighting
+  // unchanged, when GL cannot.
+  [[nodiscard]] Status setLighting(TerrainLighting lighting);
 
   const TerrainFrame& lastFrame() const;
   // Quadtree: every leaf of the last draw (culled ones included); empty

@@ -1,0 +1,151 @@
+// What the terrain's detail beyond the data costs a frame (docs/terrain.md,
+// "Detail beyond the data"): per-pixel lighting against the vertices'
+// lighting, drawn by one renderer from the same cameras, the two
+// alternated draw by draw (TerrainRenderer::setLighting()), so the
+// machine's load falls on both alike. Per DEM and method (the clipmap at
+// its default ring, the quadtree at its default bound and budget): the
+// triangles, the frame (draws and glFinish; mean over the cameras of each
+// one's best of --repeat) by vertex and by pixel, their ratio, and the
+// video memory the height gradients add to the height stack.
+//
+//   bench_renderer_terrain_detail [--size 1280x720] [--cameras 24] [--repeat 3] [--tsv FILE] DEM...
+// DEM: an elevation store (clipstream-tile DEM.tif), or a GeoTIFF DEM, tiled
+// first into a temporary store. Stretched under a 2048^2 white image, every
+// height tile resident.
+#include <clipstream/cli/sizes.h>
+#include <clipstream/renderer/flight.h>
+#include <clipstream/renderer/gl_context.h>
+#include <clipstream/renderer/terrain.h>
+
+#include "gl.h"
+#include "terrain_scene.h"
+#include "tsv_out.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+using namespace clipstream;
+
+namespace {
+
+double drawMs(TerrainRenderer& terrain, const Camera& camera, const Viewport& vp, const ClipmapRenderer& colour,
+              const OffscreenTarget& target) {
+  target.bind();
+  ClipmapRenderer::clearSky();
+  const auto start = std::chrono::steady_clock::now();
+  terrain.draw(camera, vp, colour);
+  glFinish();
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// One DEM, one method: the lighting table's row (see the top).
+bool lightingCost(const TerrainLayerConfig& layer, TerrainMethod method, const ClipmapRenderer& colour,
+                  const OffscreenTarget& target, const Viewport& vp, int camera_count, int repeat,
+                  const std::string& name, bench::TsvOut* table) {
+  const PyramidGeometry& g = layer.source->geometry();
+  std::shared_ptr<const TerrainBounds> bounds;
+  (void)loadTerrainBounds(*layer.source, kTerrainBoundsMaxLevelTiles, &bounds);
+  TerrainConfig tc;
+  tc.method = method;
+  tc.mapping = layer.alignment;
+  // The memory at the streamer's window (as a flight's stack); the frames
+  // from a stack that holds every tile.
+  tc.clip_tiles = TerrainRenderer::windowTiles(tc.ring_cells, g.tile_px);
+  std::unique_ptr<TerrainRenderer> terrain;
+  Status s = TerrainRenderer::create(g, tc, &terrain);
+  const uint64_t vertex_bytes = s ? terrain->textureBytes() : 0;
+  if (s) s = terrain->setLighting(TerrainLighting::kPixel);
+  const uint64_t pixel_bytes = s ? terrain->textureBytes() : 0;
+  tc.clip_tiles = std::max(g.levels[0].tiles_x, g.levels[0].tiles_y);
+  tc.lighting = TerrainLighting::kPixel;
+  if (s) s = TerrainRenderer::create(g, tc, &terrain);
+  if (!s) {
+    std::fprintf(stderr, "%s\n", s.toString().c_str());
+    return false;
+  }
+  terrain->setBounds(bounds);
+  bench::uploadAll(*terrain, *layer.source);
+  double vertex_ms = 0, pixel_ms = 0, triangles = 0;
+  int counted = 0;
+  for (const Camera& camera : bench::cameras(*terrain, layer, camera_count)) {
+    double best[2] = {INFINITY, INFINITY};
+    for (int r = 0; r < repeat; ++r)
+      for (int lit = 0; lit < 2; ++lit) {
+        (void)terrain->setLighting(lit ? TerrainLighting::kPixel : TerrainLighting::kVertex);
+        best[lit] = std::min(best[lit], drawMs(*terrain, camera, vp, colour, target));
+      }
+    if (terrain->lastFrame().triangles == 0) continue;
+    vertex_ms += best[0];
+    pixel_ms += best[1];
+    triangles += double(terrain->lastFrame().triangles);
+    ++counted;
+  }
+  if (counted == 0) return false;
+  const double n = counted;
+  table->row("%s\t%s\t%d\t%.0f\t%.2f\t%.2f\t%.2f\t%.1f\n", name.c_str(), terrainMethodName(method), counted,
+             triangles / n, vertex_ms / n, pixel_ms / n, pixel_ms / vertex_ms,
+             double(pixel_bytes - vertex_bytes) / double(1 << 20));
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bench::TsvOut table(bench::takeOption(&argc, argv, "--tsv"));
+  if (!table.ok()) return 1;
+  Viewport vp{1280, 720};
+  int camera_count = 24, repeat = 3;
+  std::vector<std::string> dems;
+  for (int i = 1; i < argc; ++i) {
+    const bool value = i + 1 < argc;
+    if (!std::strcmp(argv[i], "--size") && value) {
+      if (!cli::parseSize(argv[++i], &vp.width_px, &vp.height_px).ok()) return 2;
+    } else if (!std::strcmp(argv[i], "--cameras") && value) {
+      camera_count = std::max(1, std::atoi(argv[++i]));
+    } else if (!std::strcmp(argv[i], "--repeat") && value) {
+      repeat = std::max(1, std::atoi(argv[++i]));
+    } else if (argv[i][0] == '-') {
+      std::fprintf(stderr, "unknown option %s\n", argv[i]);
+      return 2;
+    } else {
+      dems.push_back(argv[i]);
+    }
+  }
+  if (dems.empty()) {
+    std::fprintf(stderr, "usage: %s [--size WxH] [--cameras N] [--repeat N] [--tsv FILE] DEM...\n", argv[0]);
+    return 2;
+  }
+  bench::WhiteGround ground;
+  if (!ground.create(vp)) return 1;
+  std::printf("# %s, %ux%u, %d cameras, best of %d draws each, lit by vertex and by pixel alternately\n",
+              ground.context->describe().c_str(), vp.width_px, vp.height_px, camera_count, repeat);
+  table.row("dem\tmethod\tcameras\ttriangles\tvertex_frame_ms\tpixel_frame_ms\tpixel_over_vertex\tgradients_mib\n");
+  int status = 0;
+  for (size_t i = 0; i < dems.size(); ++i) {
+    const std::string store = bench::storeFor(
+        dems[i], "/tmp/bench_terrain_detail." + std::to_string(::getpid()) + "." + std::to_string(i) + ".cst");
+    if (store.empty()) return 1;
+    TerrainLayerConfig layer;
+    std::vector<std::string> notes;
+    if (Status s = openTerrainLayer("", ground.source->geometry(), store, 1.0, true,
+                                    renderer_config::kTerrainRingCells, &layer, &notes);
+        !s) {
+      std::fprintf(stderr, "%s: %s\n", dems[i].c_str(), s.toString().c_str());
+      status = 1;
+    } else {
+      const std::string name = dems[i].substr(dems[i].find_last_of('/') + 1);
+      for (TerrainMethod m : {TerrainMethod::kClipmap, TerrainMethod::kQuadtree})
+        if (!lightingCost(layer, m, *ground.colour, *ground.target, vp, camera_count, repeat, name, &table))
+          status = 1;
+    }
+    if (store != dems[i]) std::remove(store.c_str());
+  }
+  return table.commit() && status == 0 ? 0 : 1;
+}
