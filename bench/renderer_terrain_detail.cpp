@@ -1,12 +1,13 @@
 // What the terrain's detail beyond the data costs a frame (docs/terrain.md,
-// "Detail beyond the data"): per-pixel lighting against the vertices'
-// lighting, drawn by one renderer from the same cameras, the two
-// alternated draw by draw (TerrainRenderer::setLighting()), so the
-// machine's load falls on both alike. Per DEM and method (the clipmap at
-// its default ring, the quadtree at its default bound and budget): the
-// triangles, the frame (draws and glFinish; mean over the cameras of each
-// one's best of --repeat) by vertex and by pixel, their ratio, and the
-// video memory the height gradients add to the height stack.
+// "Detail beyond the data"): the frame lit by vertex (none of it), lit by
+// pixel, and lit by vertex with the detail textures, drawn by one renderer
+// from the same cameras, the three alternated draw by draw
+// (TerrainRenderer::setLighting(), setDetailTextures()), so the machine's
+// load falls on all alike. Per DEM and method (the clipmap at its default
+// ring, the quadtree at its default bound and budget): the triangles, the
+// frame (draws and glFinish; mean over the cameras of each one's best of
+// --repeat) of each and its ratio to the plain one, and the video memory
+// the height gradients add to the height stack.
 //
 //   bench_renderer_terrain_detail [--size 1280x720] [--cameras 24] [--repeat 3] [--tsv FILE] DEM...
 // DEM: an elevation store (clipstream-tile DEM.tif), or a GeoTIFF DEM, tiled
@@ -72,25 +73,26 @@ bool lightingCost(const TerrainLayerConfig& layer, TerrainMethod method, const C
   }
   terrain->setBounds(bounds);
   bench::uploadAll(*terrain, *layer.source);
-  double vertex_ms = 0, pixel_ms = 0, triangles = 0;
+  // Plain (lit by vertex), lit by pixel, lit by vertex with the detail textures.
+  double ms[3] = {0, 0, 0}, triangles = 0;
   int counted = 0;
   for (const Camera& camera : bench::cameras(*terrain, layer, camera_count)) {
-    double best[2] = {INFINITY, INFINITY};
+    double best[3] = {INFINITY, INFINITY, INFINITY};
     for (int r = 0; r < repeat; ++r)
-      for (int lit = 0; lit < 2; ++lit) {
-        (void)terrain->setLighting(lit ? TerrainLighting::kPixel : TerrainLighting::kVertex);
-        best[lit] = std::min(best[lit], drawMs(*terrain, camera, vp, colour, target));
+      for (int k = 0; k < 3; ++k) {
+        (void)terrain->setLighting(k == 1 ? TerrainLighting::kPixel : TerrainLighting::kVertex);
+        (void)terrain->setDetailTextures(k == 2);
+        best[k] = std::min(best[k], drawMs(*terrain, camera, vp, colour, target));
       }
     if (terrain->lastFrame().triangles == 0) continue;
-    vertex_ms += best[0];
-    pixel_ms += best[1];
+    for (int k = 0; k < 3; ++k) ms[k] += best[k];
     triangles += double(terrain->lastFrame().triangles);
     ++counted;
   }
   if (counted == 0) return false;
   const double n = counted;
-  table->row("%s\t%s\t%d\t%.0f\t%.2f\t%.2f\t%.2f\t%.1f\n", name.c_str(), terrainMethodName(method), counted,
-             triangles / n, vertex_ms / n, pixel_ms / n, pixel_ms / vertex_ms,
+  table->row("%s\t%s\t%d\t%.0f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.1f\n", name.c_str(), terrainMethodName(method),
+             counted, triangles / n, ms[0] / n, ms[1] / n, ms[1] / ms[0], ms[2] / n, ms[2] / ms[0],
              double(pixel_bytes - vertex_bytes) / double(1 << 20));
   return true;
 }
@@ -124,9 +126,10 @@ int main(int argc, char** argv) {
   }
   bench::WhiteGround ground;
   if (!ground.create(vp)) return 1;
-  std::printf("# %s, %ux%u, %d cameras, best of %d draws each, lit by vertex and by pixel alternately\n",
+  std::printf("# %s, %ux%u, %d cameras, best of %d draws each; plain, lit by pixel, with detail textures, alternated\n",
               ground.context->describe().c_str(), vp.width_px, vp.height_px, camera_count, repeat);
-  table.row("dem\tmethod\tcameras\ttriangles\tvertex_frame_ms\tpixel_frame_ms\tpixel_over_vertex\tgradients_mib\n");
+  table.row("dem\tmethod\tcameras\ttriangles\tplain_frame_ms\tpixel_lit_frame_ms\tpixel_lit_ratio\t"
+            "detail_frame_ms\tdetail_ratio\tgradients_mib\n");
   int status = 0;
   for (size_t i = 0; i < dems.size(); ++i) {
     const std::string store = bench::storeFor(

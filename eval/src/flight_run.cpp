@@ -163,6 +163,12 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
     run->geometry_p95_px += f.geometry.p95_px;
     run->geometry_max_px = std::max(run->geometry_max_px, f.geometry.max_px);
     run->coverage_pixels_mean += double(f.geometry.coverage_pixels);
+    const TexelDensity density =
+        texelDensity(xyzw, flight.viewport(), double(renderer_config::kDetailTexelsPerTexel));
+    run->texel_density_median += density.median;
+    run->texel_density_p5 += density.p5;
+    run->detail_texel_density_median += density.detail_median;
+    run->detail_texel_density_p5 += density.detail_p5;
     run->silhouette_mean_px += f.geometry.silhouette_mean_px;
     run->silhouette_p95_px += f.geometry.silhouette_p95_px;
     run->silhouette_max_px = std::max(run->silhouette_max_px, f.geometry.silhouette_max_px);
@@ -226,6 +232,7 @@ Status createTerrainReferences(const FlightRunOptions& o, const std::shared_ptr<
   tc.ring_cells = o.terrain->ring_cells;
   tc.mapping = o.terrain->alignment;
   tc.lighting = o.reference_lighting.value_or(o.terrain->lighting);
+  tc.detail_textures = o.terrain->detail_textures;  // the reference shows the same detail
   if (Status s = TerrainReference::create(reference, *o.terrain->source, tc, o.viewport, o.streamer.planner,
                                           terrain_reference);
       !s)
@@ -247,6 +254,10 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
     run->geometry_mean_px /= run->geometry_frames;
     run->geometry_p95_px /= run->geometry_frames;
     run->coverage_pixels_mean /= run->geometry_frames;
+    run->texel_density_median /= run->geometry_frames;
+    run->texel_density_p5 /= run->geometry_frames;
+    run->detail_texel_density_median /= run->geometry_frames;
+    run->detail_texel_density_p5 /= run->geometry_frames;
     run->silhouette_mean_px /= run->geometry_frames;
     run->silhouette_p95_px /= run->geometry_frames;
     run->judged_triangles_mean /= run->geometry_frames;

@@ -249,6 +249,7 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
     terrain.error_px = o.terrain_error_px;
     terrain.triangle_budget = o.terrain_triangle_budget;
     terrain.lighting = o.terrain_lighting;
+    terrain.detail_textures = o.terrain_detail;
     r.terrain = std::move(terrain);
   }
   return okStatus();

@@ -295,6 +295,32 @@ Status TerrainReference::render(const Camera& camera, std::vector<uint8_t>* rgba
   return okStatus();
 }
 
+TexelDensity texelDensity(const std::vector<float>& xyzw, const Viewport& viewport, double detail_texels_per_texel) {
+  TexelDensity d;
+  const uint32_t w = viewport.width_px, h = viewport.height_px;
+  if (xyzw.size() != size_t(w) * h * 4) return d;
+  std::vector<double> plain, detail;
+  auto ground = [&](size_t p) { return xyzw[p * 4 + 3] >= 1.0f; };
+  auto across = [&](size_t a, size_t b) {
+    return std::hypot(double(xyzw[a * 4] - xyzw[b * 4]), double(xyzw[a * 4 + 2] - xyzw[b * 4 + 2]));
+  };
+  for (uint32_t y = 0; y + 1 < h; ++y)
+    for (uint32_t x = 0; x + 1 < w; ++x) {
+      const size_t p = size_t(y) * w + x, right = p + 1, below = p + w;
+      if (!ground(p) || !ground(right) || !ground(below)) continue;
+      const double texels = std::max(across(p, right), across(p, below));
+      plain.push_back(texels);
+      detail.push_back(texels < 1.0 ? texels * detail_texels_per_texel : texels);
+    }
+  d.pixels = uint32_t(plain.size());
+  if (plain.empty()) return d;
+  d.median = percentileOf(plain, 0.5);
+  d.p5 = percentileOf(std::move(plain), 0.05);
+  d.detail_median = percentileOf(detail, 0.5);
+  d.detail_p5 = percentileOf(std::move(detail), 0.05);
+  return d;
+}
+
 TerrainFrameError compareTerrainFrames(const std::vector<uint8_t>& streamed_rgba,
                                        const std::vector<float>& streamed_xyzw,
                                        const std::vector<uint8_t>& reference_rgba,

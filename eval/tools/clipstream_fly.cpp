@@ -171,6 +171,9 @@ void addOptions(CLI::App& app, Args* args) {
   app.add_option("--terrain-lighting", a.terrain_lighting,
                  "Terrain lit by vertex (default: the vertices' normals) or by pixel (the normal of the "
                  "finest resident heights under each pixel)");
+  app.add_flag("--terrain-detail", o.terrain_detail,
+               "Detail textures where the colour is magnified, by material rules on slope and height "
+               "(docs/terrain.md, \"Detail textures\")");
   app.add_option("--reference-lighting", a.reference_lighting,
                  "The terrain reference's lighting (with --reference): vertex or pixel; default: "
                  "--terrain-lighting");
@@ -201,6 +204,7 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
   if (Status s = cli::parseTerrainLighting(a.terrain_lighting, &o.terrain_lighting); !s)
     return "--terrain-lighting: " + s.message;
   if (app.count("--terrain-lighting") && o.elevation_path.empty()) return "--terrain-lighting needs --elevation";
+  if (o.terrain_detail && o.elevation_path.empty()) return "--terrain-detail needs --elevation";
   if (!a.reference_lighting.empty()) {
     TerrainLighting reference = TerrainLighting::kVertex;
     if (Status s = cli::parseTerrainLighting(a.reference_lighting, &reference); !s)

@@ -133,7 +133,11 @@ void main() {
   }
 #endif
 #ifdef TERRAIN
-  color.rgb = shadeTerrain(color.rgb, gx, gy);
+  vec3 normal = terrainNormal(gx, gy);
+#ifdef DETAIL
+  color.rgb = addDetail(color.rgb, gx, gy, normal, used - lambda);
+#endif
+  color.rgb = shadeTerrain(color.rgb, normal);
 #ifdef OVERLAY
   color.rgb = mix(color.rgb, vec3(1.0, 0.0, 1.0), 0.5 * vMorph);  // transition bands
 #endif

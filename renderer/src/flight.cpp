@@ -171,6 +171,7 @@ Status Flight::makeTerrain() {
   tc.error_px = t.error_px;
   tc.triangle_budget = t.triangle_budget;
   tc.lighting = t.lighting;
+  tc.detail_textures = t.detail_textures;
   std::unique_ptr<TerrainRenderer> terrain;
   if (Status s = TerrainRenderer::create(t.source->geometry(), tc, &terrain); !s) return s;
   if (t.method == TerrainMethod::kQuadtree || t.method == TerrainMethod::kFlat) {

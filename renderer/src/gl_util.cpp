@@ -61,7 +61,8 @@ Status checkCreated(const std::string& what, const std::string& hint) {
 
 std::string shaderHeader(const std::string& extra_defines) {
   return "#version 450 core\n#define MAX_LEVELS " + std::to_string(renderer_config::kMaxLevels) +
-         "\n#define AMBIENT " + std::to_string(renderer_config::kTerrainAmbient) + "\n" +
+         "\n#define AMBIENT " + std::to_string(renderer_config::kTerrainAmbient) +
+         "\n#define DETAIL_FADE_LEVELS " + std::to_string(renderer_config::kDetailFadeLevels) + "\n" +
          extra_defines;
 }
 

@@ -69,6 +69,7 @@ bool TerrainRenderer::groundRange(const Camera& camera, double* lowest, double* 
 void TerrainRenderer::setBounds(std::shared_ptr<const TerrainBounds> bounds) { m_impl->setBounds(std::move(bounds)); }
 void TerrainRenderer::setErrorBound(double error_px) { m_impl->setErrorBound(error_px); }
 Status TerrainRenderer::setLighting(TerrainLighting lighting) { return m_impl->setLighting(lighting); }
+Status TerrainRenderer::setDetailTextures(bool on) { return m_impl->setDetailTextures(on); }
 const TerrainFrame& TerrainRenderer::lastFrame() const { return m_impl->lastFrame(); }
 const std::vector<TerrainNode>& TerrainRenderer::lastNodes() const { return m_impl->lastNodes(); }
 uint64_t TerrainRenderer::textureBytes() const { return m_impl->textureBytes(); }
@@ -100,6 +101,8 @@ Status TerrainRendererImpl::create(const PyramidGeometry& heights, const Terrain
   // (the reference) computes its own from level 0.
   const bool gradients = config.lighting == TerrainLighting::kPixel && !r->m_config.full_resolution;
   if (Status s = TerrainHeightStack::create(heights, slots, layers, gradients, &r->m_stack); !s) return s;
+  if (config.detail_textures)
+    if (Status s = TerrainDetailTexture::create(&r->m_detail); !s) return s;
   *out = std::move(r);
   return okStatus();
 }
@@ -272,8 +275,8 @@ bool TerrainRendererImpl::groundHeight(const glm::dvec2& world_xz, double* heigh
 }
 
 void TerrainRendererImpl::draw(const Camera& camera, const Viewport& viewport, const ClipmapRenderer& colour) {
-  const GLuint p =
-      m_programs->ground(colour.overlay() != Overlay::kOff, m_config.lighting == TerrainLighting::kPixel);
+  const GLuint p = m_programs->ground(colour.overlay() != Overlay::kOff, m_config.lighting == TerrainLighting::kPixel,
+                                      m_config.detail_textures);
   updateCoarsest(camera, colour);
   colour.impl().bindColour(p, camera, viewport);
   setFrameUniforms(p, camera, viewport);

@@ -89,6 +89,21 @@ void TerrainRendererImpl::setFrameUniforms(uint32_t p, const Camera& camera,
     glProgramUniform4iv(p, loc(p, "uResidentSamples"), GLsizei(m_geometry.levelCount()), resident.data());
     glProgramUniform2iv(p, loc(p, "uCamTexel"), GLsizei(m_geometry.levelCount()), texel.data());
   }
+  if (m_detail) {
+    // The detail's repeat, and the camera's ground position within it (the
+    // shader adds only small camera-relative offsets to it).
+    const double period = double(renderer_config::kDetailTexturePx) / renderer_config::kDetailTexelsPerTexel;
+    glProgramUniform1i(p, loc(p, "uDetail"), 4);
+    glBindTextureUnit(4, m_detail->texture());
+    glProgramUniform1f(p, loc(p, "uDetailPeriod"), float(period));
+    glProgramUniform2f(p, loc(p, "uDetailOrigin"),
+                       float(camera.position.x - period * std::floor(camera.position.x / period)),
+                       float(camera.position.z - period * std::floor(camera.position.z / period)));
+    // The DEM's range: its coarsest level's one tile (always held).
+    const uint32_t last = m_geometry.levelCount() - 1;
+    const glm::vec2 range = m_stack->holds(last, 0, 0) ? m_stack->tileBounds(last, 0, 0) : glm::vec2(0.0f, 1.0f);
+    glProgramUniform2f(p, loc(p, "uHeightRange"), range.x, range.y);
+  }
 }
 
 void TerrainRendererImpl::setRingUniforms(uint32_t p, const Camera& camera, uint32_t level,

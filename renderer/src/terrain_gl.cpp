@@ -38,13 +38,14 @@ Status TerrainPrograms::create(bool whole_level0, std::unique_ptr<TerrainProgram
   const std::string vertex = std::string(shaders::k_terrain_heights_glsl) + "\n" + shaders::k_terrain_vert;
   const std::string fragment = std::string(shaders::k_terrain_ground_glsl) + "\n" +
                                shaders::k_ground_clipmap_frag;
-  for (int i = 0; i < 4; ++i) {
-    const bool overlay = (i & 1) != 0, pixel = (i & 2) != 0;
+  for (int i = 0; i < 8; ++i) {
+    const bool overlay = (i & 1) != 0, pixel = (i & 2) != 0, detail = (i & 4) != 0;
     // Lit by vertex, the fragment shader reads no heights.
     Status s = gl_util::buildProgram(
         vertex, pixel ? std::string(shaders::k_terrain_heights_glsl) + "\n" + fragment : fragment, &p->m_ground[i],
         std::string("#define TERRAIN 1\n") + (overlay ? "#define OVERLAY 1\n" : "") +
-            (pixel ? "#define PIXEL_LIGHTING 1\n" : "") + (whole_level0 ? "#define WHOLE_LEVEL0 1\n" : ""));
+            (pixel ? "#define PIXEL_LIGHTING 1\n" : "") + (detail ? "#define DETAIL 1\n" : "") +
+            (whole_level0 ? "#define WHOLE_LEVEL0 1\n" : ""));
     if (!s) return s;
   }
   Status s = gl_util::buildProgram(vertex, shaders::k_terrain_position_frag, &p->m_position,

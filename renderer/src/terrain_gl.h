@@ -37,8 +37,8 @@ class TerrainMeshBuffers {
 };
 
 // terrain.vert linked with the ground's fragment shader, without and with
-// the level overlay and lit by vertex or by pixel (draw()), and with
-// terrain_position.frag (readPositions()).
+// the level overlay, lit by vertex or by pixel, without and with the detail
+// textures (draw()), and with terrain_position.frag (readPositions()).
 class TerrainPrograms {
  public:
   // kUnavailable with the compiler log when a program does not build.
@@ -49,14 +49,14 @@ class TerrainPrograms {
   TerrainPrograms(const TerrainPrograms&) = delete;
   TerrainPrograms& operator=(const TerrainPrograms&) = delete;
 
-  uint32_t ground(bool overlay, bool pixel_lighting) const {
-    return m_ground[(overlay ? 1 : 0) + (pixel_lighting ? 2 : 0)];
+  uint32_t ground(bool overlay, bool pixel_lighting, bool detail) const {
+    return m_ground[(overlay ? 1 : 0) + (pixel_lighting ? 2 : 0) + (detail ? 4 : 0)];
   }
   uint32_t position() const { return m_position; }
 
  private:
   TerrainPrograms() = default;
-  uint32_t m_ground[4] = {0, 0, 0, 0};  // overlay + 2 pixel_lighting
+  uint32_t m_ground[8] = {};  // overlay + 2 pixel_lighting + 4 detail
   uint32_t m_position = 0;
 };
 

@@ -19,6 +19,7 @@
 
 #include <clipstream/renderer/terrain.h>
 
+#include "terrain_detail.h"
 #include "terrain_gl.h"
 #include "terrain_height_stack.h"
 #include "terrain_mesh.h"
@@ -70,6 +71,12 @@ class TerrainRendererImpl {
     if (lighting == TerrainLighting::kPixel && !m_config.full_resolution)
       if (Status s = m_stack->enableGradients(); !s) return s;
     m_config.lighting = lighting;
+    return okStatus();
+  }
+  Status setDetailTextures(bool on) {
+    if (on && !m_detail)
+      if (Status s = TerrainDetailTexture::create(&m_detail); !s) return s;
+    m_config.detail_textures = on;
     return okStatus();
   }
   const TerrainFrame& lastFrame() const { return m_frame; }
@@ -183,6 +190,7 @@ class TerrainRendererImpl {
   glm::dvec2 m_image_px{0.0};  // the colour image's size (world units) at the last draw
   std::unique_ptr<TerrainPrograms> m_programs;
   std::unique_ptr<TerrainHeightStack> m_stack;
+  std::unique_ptr<TerrainDetailTexture> m_detail;  // made when the detail textures are first on
   // The ring mesh and where each pattern's blocks lie in its index buffer.
   std::unique_ptr<TerrainMeshBuffers> m_ring_mesh;
   terrain_mesh::RingMesh::Blocks m_ring_blocks{};

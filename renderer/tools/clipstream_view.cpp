@@ -54,6 +54,7 @@ constexpr const char* kKeys =
     "H, Home      back to the starting view\n"
     "O            overlay: clipmap levels, missing tiles, throttling\n"
     "L            terrain lit by vertex or by pixel (with --elevation)\n"
+    "T            terrain detail textures, on and off (with --elevation)\n"
     "I            statistics on screen, on and off\n"
     "P, F12       screenshot (PNG in --screenshot-dir; Shift: with this text)\n"
     "R            record the flown path (again: write --record-out)\n"
@@ -73,6 +74,7 @@ struct Input {
   double speed_per_height = kDefaultSpeedPerHeight;
   bool overlay_toggled = false;
   bool lighting_toggled = false;
+  bool detail_toggled = false;
   bool record_toggled = false;
   bool home = false;
   bool screenshot = false;
@@ -193,6 +195,7 @@ struct Args {
   double terrain_error_px = renderer_config::kTerrainErrorPx;
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
   std::string terrain_lighting = "vertex";
+  bool terrain_detail = false;
 };
 
 // What the checked options chose.
@@ -246,6 +249,8 @@ void addOptions(CLI::App& app, Args* a) {
   app.add_option("--terrain-lighting", a->terrain_lighting,
                  "Terrain lit by vertex (default: the vertices' normals) or by pixel (the normal of the "
                  "finest resident heights under each pixel)");
+  app.add_flag("--terrain-detail", a->terrain_detail,
+               "Detail textures where the colour is magnified, by material rules on slope and height");
   app.footer(std::string("Keys:\n") + kKeys +
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
 }
@@ -262,6 +267,7 @@ std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
     return cli::usageError(app, "--terrain-lighting: " + s.message);
   if (app.count("--terrain-lighting") && a.elevation_path.empty())
     return cli::usageError(app, "--terrain-lighting needs --elevation");
+  if (a.terrain_detail && a.elevation_path.empty()) return cli::usageError(app, "--terrain-detail needs --elevation");
   if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
   if (Status s = cli::parseTileFormat(a.tile_format, &c->tile_content); !s)
@@ -329,6 +335,7 @@ std::optional<int> openScene(CLI::App& app, const Args& a, const Choices& c, std
     layer.error_px = a.terrain_error_px;
     layer.triangle_budget = a.terrain_triangle_budget;
     layer.lighting = c.lighting;
+    layer.detail_textures = a.terrain_detail;
     *terrain = std::move(layer);
   }
   *out = std::move(source);
@@ -361,6 +368,7 @@ GLFWwindow* openWindow(const Viewport& vp, Input* input) {
     Input* in = inputOf(w);
     if (key == GLFW_KEY_O) in->overlay_toggled = true;
     if (key == GLFW_KEY_L) in->lighting_toggled = true;
+    if (key == GLFW_KEY_T) in->detail_toggled = true;
     if (key == GLFW_KEY_R) in->record_toggled = true;
     if (key == GLFW_KEY_H || key == GLFW_KEY_HOME) in->home = true;
     if (key == GLFW_KEY_P || key == GLFW_KEY_F12) {
@@ -537,6 +545,12 @@ int main(int argc, char** argv) {
         if (Status s = terrain->setLighting(next); !s)
           std::cerr << "clipstream-view: " << s.toString() << "\n";
       }
+    }
+    if (input.detail_toggled) {
+      input.detail_toggled = false;
+      if (TerrainRenderer* terrain = flight->terrain())
+        if (Status s = terrain->setDetailTextures(!terrain->config().detail_textures); !s)
+          std::cerr << "clipstream-view: " << s.toString() << "\n";
     }
     if (input.record_toggled) {
       input.record_toggled = false;

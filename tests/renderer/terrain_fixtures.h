@@ -108,13 +108,17 @@ struct TerrainScene {
 };
 
 // A 1024^2-sample field under a 2048^2-texel white image (2 texels per
-// sample): lit terrain is grey (r = g = b), which the background colour is
-// not, so every background pixel is told apart from ground.
+// sample; `grey` instead of white): lit terrain is grey (r = g = b), which
+// the background colour is not, so every background pixel is told apart
+// from ground.
 inline TerrainScene makeScene(const Camera& camera, uint32_t ring_cells = 64,
-                       TerrainMethod method = TerrainMethod::kClipmap, HeightField field = roughField(1024)) {
+                       TerrainMethod method = TerrainMethod::kClipmap, HeightField field = roughField(1024),
+                       uint8_t grey = 255) {
   TerrainScene s;
   s.field = std::move(field);
-  s.colour_source = makeImageSource(std::vector<uint8_t>(size_t(2048) * 2048 * 4, 255), 2048, 2048, 128);
+  std::vector<uint8_t> image(size_t(2048) * 2048 * 4, grey);
+  for (size_t i = 3; i < image.size(); i += 4) image[i] = 255;
+  s.colour_source = makeImageSource(std::move(image), 2048, 2048, 128);
   s.plan = planClipmap(s.colour_source->geometry(), kViewport, camera, {});
   RendererConfig rc{s.plan.clip_tiles, s.plan.pyramid_level, Buffering::kSingle};
   EXPECT_TRUE(ClipmapRenderer::create(s.colour_source->geometry(), rc, &s.colour).ok());

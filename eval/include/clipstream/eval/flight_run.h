@@ -183,6 +183,11 @@ struct FlightRun {
   // Coverage and the silhouette figure (GeometryError; means over the judged
   // frames, and the largest).
   double coverage_pixels_mean = 0.0;
+  // The on-screen texel density (texelDensity(), with the detail textures'
+  // kDetailTexelsPerTexel): means over the judged frames of each frame's
+  // median and 5th percentile, without and with the detail textures.
+  double texel_density_median = 0.0, texel_density_p5 = 0.0;
+  double detail_texel_density_median = 0.0, detail_texel_density_p5 = 0.0;
   double silhouette_mean_px = 0.0, silhouette_p95_px = 0.0, silhouette_max_px = 0.0;
   // Over the judged rest frames: pixels where the geometry agrees with the
   // reference to the bit, and of them those whose colour differs (0 when

@@ -108,6 +108,7 @@ struct FlyOptions {
   // Quadtree: --terrain-triangle-budget (0: none; TerrainConfig::triangle_budget).
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
   TerrainLighting terrain_lighting = TerrainLighting::kVertex;  // --terrain-lighting
+  bool terrain_detail = false;                                  // --terrain-detail
   // The terrain reference's lighting (--reference-lighting); unset: the
   // flight's. Both lightings judged against one per-pixel reference
   // compare them.

@@ -179,6 +179,21 @@ class TerrainReference {
 };
 
 // A streamed terrain frame against its TerrainReference.
+// The on-screen texel density of a frame's terrain: level-0 colour texels
+// across a pixel (world units across it in x and z, the larger of its
+// right and lower neighbours' distances: above 1 the colour holds more
+// than the pixel shows, below 1 a texel spans several pixels), median and
+// 5th percentile (the blurriest twentieth); and the same with the detail
+// textures, whose texels are `detail_texels_per_texel` to a colour texel
+// where the colour is magnified (below 1). Over pixels whose neighbours
+// are terrain too (w >= 1 in `xyzw`, readPositions()' layout).
+struct TexelDensity {
+  uint32_t pixels = 0;
+  double median = 0.0, p5 = 0.0;
+  double detail_median = 0.0, detail_p5 = 0.0;
+};
+TexelDensity texelDensity(const std::vector<float>& xyzw, const Viewport& viewport, double detail_texels_per_texel);
+
 struct TerrainFrameError {
   FrameError error;              // PSNR over the whole frame
   uint32_t agree_pixels = 0;     // pixels where the geometry agrees (compareTerrainFrames())

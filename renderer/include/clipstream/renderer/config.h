@@ -95,6 +95,20 @@ inline constexpr uint32_t kTerrainBudgetSearchSteps = 10;
 // Share of the light that does not depend on the sun (Lambert + ambient).
 inline constexpr float kTerrainAmbient = 0.35f;
 
+// Detail textures (TerrainConfig::detail_textures, --terrain-detail): one
+// tiling RGBA8 texture of this side, a material a channel, generated at
+// start-up (docs/terrain.md, "Detail textures").
+inline constexpr uint32_t kDetailTexturePx = 256;
+// Its texels per level-0 colour texel: 8 makes the detail as sharp as the
+// colour at 8x magnification (a texel of the colour 8 px on screen), the
+// low passes' range over the demo's 1 m orthophoto; one repeat spans 32
+// colour texels.
+inline constexpr uint32_t kDetailTexelsPerTexel = 8;
+// The detail fades in over this many levels of the colour's magnification
+// (log2 of a texel's size in pixels, above the level it is drawn from):
+// none where a texel is at most a pixel, all where it spans 2^this pixels.
+inline constexpr float kDetailFadeLevels = 2.0f;
+
 // Least height above the ground a camera keeps over terrain (world units):
 // flights lift a path that asks for less, and clipstream-view stops there,
 // so the near plane never cuts into the slope in front.

@@ -80,6 +80,7 @@ struct TerrainLayerConfig {
   // Quadtree: --terrain-triangle-budget (TerrainConfig::triangle_budget; 0: none).
   uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
   TerrainLighting lighting = TerrainLighting::kVertex;  // --terrain-lighting
+  bool detail_textures = false;                         // --terrain-detail
 };
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a

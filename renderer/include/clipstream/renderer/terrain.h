@@ -104,6 +104,12 @@ struct TerrainConfig {
   // drawn whatever the budget.
   uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
   TerrainLighting lighting = TerrainLighting::kVertex;
+  // Detail textures where the colour is magnified (a texel larger than a
+  // pixel): tiling textures of four materials, chosen by rules on the
+  // slope and the height, modulating the colour, faded in over
+  // renderer_config::kDetailFadeLevels of magnification (docs/terrain.md,
+  // "Detail textures"). Off draws the frames drawn before they existed.
+  bool detail_textures = false;
 };
 
 // What the last draw() drew.
@@ -219,6 +225,10 @@ class TerrainRenderer {
   // twice the height stack's); kOutOfMemory / kUnavailable, the lighting
   // unchanged, when GL cannot.
   [[nodiscard]] Status setLighting(TerrainLighting lighting);
+  // A new TerrainConfig::detail_textures for the next draws; the first
+  // switch on makes the texture (kOutOfMemory / kUnavailable, unchanged,
+  // when GL cannot).
+  [[nodiscard]] Status setDetailTextures(bool on);
 
   const TerrainFrame& lastFrame() const;
   // Quadtree: every leaf of the last draw (culled ones included); empty
