@@ -106,6 +106,8 @@ struct TerrainJudging {
   uint32_t previous_judged = UINT32_MAX;
   std::vector<float> reference_xyzw;
   std::vector<glm::vec2> displacement, previous_displacement;  // geometricError()'s
+  // Synthesized relief: the DEM's own surface (loaded at the first judged frame).
+  std::unique_ptr<ReferenceSurface> data_surface;
 };
 
 // Judges recorded frame i over terrain: geometric error against the
@@ -124,6 +126,16 @@ Status judgeTerrainFrame(const FlightRunOptions& o, uint32_t i, uint32_t total, 
   flight.target()->readRgba(&j.streamed_rgba);
   if (Status s = terrain_reference.render(camera, &j.reference_rgba, &j.reference_xyzw); !s) return s;
   f.geometry = geometricError(xyzw, camera, flight.viewport(), surface, &j.reference_xyzw, &j.displacement);
+  if (o.terrain->data_source && f.geometry.pixels > 0) {
+    // The surface drawn against the DEM's alone: what the synthesis adds
+    // (projection only: the reference draws the synthesized surface).
+    if (!j.data_surface)
+      if (Status s = ReferenceSurface::load(*o.terrain->data_source, o.terrain->data_alignment, &j.data_surface); !s)
+        return s;
+    const GeometryError data = geometricError(xyzw, camera, flight.viewport(), *j.data_surface);
+    run->geometry_data_mean_px += data.mean_px;
+    run->geometry_data_p95_px += data.p95_px;
+  }
   const TerrainFrameError te = compareTerrainFrames(j.streamed_rgba, xyzw, j.reference_rgba, j.reference_xyzw, flight.viewport());
   f.accuracy.measured = true;
   f.accuracy.error = te.error;
@@ -255,6 +267,8 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
     run->geometry_p95_px /= run->geometry_frames;
     run->coverage_pixels_mean /= run->geometry_frames;
     run->texel_density_median /= run->geometry_frames;
+    run->geometry_data_mean_px /= run->geometry_frames;
+    run->geometry_data_p95_px /= run->geometry_frames;
     run->texel_density_p5 /= run->geometry_frames;
     run->detail_texel_density_median /= run->geometry_frames;
     run->detail_texel_density_p5 /= run->geometry_frames;

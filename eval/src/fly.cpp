@@ -250,6 +250,7 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
     terrain.triangle_budget = o.terrain_triangle_budget;
     terrain.lighting = o.terrain_lighting;
     terrain.detail_textures = o.terrain_detail;
+    if (Status s = synthesizeRelief(o.synthesized_levels, &terrain); !s) return s;
     r.terrain = std::move(terrain);
   }
   return okStatus();

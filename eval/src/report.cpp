@@ -243,6 +243,8 @@ nlohmann::json accuracyJson(const FlightRun& run, const RunDescription& d) {
   acc["geo_error_p95_px"] = run.geometry_p95_px;
   acc["geo_error_max_px"] = run.geometry_max_px;
   acc["geo_coverage_pixels_mean"] = run.coverage_pixels_mean;
+  acc["geo_error_data_mean_px"] = run.geometry_data_mean_px;
+  acc["geo_error_data_p95_px"] = run.geometry_data_p95_px;
   acc["texel_density_median"] = run.texel_density_median;
   acc["texel_density_p5"] = run.texel_density_p5;
   acc["detail_texel_density_median"] = run.detail_texel_density_median;
@@ -318,6 +320,8 @@ std::vector<std::pair<std::string, std::string>> terrainMeasureColumns(const Fli
           {"geo_silhouette_max_px", judged(run.silhouette_max_px)},
           {"geometry_change_mean_px", paired(run.geometry_change_mean)},
           {"geometry_change_max_px", paired(run.geometry_change_max)},
+          {"geo_error_data_mean_px", judged(run.geometry_data_mean_px)},
+          {"geo_error_data_p95_px", judged(run.geometry_data_p95_px)},
           {"texel_density_median", judged(run.texel_density_median)},
           {"texel_density_p5", judged(run.texel_density_p5)},
           {"detail_texel_density_median", judged(run.detail_texel_density_median)},
@@ -459,6 +463,11 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
     row("geo_silhouette_p95_px", run.silhouette_p95_px, "%.3f");
     // Level-0 texels across a pixel (median, 5th percentile), and with the
     // detail textures where the colour is magnified.
+    if (run.geometry_data_mean_px > 0) {
+      // Synthesized relief: the same frames against the DEM's own surface.
+      row("geo_error_data_mean_px", run.geometry_data_mean_px, "%.3f");
+      row("geo_error_data_p95_px", run.geometry_data_p95_px, "%.3f");
+    }
     row("texel_density_median", run.texel_density_median, "%.3f");
     row("texel_density_p5", run.texel_density_p5, "%.3f");
     row("detail_texel_density_median", run.detail_texel_density_median, "%.3f");

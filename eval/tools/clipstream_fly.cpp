@@ -174,6 +174,10 @@ void addOptions(CLI::App& app, Args* args) {
   app.add_flag("--terrain-detail", o.terrain_detail,
                "Detail textures where the colour is magnified, by material rules on slope and height "
                "(docs/terrain.md, \"Detail textures\")");
+  app.add_option("--synthesize-relief", o.synthesized_levels,
+                 "Synthesized relief below the DEM's resolution: this many levels, each 2x finer, of "
+                 "noise scaled by the DEM's roughness (docs/terrain.md, \"Synthesized relief\")")
+      ->transform(cli::wholeInRange(1, kMaxSynthesizedLevels));
   app.add_option("--reference-lighting", a.reference_lighting,
                  "The terrain reference's lighting (with --reference): vertex or pixel; default: "
                  "--terrain-lighting");
@@ -205,6 +209,7 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
     return "--terrain-lighting: " + s.message;
   if (app.count("--terrain-lighting") && o.elevation_path.empty()) return "--terrain-lighting needs --elevation";
   if (o.terrain_detail && o.elevation_path.empty()) return "--terrain-detail needs --elevation";
+  if (app.count("--synthesize-relief") && o.elevation_path.empty()) return "--synthesize-relief needs --elevation";
   if (!a.reference_lighting.empty()) {
     TerrainLighting reference = TerrainLighting::kVertex;
     if (Status s = cli::parseTerrainLighting(a.reference_lighting, &reference); !s)

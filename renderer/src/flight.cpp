@@ -59,6 +59,19 @@ Status createClipmapRenderer(TileSource& source, const Viewport& viewport, const
   return okStatus();
 }
 
+Status synthesizeRelief(uint32_t levels, TerrainLayerConfig* layer) {
+  if (levels == 0) return okStatus();
+  Status s;
+  std::shared_ptr<TileSource> synthesized = makeSynthesizedHeightSource(layer->source, levels, &s);
+  if (!synthesized) return s;
+  layer->data_source = std::move(layer->source);
+  layer->data_alignment = layer->alignment;
+  layer->source = std::move(synthesized);
+  layer->alignment.world_per_sample /= double(uint64_t(1) << levels);
+  layer->synthesized_levels = levels;
+  return okStatus();
+}
+
 Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
                         const std::string& elevation_path, double vertical_scale, bool stretch,
                         uint32_t ring_cells, TerrainLayerConfig* out,

@@ -196,6 +196,7 @@ struct Args {
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
   std::string terrain_lighting = "vertex";
   bool terrain_detail = false;
+  uint32_t synthesized_levels = 0;
 };
 
 // What the checked options chose.
@@ -251,6 +252,9 @@ void addOptions(CLI::App& app, Args* a) {
                  "finest resident heights under each pixel)");
   app.add_flag("--terrain-detail", a->terrain_detail,
                "Detail textures where the colour is magnified, by material rules on slope and height");
+  app.add_option("--synthesize-relief", a->synthesized_levels,
+                 "Synthesized relief below the DEM's resolution: this many levels, each 2x finer")
+      ->transform(cli::wholeInRange(1, kMaxSynthesizedLevels));
   app.footer(std::string("Keys:\n") + kKeys +
              "\n\nExit codes: 0 success, 1 failure, 2 command-line mistake. docs/cli.md.");
 }
@@ -268,6 +272,8 @@ std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
   if (app.count("--terrain-lighting") && a.elevation_path.empty())
     return cli::usageError(app, "--terrain-lighting needs --elevation");
   if (a.terrain_detail && a.elevation_path.empty()) return cli::usageError(app, "--terrain-detail needs --elevation");
+  if (app.count("--synthesize-relief") && a.elevation_path.empty())
+    return cli::usageError(app, "--synthesize-relief needs --elevation");
   if (Status s = cli::parseSize(a.size, &c->vp.width_px, &c->vp.height_px); !s)
     return cli::usageError(app, s.message);
   if (Status s = cli::parseTileFormat(a.tile_format, &c->tile_content); !s)
@@ -336,6 +342,10 @@ std::optional<int> openScene(CLI::App& app, const Args& a, const Choices& c, std
     layer.triangle_budget = a.terrain_triangle_budget;
     layer.lighting = c.lighting;
     layer.detail_textures = a.terrain_detail;
+    if (Status s = synthesizeRelief(a.synthesized_levels, &layer); !s) {
+      cli::printError(app, s.toString());
+      return 1;
+    }
     *terrain = std::move(layer);
   }
   *out = std::move(source);

@@ -122,7 +122,8 @@ TEST(FlyHardening, AbsurdNumbersAreCommandLineMistakes) {
       {"--terrain", "quadtree"},  {"--terrain-error", "0"},   {"--terrain-error", "nan"},
       {"--terrain", "mesh", "--elevation", "dem.cst"},
       {"--terrain-lighting", "pixel"},  {"--terrain-lighting", "phong", "--elevation", "dem.cst"},
-      {"--reference-lighting", "pixel", "--elevation", "dem.cst"}, {"--terrain-detail"}};
+      {"--reference-lighting", "pixel", "--elevation", "dem.cst"}, {"--terrain-detail"},
+      {"--synthesize-relief", "2"}, {"--synthesize-relief", "9", "--elevation", "dem.cst"}};
   for (std::vector<std::string> args : cases) {
     const std::string what = args[0] + (args.size() > 1 ? " " + args[1] : "");
     args.insert(args.begin(), {"--procedural", "4096", "--out", dir.file("out")});

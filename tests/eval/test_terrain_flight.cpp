@@ -67,6 +67,7 @@ struct Scenario {
   // ring) at these scenarios' 64-cell rings, 2 x 2 x 64^2: about what the
   // clipmap draws here (12k-18k).
   uint64_t triangle_budget = 16384;
+  uint32_t synthesized_levels = 0;  // synthesized relief below the DEM (synthesizeRelief())
 };
 
 struct Outcome {
@@ -95,6 +96,7 @@ void flyScenario(const Scenario& sc, Outcome* out) {
   terrain.ring_cells = 64;
   terrain.method = sc.method;
   terrain.triangle_budget = sc.triangle_budget;
+  ASSERT_TRUE(synthesizeRelief(sc.synthesized_levels, &terrain).ok());
   const double field = std::min(2048.0, double(std::min(sc.dem_width, sc.dem_height)) * sc.world_per_sample);
 
   FlightRunOptions o;
@@ -209,6 +211,22 @@ TEST_P(TerrainFlight, FliesAboveTheGroundThroughOneCacheWithoutHoles) {
 
 // The stability scenarios over terrain (docs/terrain.md): each must degrade
 // to coarser rings, never to a crack, a hole or a crash.
+// Synthesized relief two levels below the DEM: rings and nodes over the
+// finer levels stitch as over the DEM's, the camera stays above the
+// synthesized ground, and at rest the geometry is drawn finer than the
+// DEM's level 0 (the clipmap down to the synthesis's level 0; the quadtree
+// as far as its triangle budget lets it).
+TEST_P(TerrainStability, SynthesizedReliefTwoLevelsBelowTheDem) {
+  CLIPSTREAM_REQUIRE_GL();
+  Scenario sc;
+  sc.method = GetParam();
+  sc.synthesized_levels = 2;
+  sc.lowest_ground = 0.0;  // the synthesis may dip below the DEM's lowest sample
+  const Outcome r = flyAndCheck(sc);
+  EXPECT_LT(r.run.frames.back().sample.terrain_finest_level, sc.synthesized_levels);
+  if (sc.method == TerrainMethod::kClipmap) EXPECT_EQ(r.run.frames.back().sample.terrain_finest_level, 0u);
+}
+
 TEST_P(TerrainStability, SpikesAtTheHundredfoldSpeed) {
   CLIPSTREAM_REQUIRE_GL();
   Scenario sc;

@@ -187,6 +187,9 @@ struct FlightRun {
   // kDetailTexelsPerTexel): means over the judged frames of each frame's
   // median and 5th percentile, without and with the detail textures.
   double texel_density_median = 0.0, texel_density_p5 = 0.0;
+  // Synthesized relief: the geometric error against the DEM's own surface
+  // (means of each judged frame's mean and p95; projection only); 0 without.
+  double geometry_data_mean_px = 0.0, geometry_data_p95_px = 0.0;
   double detail_texel_density_median = 0.0, detail_texel_density_p5 = 0.0;
   double silhouette_mean_px = 0.0, silhouette_p95_px = 0.0, silhouette_max_px = 0.0;
   // Over the judged rest frames: pixels where the geometry agrees with the

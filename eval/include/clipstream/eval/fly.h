@@ -109,6 +109,7 @@ struct FlyOptions {
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
   TerrainLighting terrain_lighting = TerrainLighting::kVertex;  // --terrain-lighting
   bool terrain_detail = false;                                  // --terrain-detail
+  uint32_t synthesized_levels = 0;                              // --synthesize-relief
   // The terrain reference's lighting (--reference-lighting); unset: the
   // flight's. Both lightings judged against one per-pixel reference
   // compare them.

@@ -81,7 +81,20 @@ struct TerrainLayerConfig {
   uint64_t triangle_budget = renderer_config::kTerrainTriangleBudget;
   TerrainLighting lighting = TerrainLighting::kVertex;  // --terrain-lighting
   bool detail_textures = false;                         // --terrain-detail
+  // Synthesized relief (synthesizeRelief()): the levels added below the
+  // DEM's (0: none), and the DEM and its alignment as they were.
+  uint32_t synthesized_levels = 0;
+  std::shared_ptr<TileSource> data_source;
+  LayerAlignment data_alignment;
 };
+
+// Synthesized relief below the DEM's resolution (--synthesize-relief,
+// docs/terrain.md): replaces layer->source by makeSynthesizedHeightSource()
+// of it with `levels` more levels and divides the alignment's spacing by
+// 2^levels (sample 0 stays where it was), keeping the DEM in data_source.
+// kInvalidArgument as makeSynthesizedHeightSource() says; `levels` 0 does
+// nothing.
+Status synthesizeRelief(uint32_t levels, TerrainLayerConfig* layer);
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a
 // height source, reads both stores' headers and aligns the DEM under the

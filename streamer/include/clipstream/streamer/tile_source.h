@@ -192,6 +192,21 @@ std::shared_ptr<TileSource> makeImageSource(std::vector<uint8_t> rgba, uint32_t 
 std::shared_ptr<TileSource> makeProceduralHeightSource(const ProceduralSpec& spec);
 double proceduralHeight(const ProceduralSpec& spec, uint64_t x, uint64_t y);
 
+// Synthesized relief below a DEM's resolution (docs/terrain.md,
+// "Synthesized relief"): a kHeightF32 source of `levels` more levels than
+// `dem` (a kHeightF32 source), each 2x finer: its level-0 sample (x, y) lies
+// at the DEM's level-0 sample (x, y) / 2^levels, level `levels` and up are
+// the DEM's own levels, and the samples between the DEM's are its cell's
+// bilinear surface plus fractal value noise that vanishes at the DEM's
+// samples, scaled by the DEM's local roughness. A pure function of
+// position: deterministic, continuous across tiles, and each level the
+// decimation of the finer. Reads the DEM's level-0 tiles in fetch(), on
+// the caller's thread. Null with *status = kInvalidArgument for a source
+// that is not heights or `levels` outside 1..kMaxSynthesizedLevels.
+inline constexpr uint32_t kMaxSynthesizedLevels = 4;
+std::shared_ptr<TileSource> makeSynthesizedHeightSource(std::shared_ptr<TileSource> dem, uint32_t levels,
+                                                         Status* status);
+
 // Transcoding wrapper: hands out `rgba8`'s colour tiles as BC1 blocks
 // (kBc1), encoded by encodeBc1Tile() inside fetch(), so the streamer's
 // loader threads do the work and its RAM cache holds the compressed tiles
