@@ -1,13 +1,16 @@
 // What the terrain's detail beyond the data costs a frame (docs/terrain.md,
 // "Detail beyond the data"): the frame lit by vertex (none of it), lit by
 // pixel, and lit by vertex with the detail textures, drawn by one renderer
-// from the same cameras, the three alternated draw by draw
-// (TerrainRenderer::setLighting(), setDetailTextures()), so the machine's
-// load falls on all alike. Per DEM and method (the clipmap at its default
-// ring, the quadtree at its default bound and budget): the triangles, the
-// frame (draws and glFinish; mean over the cameras of each one's best of
-// --repeat) of each and its ratio to the plain one, and the video memory
-// the height gradients add to the height stack.
+// from the same cameras (TerrainRenderer::setLighting(),
+// setDetailTextures()), and the frame over synthesized relief (a second
+// renderer over synthesizeRelief() of the DEM: 2 levels, or 1 where a stack
+// holding every tile of 2 would pass kMaxReliefStackBytes), the four
+// alternated draw by draw so the machine's load falls on all alike. Per DEM
+// and method (the clipmap at its default ring, the quadtree at its default
+// bound and budget): the triangles, the frame (draws and glFinish; mean over
+// the cameras of each one's best of --repeat) of each and its ratio to the
+// plain one, and the video memory the height gradients add to the height
+// stack.
 //
 //   bench_renderer_terrain_detail [--size 1280x720] [--cameras 24] [--repeat 3] [--tsv FILE] DEM...
 // DEM: an elevation store (clipstream-tile DEM.tif), or a GeoTIFF DEM, tiled
@@ -35,6 +38,10 @@
 using namespace clipstream;
 
 namespace {
+
+// The largest height stack (every tile of every level) the relief column
+// makes: 2 synthesized levels over a 1201^2 DEM would take 1.2 GiB.
+constexpr uint64_t kMaxReliefStackBytes = uint64_t(512) << 20;
 
 double drawMs(TerrainRenderer& terrain, const Camera& camera, const Viewport& vp, const ClipmapRenderer& colour,
               const OffscreenTarget& target) {
@@ -73,27 +80,63 @@ bool lightingCost(const TerrainLayerConfig& layer, TerrainMethod method, const C
   }
   terrain->setBounds(bounds);
   bench::uploadAll(*terrain, *layer.source);
-  // Plain (lit by vertex), lit by pixel, lit by vertex with the detail textures.
-  double ms[3] = {0, 0, 0}, triangles = 0;
+  // The same DEM under synthesized relief, every tile in the stack.
+  TerrainLayerConfig relief_layer = layer;
+  uint32_t relief_levels = 0;
+  for (uint32_t levels : {2u, 1u}) {
+    TerrainLayerConfig candidate = layer;
+    if (!synthesizeRelief(levels, &candidate).ok()) continue;
+    const PyramidGeometry& rg = candidate.source->geometry();
+    const uint64_t side = uint64_t(std::max(rg.levels[0].tiles_x, rg.levels[0].tiles_y)) * rg.tile_px;
+    if (side * side * 4 * rg.levelCount() > kMaxReliefStackBytes) continue;
+    relief_layer = candidate;
+    relief_levels = levels;
+    break;
+  }
+  std::unique_ptr<TerrainRenderer> relief;
+  if (relief_levels > 0) {
+    const PyramidGeometry& rg = relief_layer.source->geometry();
+    TerrainConfig rc = tc;
+    rc.lighting = TerrainLighting::kVertex;
+    rc.mapping = relief_layer.alignment;
+    rc.clip_tiles = std::max(rg.levels[0].tiles_x, rg.levels[0].tiles_y);
+    if (Status st = TerrainRenderer::create(rg, rc, &relief); !st) {
+      std::fprintf(stderr, "%s\n", st.toString().c_str());
+      return false;
+    }
+    std::shared_ptr<const TerrainBounds> relief_bounds;
+    (void)loadTerrainBounds(*relief_layer.source, kTerrainBoundsMaxLevelTiles, &relief_bounds);
+    relief->setBounds(relief_bounds);
+    bench::uploadAll(*relief, *relief_layer.source);
+  }
+  // Plain (lit by vertex), lit by pixel, lit by vertex with the detail
+  // textures, over synthesized relief.
+  double ms[4] = {0, 0, 0, 0}, triangles = 0, relief_triangles = 0;
   int counted = 0;
   for (const Camera& camera : bench::cameras(*terrain, layer, camera_count)) {
-    double best[3] = {INFINITY, INFINITY, INFINITY};
+    double best[4] = {INFINITY, INFINITY, INFINITY, INFINITY};
     for (int r = 0; r < repeat; ++r)
-      for (int k = 0; k < 3; ++k) {
+      for (int k = 0; k < (relief ? 4 : 3); ++k) {
+        if (k == 3) {
+          best[k] = std::min(best[k], drawMs(*relief, camera, vp, colour, target));
+          continue;
+        }
         (void)terrain->setLighting(k == 1 ? TerrainLighting::kPixel : TerrainLighting::kVertex);
         (void)terrain->setDetailTextures(k == 2);
         best[k] = std::min(best[k], drawMs(*terrain, camera, vp, colour, target));
       }
     if (terrain->lastFrame().triangles == 0) continue;
-    for (int k = 0; k < 3; ++k) ms[k] += best[k];
+    for (int k = 0; k < 4; ++k) ms[k] += relief || k < 3 ? best[k] : 0.0;
     triangles += double(terrain->lastFrame().triangles);
+    if (relief) relief_triangles += double(relief->lastFrame().triangles);
     ++counted;
   }
   if (counted == 0) return false;
   const double n = counted;
-  table->row("%s\t%s\t%d\t%.0f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.1f\n", name.c_str(), terrainMethodName(method),
-             counted, triangles / n, ms[0] / n, ms[1] / n, ms[1] / ms[0], ms[2] / n, ms[2] / ms[0],
-             double(pixel_bytes - vertex_bytes) / double(1 << 20));
+  table->row("%s\t%s\t%d\t%.0f\t%.2f\t%.2f\t%.2f\t%.2f\t%.2f\t%.1f\t%u\t%.0f\t%.2f\t%.2f\n", name.c_str(),
+             terrainMethodName(method), counted, triangles / n, ms[0] / n, ms[1] / n, ms[1] / ms[0], ms[2] / n,
+             ms[2] / ms[0], double(pixel_bytes - vertex_bytes) / double(1 << 20), relief_levels,
+             relief_triangles / n, ms[3] / n, ms[3] / ms[0]);
   return true;
 }
 
@@ -129,7 +172,8 @@ int main(int argc, char** argv) {
   std::printf("# %s, %ux%u, %d cameras, best of %d draws each; plain, lit by pixel, with detail textures, alternated\n",
               ground.context->describe().c_str(), vp.width_px, vp.height_px, camera_count, repeat);
   table.row("dem\tmethod\tcameras\ttriangles\tplain_frame_ms\tpixel_lit_frame_ms\tpixel_lit_ratio\t"
-            "detail_frame_ms\tdetail_ratio\tgradients_mib\n");
+            "detail_frame_ms\tdetail_ratio\tgradients_mib\trelief_levels\trelief_triangles\trelief_frame_ms\t"
+            "relief_ratio\n");
   int status = 0;
   for (size_t i = 0; i < dems.size(); ++i) {
     const std::string store = bench::storeFor(
