@@ -1,9 +1,11 @@
-// The terrain's detail textures (TerrainConfig::detail_textures): the
-// generated texture tiles and leaves the colour as it is on average; drawn,
-// the detail is absent where a texel spans at most a pixel, present where
-// the colour is magnified, and fades in without a seam at either end of
-// its fade (renderer_config::kDetailFadeLevels).
+// The detail beyond the data, drawn: the detail textures
+// (TerrainConfig::detail_textures: the generated texture tiles and leaves the
+// colour as it is on average; absent where a texel spans at most a pixel,
+// present where the colour is magnified, faded in without a seam at either
+// end of renderer_config::kDetailFadeLevels); every feature off draws a
+// plain renderer's frames; synthesized relief draws the same frames twice.
 #include <clipstream/renderer/config.h>
+#include <clipstream/streamer/tile_source.h>
 
 #include "../../renderer/src/terrain_detail.h"
 #include "terrain_fixtures.h"
@@ -12,6 +14,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <memory>
 #include <vector>
 
 using namespace clipstream;
@@ -117,4 +121,92 @@ TEST(TerrainDetail, OnlyWhereTheColourIsMagnifiedAndFadedInWithoutASeam) {
     if (count[size_t(b)] > 0)
       std::printf("  magnification %+.2f: %5d px, mean change %.2f grey levels\n", b / 4.0 - 1.0, count[size_t(b)],
                   diff[size_t(b)]);
+}
+
+namespace {
+
+// A HeightField as a height source (its tiles as the tiler cuts them).
+class FieldSource final : public TileSource {
+ public:
+  explicit FieldSource(const HeightField& f) : m_field(f) {}
+  const PyramidGeometry& geometry() const override { return m_field.geometry; }
+  TileContent content() const override { return TileContent::kHeightF32; }
+  std::string describe() const override { return "height field"; }
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    if (!m_field.geometry.contains(key)) return Status::error(ErrorCode::kOutOfRange, "outside");
+    const std::vector<float> t = m_field.tile(key);
+    rgba->resize(t.size() * 4);
+    std::memcpy(rgba->data(), t.data(), rgba->size());
+    return okStatus();
+  }
+
+ private:
+  const HeightField& m_field;
+};
+
+// Every tile of `source` into `terrain` (a stack that holds them all).
+void uploadAllTiles(TerrainRenderer& terrain, TileSource& source) {
+  const PyramidGeometry& g = source.geometry();
+  std::vector<uint8_t> bytes;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+        ASSERT_TRUE(source.fetch({l, x, y}, &bytes).ok());
+        terrain.uploadTile({l, x, y}, reinterpret_cast<const float*>(bytes.data()));
+      }
+}
+
+}  // namespace
+
+// Each feature off draws what a renderer that never had it draws: lit per
+// pixel with the detail textures, then both switched off, the frame is the
+// plain renderer's to the bit (and differs while they are on).
+TEST(TerrainDetail, EveryFeatureOffDrawsTheFramesOfARendererWithoutIt) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera camera = overField(700.0, 900.0, 90.0, 0.8, -0.35);
+  TerrainScene plain = makeScene(camera, 64, TerrainMethod::kClipmap, roughField(1024), 128);
+  uploadRings(*plain.terrain, plain.field, camera);
+  TerrainScene featured = makeScene(camera, 64, TerrainMethod::kClipmap, roughField(1024), 128);
+  ASSERT_TRUE(featured.terrain->setLighting(TerrainLighting::kPixel).ok());
+  ASSERT_TRUE(featured.terrain->setDetailTextures(true).ok());
+  uploadRings(*featured.terrain, featured.field, camera);
+  const std::vector<uint8_t> expected = drawTerrain(plain, camera);
+  ASSERT_GT(groundPixels(expected), size_t(kViewport.width_px) * kViewport.height_px / 2);
+  EXPECT_NE(drawTerrain(featured, camera), expected);
+  ASSERT_TRUE(featured.terrain->setLighting(TerrainLighting::kVertex).ok());
+  EXPECT_NE(drawTerrain(featured, camera), expected) << "the detail textures still on";
+  ASSERT_TRUE(featured.terrain->setDetailTextures(false).ok());
+  EXPECT_EQ(drawTerrain(featured, camera), expected);
+}
+
+// Synthesized relief is the same frames twice: two renderers over two
+// synthesized sources of one DEM draw the same pixels, and they differ from
+// the DEM's own.
+TEST(TerrainDetail, SynthesizedReliefDrawsTheSameFramesTwice) {
+  CLIPSTREAM_REQUIRE_GL();
+  // Low and steep, so that the synthesis's own rings (within 32 and 64
+  // world units) fill the frame.
+  const Camera camera = overField(300.0, 300.0, 100.0, 2.4, -1.1);
+  const HeightField field = roughField(256);
+  std::vector<uint8_t> frames[3];
+  for (int i = 0; i < 3; ++i) {
+    TerrainScene s = makeScene(camera, 64, TerrainMethod::kClipmap, field, 128);
+    std::shared_ptr<TileSource> heights = std::make_shared<FieldSource>(s.field);
+    TerrainConfig tc = s.terrain->config();
+    if (i > 0) {
+      Status st;
+      heights = makeSynthesizedHeightSource(heights, 2, &st);
+      ASSERT_TRUE(heights) << st.toString();
+      tc.mapping.world_per_sample /= 4.0;
+    }
+    const PyramidGeometry& g = heights->geometry();
+    tc.clip_tiles = std::max(g.levels[0].tiles_x, g.levels[0].tiles_y);
+    ASSERT_TRUE(TerrainRenderer::create(g, tc, &s.terrain).ok());
+    ASSERT_NO_FATAL_FAILURE(uploadAllTiles(*s.terrain, *heights));
+    frames[i] = drawTerrain(s, camera);
+    if (i > 0) EXPECT_EQ(s.terrain->lastFrame().finest_level, 0u) << "drawn down to the synthesis's level 0";
+  }
+  ASSERT_GT(groundPixels(frames[1]), size_t(kViewport.width_px) * kViewport.height_px / 4);
+  EXPECT_EQ(frames[1], frames[2]);
+  EXPECT_NE(frames[0], frames[1]);
 }
