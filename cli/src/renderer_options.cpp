@@ -3,6 +3,10 @@
 // words the reports print.
 #include <clipstream/cli/renderer_options.h>
 
+#include <cmath>
+#include <cstdlib>
+#include <vector>
+
 namespace clipstream::cli {
 
 Status parseBuffering(const std::string& name, Buffering* out) {
@@ -57,6 +61,28 @@ Status parseTerrainMethod(const std::string& name, TerrainMethod* out) {
   }
   return Status::error(ErrorCode::kInvalidArgument,
                        "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
+}
+
+Status parseLookAt(const std::string& text, LookAt* out) {
+  std::vector<double> v;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t comma = std::min(text.find(',', start), text.size());
+    const std::string part = text.substr(start, comma - start);
+    char* end = nullptr;
+    const double d = part.empty() ? NAN : std::strtod(part.c_str(), &end);
+    if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(d))
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "look-at point \"" + printableText(text, 60) + "\": give X,Y or X,Y,HEIGHT (finite numbers)");
+    v.push_back(d);
+    start = comma + 1;
+  }
+  if (v.size() < 2 || v.size() > 3)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "look-at point \"" + printableText(text, 60) + "\": give X,Y or X,Y,HEIGHT");
+  out->map = {v[0], v[1]};
+  out->height = v.size() == 3 ? std::optional<double>(v[2]) : std::nullopt;
+  return okStatus();
 }
 
 Status parseTerrainLighting(const std::string& name, TerrainLighting* out) {

@@ -259,7 +259,27 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
 // The path, its frame count and the flight's settings from the options.
 Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, FlightRunOptions* out) {
   FlightRunOptions& r = *out;
-  {
+  if (o.look_at) {
+    // One camera, held: two equal keyframes a second apart (over terrain a
+    // path's heights are above the ground under the camera).
+    GeoReference geo;
+    if (!o.store_path.empty()) {
+      std::unique_ptr<TileStoreReader> reader;
+      if (Status s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
+      geo = reader->info().geo;
+    }
+    Camera camera;
+    double ground = 0.0;
+    const TerrainLayerConfig* terrain = r.terrain ? &*r.terrain : nullptr;
+    if (Status s = aimAtMapPoint(*o.look_at, geo, geometry, terrain, &camera, &ground); !s)
+      return Status::error(s.code, "--look-at: " + s.message);
+    Keyframe k;
+    k.position = {camera.position.x, camera.position.y - ground, camera.position.z};
+    k.heading_deg = camera.heading_rad * 180.0 / M_PI;
+    k.pitch_deg = camera.pitch_rad * 180.0 / M_PI;
+    r.path.keyframes = {k, k};
+    r.path.keyframes[1].t_s = 1.0;
+  } else {
     const auto names = FlightPath::builtinNames();
     Status s = std::find(names.begin(), names.end(), o.path) != names.end()
                    ? FlightPath::builtin(o.path, geometry, &r.path, std::max(1u, o.teleport_frames))

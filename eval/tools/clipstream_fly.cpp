@@ -34,6 +34,7 @@ struct Args {
   std::string plan_scope = "sampled";
   std::string terrain_method = clipstream::terrainMethodName(o.terrain_method);
   std::string terrain_lighting = clipstream::terrainLightingName(o.terrain_lighting), reference_lighting;
+  std::string look_at;
 };
 
 // Declares every option and the footer, in the order --help lists them,
@@ -48,6 +49,10 @@ void addOptions(CLI::App& app, Args* args) {
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
   app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom, valley) or JSON file");
+  app.add_option("--look-at", a.look_at,
+                 "X,Y[,HEIGHT]: instead of --path, hold the camera that looks at this point, in the colour "
+                 "store's map coordinates (level-0 texels without a georeference), from the south, 30 degrees "
+                 "down; HEIGHT in the elevation's unit (default: the ground's)");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
       ->transform(frames);
   app.add_option("--size", a.size, "Viewport WIDTHxHEIGHT");
@@ -210,6 +215,12 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
   if (app.count("--terrain-lighting") && o.elevation_path.empty()) return "--terrain-lighting needs --elevation";
   if (o.terrain_detail && o.elevation_path.empty()) return "--terrain-detail needs --elevation";
   if (app.count("--synthesize-relief") && o.elevation_path.empty()) return "--synthesize-relief needs --elevation";
+  if (!a.look_at.empty()) {
+    LookAt look;
+    if (Status s = cli::parseLookAt(a.look_at, &look); !s) return "--look-at: " + s.message;
+    if (app.count("--path")) return "give --path or --look-at, not both";
+    o.look_at = look;
+  }
   if (!a.reference_lighting.empty()) {
     TerrainLighting reference = TerrainLighting::kVertex;
     if (Status s = cli::parseTerrainLighting(a.reference_lighting, &reference); !s)

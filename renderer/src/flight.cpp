@@ -72,6 +72,26 @@ Status synthesizeRelief(uint32_t levels, TerrainLayerConfig* layer) {
   return okStatus();
 }
 
+Status aimAtMapPoint(const LookAt& look, const GeoReference& colour_geo, const PyramidGeometry& colour,
+                     const TerrainLayerConfig* terrain, Camera* out, double* camera_ground) {
+  glm::dvec2 world;
+  if (Status s = mapToWorld(colour_geo, look.map, &world); !s) return s;
+  double y = 0.0;
+  if (look.height)
+    y = *look.height * (terrain ? terrain->alignment.world_per_height : 1.0);
+  else if (terrain)
+    if (Status s = groundHeightAt(*terrain->source, terrain->alignment, world, &y); !s) return s;
+  const double distance = kLookAtDistanceFraction * double(std::max(colour.width_px, colour.height_px));
+  *out = lookAtCamera({world.x, y, world.y}, distance, 0.0, kLookAtPitchRad);
+  *camera_ground = 0.0;
+  if (terrain)
+    if (Status s = groundHeightAt(*terrain->source, terrain->alignment, {out->position.x, out->position.z},
+                                  camera_ground);
+        !s)
+      return s;
+  return okStatus();
+}
+
 Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& colour_geometry,
                         const std::string& elevation_path, double vertical_scale, bool stretch,
                         uint32_t ring_cells, TerrainLayerConfig* out,

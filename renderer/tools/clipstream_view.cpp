@@ -192,6 +192,7 @@ struct Args {
   uint64_t pool_mb = 0;
   std::string screenshot_dir = ".";
   std::string terrain_method = "clipmap";
+  std::string look_at;
   double terrain_error_px = renderer_config::kTerrainErrorPx;
   uint64_t terrain_triangle_budget = renderer_config::kTerrainTriangleBudget;
   std::string terrain_lighting = "vertex";
@@ -202,6 +203,7 @@ struct Args {
 // What the checked options chose.
 struct Choices {
   Viewport vp;
+  std::optional<LookAt> look_at;
   TerrainMethod method = TerrainMethod::kClipmap;
   TerrainLighting lighting = TerrainLighting::kVertex;
   TileContent tile_content = TileContent::kRgba8;
@@ -237,6 +239,9 @@ void addOptions(CLI::App& app, Args* a) {
       ->transform(cli::inRange(0.001, 1000.0));
   app.add_flag("--stretch-elevation", a->stretch_elevation,
                "Stretch the elevation store over the texture instead of placing it by georeference");
+  app.add_option("--look-at", a->look_at,
+                 "X,Y[,HEIGHT]: start looking at this point, in the store's map coordinates (level-0 texels "
+                 "without a georeference); HEIGHT in the elevation's unit (default: the ground's)");
   app.add_option("--terrain", a->terrain_method,
                  "Terrain geometry with --elevation: clipmap (default), quadtree, flat or full");
   app.add_option("--terrain-error", a->terrain_error_px,
@@ -267,6 +272,11 @@ std::optional<int> checkArgs(CLI::App& app, const Args& a, Choices* c) {
   if ((app.count("--terrain") || app.count("--terrain-error") || app.count("--terrain-triangle-budget")) &&
       a.elevation_path.empty())
     return cli::usageError(app, "--terrain, --terrain-error and --terrain-triangle-budget need --elevation");
+  if (!a.look_at.empty()) {
+    LookAt look;
+    if (Status s = cli::parseLookAt(a.look_at, &look); !s) return cli::usageError(app, "--look-at: " + s.message);
+    c->look_at = look;
+  }
   if (Status s = cli::parseTerrainLighting(a.terrain_lighting, &c->lighting); !s)
     return cli::usageError(app, "--terrain-lighting: " + s.message);
   if (app.count("--terrain-lighting") && a.elevation_path.empty())
@@ -415,6 +425,16 @@ GLFWwindow* openWindow(const Viewport& vp, Input* input) {
 // One frame's move of the camera by the keys and the mouse, at `speed`
 // (texels a second, returned: Shift multiplies it), kept near the scene and
 // above the ground.
+// The store's georeference, read from its header (none for --procedural).
+Status storeGeoReference(const Args& a, GeoReference* out) {
+  *out = GeoReference{};
+  if (a.store_path.empty()) return okStatus();
+  std::unique_ptr<TileStoreReader> reader;
+  if (Status s = TileStoreReader::open(a.store_path, a.remote, &reader); !s) return s;
+  *out = reader->info().geo;
+  return okStatus();
+}
+
 double moveCamera(GLFWwindow* window, Input& input, const Flight& flight, const PyramidGeometry& g,
                   double scene_side, double dt, Camera* camera_io, double* ground_below) {
   Camera& camera = *camera_io;
@@ -482,6 +502,17 @@ int main(int argc, char** argv) {
   if (terrain) {
     // Start above the highest ground; each frame then keeps above the ground.
     camera.position.y += terrain->source->elevationInfo().max_height * terrain->alignment.world_per_height;
+  }
+  if (choices.look_at) {
+    GeoReference geo;
+    Status s = storeGeoReference(args, &geo);
+    double ground = 0.0;
+    if (s) s = aimAtMapPoint(*choices.look_at, geo, g, terrain ? &*terrain : nullptr, &camera, &ground);
+    if (!s) {
+      std::cerr << "clipstream-view: --look-at: " << s.toString() << "\n";
+      glfwTerminate();
+      return 1;
+    }
   }
   const Camera home = camera;
   const double scene_side = double(std::max(g.width_px, g.height_px));

@@ -123,7 +123,8 @@ TEST(FlyHardening, AbsurdNumbersAreCommandLineMistakes) {
       {"--terrain", "mesh", "--elevation", "dem.cst"},
       {"--terrain-lighting", "pixel"},  {"--terrain-lighting", "phong", "--elevation", "dem.cst"},
       {"--reference-lighting", "pixel", "--elevation", "dem.cst"}, {"--terrain-detail"},
-      {"--synthesize-relief", "2"}, {"--synthesize-relief", "9", "--elevation", "dem.cst"}};
+      {"--synthesize-relief", "2"}, {"--synthesize-relief", "9", "--elevation", "dem.cst"},
+      {"--look-at", "1,2,3,4"}, {"--look-at", "nan,2"}, {"--look-at", "1,2", "--path", "orbit"}};
   for (std::vector<std::string> args : cases) {
     const std::string what = args[0] + (args.size() > 1 ? " " + args[1] : "");
     args.insert(args.begin(), {"--procedural", "4096", "--out", dir.file("out")});

@@ -125,25 +125,6 @@ TEST(TerrainDetail, OnlyWhereTheColourIsMagnifiedAndFadedInWithoutASeam) {
 
 namespace {
 
-// A HeightField as a height source (its tiles as the tiler cuts them).
-class FieldSource final : public TileSource {
- public:
-  explicit FieldSource(const HeightField& f) : m_field(f) {}
-  const PyramidGeometry& geometry() const override { return m_field.geometry; }
-  TileContent content() const override { return TileContent::kHeightF32; }
-  std::string describe() const override { return "height field"; }
-  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
-    if (!m_field.geometry.contains(key)) return Status::error(ErrorCode::kOutOfRange, "outside");
-    const std::vector<float> t = m_field.tile(key);
-    rgba->resize(t.size() * 4);
-    std::memcpy(rgba->data(), t.data(), rgba->size());
-    return okStatus();
-  }
-
- private:
-  const HeightField& m_field;
-};
-
 // Every tile of `source` into `terrain` (a stack that holds them all).
 void uploadAllTiles(TerrainRenderer& terrain, TileSource& source) {
   const PyramidGeometry& g = source.geometry();

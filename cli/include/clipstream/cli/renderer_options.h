@@ -14,6 +14,7 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/renderer/terrain.h>
 #include <clipstream/store/types.h>
+#include <clipstream/streamer/look_at.h>
 
 #include <string>
 
@@ -41,6 +42,10 @@ Status parseTileFormat(const std::string& name, TileContent* out);
 // kInvalidArgument naming the choices otherwise; *out is set only on
 // success.
 Status parseTerrainMethod(const std::string& name, TerrainMethod* out);
+
+// --look-at X,Y[,HEIGHT]: a map point and optionally its height, finite
+// numbers separated by commas. kInvalidArgument naming the text otherwise.
+Status parseLookAt(const std::string& text, LookAt* out);
 
 // --terrain-lighting (and --reference-lighting): "vertex" or "pixel"
 // (terrainLightingName()). kInvalidArgument naming the choices otherwise;

@@ -12,6 +12,7 @@
 #include <clipstream/renderer/renderer.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/look_at.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -110,6 +111,9 @@ struct FlyOptions {
   TerrainLighting terrain_lighting = TerrainLighting::kVertex;  // --terrain-lighting
   bool terrain_detail = false;                                  // --terrain-detail
   uint32_t synthesized_levels = 0;                              // --synthesize-relief
+  // --look-at X,Y[,HEIGHT]: instead of `path`, the camera that looks at this
+  // map point (aimAtMapPoint()), held for every frame.
+  std::optional<LookAt> look_at;
   // The terrain reference's lighting (--reference-lighting); unset: the
   // flight's. Both lightings judged against one per-pixel reference
   // compare them.

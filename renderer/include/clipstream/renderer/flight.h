@@ -29,6 +29,7 @@
 #include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
+#include <clipstream/streamer/look_at.h>
 #include <clipstream/streamer/camera.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/stats.h>
@@ -95,6 +96,16 @@ struct TerrainLayerConfig {
 // kInvalidArgument as makeSynthesizedHeightSource() says; `levels` 0 does
 // nothing.
 Status synthesizeRelief(uint32_t levels, TerrainLayerConfig* layer);
+
+// The camera of --look-at (streamer/look_at.h): `look`'s map point in the
+// colour layer's georeference (texels without one) and its height (given,
+// else the terrain's ground there, else 0), seen from kLookAtDistanceFraction
+// of the scene's larger side (`colour`'s), looking north, kLookAtPitchRad
+// down. *camera_ground: the terrain's ground under the camera (0 without
+// terrain), for a path whose heights are above the ground. Errors:
+// mapToWorld()'s, groundHeightAt()'s.
+Status aimAtMapPoint(const LookAt& look, const GeoReference& colour_geo, const PyramidGeometry& colour,
+                     const TerrainLayerConfig* terrain, Camera* out, double* camera_ground);
 
 // The terrain layer of a scene of two stores: opens `elevation_path` as a
 // height source, reads both stores' headers and aligns the DEM under the

@@ -1,0 +1,52 @@
+// Cameras aimed at a point of the map (--look-at X,Y[,HEIGHT]): a map point
+// in the colour layer's georeference turned into world units, the ground
+// height there from an elevation layer, and the camera that looks at it.
+// docs/cli.md, "Cameras in map coordinates".
+//
+// Thread-safe: pure functions, but for groundHeightAt(), which reads tiles
+// of its source on the calling thread (call it before a flight, not per
+// frame).
+#pragma once
+
+#include <clipstream/store/types.h>
+#include <clipstream/streamer/alignment.h>
+#include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/tile_source.h>
+
+#include <glm/glm.hpp>
+
+#include <optional>
+
+namespace clipstream {
+
+// What --look-at names: a map point and, optionally, its height (the
+// elevation's unit, before any vertical scale; unset: the ground's).
+struct LookAt {
+  glm::dvec2 map{0.0, 0.0};
+  std::optional<double> height;
+};
+
+// Map point `map` (the georeference's CRS units) in world units (the
+// colour layer's level-0 texels, x and z): the inverse of its transform.
+// Without a georeference (present = false) the point is taken as texels.
+// kInvalidArgument for a rotated or degenerate transform.
+Status mapToWorld(const GeoReference& colour, const glm::dvec2& map, glm::dvec2* world);
+
+// The height (world units, the vertical scale included) of the elevation
+// layer `heights` placed by `alignment` at world point `world_xz`: its
+// level-0 samples there, bilinear (clamped to its edges). Reads at most
+// four level-0 tiles; their errors.
+Status groundHeightAt(TileSource& heights, const LayerAlignment& alignment, const glm::dvec2& world_xz,
+                      double* world_y);
+
+// The camera that looks along heading `heading_rad`, pitched `pitch_rad`
+// (negative: down), at world point `target` from `distance` world units.
+Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad);
+
+// How far a look-at camera stands from its point by default: a tenth of the
+// scene's larger side (as the built-in orbit's height), looking north, 30
+// degrees down.
+inline constexpr double kLookAtDistanceFraction = 0.1;
+inline constexpr double kLookAtPitchRad = -0.5235987755982988;
+
+}  // namespace clipstream

@@ -1,0 +1,90 @@
+// Cameras in map coordinates (--look-at, aimAtMapPoint()): a map point of a
+// georeferenced scene is drawn at the centre of the frame, on the ground.
+#include <clipstream/renderer/flight.h>
+#include <clipstream/streamer/look_at.h>
+
+#include "terrain_fixtures.h"
+#include "test_helpers.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+using namespace clipstream;
+using namespace terrain_test;
+
+TEST(LookAt, MapCoordinatesBecomeTexels) {
+  GeoReference geo;
+  glm::dvec2 world;
+  ASSERT_TRUE(mapToWorld(geo, {12.5, 7.0}, &world).ok());
+  EXPECT_EQ(world, glm::dvec2(12.5, 7.0)) << "without a georeference: texels";
+  geo.present = true;
+  const double t[6] = {500000.0, 0.5, 0.0, 4000000.0, 0.0, -0.5};
+  std::copy(t, t + 6, geo.transform);
+  ASSERT_TRUE(mapToWorld(geo, {500350.0, 3999550.0}, &world).ok());
+  EXPECT_DOUBLE_EQ(world.x, 700.0);
+  EXPECT_DOUBLE_EQ(world.y, 900.0);
+  geo.transform[2] = 0.1;  // rotated
+  EXPECT_EQ(mapToWorld(geo, {0.0, 0.0}, &world).code, ErrorCode::kInvalidArgument);
+}
+
+namespace {
+
+// Rolling hills, smooth enough that every ring's surface is within a small
+// fraction of a unit of the samples' (the methods' own error is measured
+// elsewhere).
+HeightField smoothField(uint32_t side) {
+  HeightField f;
+  f.w = f.h = side;
+  f.samples.resize(size_t(side) * side);
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x)
+      f.samples[size_t(y) * side + x] = float(60.0 + 30.0 * std::sin(x * 0.01) * std::cos(y * 0.013));
+  EXPECT_TRUE(makePyramidGeometry(side, side, 128, PixelFormat::kF32, &f.geometry));
+  return f;
+}
+
+}  // namespace
+
+TEST(LookAt, TheNamedPointIsAtTheCentreOfTheFrameOnTheGround) {
+  CLIPSTREAM_REQUIRE_GL();
+  // A 1024^2 field (2 world units a sample) under a 2048^2 image whose
+  // georeference puts texel (x, y) at map (500000 + x / 2, 4000000 - y / 2).
+  GeoReference geo;
+  geo.present = true;
+  const double t[6] = {500000.0, 0.5, 0.0, 4000000.0, 0.0, -0.5};
+  std::copy(t, t + 6, geo.transform);
+  for (const glm::dvec2 target : {glm::dvec2(700.0, 900.0), glm::dvec2(1500.5, 1200.25)}) {
+    TerrainScene s = makeScene(overField(1024.0, 1024.0, 500.0, 0.0, -0.5), 64, TerrainMethod::kClipmap,
+                               smoothField(1024));
+    TerrainLayerConfig layer;
+    layer.source = std::make_shared<FieldSource>(s.field);
+    layer.alignment = s.terrain->config().mapping;
+    LookAt look;
+    look.map = {t[0] + target.x * t[1], t[3] + target.y * t[5]};
+    Camera camera;
+    double camera_ground = 0.0;
+    ASSERT_TRUE(aimAtMapPoint(look, geo, s.colour_source->geometry(), &layer, &camera, &camera_ground).ok());
+    EXPECT_GT(camera.position.y, camera_ground) << "the camera above the ground";
+    uploadRings(*s.terrain, s.field, camera);
+    drawTerrain(s, camera);
+    std::vector<float> xyzw;
+    ASSERT_TRUE(s.terrain->readPositions(camera, kViewport, *s.colour, &xyzw).ok());
+    // The pixels around the frame's centre (it falls between four).
+    glm::dvec3 centre(0.0);
+    for (uint32_t y : {kViewport.height_px / 2 - 1, kViewport.height_px / 2})
+      for (uint32_t x : {kViewport.width_px / 2 - 1, kViewport.width_px / 2}) {
+        const float* p = &xyzw[(size_t(y) * kViewport.width_px + x) * 4];
+        ASSERT_GE(p[3], 1.0f) << "ground at the centre";
+        centre += 0.25 * (glm::dvec3(p[0], p[1], p[2]) + camera.position);
+      }
+    // Within a texel of the point, on the ground there.
+    EXPECT_NEAR(centre.x, target.x, 1.0);
+    EXPECT_NEAR(centre.z, target.y, 1.0);
+    double ground = 0.0;
+    ASSERT_TRUE(groundHeightAt(*layer.source, layer.alignment, target, &ground).ok());
+    EXPECT_NEAR(centre.y, ground, 0.5);
+  }
+}
