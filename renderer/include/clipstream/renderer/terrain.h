@@ -234,7 +234,8 @@ class TerrainRenderer {
   // Quadtree: every leaf of the last draw (culled ones included); empty
   // for the other methods.
   const std::vector<TerrainNode>& lastNodes() const;
-  // Bytes of the height stack texture (video memory).
+  // Bytes of the height stack texture (video memory), with its gradients
+  // when lit per pixel.
   uint64_t textureBytes() const;
   const PyramidGeometry& geometry() const;
   const TerrainConfig& config() const;
