@@ -281,10 +281,26 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
     r.path.keyframes[1].t_s = 1.0;
   } else {
     const auto names = FlightPath::builtinNames();
-    Status s = std::find(names.begin(), names.end(), o.path) != names.end()
-                   ? FlightPath::builtin(o.path, geometry, &r.path, std::max(1u, o.teleport_frames))
-                   : FlightPath::load(o.path, &r.path);
+    const bool builtin = std::find(names.begin(), names.end(), o.path) != names.end();
+    if (builtin && o.path_in_map_units)
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--path-in-map-units is for a JSON path file, not the built-in path " + o.path);
+    Status s = builtin ? FlightPath::builtin(o.path, geometry, &r.path, std::max(1u, o.teleport_frames))
+                       : FlightPath::load(o.path, &r.path);
     if (!s) return s;
+    if (o.path_in_map_units) {
+      GeoReference geo;
+      if (!o.store_path.empty()) {
+        std::unique_ptr<TileStoreReader> reader;
+        if (s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
+        geo = reader->info().geo;
+      }
+      if (!geo.present)
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "--path-in-map-units: the colour store has no georeference (give the path in texels)");
+      if (s = pathFromMapUnits(geo, r.terrain ? &r.terrain->alignment : nullptr, &r.path); !s)
+        return Status::error(s.code, "--path-in-map-units: " + s.message);
+    }
   }
   r.speed = o.speed;
   // The whole path at this speed, bounded like --frames: a long path flown

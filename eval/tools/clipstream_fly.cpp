@@ -49,6 +49,9 @@ void addOptions(CLI::App& app, Args* args) {
   const auto delay_ms = cli::inRange(0.0, kMaxFlyDelayMs);
   app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   app.add_option("--path", o.path, "Built-in path (pass, dive, orbit, teleport, zoom, valley) or JSON file");
+  app.add_flag("--path-in-map-units", o.path_in_map_units,
+               "The --path JSON file's x and z are the colour store's map coordinates and its heights are "
+               "in the elevation's unit (docs/cli.md, \"Cameras in map coordinates\")");
   app.add_option("--look-at", a.look_at,
                  "X,Y[,HEIGHT]: instead of --path, hold the camera that looks at this point, in the colour "
                  "store's map coordinates (level-0 texels without a georeference), from the south, 30 degrees "
@@ -219,6 +222,7 @@ std::optional<std::string> toFlyOptions(const CLI::App& app, Args& a) {
     LookAt look;
     if (Status s = cli::parseLookAt(a.look_at, &look); !s) return "--look-at: " + s.message;
     if (app.count("--path")) return "give --path or --look-at, not both";
+    if (o.path_in_map_units) return "--path-in-map-units is for a --path file, not --look-at";
     o.look_at = look;
   }
   if (!a.reference_lighting.empty()) {

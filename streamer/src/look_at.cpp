@@ -52,6 +52,16 @@ Status groundHeightAt(TileSource& heights, const LayerAlignment& alignment, cons
   return okStatus();
 }
 
+Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevation, FlightPath* path) {
+  for (Keyframe& k : path->keyframes) {
+    glm::dvec2 world;
+    if (Status s = mapToWorld(colour, {k.position.x, k.position.z}, &world); !s) return s;
+    const double y = elevation ? k.position.y * elevation->world_per_height : k.position.y / std::abs(colour.transform[1]);
+    k.position = {world.x, y, world.y};
+  }
+  return okStatus();
+}
+
 Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad) {
   Camera c;
   c.heading_rad = heading_rad;

@@ -30,6 +30,34 @@ TEST(LookAt, MapCoordinatesBecomeTexels) {
   EXPECT_EQ(mapToWorld(geo, {0.0, 0.0}, &world).code, ErrorCode::kInvalidArgument);
 }
 
+// A path in map units (--path-in-map-units): x and z through the
+// georeference, heights through the elevation's scale (or, without one, the
+// georeference's pixel size).
+TEST(LookAt, APathInMapUnitsBecomesTexels) {
+  GeoReference geo;
+  geo.present = true;
+  const double t[6] = {500000.0, 0.5, 0.0, 4000000.0, 0.0, -0.5};
+  std::copy(t, t + 6, geo.transform);
+  FlightPath path;
+  Keyframe a, b;
+  a.position = {500350.0, 30.0, 3999550.0};
+  b.t_s = 2.0;
+  b.position = {500000.0, 10.0, 4000000.0};
+  path.keyframes = {a, b};
+  LayerAlignment elevation;
+  elevation.world_per_height = 2.0;
+  FlightPath over_terrain = path;
+  ASSERT_TRUE(pathFromMapUnits(geo, &elevation, &over_terrain).ok());
+  EXPECT_EQ(over_terrain.keyframes[0].position, glm::dvec3(700.0, 60.0, 900.0));
+  EXPECT_EQ(over_terrain.keyframes[1].position, glm::dvec3(0.0, 20.0, 0.0));
+  EXPECT_EQ(over_terrain.keyframes[1].t_s, 2.0) << "times and angles as they were";
+  FlightPath flat = path;
+  ASSERT_TRUE(pathFromMapUnits(geo, nullptr, &flat).ok());
+  EXPECT_EQ(flat.keyframes[0].position, glm::dvec3(700.0, 60.0, 900.0));
+  geo.transform[4] = 0.2;  // rotated
+  EXPECT_EQ(pathFromMapUnits(geo, nullptr, &flat).code, ErrorCode::kInvalidArgument);
+}
+
 namespace {
 
 // Rolling hills, smooth enough that every ring's surface is within a small

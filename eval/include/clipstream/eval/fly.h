@@ -111,6 +111,11 @@ struct FlyOptions {
   TerrainLighting terrain_lighting = TerrainLighting::kVertex;  // --terrain-lighting
   bool terrain_detail = false;                                  // --terrain-detail
   uint32_t synthesized_levels = 0;                              // --synthesize-relief
+  // --path-in-map-units: a JSON path's x and z are map coordinates of the
+  // colour store's georeference and its heights are in the elevation's
+  // unit (without terrain: map units), turned into texels by
+  // pathFromMapUnits().
+  bool path_in_map_units = false;
   // --look-at X,Y[,HEIGHT]: instead of `path`, the camera that looks at this
   // map point (aimAtMapPoint()), held for every frame.
   std::optional<LookAt> look_at;

@@ -11,6 +11,7 @@
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/flight_path.h>
 #include <clipstream/streamer/tile_source.h>
 
 #include <glm/glm.hpp>
@@ -38,6 +39,12 @@ Status mapToWorld(const GeoReference& colour, const glm::dvec2& map, glm::dvec2*
 // four level-0 tiles; their errors.
 Status groundHeightAt(TileSource& heights, const LayerAlignment& alignment, const glm::dvec2& world_xz,
                       double* world_y);
+
+// A path whose keyframes' x and z are map coordinates of `colour` and whose
+// heights are in the elevation's unit (`elevation` null: map units, as
+// far as the georeference's x pixel size makes them texels), turned into
+// texels in place. Errors as mapToWorld().
+Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevation, FlightPath* path);
 
 // The camera that looks along heading `heading_rad`, pitched `pitch_rad`
 // (negative: down), at world point `target` from `distance` world units.
