@@ -279,6 +279,15 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
     k.pitch_deg = camera.pitch_rad * 180.0 / M_PI;
     r.path.keyframes = {k, k};
     r.path.keyframes[1].t_s = 1.0;
+  } else if (o.path == kSummitPath) {
+    // The built-in orbit around the terrain's highest point instead of the
+    // texture's centre.
+    if (!r.terrain) return Status::error(ErrorCode::kInvalidArgument, "--path summit needs --elevation");
+    glm::dvec3 peak;
+    if (Status s = highestPoint(*r.terrain->source, r.terrain->alignment, &peak); !s) return s;
+    if (Status s = FlightPath::builtin("orbit", geometry, &r.path); !s) return s;
+    const glm::dvec2 shift = glm::dvec2(peak.x, peak.z) - 0.5 * glm::dvec2(geometry.width_px, geometry.height_px);
+    for (Keyframe& k : r.path.keyframes) k.position += glm::dvec3(shift.x, 0.0, shift.y);
   } else {
     const auto names = FlightPath::builtinNames();
     const bool builtin = std::find(names.begin(), names.end(), o.path) != names.end();

@@ -62,6 +62,43 @@ Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevat
   return okStatus();
 }
 
+Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world) {
+  const PyramidGeometry& g = heights.geometry();
+  uint32_t level = g.levelCount() - 1;
+  while (level > 0 && uint64_t(g.levels[level - 1].tiles_x) * g.levels[level - 1].tiles_y <= 16) --level;
+  std::vector<uint8_t> bytes;
+  // The highest sample of `level` within [x0, x1] x [y0, y1] (clamped).
+  auto highest = [&](uint32_t l, int64_t x0, int64_t y0, int64_t x1, int64_t y1, int64_t* bx, int64_t* by,
+                     float* bh) -> Status {
+    const LevelInfo& info = g.levels[l];
+    x0 = std::max<int64_t>(x0, 0), y0 = std::max<int64_t>(y0, 0);
+    x1 = std::min<int64_t>(x1, int64_t(info.width_px) - 1), y1 = std::min<int64_t>(y1, int64_t(info.height_px) - 1);
+    *bh = -INFINITY;
+    const int64_t tp = g.tile_px;
+    for (int64_t ty = y0 / tp; ty <= y1 / tp; ++ty)
+      for (int64_t tx = x0 / tp; tx <= x1 / tp; ++tx) {
+        if (Status s = heights.fetch({l, uint32_t(tx), uint32_t(ty)}, &bytes); !s) return s;
+        const float* f = reinterpret_cast<const float*>(bytes.data());
+        for (int64_t j = std::max(y0, ty * tp); j <= std::min(y1, ty * tp + tp - 1); ++j)
+          for (int64_t i = std::max(x0, tx * tp); i <= std::min(x1, tx * tp + tp - 1); ++i) {
+            const float h = f[size_t((j - ty * tp) * tp + (i - tx * tp))];
+            if (h > *bh) *bh = h, *bx = i, *by = j;
+          }
+      }
+    return okStatus();
+  };
+  int64_t x = 0, y = 0;
+  float h = 0.0f;
+  if (Status s = highest(level, 0, 0, INT64_MAX / 2, INT64_MAX / 2, &x, &y, &h); !s) return s;
+  while (level > 0) {
+    --level;
+    if (Status s = highest(level, 2 * x - 2, 2 * y - 2, 2 * x + 2, 2 * y + 2, &x, &y, &h); !s) return s;
+  }
+  const glm::dvec2 xz = alignment.sample0_world + glm::dvec2(double(x), double(y)) * alignment.world_per_sample;
+  *world = {xz.x, double(h) * alignment.world_per_height, xz.y};
+  return okStatus();
+}
+
 Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad) {
   Camera c;
   c.heading_rad = heading_rad;

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -75,6 +76,32 @@ HeightField smoothField(uint32_t side) {
 }
 
 }  // namespace
+
+// The summit the built-in path circles (--path summit): the DEM's highest
+// sample, found by a climb from its coarse levels, in world units.
+TEST(LookAt, TheHighestPointIsTheSummit) {
+  HeightField f = smoothField(1024);
+  // A bump on the rolling hills, its top at sample (301, 702).
+  for (uint32_t y = 0; y < 1024; ++y)
+    for (uint32_t x = 0; x < 1024; ++x) {
+      const double d2 = (double(x) - 301.0) * (double(x) - 301.0) + (double(y) - 702.0) * (double(y) - 702.0);
+      f.samples[size_t(y) * 1024 + x] += float(80.0 * std::exp(-d2 / 2000.0));
+    }
+  FieldSource source(f);
+  LayerAlignment alignment;
+  alignment.world_per_sample = {2.0, 2.0};
+  alignment.sample0_world = {1.0, 1.0};
+  alignment.world_per_height = 0.5;
+  glm::dvec3 peak;
+  ASSERT_TRUE(highestPoint(source, alignment, &peak).ok());
+  // The highest sample, by looking at every one (the hills' slope moves it
+  // a few samples off the bump's centre).
+  const size_t top = size_t(std::max_element(f.samples.begin(), f.samples.end()) - f.samples.begin());
+  EXPECT_NEAR(double(top % 1024), 301.0, 8.0);
+  EXPECT_DOUBLE_EQ(peak.x, 1.0 + 2.0 * double(top % 1024));
+  EXPECT_DOUBLE_EQ(peak.z, 1.0 + 2.0 * double(top / 1024));
+  EXPECT_DOUBLE_EQ(peak.y, 0.5 * double(f.samples[top]));
+}
 
 TEST(LookAt, TheNamedPointIsAtTheCentreOfTheFrameOnTheGround) {
   CLIPSTREAM_REQUIRE_GL();

@@ -42,7 +42,7 @@ inline constexpr double kDefaultMaxFailedReadsPercent = 1.0;
 struct FlyOptions {
   std::string store_path;          // tile store file or http(s) URL; empty when procedural_px > 0
   uint64_t procedural_px = 0;      // > 0: procedural texture of this side instead
-  std::string path = "orbit";      // built-in name or JSON file
+  std::string path = "orbit";      // built-in name (or kSummitPath) or JSON file
   uint32_t frames = 0;             // 0 = the whole path at `speed`
   Viewport viewport{1280, 720};
   double speed = 1.0;              // path seconds per simulated second
@@ -124,6 +124,10 @@ struct FlyOptions {
   // compare them.
   std::optional<TerrainLighting> reference_lighting;
 };
+
+// --path summit: over terrain, the built-in orbit around the DEM's highest
+// point (highestPoint()) instead of the texture's centre.
+inline constexpr const char* kSummitPath = "summit";
 
 // Largest --vertical-scale: beyond it every slope is a wall.
 inline constexpr double kMaxVerticalScale = 1000.0;

@@ -46,6 +46,13 @@ Status groundHeightAt(TileSource& heights, const LayerAlignment& alignment, cons
 // texels in place. Errors as mapToWorld().
 Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevation, FlightPath* path);
 
+// The highest point of the elevation layer `heights` placed by `alignment`
+// (world x, height, z): the highest sample of its coarsest level of at
+// most 16 tiles, then, level by level, the highest sample within two of it
+// at each finer level (a local climb: the summit of the coarse level's
+// highest hill). Reads at most 16 tiles, then 4 a level; their errors.
+Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world);
+
 // The camera that looks along heading `heading_rad`, pitched `pitch_rad`
 // (negative: down), at world point `target` from `distance` world units.
 Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad);
