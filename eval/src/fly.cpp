@@ -256,6 +256,16 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
   return okStatus();
 }
 
+// The colour store's georeference, from its header (none for --procedural).
+Status colourGeoReference(const FlyOptions& o, GeoReference* out) {
+  *out = GeoReference{};
+  if (o.store_path.empty()) return okStatus();
+  std::unique_ptr<TileStoreReader> reader;
+  if (Status s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
+  *out = reader->info().geo;
+  return okStatus();
+}
+
 // The path, its frame count and the flight's settings from the options.
 Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, FlightRunOptions* out) {
   FlightRunOptions& r = *out;
@@ -263,11 +273,7 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
     // One camera, held: two equal keyframes a second apart (over terrain a
     // path's heights are above the ground under the camera).
     GeoReference geo;
-    if (!o.store_path.empty()) {
-      std::unique_ptr<TileStoreReader> reader;
-      if (Status s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
-      geo = reader->info().geo;
-    }
+    if (Status s = colourGeoReference(o, &geo); !s) return s;
     Camera camera;
     double ground = 0.0;
     const TerrainLayerConfig* terrain = r.terrain ? &*r.terrain : nullptr;
@@ -299,11 +305,7 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
     if (!s) return s;
     if (o.path_in_map_units) {
       GeoReference geo;
-      if (!o.store_path.empty()) {
-        std::unique_ptr<TileStoreReader> reader;
-        if (s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
-        geo = reader->info().geo;
-      }
+      if (s = colourGeoReference(o, &geo); !s) return s;
       if (!geo.present)
         return Status::error(ErrorCode::kInvalidArgument,
                              "--path-in-map-units: the colour store has no georeference (give the path in texels)");
