@@ -199,6 +199,55 @@ TEST(Readers, SpilledCoefficientsDecodeLikeHeldOnes) {
   EXPECT_TRUE(spilled == held);
 }
 
+// Bytes this process has handed to write() and pwrite() so far.
+uint64_t bytesWritten() {
+  std::ifstream io("/proc/self/io");
+  std::string key;
+  uint64_t value = 0;
+  while (io >> key >> value) {
+    if (key == "wchar:") return value;
+  }
+  return 0;
+}
+
+// A progressive JPEG cut short whose header claims a huge image: libjpeg
+// would pad every block of every scan after the data runs out, writing
+// gigabytes of zeros to the coefficient file before anyone saw the damage.
+// The first sign of damage ends the read, naming the file, having written
+// next to nothing.
+TEST(Readers, AProgressiveJpegCutShortFailsAtItsFirstDamage) {
+  TempDir dir;
+  const std::string small = dir.file("small.jpg");
+  ASSERT_TRUE(writeImage(small, 256, 256, 3, kU8, pattern, 0, setInt("jpeg:progressive", 1)));
+  std::vector<uint8_t> bytes = readBytes(small);
+  size_t sof = 0;
+  for (size_t i = 0; i + 9 < bytes.size(); ++i) {
+    if (bytes[i] == 0xFF && bytes[i + 1] == 0xC2) {
+      sof = i;
+      break;
+    }
+  }
+  ASSERT_GT(sof, 0u) << "no progressive frame header";
+  // Height and width: 20000 x 20000, 1.1 GiB of coefficients at 4:2:0.
+  bytes[sof + 5] = bytes[sof + 7] = 20000 >> 8;
+  bytes[sof + 6] = bytes[sof + 8] = 20000 & 255;
+  bytes.resize(bytes.size() / 2);
+  const std::string cut = dir.file("cut.jpg");
+  writeBytes(cut, bytes);
+
+  ImageReadOptions read;
+  read.memory_budget_bytes = uint64_t(64) << 20;
+  const uint64_t written_before = bytesWritten();
+  std::unique_ptr<ImageSource> src;
+  const Status s = openImageFile(cut, std::nullopt, &src, read);
+  const uint64_t written = bytesWritten() - written_before;
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code, ErrorCode::kTruncated) << s.toString();
+  EXPECT_NE(s.toString().find(cut), std::string::npos) << s.toString();
+  EXPECT_NE(s.toString().find("damaged image data"), std::string::npos) << s.toString();
+  EXPECT_LT(written, uint64_t(1) << 20) << "bytes written before the failure";
+}
+
 // Panels (a budget too small for the image's width) read each file in
 // blocks of columns, going back up the image for every block: the tiles
 // are those of one pass down, for every reader.

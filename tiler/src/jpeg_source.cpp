@@ -52,14 +52,17 @@ struct JpegError {
 }
 
 // libjpeg reports damage it can step over (data cut short, a bad Huffman
-// code) as a warning and pads with grey; the first is kept so the read
-// fails instead of tiling the padding. Trace messages are ignored.
+// code) as a warning and pads with grey. The read fails instead of tiling
+// the padding, and it fails at once: left to go on, libjpeg pads every
+// remaining block of every remaining scan, which for a multi-scan file
+// whose header claims a huge image means gigabytes of zeros written to the
+// coefficient file before the failure is seen. Trace messages are ignored.
 void onJpegMessage(j_common_ptr cinfo, int level) {
+  if (level >= 0) return;
   auto* e = reinterpret_cast<JpegError*>(cinfo->err);
-  if (level < 0 && !e->warned) {
-    (*cinfo->err->format_message)(cinfo, e->warning);
-    e->warned = true;
-  }
+  (*cinfo->err->format_message)(cinfo, e->warning);
+  e->warned = true;
+  std::longjmp(e->jump, 1);
 }
 
 // One coefficient array kept in a temporary file. libjpeg sees only the
@@ -253,7 +256,6 @@ class Decoder {
         })) {
       return failure("cannot open image");
     }
-    if (m_err.warned) return damaged();
     return okStatus();
   }
 
@@ -275,7 +277,6 @@ class Decoder {
       return failure(m_spill.failure != nullptr ? "cannot decode (coefficient file in " + m_spill.dir + ")"
                                                 : std::string("cannot decode image"));
     }
-    if (m_err.warned) return damaged();
     return okStatus();
   }
 
@@ -287,7 +288,6 @@ class Decoder {
     if (!guarded([&] { jpeg_read_scanlines(&m_cinfo, rows, 1); })) {
       return failure("cannot read row " + std::to_string(m_cinfo.output_scanline));
     }
-    if (m_err.warned) return damaged();
     return okStatus();
   }
 
@@ -299,7 +299,10 @@ class Decoder {
     return true;
   }
 
+  // A warning (onJpegMessage) ends the call it came from too: it is
+  // reported as damage, not as a decoder failure.
   Status failure(const std::string& what) {
+    if (m_err.warned) return damaged();
     return Status::error(ErrorCode::kIo,
                          m_path + ": " + what + ": " + decoderMessage(m_err.message, "decoder failed"));
   }
