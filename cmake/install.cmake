@@ -4,7 +4,8 @@
 # Two components, one Debian package each (cmake/package.cmake):
 #   programs (package clipstream):
 #     bin/clipstream-*                  the programs
-#     LIBDIR/clipstream/libclipstream_tiler_oiio.so   the image reader module the tiler loads
+#     LIBDIR/clipstream/libclipstream_tiler_oiio.so   the image reader modules the tiler loads
+#     LIBDIR/clipstream/libclipstream_tiler_gdal.so   (OpenImageIO's, GDAL's) when an input needs one
 #     share/man/man1/clipstream-*.1.gz  their manual pages (help2man, from --help)
 #     share/bash-completion/completions/clipstream-*  their shell completion
 #     share/doc/clipstream/             README, docs, copyright

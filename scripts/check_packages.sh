@@ -35,8 +35,10 @@ for program in clipstream-tile clipstream-merge clipstream-info clipstream-fly c
   has "$p" "^/usr/share/man/man1/$program\.1\.gz\$" "clipstream lacks the manual page of $program"
   has "$p" "^/usr/share/bash-completion/completions/$program\$" "clipstream lacks the completion of $program"
 done
-has "$p" "^/usr/lib/$multiarch/clipstream/libclipstream_tiler_oiio\.so\$" \
-  "clipstream lacks the module in /usr/lib/$multiarch/clipstream"
+for module in oiio gdal; do
+  has "$p" "^/usr/lib/$multiarch/clipstream/libclipstream_tiler_$module\.so\$" \
+    "clipstream lacks the $module module in /usr/lib/$multiarch/clipstream"
+done
 has "$p" "^/usr/share/doc/clipstream/copyright\$" "clipstream lacks its copyright file"
 lacks "$p" "^/usr/include/|\.a\$|/cmake/|/pkgconfig/" "clipstream carries development files"
 for name in util store tiler streamer renderer; do
@@ -60,6 +62,18 @@ CLIPSTREAM_TILER_OIIO_MODULE='' LD_DEBUG=files \
   "$root/usr/bin/clipstream-tile" -q --no-fsync "$root/noise.ppm" "$root/noise.cst" 2>"$root/loader.log"
 grep -qF "file=$root/usr/bin/../lib/$multiarch/clipstream/libclipstream_tiler_oiio.so " "$root/loader.log" ||
   fail "the unpacked clipstream-tile did not load the module from /usr/lib/$multiarch/clipstream"
+# ... and its GDAL module: a VRT goes to GDAL.
+{
+  echo '<VRTDataset rasterXSize="300" rasterYSize="200">'
+  for b in 1 2 3; do
+    echo "<VRTRasterBand dataType=\"Byte\" band=\"$b\"><SimpleSource><SourceFilename relativeToVRT=\"1\">noise.ppm</SourceFilename><SourceBand>$b</SourceBand></SimpleSource></VRTRasterBand>"
+  done
+  echo '</VRTDataset>'
+} >"$root/noise.vrt"
+CLIPSTREAM_TILER_GDAL_MODULE='' LD_DEBUG=files \
+  "$root/usr/bin/clipstream-tile" -q --no-fsync "$root/noise.vrt" "$root/noise-vrt.cst" 2>"$root/loader.log"
+grep -qF "file=$root/usr/bin/../lib/$multiarch/clipstream/libclipstream_tiler_gdal.so " "$root/loader.log" ||
+  fail "the unpacked clipstream-tile did not load the GDAL module from /usr/lib/$multiarch/clipstream"
 "$root/usr/bin/clipstream-info" --verify "$root/noise.cst" | tail -n 1
 zcat "$root/usr/share/man/man1/clipstream-tile.1.gz" | grep -qF 'memory\-mb' ||
   fail "the manual page of clipstream-tile does not list --memory-mb"

@@ -11,6 +11,7 @@ packages=(
   libopenimageio-dev libzstd-dev libxxhash-dev
   libtiff-dev libjpeg62-turbo-dev libpng-dev  # the tiler reads TIFF, JPEG and PNG without OpenImageIO
   libxml2-dev           # ... and GDAL VRTs (mosaics) with a real XML parser
+  libgdal-dev           # ... and every other raster, URLs and VRTs through GDAL (a module)
   libcurl4-openssl-dev  # stores read over HTTP(S)
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   openssl               # ... and make a certificate for its https:// test

@@ -224,7 +224,9 @@ TEST_P(TerrainStability, SynthesizedReliefTwoLevelsBelowTheDem) {
   sc.lowest_ground = 0.0;  // the synthesis may dip below the DEM's lowest sample
   const Outcome r = flyAndCheck(sc);
   EXPECT_LT(r.run.frames.back().sample.terrain_finest_level, sc.synthesized_levels);
-  if (sc.method == TerrainMethod::kClipmap) EXPECT_EQ(r.run.frames.back().sample.terrain_finest_level, 0u);
+  if (sc.method == TerrainMethod::kClipmap) {
+    EXPECT_EQ(r.run.frames.back().sample.terrain_finest_level, 0u);
+  }
 }
 
 TEST_P(TerrainStability, SpikesAtTheHundredfoldSpeed) {

@@ -154,8 +154,14 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
   Status s = planHeights(o, (*source)->info(), &plan);
   if (!s) return s;
   ElevationTags tags;
-  s = readElevationTags(tags_path, &tags);
-  if (!s) return s;
+  if (const SourceMetadata& meta = (*source)->info().metadata; meta.present) {
+    tags.has_nodata = meta.has_nodata;  // the decoder read them (GDAL)
+    tags.nodata = meta.nodata;
+    tags.units = meta.units;
+  } else {
+    s = readElevationTags(tags_path, &tags);
+    if (!s) return s;
+  }
   HeightConversion conversion;
   conversion.stored = plan.stored;
   conversion.has_nodata = o.nodata.has_value() || tags.has_nodata;

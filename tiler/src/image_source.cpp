@@ -4,15 +4,18 @@
 #include <clipstream/tiler/image_source.h>
 
 #include "native_source.h"
+#include "gdal_module.h"
 #include "oiio_module.h"
 
 #include <dlfcn.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <system_error>
 #include <mutex>
 #include <vector>
@@ -20,14 +23,17 @@
 #ifndef CLIPSTREAM_TILER_OIIO_MODULE_PATH
 #define CLIPSTREAM_TILER_OIIO_MODULE_PATH ""
 #endif
-#ifndef CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR
-#define CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR "../lib/clipstream"
+#ifndef CLIPSTREAM_TILER_GDAL_MODULE_PATH
+#define CLIPSTREAM_TILER_GDAL_MODULE_PATH ""
 #endif
-#ifndef CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED
-#define CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED ""
+#ifndef CLIPSTREAM_TILER_MODULE_FROM_BINDIR
+#define CLIPSTREAM_TILER_MODULE_FROM_BINDIR "../lib/clipstream"
 #endif
-#ifndef CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED
-#define CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED ""
+#ifndef CLIPSTREAM_TILER_MODULE_INSTALLED
+#define CLIPSTREAM_TILER_MODULE_INSTALLED ""
+#endif
+#ifndef CLIPSTREAM_TILER_MODULE_PACKAGED
+#define CLIPSTREAM_TILER_MODULE_PACKAGED ""
 #endif
 
 namespace clipstream {
@@ -35,34 +41,41 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// OpenImageIO and its ~260 dependent libraries cost about 120 MB of
-// resident memory as soon as they are loaded, which alone would break small
-// --memory-mb budgets. They live in a module loaded on the first file open,
-// so procedural inputs never pay for them.
-Status loadOiioModule(OpenImageFileFn* out) {
+// A module the tiler loads on first use: its file, its entry point, the
+// environment variable that names it, and where the build put it.
+struct ModuleSpec {
+  const char* file_name;
+  const char* symbol;
+  const char* env;
+  const char* build_path;
+};
+
+// Loads `spec`'s module (once per process; it stays loaded) and returns its
+// entry point. Looked for: $env, beside the program, LIBDIR/clipstream
+// relative to the program, the build folder, the configured and packaged
+// module folders, then the loader's search path.
+Status loadModule(const ModuleSpec& spec, void** out) {
   static std::mutex mutex;
-  static OpenImageFileFn cached = nullptr;
-  static std::string failure;
+  static std::vector<std::pair<std::string, void*>> loaded;
   std::lock_guard lock(mutex);
-  if (cached != nullptr) {
-    *out = cached;
-    return okStatus();
+  for (const auto& [name, fn] : loaded) {
+    if (name == spec.file_name) {
+      *out = fn;
+      return okStatus();
+    }
   }
   std::vector<std::string> candidates;
-  if (const char* env = std::getenv("CLIPSTREAM_TILER_OIIO_MODULE"); env != nullptr && *env) {
-    candidates.push_back(env);
-  }
+  if (const char* env = std::getenv(spec.env); env != nullptr && *env) candidates.push_back(env);
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (!ec) {
-    candidates.push_back((exe.parent_path() / kOiioModuleFileName).string());
-    candidates.push_back(
-        (exe.parent_path() / CLIPSTREAM_TILER_OIIO_MODULE_FROM_BINDIR / kOiioModuleFileName).string());
+    candidates.push_back((exe.parent_path() / spec.file_name).string());
+    candidates.push_back((exe.parent_path() / CLIPSTREAM_TILER_MODULE_FROM_BINDIR / spec.file_name).string());
   }
-  if (*CLIPSTREAM_TILER_OIIO_MODULE_PATH) candidates.push_back(CLIPSTREAM_TILER_OIIO_MODULE_PATH);
-  for (const char* folder : {CLIPSTREAM_TILER_OIIO_MODULE_INSTALLED, CLIPSTREAM_TILER_OIIO_MODULE_PACKAGED})
-    if (*folder) candidates.push_back((fs::path(folder) / kOiioModuleFileName).string());
-  candidates.push_back(kOiioModuleFileName);  // the loader's search path
+  if (*spec.build_path) candidates.push_back(spec.build_path);
+  for (const char* folder : {CLIPSTREAM_TILER_MODULE_INSTALLED, CLIPSTREAM_TILER_MODULE_PACKAGED})
+    if (*folder) candidates.push_back((fs::path(folder) / spec.file_name).string());
+  candidates.push_back(spec.file_name);  // the loader's search path
   std::string errors;
   for (const std::string& c : candidates) {
     if (c.find('/') != std::string::npos && !fs::exists(c, ec)) continue;
@@ -71,20 +84,71 @@ Status loadOiioModule(OpenImageFileFn* out) {
       errors += std::string(" ") + dlerror() + ";";
       continue;
     }
-    auto fn = reinterpret_cast<OpenImageFileFn>(dlsym(handle, kOiioModuleSymbol));
+    void* fn = dlsym(handle, spec.symbol);
     if (fn == nullptr) {
-      errors += " " + c + ": no " + kOiioModuleSymbol + ";";
+      errors += " " + c + ": no " + spec.symbol + ";";
       continue;
     }
-    cached = fn;  // the module stays loaded for the life of the process
+    loaded.emplace_back(spec.file_name, fn);
     *out = fn;
     return okStatus();
   }
-  return Status::error(ErrorCode::kUnsupported,
-                       std::string("cannot load the image reader module ") + kOiioModuleFileName +
-                           " (set CLIPSTREAM_TILER_OIIO_MODULE):" + errors);
+  return Status::error(ErrorCode::kUnsupported, std::string("cannot load the image reader module ") +
+                                                    spec.file_name + " (set " + spec.env + "):" + errors);
 }
 
+// OpenImageIO and its ~260 dependent libraries cost about 120 MB of
+// resident memory as soon as they are loaded, which alone would break small
+// --memory-mb budgets. They live in a module loaded on the first file open
+// that needs them, so procedural inputs and the formats the tiler reads
+// itself never pay for them.
+Status openWithOiio(const std::string& path, std::optional<PixelFormat> forced,
+                    std::unique_ptr<ImageSource>* out) {
+  static const ModuleSpec kSpec{kOiioModuleFileName, kOiioModuleSymbol, "CLIPSTREAM_TILER_OIIO_MODULE",
+                                CLIPSTREAM_TILER_OIIO_MODULE_PATH};
+  void* fn = nullptr;
+  Status s = loadModule(kSpec, &fn);
+  if (!s) return s;
+  reinterpret_cast<OpenImageFileFn>(fn)(&path, &forced, out, &s);
+  return s;
+}
+
+// GDAL likewise (gdal_module.h).
+Status openWithGdal(const std::string& path, std::optional<PixelFormat> forced,
+                    const ImageReadOptions& read, std::unique_ptr<ImageSource>* out) {
+  static const ModuleSpec kSpec{kGdalModuleFileName, kGdalModuleSymbol, "CLIPSTREAM_TILER_GDAL_MODULE",
+                                CLIPSTREAM_TILER_GDAL_MODULE_PATH};
+  void* fn = nullptr;
+  Status s = loadModule(kSpec, &fn);
+  if (!s) return s;
+  reinterpret_cast<OpenGdalFn>(fn)(&path, &forced, &read, out, &s);
+  return s;
+}
+
+bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
+
+// The first bytes of a file (fewer when it is shorter).
+std::string fileHead(const std::string& path, size_t bytes) {
+  std::string head(bytes, '\0');
+  std::ifstream in(path, std::ios::binary);
+  in.read(head.data(), std::streamsize(bytes));
+  head.resize(size_t(std::max<std::streamsize>(in.gcount(), 0)));
+  return head;
+}
+
+// Files whose place on the ground only GDAL reads among our readers: a
+// VRT (which may also warp, crop or combine its sources) and JPEG 2000
+// (OpenImageIO decodes its pixels but drops GeoJP2 and GMLJP2).
+bool gdalFormat(const std::string& path) {
+  const std::string head = fileHead(path, 64);
+  size_t i = 0;
+  while (i < head.size() && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
+  if (head.compare(i, 11, "<VRTDataset") == 0) return true;
+  static const char kJp2[] = {0, 0, 0, 0x0c, 'j', 'P', ' ', ' '};
+  static const char kJ2k[] = {char(0xff), 0x4f, char(0xff), 0x51};
+  return head.compare(0, sizeof kJp2, kJp2, sizeof kJp2) == 0 ||
+         head.compare(0, sizeof kJ2k, kJ2k, sizeof kJ2k) == 0;
+}
 
 inline uint32_t hash32(uint64_t x, uint64_t y) {
   // A small integer hash (xxhash-style avalanche): cheap and stable.
@@ -181,11 +245,26 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
   return okStatus();
 }
 
+bool isGdalName(const std::string& path) {
+  if (startsWith(path, "http://") || startsWith(path, "https://") || startsWith(path, "ftp://") ||
+      startsWith(path, "/vsi")) {
+    return true;
+  }
+  // A driver's connection string: NETCDF:"file.nc":variable, HDF5:..., GPKG:...
+  size_t i = 0;
+  while (i < path.size() && (std::isupper(static_cast<unsigned char>(path[i])) ||
+                             std::isdigit(static_cast<unsigned char>(path[i])) || path[i] == '_')) {
+    ++i;
+  }
+  return i >= 3 && i < path.size() && path[i] == ':' && std::isupper(static_cast<unsigned char>(path[0]));
+}
+
 Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
                      std::unique_ptr<ImageSource>* out, const ImageReadOptions& read) {
   out->reset();
   std::error_code ec;
   if (!fs::exists(path, ec)) {
+    if (isGdalName(path)) return openWithGdal(path, forced, read, out);
     if (ec) return Status::error(ErrorCode::kIo, path + ": " + ec.message());
     return Status::error(ErrorCode::kNotFound, path + ": no such file");
   }
@@ -196,6 +275,7 @@ Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
     bool covered = false;
     Status s = openNativeImage(path, forced, read, out, &covered);
     if (covered || !s) return s;
+    if (gdalFormat(path)) return openWithGdal(path, forced, read, out);
   } else {
     // OpenImageIO's TIFF reader drops libtiff's warnings, so a file whose
     // layout libtiff had to ignore would tile as zeros: our readers' checks
@@ -205,12 +285,19 @@ Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
     std::unique_ptr<ImageSource> probe;
     Status s = openNativeImage(path, forced, read, &probe, &covered);
     if (!s && s.code == ErrorCode::kTruncated) return s;
+    if (read.reader == ImageReader::kGdal) return openWithGdal(path, forced, read, out);
   }
-  OpenImageFileFn fn = nullptr;
-  Status s = loadOiioModule(&fn);
-  if (!s) return s;
-  fn(&path, &forced, out, &s);
-  return s;
+  Status s = openWithOiio(path, forced, out);
+  if (s || read.reader != ImageReader::kAuto || s.code != ErrorCode::kIo) return s;
+  // Neither our readers nor OpenImageIO: GDAL's geodata formats (HDF,
+  // NetCDF, ERDAS Imagine, ASCII grids, ...).
+  Status g = openWithGdal(path, forced, read, out);
+  if (g || g.code != ErrorCode::kIo) return g;
+  const std::string prefix = path + ": cannot open image: ";
+  auto why = [&](const Status& st) {
+    return startsWith(st.message, prefix.c_str()) ? st.message.substr(prefix.size()) : st.message;
+  };
+  return Status::error(ErrorCode::kIo, prefix + "OpenImageIO: " + why(s) + "; " + why(g));
 }
 
 }  // namespace clipstream

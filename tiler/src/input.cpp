@@ -95,8 +95,13 @@ Status openInputImage(const TilerOptions& o, TilerInput* out) {
   const std::optional<PixelFormat> first_format = height_format ? std::nullopt : o.format;
   if (!o.mosaic) {
     Status s = openImageFile(o.input_path, first_format, &out->source, read);
-    if (s) s = findGeoReference(o.input_path, &out->geo);
-    return s;
+    if (!s) return s;
+    const SourceMetadata& meta = out->source->info().metadata;
+    if (meta.present) {
+      out->geo = meta.geo;  // the decoder read it (GDAL)
+      return okStatus();
+    }
+    return findGeoReference(o.input_path, &out->geo);
   }
   Status s = openMosaic(o.input_path, first_format, o.fill, &out->source, &out->mosaic, read);
   if (s) out->geo = out->mosaic.geo;

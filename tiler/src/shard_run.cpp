@@ -1,10 +1,13 @@
 // The run fingerprint and the band of a sharded tiler run (shard_run.h).
 #include "shard_run.h"
 
+#include "gdal_module.h"
+
 #include <clipstream/tiler/shard.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 
 namespace clipstream {
 namespace {
@@ -54,6 +57,10 @@ Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoRef
   h.text("clipstream shard run 1");
   if (o.input_path.empty()) {
     h.text("synthetic");
+  } else if (std::error_code ec; !std::filesystem::exists(o.input_path, ec) && isGdalName(o.input_path)) {
+    // A URL or another name only GDAL opens: the name is what the shards share.
+    h.text("named");
+    h.text(o.input_path);
   } else {
     Status s = hashFileSample(o.input_path, &h);
     if (!s) return s;

@@ -182,7 +182,8 @@ void addOptions(CLI::App& app, Args* args) {
   app.add_flag("--linear-light", a.linear_light, "with lanczos3: filter in linear light (sRGB input)");
   app.add_option("--reader", a.reader_text,
                  "auto (default: the tiler's own readers for the TIFF, JPEG and PNG files they "
-                 "cover, OpenImageIO for the rest) or openimageio (every file)");
+                 "cover; GDAL for URLs, VRTs and JPEG 2000; OpenImageIO for the other image "
+                 "formats; GDAL for what OpenImageIO cannot read), openimageio or gdal (every file)");
   app.add_option("--threads", a.threads, "encoder threads, and TIFF decode threads (default: all cores)")
       ->transform(cli::wholeInRange(0, kMaxThreads));
   app.add_option("--memory-mb", a.memory_mb, "bound on peak memory in MiB")
@@ -303,8 +304,10 @@ std::string toEncoding(const Args& a, clipstream::TilerOptions* options) {
     options->reader = ImageReader::kAuto;
   } else if (a.reader_text == "openimageio") {
     options->reader = ImageReader::kOpenImageIO;
+  } else if (a.reader_text == "gdal") {
+    options->reader = ImageReader::kGdal;
   } else {
-    return "--reader '" + a.reader_text + "' is not auto or openimageio";
+    return "--reader '" + a.reader_text + "' is not auto, openimageio or gdal";
   }
   options->memory_budget_bytes = a.memory_mb << 20;
   options->overwrite = a.force;

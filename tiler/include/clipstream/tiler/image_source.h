@@ -9,6 +9,7 @@
 // reader thread). Different sources are independent.
 #pragma once
 
+#include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
 
 #include <cstddef>
@@ -19,6 +20,18 @@
 #include <vector>
 
 namespace clipstream {
+
+// What a decoder read itself about where the data lies and what its
+// samples mean. GDAL's reader fills it; for the others `present` stays
+// false and the tiler reads the file's GeoTIFF tags or world file
+// (findGeoReference, readElevationTags in georef.h).
+struct SourceMetadata {
+  bool present = false;
+  GeoReference geo;
+  bool has_nodata = false;
+  double nodata = 0.0;  // may be NaN
+  std::optional<HeightUnits> units;
+};
 
 // What the input looked like before conversion, for summaries and docs.
 struct SourceInfo {
@@ -33,6 +46,7 @@ struct SourceInfo {
   PixelFormat format = PixelFormat::kRGB8;  // format rows are delivered in
   uint64_t clamped_samples = 0;  // samples clamped by the conversion so far
   std::vector<std::string> warnings;  // what the user should know about the input
+  SourceMetadata metadata;
 };
 
 class ImageSource {
@@ -61,6 +75,7 @@ enum class ImageReader {
   // OpenImageIO for every other file.
   kAuto,
   kOpenImageIO,  // OpenImageIO for every file (for comparison)
+  kGdal,         // GDAL for every file (for comparison)
 };
 
 struct ImageReadOptions {

@@ -1,0 +1,372 @@
+// The GDAL side of the tiler's image sources, built as a separate module
+// (gdal_module.h says why): URLs, /vsi paths, VRTs, JPEG 2000, HDF and
+// NetCDF subdatasets and every other raster GDAL reads that the tiler's own
+// readers and OpenImageIO do not. Rows come from GDALDatasetRasterIO in the
+// file's sample type and are converted by pixel_convert.h, shared with the
+// other readers, so the same samples give the same bytes whoever decodes
+// them. This file must not use symbols from clipstream_store: the module
+// links GDAL only.
+#include "gdal_module.h"
+#include "pixel_convert.h"
+
+#include <cpl_conv.h>
+#include <cpl_error.h>
+#include <cpl_string.h>
+#include <cpl_vsi.h>
+#include <gdal.h>
+#include <ogr_srs_api.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace clipstream {
+namespace {
+
+using namespace pixel_convert;
+
+// One RasterIO call never asks for more than this many bytes of native
+// samples, whatever the image width.
+constexpr size_t kMaxScratchBytes = size_t(8) << 20;
+
+// GDAL's block cache (GDAL_CACHEMAX): a quarter of the caller's budget, at
+// least 64 MB, at most 1 GB. Rows are read in strips of the pipeline's
+// height while a file's blocks may be taller (a COG's 512-row tiles): a
+// band of blocks across the whole width must stay cached between strips,
+// or each strip would fetch and decode the band again.
+constexpr uint64_t kMinCacheBytes = uint64_t(64) << 20;
+constexpr uint64_t kMaxCacheBytes = uint64_t(1) << 30;
+
+// The messages GDAL reports on this thread while one is installed: the
+// first failure (what the user sees) and a count of the rest.
+class ErrorCollector {
+ public:
+  ErrorCollector() { CPLPushErrorHandlerEx(&ErrorCollector::handle, this); }
+  ~ErrorCollector() { CPLPopErrorHandler(); }
+  ErrorCollector(const ErrorCollector&) = delete;
+  ErrorCollector& operator=(const ErrorCollector&) = delete;
+
+  // The first failure, else the first warning, else `fallback`.
+  std::string message(const char* fallback) const {
+    return decoderMessage(!m_failure.empty() ? m_failure : m_warning, fallback);
+  }
+  bool failed() const { return !m_failure.empty(); }
+
+ private:
+  static void CPL_STDCALL handle(CPLErr level, CPLErrorNum, const char* text) {
+    auto* self = static_cast<ErrorCollector*>(CPLGetErrorHandlerUserData());
+    if (self == nullptr || text == nullptr) return;
+    std::string& slot = level >= CE_Failure ? self->m_failure : level == CE_Warning ? self->m_warning
+                                                                                    : self->m_ignored;
+    if (slot.empty()) {
+      slot = text;
+    } else if (&slot != &self->m_ignored) {
+      slot += "\n";
+      slot += text;  // counted by decoderMessage as "and N more"
+    }
+  }
+
+  std::string m_failure, m_warning, m_ignored;
+};
+
+// Process-wide GDAL settings, once: drivers, a block cache within the
+// budget, and nothing written beside the inputs (GDAL's .aux.xml side-car
+// files are written on close when statistics were computed; the tiler
+// computes none, and says so).
+void initialiseGdal(uint64_t budget_bytes) {
+  static std::once_flag once;
+  std::call_once(once, [budget_bytes] {
+    CPLSetConfigOption("GDAL_PAM_ENABLED", "NO");
+    GDALAllRegister();
+    const uint64_t quarter = budget_bytes > 0 ? budget_bytes / 4 : kMaxCacheBytes;
+    GDALSetCacheMax64(GIntBig(std::clamp(quarter, kMinCacheBytes, kMaxCacheBytes)));
+  });
+}
+
+bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
+
+// What GDAL opens for `path`: http(s) and ftp URLs through /vsicurl/,
+// anything else as given.
+std::string gdalName(const std::string& path) {
+  if (startsWith(path, "http://") || startsWith(path, "https://") || startsWith(path, "ftp://")) {
+    return "/vsicurl/" + path;
+  }
+  return path;
+}
+
+// The CRS as the store keeps it: "EPSG:n" when the whole CRS is one EPSG
+// code (as the GeoTIFF reader writes it), else its WKT.
+std::string crsText(GDALDatasetH ds) {
+  OGRSpatialReferenceH srs = GDALGetSpatialRef(ds);
+  if (srs == nullptr) return {};
+  OGRSpatialReferenceH copy = OSRClone(srs);
+  std::string text;
+  if (OSRGetAuthorityName(copy, nullptr) == nullptr) OSRAutoIdentifyEPSG(copy);
+  const char* authority = OSRGetAuthorityName(copy, nullptr);
+  const char* code = OSRGetAuthorityCode(copy, nullptr);
+  if (authority != nullptr && code != nullptr && EQUAL(authority, "EPSG")) {
+    text = std::string("EPSG:") + code;
+  } else {
+    char* wkt = nullptr;
+    if (OSRExportToWkt(copy, &wkt) == OGRERR_NONE && wkt != nullptr) text = wkt;
+    CPLFree(wkt);
+  }
+  OSRDestroySpatialReference(copy);
+  return text;
+}
+
+std::optional<HeightUnits> heightUnits(GDALRasterBandH band) {
+  std::string unit = GDALGetRasterUnitType(band);
+  std::transform(unit.begin(), unit.end(), unit.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (unit == "m" || unit == "metre" || unit == "meter" || unit == "metres" || unit == "meters") {
+    return HeightUnits::kMetre;
+  }
+  if (unit == "ft" || unit == "foot" || unit == "feet") return HeightUnits::kFoot;
+  if (unit == "us-ft" || unit == "ftus" || unit == "us survey foot") return HeightUnits::kUsSurveyFoot;
+  return std::nullopt;
+}
+
+class GdalSource final : public ImageSource {
+ public:
+  GdalSource(std::string path, GDALDatasetH ds, SourceInfo info, SampleKind kind, GDALDataType read_type,
+             std::vector<std::array<uint8_t, 4>> palette)
+      : m_path(std::move(path)),
+        m_ds(ds),
+        m_info(std::move(info)),
+        m_kind(kind),
+        m_read_type(read_type),
+        m_palette(std::move(palette)) {}
+  ~GdalSource() override { GDALClose(m_ds); }
+
+  const SourceInfo& info() const override { return m_info; }
+
+  Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
+                  size_t dst_stride) override {
+    if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
+      return Status::error(ErrorCode::kOutOfRange, m_path + ": row request outside the image");
+    }
+    ErrorCollector errors;
+    const uint32_t nch = m_info.input_channels;
+    // A palette file is read as its indices (one band) and expanded to RGB(A).
+    const int bands = m_palette.empty() ? int(nch) : 1;
+    const size_t sample = size_t(GDALGetDataTypeSizeBytes(m_read_type));
+    const size_t read_pixel = sample * size_t(bands);
+    const size_t read_row = read_pixel * width;
+    const uint32_t chunk =
+        uint32_t(std::clamp<size_t>(kMaxScratchBytes / std::max<size_t>(read_row, 1), 1, rows));
+    const bool fast_copy = m_palette.empty() && m_kind == SampleKind::kU8 &&
+                           formatChannels(m_info.format) == nch;
+    for (uint32_t done = 0; done < rows;) {
+      const uint32_t n = std::min(chunk, rows - done);
+      m_scratch.resize(read_row * n);
+      const CPLErr e = GDALDatasetRasterIO(m_ds, GF_Read, int(x0), int(y0 + done), int(width), int(n),
+                                           m_scratch.data(), int(width), int(n), m_read_type, bands,
+                                           nullptr, int(read_pixel), int(read_row), int(sample));
+      if (e != CE_None || errors.failed()) {
+        return Status::error(ErrorCode::kIo, m_path + ": cannot read rows " + std::to_string(y0 + done) +
+                                                 "-" + std::to_string(y0 + done + n - 1) + ": " +
+                                                 errors.message("GDAL failed"));
+      }
+      for (uint32_t r = 0; r < n; ++r) {
+        const uint8_t* src = m_scratch.data() + size_t(r) * read_row;
+        if (!m_palette.empty()) src = expand(src, width);
+        convertNativeRow(m_kind, src, nch, width, m_info.format, fast_copy,
+                         dst + size_t(done + r) * dst_stride, &m_info.clamped_samples);
+      }
+      done += n;
+    }
+    return okStatus();
+  }
+
+ private:
+  // One row of palette indices (uint16) as RGB or RGBA bytes.
+  const uint8_t* expand(const uint8_t* indices, uint64_t width) {
+    const uint32_t nch = m_info.input_channels;
+    m_expanded.resize(size_t(width) * nch);
+    for (uint64_t x = 0; x < width; ++x) {
+      uint16_t i;
+      std::memcpy(&i, indices + 2 * x, 2);
+      static constexpr std::array<uint8_t, 4> kOutside = {0, 0, 0, 0};
+      const std::array<uint8_t, 4>& c = i < m_palette.size() ? m_palette[i] : kOutside;
+      std::memcpy(m_expanded.data() + x * nch, c.data(), nch);
+    }
+    return m_expanded.data();
+  }
+
+  std::string m_path;
+  GDALDatasetH m_ds;
+  SourceInfo m_info;
+  SampleKind m_kind;
+  GDALDataType m_read_type;
+  std::vector<std::array<uint8_t, 4>> m_palette;  // empty unless the file is paletted
+  std::vector<uint8_t> m_scratch, m_expanded;
+};
+
+// Closes a dataset on every early return of openGdal.
+struct DatasetCloser {
+  GDALDatasetH ds = nullptr;
+  ~DatasetCloser() {
+    if (ds != nullptr) GDALClose(ds);
+  }
+};
+
+// The subdatasets a container (HDF, NetCDF) lists instead of bands, for the
+// error that asks for one.
+std::string subdatasetList(GDALDatasetH ds) {
+  char** md = GDALGetMetadata(ds, "SUBDATASETS");
+  std::string list;
+  int shown = 0, total = 0;
+  for (char** p = md; p != nullptr && *p != nullptr; ++p) {
+    const std::string entry = *p;
+    const size_t eq = entry.find('=');
+    if (eq == std::string::npos || entry.find("_NAME=") == std::string::npos) continue;
+    ++total;
+    if (shown < 8) {
+      list += "\n  " + entry.substr(eq + 1);
+      ++shown;
+    }
+  }
+  if (total > shown) list += "\n  ... and " + std::to_string(total - shown) + " more";
+  return list;
+}
+
+Status openGdal(const std::string& path, std::optional<PixelFormat> forced, const ImageReadOptions& read,
+                std::unique_ptr<ImageSource>* out) {
+  out->reset();
+  initialiseGdal(read.memory_budget_bytes);
+  ErrorCollector errors;
+  const std::string name = gdalName(path);
+  const bool remote = startsWith(name, "/vsicurl") || startsWith(name, "/vsis3") ||
+                      startsWith(name, "/vsigs") || startsWith(name, "/vsiaz") || startsWith(name, "/vsiadls") ||
+                      startsWith(name, "/vsioss") || startsWith(name, "/vsiswift");
+  // A remote file's folder is not listed for side-car files: one request
+  // saved, and servers that refuse listings do not fail the open.
+  if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "EMPTY_DIR");
+  const std::string threads = read.decode_threads == 0 ? "ALL_CPUS" : std::to_string(read.decode_threads);
+  CPLSetThreadLocalConfigOption("GDAL_NUM_THREADS", threads.c_str());
+  DatasetCloser closer;
+  closer.ds = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
+                         nullptr, nullptr);
+  if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", nullptr);
+  GDALDatasetH ds = closer.ds;
+  if (ds == nullptr) {
+    return Status::error(ErrorCode::kIo,
+                         path + ": cannot open image: GDAL: " + errors.message("not a raster GDAL can read"));
+  }
+  const int bands = GDALGetRasterCount(ds);
+  if (bands == 0) {
+    const std::string subdatasets = subdatasetList(ds);
+    if (!subdatasets.empty()) {
+      return Status::error(ErrorCode::kUnsupported,
+                           path + ": holds several rasters; name one as the input:" + subdatasets);
+    }
+    return Status::error(ErrorCode::kUnsupported, path + ": GDAL finds no raster band in it");
+  }
+  const int width = GDALGetRasterXSize(ds), height = GDALGetRasterYSize(ds);
+  if (width <= 0 || height <= 0) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(width) + "x" +
+                                                          std::to_string(height) + " is empty");
+  }
+  GDALRasterBandH first = GDALGetRasterBand(ds, 1);
+  const GDALDataType type = GDALGetRasterDataType(first);
+  for (int b = 2; b <= bands; ++b) {
+    if (GDALGetRasterDataType(GDALGetRasterBand(ds, b)) != type) {
+      return Status::error(ErrorCode::kUnsupported,
+                           path + ": its bands hold different sample types; make them one "
+                                  "(gdal_translate -ot)");
+    }
+  }
+  // A paletted band becomes RGB, or RGBA when an entry is not opaque.
+  std::vector<std::array<uint8_t, 4>> palette;
+  GDALColorTableH table = GDALGetRasterColorTable(first);
+  if (bands == 1 && table != nullptr && GDALGetRasterColorInterpretation(first) == GCI_PaletteIndex &&
+      (type == GDT_Byte || type == GDT_UInt16) && GDALGetPaletteInterpretation(table) == GPI_RGB) {
+    const int entries = GDALGetColorEntryCount(table);
+    palette.resize(size_t(std::max(entries, 0)));
+    for (int i = 0; i < entries; ++i) {
+      const GDALColorEntry* c = GDALGetColorEntry(table, i);
+      auto clamp = [](short v) { return uint8_t(std::clamp<int>(v, 0, 255)); };
+      palette[size_t(i)] = {clamp(c->c1), clamp(c->c2), clamp(c->c3), clamp(c->c4)};
+    }
+  }
+  const bool translucent =
+      std::any_of(palette.begin(), palette.end(), [](const auto& c) { return c[3] != 255; });
+  const uint32_t channels = palette.empty() ? uint32_t(bands) : translucent ? 4u : 3u;
+  if (channels > 4) {
+    return Status::error(ErrorCode::kUnsupported,
+                         path + ": " + std::to_string(bands) +
+                             " bands; only 1 (grey), 2 (grey+alpha), 3 (RGB), 4 (RGBA) are supported "
+                             "(pick bands with gdal_translate -b or a VRT)");
+  }
+  SampleKind kind;
+  GDALDataType read_type;
+  std::string type_name;
+  switch (type) {
+    case GDT_Byte: kind = SampleKind::kU8, read_type = GDT_Byte, type_name = "uint8"; break;
+    case GDT_UInt16: kind = SampleKind::kU16, read_type = GDT_UInt16, type_name = "uint16"; break;
+    case GDT_Int16: kind = SampleKind::kI16, read_type = GDT_Int16, type_name = "int16"; break;
+    case GDT_UInt32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "uint32"; break;
+    case GDT_Int32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "int32"; break;
+    case GDT_Float32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "float"; break;
+    case GDT_Float64: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "double"; break;
+    default:
+      return Status::error(ErrorCode::kUnsupported,
+                           path + ": sample type " + GDALGetDataTypeName(type) +
+                               " is not supported (8/16/32-bit integers and 32/64-bit floats are)");
+  }
+  if (!palette.empty()) {
+    kind = SampleKind::kU8;
+    read_type = GDT_UInt16;  // the indices; expanded to bytes per row
+    type_name = "uint8 palette";
+  }
+  SourceInfo info;
+  info.width_px = uint64_t(width);
+  info.height_px = uint64_t(height);
+  info.input_channels = channels;
+  info.input_type = type_name;
+  GDALDriverH driver = GDALGetDatasetDriver(ds);
+  info.decoder = std::string("gdal ") + (driver != nullptr ? GDALGetDriverShortName(driver) : "?");
+  int block_w = 0, block_h = 0;
+  GDALGetBlockSize(first, &block_w, &block_h);
+  info.tiled = block_w < width;
+  info.sequential_only = false;
+  VSIStatBufL st;
+  if (VSIStatL(name.c_str(), &st) == 0 && VSI_ISREG(st.st_mode)) info.file_bytes = uint64_t(st.st_size);
+  info.format = forced ? *forced : defaultFormat(channels, kind);
+
+  SourceMetadata& meta = info.metadata;
+  meta.present = true;
+  double gt[6];
+  if (GDALGetGeoTransform(ds, gt) == CE_None && !(gt[0] == 0 && gt[1] == 1 && gt[2] == 0 && gt[3] == 0 &&
+                                                  gt[4] == 0 && gt[5] == 1)) {
+    meta.geo.present = true;
+    std::copy(gt, gt + 6, meta.geo.transform);
+    meta.geo.crs = crsText(ds);
+  } else if (GDALGetGCPCount(ds) > 0) {
+    info.warnings.push_back(path + ": placed by ground control points, which the tiler does not use; "
+                                   "it is tiled without a georeference (warp it first: gdalwarp)");
+  }
+  int has_nodata = 0;
+  const double nodata = GDALGetRasterNoDataValue(first, &has_nodata);
+  meta.has_nodata = has_nodata != 0;
+  meta.nodata = nodata;
+  meta.units = heightUnits(first);
+
+  *out = std::make_unique<GdalSource>(path, ds, std::move(info), kind, read_type, std::move(palette));
+  closer.ds = nullptr;  // the source owns it now
+  return okStatus();
+}
+
+}  // namespace
+}  // namespace clipstream
+
+extern "C" __attribute__((visibility("default"))) void clipstreamTilerOpenGdal(
+    const std::string* path, const std::optional<clipstream::PixelFormat>* forced,
+    const clipstream::ImageReadOptions* read, std::unique_ptr<clipstream::ImageSource>* out,
+    clipstream::Status* status) {
+  *status = clipstream::openGdal(*path, *forced, *read, out);
+}
