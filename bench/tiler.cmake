@@ -7,3 +7,5 @@ add_executable(tiler_filter_quality ${CMAKE_CURRENT_SOURCE_DIR}/tiler_filter_qua
 target_link_libraries(tiler_filter_quality PRIVATE clipstream::store PkgConfig::OIIO_BENCH clipstream_warnings)
 add_executable(tiler_decode ${CMAKE_CURRENT_SOURCE_DIR}/tiler_decode.cpp)
 target_link_libraries(tiler_decode PRIVATE clipstream::tiler clipstream_warnings)
+add_executable(tiler_warp_diff ${CMAKE_CURRENT_SOURCE_DIR}/tiler_warp_diff.cpp)
+target_link_libraries(tiler_warp_diff PRIVATE clipstream::tiler clipstream_warnings)

@@ -12,6 +12,7 @@ packages=(
   libtiff-dev libjpeg62-turbo-dev libpng-dev  # the tiler reads TIFF, JPEG and PNG without OpenImageIO
   libxml2-dev           # ... and GDAL VRTs (mosaics) with a real XML parser
   libgdal-dev           # ... and every other raster, URLs and VRTs through GDAL (a module)
+  gdal-bin              # gdalwarp and gdal_translate make the reprojection tests' references
   libcurl4-openssl-dev  # stores read over HTTP(S)
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   openssl               # ... and make a certificate for its https:// test
@@ -24,7 +25,7 @@ packages=(
   clang libclang-rt-dev
 )
 if [[ "${1:-}" == "--bench" ]]; then
-  packages+=(gdal-bin python3-gdal libvips-tools time)
+  packages+=(python3-gdal libvips-tools time)
 fi
 
 missing=()

@@ -41,7 +41,9 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
     return Status::error(ErrorCode::kInvalidArgument,
                          "the colour and elevation stores use different coordinate systems (" +
                              printableText(cg.crs, 80) + " and " + printableText(eg.crs, 80) +
-                             "); reproject one to the other's, e.g. with gdalwarp -t_srs");
+                             "); tile one again in the other's CRS, e.g. clipstream-tile DEM "
+                             "OUTPUT --t-srs '" + printableText(cg.crs.size() <= 40 ? cg.crs : "<the colour's CRS>", 80) +
+                             "'");
   }
   if (by_georef) {
     // Elevation sample (i, j) has its centre at pixel (i + 0.5, j + 0.5).
@@ -109,7 +111,8 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
     out->warnings.push_back("colour texels are not square on the ground (" +
                             std::to_string(out->metres_per_world.x) + " x " +
                             std::to_string(out->metres_per_world.y) +
-                            " m); the scene is drawn with square texels and heights at their mean");
+                            " m); the scene is drawn with square texels and heights at their mean "
+                            "(tile a geographic input with --t-srs auto: a UTM zone)");
   }
   out->world_per_height = metres_per_height / metres_per_world * vertical_scale;
   return okStatus();

@@ -13,6 +13,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -217,6 +218,163 @@ TEST(TilerGdal, MissingNamesAreErrorsNamingThem) {
   EXPECT_NE(netcdf.message.find("NETCDF:\"/nonexistent/x.nc\":elevation: cannot open image: GDAL"),
             std::string::npos)
       << netcdf.toString();
+}
+
+}  // namespace
+}  // namespace clipstream::test
+
+namespace clipstream::test {
+namespace {
+
+// A command's exit status (the reference files come from GDAL's own programs).
+int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
+
+std::string quoted(const std::string& s) { return "'" + s + "'"; }
+
+// Level 0 of a store, row-major, in its pixel format.
+std::vector<uint8_t> level0(const std::string& store, PyramidGeometry* geometry, GeoReference* geo) {
+  std::unique_ptr<TileStoreReader> r;
+  EXPECT_TRUE(TileStoreReader::open(store, &r).ok()) << store;
+  if (!r) return {};
+  *geometry = r->geometry();
+  *geo = r->info().geo;
+  const uint32_t bpp = bytesPerPixel(geometry->format), t = geometry->tile_px;
+  std::vector<uint8_t> out(geometry->width_px * geometry->height_px * bpp);
+  std::vector<uint8_t> tile;
+  for (uint32_t ty = 0; ty < geometry->levels[0].tiles_y; ++ty) {
+    for (uint32_t tx = 0; tx < geometry->levels[0].tiles_x; ++tx) {
+      EXPECT_TRUE(r->readTile({0, tx, ty}, &tile).ok());
+      for (uint32_t y = 0; y < t && uint64_t(ty) * t + y < geometry->height_px; ++y) {
+        const uint64_t w = std::min<uint64_t>(t, geometry->width_px - uint64_t(tx) * t);
+        std::memcpy(out.data() + ((uint64_t(ty) * t + y) * geometry->width_px + uint64_t(tx) * t) * bpp,
+                    tile.data() + size_t(y) * t * bpp, w * bpp);
+      }
+    }
+  }
+  return out;
+}
+
+// A whole image through the tiler's own reader, in `format`.
+std::vector<uint8_t> wholeImage(const std::string& path, PixelFormat format, uint64_t* w, uint64_t* h) {
+  std::unique_ptr<ImageSource> src;
+  const Status s = openImageFile(path, format, &src);
+  EXPECT_TRUE(s.ok()) << s.toString();
+  if (!s) return {};
+  *w = src->info().width_px, *h = src->info().height_px;
+  const size_t row = *w * bytesPerPixel(format);
+  std::vector<uint8_t> out(row * *h);
+  EXPECT_TRUE(src->readRows(0, uint32_t(*h), 0, *w, out.data(), row).ok());
+  return out;
+}
+
+// The bundled DEM (UTM 10N, NAD27) warped to geographic coordinates by
+// gdalwarp: a DEM as SRTM tiles come.
+std::string geographicDem(const TempDir& dir) {
+  const std::string out = dir.file("dem4326.tif");
+  EXPECT_EQ(shell("gdalwarp -q -t_srs EPSG:4326 -r bilinear " +
+                  quoted(bundledDataPath("mount_st_helens_30m.tif")) + " " + quoted(out)),
+            0)
+      << "gdalwarp (Debian's gdal-bin, scripts/deps.sh) failed";
+  return out;
+}
+
+// A geographic DEM tiled with --t-srs into the UTM texture's CRS lands on
+// gdalwarp's grid with gdalwarp's heights: the same warper, run block by
+// block.
+TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
+  TempDir dir("warp");
+  const std::string dem = geographicDem(dir);
+  const RunResult r = runTiler({dem, dir.file("utm.cst"), "--t-srs", "EPSG:26710", "--json-summary",
+                                dir.file("utm.json")});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("reprojected: EPSG:4326 (WGS 84) -> EPSG:26710 (NAD27 / UTM zone 10N), bilinear"),
+            std::string::npos)
+      << r.output;
+  const std::string ref = dir.file("ref.tif");
+  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:26710 -r bilinear " + quoted(dem) + " " + quoted(ref)), 0);
+
+  PyramidGeometry g;
+  GeoReference geo, ref_geo;
+  const std::vector<uint8_t> ours = level0(dir.file("utm.cst"), &g, &geo);
+  ASSERT_TRUE(findGeoReference(ref, &ref_geo).ok());
+  uint64_t w = 0, h = 0;
+  const std::vector<uint8_t> theirs = wholeImage(ref, PixelFormat::kI16, &w, &h);
+  ASSERT_EQ(g.width_px, w);
+  ASSERT_EQ(g.height_px, h);
+  ASSERT_EQ(g.format, PixelFormat::kI16);
+  EXPECT_EQ(geo.crs, "EPSG:26710");
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(geo.transform[i], ref_geo.transform[i], 1e-6 * 30.0) << i;
+  // Every sample gdalwarp gives a height equals ours (the no-data collar
+  // is filled in the store, as any void).
+  uint64_t compared = 0, differ = 0;
+  for (size_t i = 0; i < w * h; ++i) {
+    int16_t a, b;
+    std::memcpy(&a, ours.data() + 2 * i, 2);
+    std::memcpy(&b, theirs.data() + 2 * i, 2);
+    if (b == -32767) continue;
+    ++compared;
+    differ += a != b;
+  }
+  EXPECT_GT(compared, w * h / 2);
+  EXPECT_EQ(differ, 0u) << "of " << compared;
+}
+
+// --t-srs auto: a geographic input goes to the WGS 84 UTM zone of its
+// centre, said in the summary; a colour image gains an alpha band that is
+// transparent where no input pixel lands, as gdalwarp -dstalpha draws it.
+TEST(TilerWarp, AutoPicksTheUtmZoneAndTheCollarIsTransparent) {
+  TempDir dir("warp");
+  const std::string dem = geographicDem(dir);
+  const RunResult r = runTiler({dem, dir.file("auto.cst"), "--t-srs", "auto", "--json-summary",
+                                dir.file("auto.json")});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(readText(dir.file("auto.json")).find("EPSG:32610 (WGS 84 / UTM zone 10N)"), std::string::npos)
+      << readText(dir.file("auto.json"));
+
+  // A colour image placed in geographic coordinates, reprojected.
+  ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 240, 200, 3, OIIO::TypeDesc::UINT8, pattern));
+  const std::string rgb = dir.file("rgb4326.tif");
+  ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr -122.30 46.30 -122.10 46.12 " +
+                  quoted(dir.file("rgb.tif")) + " " + quoted(rgb)),
+            0);
+  const RunResult c = runTiler({rgb, dir.file("rgb.cst"), "--t-srs", "auto"});
+  ASSERT_EQ(c.exit_code, 0) << c.output;
+  const std::string ref = dir.file("rgb_ref.tif");
+  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:32610 -r bilinear -dstalpha " + quoted(rgb) + " " + quoted(ref)), 0);
+  PyramidGeometry g;
+  GeoReference geo;
+  const std::vector<uint8_t> ours = level0(dir.file("rgb.cst"), &g, &geo);
+  uint64_t w = 0, h = 0;
+  const std::vector<uint8_t> theirs = wholeImage(ref, PixelFormat::kRGBA8, &w, &h);
+  ASSERT_EQ(g.format, PixelFormat::kRGBA8);
+  ASSERT_EQ(g.width_px, w);
+  ASSERT_EQ(g.height_px, h);
+  EXPECT_TRUE(ours == theirs);
+  uint64_t transparent = 0;
+  for (size_t i = 3; i < ours.size(); i += 4) transparent += ours[i] == 0;
+  EXPECT_GT(transparent, 0u) << "a rotated footprint leaves corners no input pixel reaches";
+}
+
+TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
+  TempDir dir("warp");
+  fs::create_directories(dir.file("out"));
+  const std::string out = dir.file("out/x.cst");
+  // The bundled photo has a world file but no CRS.
+  RunResult r = runTiler({bundledDataPath("autzen.jpg"), out, "--t-srs", "EPSG:32610"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("autzen.jpg: has no coordinate system to reproject from"), std::string::npos)
+      << r.output;
+  r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", "EPSG:99999999"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--t-srs 'EPSG:99999999' is not a coordinate system GDAL knows"), std::string::npos)
+      << r.output;
+  r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", "auto", "--resampling", "sharp"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--resampling 'sharp' is not"), std::string::npos) << r.output;
+  r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-res", "10"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--t-res needs --t-srs"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::is_empty(dir.file("out")));
 }
 
 }  // namespace

@@ -14,11 +14,13 @@
 #include <cpl_string.h>
 #include <cpl_vsi.h>
 #include <gdal.h>
+#include <gdal_utils.h>
 #include <ogr_srs_api.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <string>
@@ -132,15 +134,21 @@ std::optional<HeightUnits> heightUnits(GDALRasterBandH band) {
 
 class GdalSource final : public ImageSource {
  public:
-  GdalSource(std::string path, GDALDatasetH ds, SourceInfo info, SampleKind kind, GDALDataType read_type,
-             std::vector<std::array<uint8_t, 4>> palette)
+  // `ds` is read; `underlying` (may be null) is the file a warped `ds`
+  // reads from, closed after it.
+  GdalSource(std::string path, GDALDatasetH ds, GDALDatasetH underlying, SourceInfo info, SampleKind kind,
+             GDALDataType read_type, std::vector<std::array<uint8_t, 4>> palette)
       : m_path(std::move(path)),
         m_ds(ds),
+        m_underlying(underlying),
         m_info(std::move(info)),
         m_kind(kind),
         m_read_type(read_type),
         m_palette(std::move(palette)) {}
-  ~GdalSource() override { GDALClose(m_ds); }
+  ~GdalSource() override {
+    GDALClose(m_ds);
+    if (m_underlying != nullptr) GDALClose(m_underlying);
+  }
 
   const SourceInfo& info() const override { return m_info; }
 
@@ -199,6 +207,7 @@ class GdalSource final : public ImageSource {
 
   std::string m_path;
   GDALDatasetH m_ds;
+  GDALDatasetH m_underlying;
   SourceInfo m_info;
   SampleKind m_kind;
   GDALDataType m_read_type;
@@ -213,6 +222,128 @@ struct DatasetCloser {
     if (ds != nullptr) GDALClose(ds);
   }
 };
+
+// A spatial reference that is destroyed with its holder.
+struct Srs {
+  OGRSpatialReferenceH h = OSRNewSpatialReference(nullptr);
+  ~Srs() { OSRDestroySpatialReference(h); }
+  Srs() { OSRSetAxisMappingStrategy(h, OAMS_TRADITIONAL_GIS_ORDER); }
+  Srs(const Srs&) = delete;
+  Srs& operator=(const Srs&) = delete;
+};
+
+// "EPSG:n (name)" for the summary.
+std::string describeSrs(OGRSpatialReferenceH srs) {
+  const char* authority = OSRGetAuthorityName(srs, nullptr);
+  const char* code = OSRGetAuthorityCode(srs, nullptr);
+  const char* name = OSRGetName(srs);
+  std::string text = authority != nullptr && code != nullptr ? std::string(authority) + ":" + code : "";
+  if (name != nullptr) text += text.empty() ? name : std::string(" (") + name + ")";
+  return text.empty() ? "a CRS without a name" : text;
+}
+
+// The target CRS of --t-srs into `dst`: as GDAL takes it, or "auto": the
+// WGS 84 UTM zone of a geographic input's centre (a projected input stays
+// as it is: *keep set).
+Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& text, Srs* dst, bool* keep) {
+  *keep = false;
+  OGRSpatialReferenceH from = GDALGetSpatialRef(src);
+  if (from == nullptr) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         path + ": has no coordinate system to reproject from (--t-srs)");
+  }
+  if (text != "auto") {
+    if (OSRSetFromUserInput(dst->h, text.c_str()) != OGRERR_NONE) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--t-srs '" + text + "' is not a coordinate system GDAL knows "
+                                                "(EPSG:n, WKT, a PROJ string, or auto)");
+    }
+    return okStatus();
+  }
+  if (!OSRIsGeographic(from)) {
+    *keep = true;
+    return okStatus();
+  }
+  double gt[6];
+  if (GDALGetGeoTransform(src, gt) != CE_None) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ": has no georeference to reproject");
+  }
+  const double cx = GDALGetRasterXSize(src) * 0.5, cy = GDALGetRasterYSize(src) * 0.5;
+  double x = gt[0] + gt[1] * cx + gt[2] * cy, y = gt[3] + gt[4] * cx + gt[5] * cy;
+  // The centre in longitude and latitude, whatever the axis order of the CRS.
+  Srs lonlat;
+  OSRSetWellKnownGeogCS(lonlat.h, "WGS84");
+  OGRSpatialReferenceH from_gis = OSRClone(from);
+  OSRSetAxisMappingStrategy(from_gis, OAMS_TRADITIONAL_GIS_ORDER);
+  OGRCoordinateTransformationH ct = OCTNewCoordinateTransformation(from_gis, lonlat.h);
+  const bool moved = ct != nullptr && OCTTransform(ct, 1, &x, &y, nullptr);
+  if (ct != nullptr) OCTDestroyCoordinateTransformation(ct);
+  OSRDestroySpatialReference(from_gis);
+  if (!moved || !(std::abs(y) <= 84.0)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         path + ": --t-srs auto picks a UTM zone, and the input's centre is not between "
+                                "84 degrees south and north; give a CRS");
+  }
+  const int zone = std::clamp(int(std::floor((x + 180.0) / 6.0)) + 1, 1, 60);
+  OSRImportFromEPSG(dst->h, (y >= 0 ? 32600 : 32700) + zone);
+  OSRSetAxisMappingStrategy(dst->h, OAMS_TRADITIONAL_GIS_ORDER);
+  return okStatus();
+}
+
+// The input reprojected by GDAL's warper, as gdalwarp would write it (same
+// grid, same no-data handling), as a virtual dataset read block by block:
+// nothing is held whole. An RGB input gains an alpha band, transparent
+// where no input pixel lands.
+Status warp(const std::string& path, GDALDatasetH src, const ImageReadOptions& read, GDALDatasetH* out,
+            std::string* description) {
+  *out = nullptr;
+  Srs dst;
+  bool keep = false;
+  Status s = targetSrs(path, src, read.target_crs, &dst, &keep);
+  if (!s) return s;
+  OGRSpatialReferenceH from = GDALGetSpatialRef(src);
+  if (keep || OSRIsSame(from, dst.h)) {
+    *description = describeSrs(from) + " kept (already projected" +
+                   std::string(keep ? "; --t-srs auto reprojects geographic inputs only)" : ")");
+    return okStatus();
+  }
+  char* wkt = nullptr;
+  OSRExportToWkt(dst.h, &wkt);
+  const std::string target_wkt = wkt != nullptr ? wkt : "";
+  CPLFree(wkt);
+  const uint64_t memory = std::clamp<uint64_t>(read.memory_budget_bytes / 8, uint64_t(16) << 20,
+                                               uint64_t(256) << 20);
+  std::vector<std::string> args = {"-of", "VRT", "-t_srs", target_wkt, "-r", read.resampling,
+                                   "-wm", std::to_string(memory >> 20)};
+  if (read.target_resolution > 0) {
+    char res[64];
+    std::snprintf(res, sizeof res, "%.17g", read.target_resolution);
+    args.insert(args.end(), {"-tr", res, res});
+  }
+  const int bands = GDALGetRasterCount(src);
+  if (bands == 3 && GDALGetRasterColorInterpretation(GDALGetRasterBand(src, 3)) != GCI_AlphaBand) {
+    int has_nodata = 0;
+    GDALGetRasterNoDataValue(GDALGetRasterBand(src, 1), &has_nodata);
+    if (!has_nodata) args.push_back("-dstalpha");
+  }
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  GDALWarpAppOptions* options = GDALWarpAppOptionsNew(argv.data(), nullptr);
+  if (options == nullptr) return Status::error(ErrorCode::kInvalidArgument, "--t-srs: GDAL refused the warp options");
+  int usage_error = 0;
+  ErrorCollector errors;
+  GDALDatasetH warped = GDALWarp("", nullptr, 1, &src, options, &usage_error);
+  GDALWarpAppOptionsFree(options);
+  if (warped == nullptr) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         path + ": cannot reproject to " + describeSrs(dst.h) + ": GDAL: " +
+                             errors.message("the warp failed"));
+  }
+  *out = warped;
+  *description = describeSrs(from) + " -> " + describeSrs(dst.h) + ", " + read.resampling;
+  return okStatus();
+}
 
 // The subdatasets a container (HDF, NetCDF) lists instead of bands, for the
 // error that asks for one.
@@ -252,11 +383,23 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   closer.ds = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
                          nullptr, nullptr);
   if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", nullptr);
-  GDALDatasetH ds = closer.ds;
-  if (ds == nullptr) {
+  if (closer.ds == nullptr) {
     return Status::error(ErrorCode::kIo,
                          path + ": cannot open image: GDAL: " + errors.message("not a raster GDAL can read"));
   }
+  // Reprojected: the rest reads the warped dataset, which reads the file.
+  DatasetCloser underlying;
+  std::string reprojection;
+  if (!read.target_crs.empty() && GDALGetRasterCount(closer.ds) > 0) {
+    GDALDatasetH warped = nullptr;
+    Status w = warp(path, closer.ds, read, &warped, &reprojection);
+    if (!w) return w;
+    if (warped != nullptr) {
+      underlying.ds = closer.ds;
+      closer.ds = warped;
+    }
+  }
+  GDALDatasetH ds = closer.ds;
   const int bands = GDALGetRasterCount(ds);
   if (bands == 0) {
     const std::string subdatasets = subdatasetList(ds);
@@ -328,8 +471,9 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   info.height_px = uint64_t(height);
   info.input_channels = channels;
   info.input_type = type_name;
-  GDALDriverH driver = GDALGetDatasetDriver(ds);
-  info.decoder = std::string("gdal ") + (driver != nullptr ? GDALGetDriverShortName(driver) : "?");
+  GDALDriverH driver = GDALGetDatasetDriver(underlying.ds != nullptr ? underlying.ds : ds);
+  info.decoder = std::string("gdal ") + (driver != nullptr ? GDALGetDriverShortName(driver) : "?") +
+                 (underlying.ds != nullptr ? ", warped" : "");
   int block_w = 0, block_h = 0;
   GDALGetBlockSize(first, &block_w, &block_h);
   info.tiled = block_w < width;
@@ -356,8 +500,10 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   meta.nodata = nodata;
   meta.units = heightUnits(first);
 
-  *out = std::make_unique<GdalSource>(path, ds, std::move(info), kind, read_type, std::move(palette));
-  closer.ds = nullptr;  // the source owns it now
+  info.reprojection = reprojection;
+  *out = std::make_unique<GdalSource>(path, ds, underlying.ds, std::move(info), kind, read_type,
+                                      std::move(palette));
+  closer.ds = underlying.ds = nullptr;  // the source owns them now
   return okStatus();
 }
 

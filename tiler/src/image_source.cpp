@@ -271,6 +271,9 @@ Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,
   if (!fs::is_regular_file(path, ec)) {
     return Status::error(ErrorCode::kIo, path + ": not a regular file");
   }
+  if (!read.target_crs.empty() && read.reader != ImageReader::kOpenImageIO) {
+    return openWithGdal(path, forced, read, out);  // only GDAL reprojects
+  }
   if (read.reader == ImageReader::kAuto) {
     bool covered = false;
     Status s = openNativeImage(path, forced, read, out, &covered);

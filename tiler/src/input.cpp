@@ -9,6 +9,7 @@
 #include "relief_source.h"
 
 #include <cmath>
+#include <cstdio>
 #include <optional>
 
 namespace clipstream {
@@ -72,6 +73,23 @@ Status makeRelief(const TilerOptions& o, GeoReference* geo, std::unique_ptr<Imag
   return okStatus();
 }
 
+// A DEM whose samples are not square on the ground (a geographic CRS away
+// from the equator) is drawn stretched: says so, and what reprojects it.
+void warnIfStretched(const TilerOptions& o, const TilerInput& in, std::vector<std::string>* warnings) {
+  if (!in.geo.present) return;
+  const double* t = in.geo.transform;
+  const double latitude = t[3] + t[5] * double(in.source->info().height_px) * 0.5;
+  const CrsUnitMetres unit = metresPerCrsUnit(in.geo.crs, latitude);
+  const double x = std::hypot(t[1], t[4]) * unit.x, y = std::hypot(t[2], t[5]) * unit.y;
+  if (unit.assumed || !(x > 0.0) || !(y > 0.0) || std::abs(x - y) <= 0.01 * std::max(x, y)) return;
+  char text[200];
+  std::snprintf(text, sizeof text,
+                ": samples are %.2f x %.2f m on the ground (a geographic CRS), so terrain is drawn "
+                "stretched %.0f %%; --t-srs auto reprojects it to its UTM zone",
+                x, y, 100.0 * (std::max(x, y) / std::min(x, y) - 1.0));
+  warnings->push_back(o.input_path + text);
+}
+
 }  // namespace
 
 ImageReadOptions imageReadOptions(const TilerOptions& o) {
@@ -79,6 +97,9 @@ ImageReadOptions imageReadOptions(const TilerOptions& o) {
   read.reader = o.reader;
   read.decode_threads = o.threads;
   read.memory_budget_bytes = o.memory_budget_bytes;
+  read.target_crs = o.target_crs;
+  read.resampling = o.resampling;
+  read.target_resolution = o.target_resolution;
   return read;
 }
 
@@ -137,6 +158,7 @@ Status openInput(const TilerOptions& o, TilerInput* out, std::vector<std::string
                       &out->heights, &out->elevation, warnings);
     if (!s) return s;
   }
+  if (out->elevation.present && o.target_crs.empty()) warnIfStretched(o, *out, warnings);
   if (o.relief_scale > 0) {
     s = makeRelief(o, &out->geo, &out->source, &out->elevation);
     if (!s) return s;

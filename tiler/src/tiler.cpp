@@ -175,12 +175,40 @@ Status checkColourFormat(const TilerOptions& o) {
   return okStatus();
 }
 
+// Reprojection: an input file GDAL can warp, a resampling it has, a
+// positive resolution.
+Status checkReprojection(const TilerOptions& o) {
+  const bool asked = !o.target_crs.empty() || o.target_resolution != 0.0;
+  if (!asked) return okStatus();
+  if (o.target_crs.empty()) {
+    return Status::error(ErrorCode::kInvalidArgument, "--t-res needs --t-srs (the CRS it is in)");
+  }
+  const char* conflict = o.input_path.empty()                  ? "--synthetic"
+                         : o.mosaic                             ? "--mosaic (reproject a VRT of the sheets)"
+                         : o.reader == ImageReader::kOpenImageIO ? "--reader openimageio (GDAL reprojects)"
+                                                                 : nullptr;
+  if (conflict != nullptr) {
+    return Status::error(ErrorCode::kInvalidArgument, std::string("--t-srs does not go with ") + conflict);
+  }
+  if (!(o.target_resolution >= 0.0) || !std::isfinite(o.target_resolution)) {
+    return Status::error(ErrorCode::kInvalidArgument, "--t-res must be a positive pixel size");
+  }
+  static const char* const kResamplings[] = {"near", "bilinear", "cubic", "cubicspline",
+                                             "lanczos", "average", "mode"};
+  if (std::find(std::begin(kResamplings), std::end(kResamplings), o.resampling) == std::end(kResamplings)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--resampling '" + o.resampling +
+                             "' is not near, bilinear, cubic, cubicspline, lanczos, average or mode");
+  }
+  return okStatus();
+}
+
 }  // namespace
 
 Status validateOptions(const TilerOptions& o) {
   for (Status (*check)(const TilerOptions&) :
        {checkRunSizes, checkRelief, checkImageAndOutput, checkFilterAndHeights, checkMosaicAndShard,
-        checkColourFormat}) {
+        checkColourFormat, checkReprojection}) {
     Status s = check(o);
     if (!s) return s;
   }
@@ -250,6 +278,7 @@ void fillSummary(const TilerOptions& o, const SourceInfo& src, const TilerInput&
   summary->format = src.format;
   summary->input_type = src.input_type;
   summary->decoder = src.decoder;
+  summary->reprojection = src.reprojection;
   summary->input_channels = src.input_channels;
   summary->levels = geometry.levelCount();
   summary->tiles = figures.tiles;

@@ -86,6 +86,7 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["pixel_format"] = clipstream::pixelFormatName(s.format);
   j["input_type"] = s.input_type;
   j["decoder"] = s.decoder;
+  j["reprojection"] = s.reprojection.empty() ? nlohmann::json() : nlohmann::json(s.reprojection);
   j["input_channels"] = s.input_channels;
   j["levels"] = s.levels;
   j["tiles"] = s.tiles;
@@ -133,6 +134,8 @@ struct Args {
   uint32_t relief_scale = 4;
   CLI::Option* relief_scale_option = nullptr;
   std::string reader_text = "auto";
+  std::string t_srs, resampling = "bilinear";
+  double t_res = 0.0;
   std::string shard_text;
   std::string order_text;
 };
@@ -184,6 +187,14 @@ void addOptions(CLI::App& app, Args* args) {
                  "auto (default: the tiler's own readers for the TIFF, JPEG and PNG files they "
                  "cover; GDAL for URLs, VRTs and JPEG 2000; OpenImageIO for the other image "
                  "formats; GDAL for what OpenImageIO cannot read), openimageio or gdal (every file)");
+  app.add_option("--t-srs", a.t_srs,
+                 "reproject the input to this CRS with GDAL's warper (EPSG:n, WKT, a PROJ string; "
+                 "auto: the UTM zone of a geographic input's centre)");
+  app.add_option("--resampling", a.resampling,
+                 "with --t-srs: near, bilinear (default), cubic, cubicspline, lanczos, average or mode");
+  app.add_option("--t-res", a.t_res,
+                 "with --t-srs: pixel size in the target CRS's units (default: GDAL's choice, as gdalwarp)")
+      ->transform(cli::inRange(0.0, 1e12));
   app.add_option("--threads", a.threads, "encoder threads, and TIFF decode threads (default: all cores)")
       ->transform(cli::wholeInRange(0, kMaxThreads));
   app.add_option("--memory-mb", a.memory_mb, "bound on peak memory in MiB")
@@ -309,6 +320,9 @@ std::string toEncoding(const Args& a, clipstream::TilerOptions* options) {
   } else {
     return "--reader '" + a.reader_text + "' is not auto, openimageio or gdal";
   }
+  options->target_crs = a.t_srs;
+  options->resampling = a.resampling;
+  options->target_resolution = a.t_res;
   options->memory_budget_bytes = a.memory_mb << 20;
   options->overwrite = a.force;
   options->fsync = !a.no_fsync;
@@ -379,6 +393,9 @@ void printSummary(const clipstream::TilerSummary& summary, const clipstream::Til
       megabytes(summary.input_bytes).c_str(), megabytes(summary.output_bytes).c_str(),
       summary.output_bytes ? double(summary.raw_bytes) / double(summary.output_bytes) : 0.0,
       megabytes(summary.peak_rss_bytes).c_str(), summary.wall_s);
+  if (!summary.reprojection.empty()) {
+    std::printf("reprojected: %s\n", printableText(summary.reprojection, 600).c_str());
+  }
   if (summary.geo.present) {
     const double* t = summary.geo.transform;
     std::printf("georeference: origin (%.6f, %.6f), pixel (%.6g, %.6g), rotation (%.6g, %.6g), CRS %s\n",

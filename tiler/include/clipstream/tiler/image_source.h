@@ -1,6 +1,7 @@
 // Where the tiler's level-0 pixels come from: an image file (TIFF, JPEG and
 // PNG through the tiler's own readers on libtiff, libjpeg-turbo and libpng;
-// everything else through OpenImageIO), or a procedural image computed on
+// other image formats through OpenImageIO; URLs, VRTs, JPEG 2000, geodata
+// formats and reprojection through GDAL), or a procedural image computed on
 // demand. Either way the
 // source hands out rows already converted to the store's pixel format, so
 // the pyramid code never sees input pixel types.
@@ -47,6 +48,8 @@ struct SourceInfo {
   uint64_t clamped_samples = 0;  // samples clamped by the conversion so far
   std::vector<std::string> warnings;  // what the user should know about the input
   SourceMetadata metadata;
+  // Set when GDAL's warper reprojected the input: "from -> to, resampling".
+  std::string reprojection;
 };
 
 class ImageSource {
@@ -71,8 +74,9 @@ enum class ImageReader {
   // The tiler's own readers for the TIFF, JPEG and PNG files they cover
   // (tiled and striped TIFF and BigTIFF of 8/16-bit integer or 32/64-bit
   // float samples, any compression libtiff has; grey and colour JPEG,
-  // baseline or progressive; 8/16-bit grey, grey+alpha, RGB and RGBA PNG),
-  // OpenImageIO for every other file.
+  // baseline or progressive; 8/16-bit grey, grey+alpha, RGB and RGBA PNG);
+  // GDAL for URLs, /vsi paths, VRTs and JPEG 2000; OpenImageIO for the other
+  // image formats; GDAL for what OpenImageIO cannot open.
   kAuto,
   kOpenImageIO,  // OpenImageIO for every file (for comparison)
   kGdal,         // GDAL for every file (for comparison)
@@ -89,6 +93,14 @@ struct ImageReadOptions {
   // kept in a temporary file in $TMPDIR (else /tmp) instead, a few MB of
   // them in memory at a time.
   uint64_t memory_budget_bytes = 0;
+  // Reprojection by GDAL's warper (the input is then read through GDAL):
+  // the target CRS as GDAL takes it (EPSG:n, WKT, a PROJ string), or "auto"
+  // for the UTM zone of a geographic input's centre; empty = as stored. The
+  // grid is GDAL's suggestion (gdalwarp's default: the input's extent, and
+  // its resolution along the diagonal), unless target_resolution > 0.
+  std::string target_crs;
+  std::string resampling = "bilinear";  // near, bilinear, cubic, cubicspline, lanczos, average, mode
+  double target_resolution = 0.0;       // pixel size in target CRS units; 0 = GDAL's
 };
 
 // Opens an image file and decides its conversion: 1 channel -> R8 (8-bit

@@ -66,6 +66,11 @@ struct TilerOptions {
   // TIFF, JPEG and PNG files they cover, else OpenImageIO; or OpenImageIO
   // for every file. TIFF strips and tiles decode on `threads` threads.
   ImageReader reader = ImageReader::kAuto;
+  // Reprojection by GDAL's warper (ImageReadOptions::target_crs and the
+  // rest): not for mosaics (give a VRT of the sheets instead) or --synthetic.
+  std::string target_crs;
+  std::string resampling = "bilinear";
+  double target_resolution = 0.0;
   std::string output_path;
   uint32_t tile_px = 128;            // power of two in [kMinTilePx, kMaxTilePx]
   int zstd_level = 1;
@@ -107,6 +112,7 @@ struct TilerSummary {
   PixelFormat format = PixelFormat::kRGB8;
   std::string input_type;        // "uint8", "synthetic", ...
   std::string decoder;           // SourceInfo::decoder: "libtiff", "openimageio", ...
+  std::string reprojection;      // SourceInfo::reprojection: "" unless warped
   uint32_t input_channels = 0;
   uint32_t levels = 0;
   uint64_t tiles = 0;
