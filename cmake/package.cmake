@@ -47,7 +47,7 @@ traces against the cache policies.")
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME libclipstream-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS
-    "clipstream (= ${PROJECT_VERSION}), libzstd-dev, libxxhash-dev, libglm-dev, nlohmann-json3-dev, libcurl4-openssl-dev | libcurl-dev, libtiff-dev, libjpeg-dev, libpng-dev, libxml2-dev, libegl-dev, libopengl-dev, pkg-config")
+    "clipstream (= ${PROJECT_VERSION}), libzstd-dev, libxxhash-dev, libglm-dev, nlohmann-json3-dev, libcurl4-openssl-dev | libcurl-dev, libtiff-dev, libjpeg-dev, libpng-dev, libxml2-dev, libproj-dev, libegl-dev, libopengl-dev, pkg-config")
 set(CPACK_DEBIAN_DEV_DESCRIPTION
 "out-of-core megatexture streaming: development files
 The static libraries clipstream::store, ::tiler, ::streamer and ::renderer,

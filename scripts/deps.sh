@@ -16,6 +16,7 @@ packages=(
   libcurl4-openssl-dev  # stores read over HTTP(S)
   nginx-light           # the HTTP tests serve stores from a real nginx on 127.0.0.1
   openssl               # ... and make a certificate for its https:// test
+  libproj-dev           # longitude and latitude into a store's CRS (--look-at lonlat:)
   libcli11-dev nlohmann-json3-dev libglm-dev
   libstb-dev            # stb_dxt: the BC1 encoder of --tile-format bc1 (streamer/src/bc1.cpp)
   libglfw3-dev libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri

@@ -63,7 +63,11 @@ Status parseTerrainMethod(const std::string& name, TerrainMethod* out) {
                        "terrain method '" + name + "': must be clipmap, quadtree, flat or full");
 }
 
-Status parseLookAt(const std::string& text, LookAt* out) {
+Status parseLookAt(const std::string& given, LookAt* out) {
+  // "lonlat:LON,LAT[,HEIGHT]": degrees, WGS 84.
+  static constexpr char kLonLat[] = "lonlat:";
+  const bool lon_lat = given.rfind(kLonLat, 0) == 0;
+  const std::string text = lon_lat ? given.substr(sizeof kLonLat - 1) : given;
   std::vector<double> v;
   size_t start = 0;
   while (start <= text.size()) {
@@ -80,8 +84,12 @@ Status parseLookAt(const std::string& text, LookAt* out) {
   if (v.size() < 2 || v.size() > 3)
     return Status::error(ErrorCode::kInvalidArgument,
                          "look-at point \"" + printableText(text, 60) + "\": give X,Y or X,Y,HEIGHT");
+  if (lon_lat && (std::abs(v[0]) > 180.0 || std::abs(v[1]) > 90.0))
+    return Status::error(ErrorCode::kInvalidArgument, "look-at point \"" + printableText(given, 60) +
+                                                          "\": longitude -180..180, latitude -90..90");
   out->map = {v[0], v[1]};
   out->height = v.size() == 3 ? std::optional<double>(v[2]) : std::nullopt;
+  out->lon_lat = lon_lat;
   return okStatus();
 }
 

@@ -98,8 +98,13 @@ void renderReference(const PyramidGeometry& geometry, const TexelFunction& texel
       bilinear(geometry, texel, level, u0, v0, ca);
       if (f > 0.0 && level + 1 < geometry.levelCount())
         bilinear(geometry, texel, level + 1, u0, v0, cb);
-      for (int k = 0; k < 3; ++k)
-        out[k] = uint8_t(std::clamp(std::lround(ca[k] * (1.0 - f) + cb[k] * f), 0l, 255l));
+      // Premultiplied alpha over the sky colour, as the ground shader
+      // composites it (a no-data texel is black under alpha 0).
+      const double cover = (ca[3] * (1.0 - f) + cb[3] * f) / 255.0;
+      for (int k = 0; k < 3; ++k) {
+        const double v = ca[k] * (1.0 - f) + cb[k] * f + (1.0 - cover) * renderer_config::kSkyRgba[k];
+        out[k] = uint8_t(std::clamp(std::lround(v), 0l, 255l));
+      }
       out[3] = 255;
     }
   }

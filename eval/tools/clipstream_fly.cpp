@@ -55,9 +55,10 @@ void addOptions(CLI::App& app, Args* args) {
                "The --path JSON file's x and z are the colour store's map coordinates and its heights are "
                "in the elevation's unit (docs/cli.md, \"Cameras in map coordinates\")");
   app.add_option("--look-at", a.look_at,
-                 "X,Y[,HEIGHT]: instead of --path, hold the camera that looks at this point, in the colour "
-                 "store's map coordinates (level-0 texels without a georeference), from the south, 30 degrees "
-                 "down; HEIGHT in the elevation's unit (default: the ground's)");
+                 "X,Y[,HEIGHT] or lonlat:LON,LAT[,HEIGHT]: instead of --path, hold the camera that looks at "
+                 "this point, in the colour store's map coordinates (level-0 texels without a georeference) "
+                 "or in degrees, from the south, 30 degrees down; HEIGHT in the elevation's unit (default: "
+                 "the ground's)");
   app.add_option("--frames", o.frames, "Frames to render (default: the whole path at --speed)")
       ->transform(frames);
   app.add_option("--size", a.size, "Viewport WIDTHxHEIGHT");

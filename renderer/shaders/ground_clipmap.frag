@@ -142,5 +142,8 @@ void main() {
   color.rgb = mix(color.rgb, vec3(1.0, 0.0, 1.0), 0.5 * vMorph);  // transition bands
 #endif
 #endif
-  outColor = vec4(color.rgb, 1.0);
+  // Colour is premultiplied by its alpha (a no-data pixel is black under
+  // alpha 0: tiler/src/nodata_alpha.h): where the ground is not covered the
+  // sky colour shows, as it does where the ray misses the texture.
+  outColor = vec4(color.rgb + (1.0 - color.a) * SKY_RGB, 1.0);
 }

@@ -74,8 +74,16 @@ Status synthesizeRelief(uint32_t levels, TerrainLayerConfig* layer) {
 
 Status aimAtMapPoint(const LookAt& look, const GeoReference& colour_geo, const PyramidGeometry& colour,
                      const TerrainLayerConfig* terrain, Camera* out, double* camera_ground) {
+  glm::dvec2 map = look.map;
+  if (look.lon_lat) {
+    if (!colour_geo.present) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "longitude and latitude need a georeferenced colour store; give texels");
+    }
+    if (Status s = lonLatToMap(colour_geo.crs, look.map, &map); !s) return s;
+  }
   glm::dvec2 world;
-  if (Status s = mapToWorld(colour_geo, look.map, &world); !s) return s;
+  if (Status s = mapToWorld(colour_geo, map, &world); !s) return s;
   double y = 0.0;
   if (look.height)
     y = *look.height * (terrain ? terrain->alignment.world_per_height : 1.0);

@@ -62,8 +62,10 @@ Status checkCreated(const std::string& what, const std::string& hint) {
 std::string shaderHeader(const std::string& extra_defines) {
   return "#version 450 core\n#define MAX_LEVELS " + std::to_string(renderer_config::kMaxLevels) +
          "\n#define AMBIENT " + std::to_string(renderer_config::kTerrainAmbient) +
-         "\n#define DETAIL_FADE_LEVELS " + std::to_string(renderer_config::kDetailFadeLevels) + "\n" +
-         extra_defines;
+         "\n#define DETAIL_FADE_LEVELS " + std::to_string(renderer_config::kDetailFadeLevels) +
+         "\n#define SKY_RGB vec3(" + std::to_string(renderer_config::kSkyRgba[0] / 255.0) + ", " +
+         std::to_string(renderer_config::kSkyRgba[1] / 255.0) + ", " +
+         std::to_string(renderer_config::kSkyRgba[2] / 255.0) + ")\n" + extra_defines;
 }
 
 Status buildGroundProgram(const char* fragment_body, uint32_t* program,

@@ -240,8 +240,9 @@ void addOptions(CLI::App& app, Args* a) {
   app.add_flag("--stretch-elevation", a->stretch_elevation,
                "Stretch the elevation store over the texture instead of placing it by georeference");
   app.add_option("--look-at", a->look_at,
-                 "X,Y[,HEIGHT]: start looking at this point, in the store's map coordinates (level-0 texels "
-                 "without a georeference); HEIGHT in the elevation's unit (default: the ground's)");
+                 "X,Y[,HEIGHT] or lonlat:LON,LAT[,HEIGHT]: start looking at this point, in the store's map "
+                 "coordinates (level-0 texels without a georeference) or in degrees; HEIGHT in the "
+                 "elevation's unit (default: the ground's)");
   app.add_option("--terrain", a->terrain_method,
                  "Terrain geometry with --elevation: clipmap (default), quadtree, flat or full");
   app.add_option("--terrain-error", a->terrain_error_px,
@@ -580,18 +581,19 @@ int main(int argc, char** argv) {
     }
     if (input.lighting_toggled) {
       input.lighting_toggled = false;
-      if (TerrainRenderer* terrain = flight->terrain()) {
-        const TerrainLighting next = terrain->config().lighting == TerrainLighting::kPixel ? TerrainLighting::kVertex
-                                                                                           : TerrainLighting::kPixel;
-        if (Status s = terrain->setLighting(next); !s)
-          std::cerr << "clipstream-view: " << s.toString() << "\n";
+      if (TerrainRenderer* drawn = flight->terrain()) {
+        const TerrainLighting next = drawn->config().lighting == TerrainLighting::kPixel ? TerrainLighting::kVertex
+                                                                                         : TerrainLighting::kPixel;
+        if (Status s = drawn->setLighting(next); !s) std::cerr << "clipstream-view: " << s.toString() << "\n";
       }
     }
     if (input.detail_toggled) {
       input.detail_toggled = false;
-      if (TerrainRenderer* terrain = flight->terrain())
-        if (Status s = terrain->setDetailTextures(!terrain->config().detail_textures); !s)
+      if (TerrainRenderer* drawn = flight->terrain()) {
+        if (Status s = drawn->setDetailTextures(!drawn->config().detail_textures); !s) {
           std::cerr << "clipstream-view: " << s.toString() << "\n";
+        }
+      }
     }
     if (input.record_toggled) {
       input.record_toggled = false;

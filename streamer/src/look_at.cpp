@@ -1,5 +1,7 @@
 #include <clipstream/streamer/look_at.h>
 
+#include <proj.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -105,6 +107,40 @@ Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_ra
   c.pitch_rad = pitch_rad;
   c.position = target - c.forward() * distance;
   return c;
+}
+
+Status lonLatToMap(const std::string& crs, const glm::dvec2& lon_lat, glm::dvec2* map) {
+  if (crs.empty()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "longitude and latitude need the colour store's coordinate system, and it "
+                         "names none; give map coordinates");
+  }
+  if (!(std::abs(lon_lat.x) <= 180.0) || !(std::abs(lon_lat.y) <= 90.0)) {
+    return Status::error(ErrorCode::kInvalidArgument, "longitude must be within -180..180 and latitude -90..90");
+  }
+  // One context per call: PROJ contexts are not shared between threads.
+  PJ_CONTEXT* ctx = proj_context_create();
+  proj_log_level(ctx, PJ_LOG_NONE);
+  PJ* raw = proj_create_crs_to_crs(ctx, "EPSG:4326", crs.c_str(), nullptr);
+  PJ* pj = raw != nullptr ? proj_normalize_for_visualization(ctx, raw) : nullptr;  // lon, lat / east, north
+  Status result = okStatus();
+  if (pj == nullptr) {
+    result = Status::error(ErrorCode::kInvalidArgument,
+                           "longitude and latitude: PROJ does not know the colour store's coordinate system (" +
+                               std::string(proj_context_errno_string(ctx, proj_context_errno(ctx))) + ")");
+  } else {
+    const PJ_COORD c = proj_trans(pj, PJ_FWD, proj_coord(lon_lat.x, lon_lat.y, 0, 0));
+    if (!std::isfinite(c.xy.x) || !std::isfinite(c.xy.y) || proj_errno(pj) != 0) {
+      result = Status::error(ErrorCode::kInvalidArgument,
+                             "longitude and latitude: the point has no place in the colour store's coordinate system");
+    } else {
+      *map = {c.xy.x, c.xy.y};
+    }
+  }
+  if (pj != nullptr) proj_destroy(pj);
+  if (raw != nullptr) proj_destroy(raw);
+  proj_context_destroy(ctx);
+  return result;
 }
 
 }  // namespace clipstream

@@ -92,6 +92,38 @@ TEST(ClipmapRender, MatchesCpuReferenceWhenResident) {
   EXPECT_GE(psnrLogged("gpu vs reference", gpu, ref), kMatchDb);
 }
 
+// A colour store with no-data (black under alpha 0: the tiler's
+// transparency) shows the sky colour there, on the GPU as in the
+// reference, and the covered ground is drawn as before.
+TEST(ClipmapRender, NoDataShowsTheSkyColour) {
+  CLIPSTREAM_REQUIRE_GL();
+  const Camera cam = test::obliqueCamera();
+  std::vector<uint8_t> image = test::patternImage(2048, 2048);
+  for (size_t y = 0; y < 2048; ++y) std::fill_n(image.begin() + long(y * 2048 * 4), 1024 * 4, uint8_t(0));
+  std::shared_ptr<TileSource> holed = makeImageSource(image, 2048, 2048, 128);
+  Scene s = makeScene(holed, cam);
+  ASSERT_TRUE(s.renderer);
+  test::loadPlan(*s.renderer, *s.source, s.plan);
+  const auto gpu = test::renderFrame(*s.renderer, *s.target, cam);
+  const auto ref = reference(*s.source, s.source, cam);
+  test::dumpPpm("nodata_gpu", gpu, kViewport);
+  EXPECT_GE(psnrLogged("no-data gpu vs reference", gpu, ref), kMatchDb);
+  // Against the same view of the whole pattern: the holed half turned to sky.
+  Scene whole = makeScene(patternSource(), cam);
+  test::loadPlan(*whole.renderer, *whole.source, whole.plan);
+  const auto opaque = test::renderFrame(*whole.renderer, *whole.target, cam);
+  const size_t pixels = gpu.size() / 4;
+  ASSERT_GT(groundPixels(opaque), pixels / 4);
+  EXPECT_LT(groundPixels(gpu), groundPixels(opaque) - pixels / 8) << "the no-data half is not sky";
+  size_t same = 0, ground = 0;
+  for (size_t i = 0; i < gpu.size(); i += 4) {
+    if (groundPixels({gpu.begin() + long(i), gpu.begin() + long(i) + 4}) == 0) continue;
+    ++ground;
+    same += std::equal(gpu.begin() + long(i), gpu.begin() + long(i) + 3, opaque.begin() + long(i));
+  }
+  EXPECT_GT(same, ground * 9 / 10) << "covered ground drawn as with no hole";
+}
+
 // After a refused allocation the context still draws a renderer that fits:
 // the pattern at the oblique view matches its reference.
 void expectTheContextStillRenders(const char* label) {

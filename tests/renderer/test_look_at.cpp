@@ -1,5 +1,6 @@
 // Cameras in map coordinates (--look-at, aimAtMapPoint()): a map point of a
 // georeferenced scene is drawn at the centre of the frame, on the ground.
+#include <clipstream/cli/renderer_options.h>
 #include <clipstream/renderer/flight.h>
 #include <clipstream/streamer/look_at.h>
 
@@ -29,6 +30,46 @@ TEST(LookAt, MapCoordinatesBecomeTexels) {
   EXPECT_DOUBLE_EQ(world.y, 900.0);
   geo.transform[2] = 0.1;  // rotated
   EXPECT_EQ(mapToWorld(geo, {0.0, 0.0}, &world).code, ErrorCode::kInvalidArgument);
+}
+
+// Longitude and latitude (--look-at lonlat:...) through PROJ: a UTM
+// zone's central meridian is its false easting (500 km), the equator its
+// false northing (0 north, 10000 km south); a geographic CRS keeps the
+// degrees in longitude, latitude order whatever its axis order; what
+// cannot be converted is an error naming why.
+TEST(LookAt, LongitudeAndLatitudeBecomeMapCoordinates) {
+  glm::dvec2 map;
+  ASSERT_TRUE(lonLatToMap("EPSG:32610", {-123.0, 0.0}, &map).ok());
+  EXPECT_NEAR(map.x, 500000.0, 1e-6);
+  EXPECT_NEAR(map.y, 0.0, 1e-6);
+  ASSERT_TRUE(lonLatToMap("EPSG:32710", {-123.0, 0.0}, &map).ok());
+  EXPECT_NEAR(map.y, 10000000.0, 1e-6);
+  ASSERT_TRUE(lonLatToMap("EPSG:32610", {-123.0, 46.2}, &map).ok());
+  EXPECT_NEAR(map.x, 500000.0, 1e-6);
+  EXPECT_NEAR(map.y, 5116000.0, 2000.0);  // about 111 km a degree of latitude
+  ASSERT_TRUE(lonLatToMap("EPSG:4326", {-122.19, 46.2}, &map).ok());
+  EXPECT_NEAR(map.x, -122.19, 1e-9);
+  EXPECT_NEAR(map.y, 46.2, 1e-9);
+  EXPECT_EQ(lonLatToMap("", {0.0, 0.0}, &map).code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(lonLatToMap("EPSG:99999999", {0.0, 0.0}, &map).code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(lonLatToMap("EPSG:32610", {200.0, 0.0}, &map).code, ErrorCode::kInvalidArgument);
+
+  LookAt look;
+  ASSERT_TRUE(cli::parseLookAt("lonlat:-122.19,46.2,2500", &look).ok());
+  EXPECT_TRUE(look.lon_lat);
+  EXPECT_EQ(look.map, glm::dvec2(-122.19, 46.2));
+  EXPECT_EQ(look.height, 2500.0);
+  ASSERT_TRUE(cli::parseLookAt("562710,5114985", &look).ok());
+  EXPECT_FALSE(look.lon_lat);
+  EXPECT_FALSE(cli::parseLookAt("lonlat:-190,46", &look).ok());
+  EXPECT_FALSE(cli::parseLookAt("lonlat:46", &look).ok());
+  // A store without a georeference has no place for degrees.
+  look.lon_lat = true;
+  Camera camera;
+  double ground = 0.0;
+  PyramidGeometry g;
+  g.width_px = g.height_px = 1024;
+  EXPECT_EQ(aimAtMapPoint(look, GeoReference{}, g, nullptr, &camera, &ground).code, ErrorCode::kInvalidArgument);
 }
 
 // A path in map units (--path-in-map-units): x and z through the

@@ -185,7 +185,9 @@ TEST(TerrainDetail, SynthesizedReliefDrawsTheSameFramesTwice) {
     ASSERT_TRUE(TerrainRenderer::create(g, tc, &s.terrain).ok());
     ASSERT_NO_FATAL_FAILURE(uploadAllTiles(*s.terrain, *heights));
     frames[i] = drawTerrain(s, camera);
-    if (i > 0) EXPECT_EQ(s.terrain->lastFrame().finest_level, 0u) << "drawn down to the synthesis's level 0";
+    if (i > 0) {
+      EXPECT_EQ(s.terrain->lastFrame().finest_level, 0u) << "drawn down to the synthesis's level 0";
+    }
   }
   ASSERT_GT(groundPixels(frames[1]), size_t(kViewport.width_px) * kViewport.height_px / 4);
   EXPECT_EQ(frames[1], frames[2]);

@@ -379,3 +379,57 @@ TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
 
 }  // namespace
 }  // namespace clipstream::test
+
+namespace clipstream::test {
+namespace {
+
+// A colour image's no-data (--nodata, or the GDAL tag the file carries)
+// becomes alpha 0 over black; other pixels are opaque and keep their
+// colour, whichever reader decodes the file; a format forced without alpha
+// keeps the pixels opaque.
+TEST(TilerNoData, AColourNoDataCollarIsTransparent) {
+  TempDir dir("nodata");
+  auto collared = [](uint64_t x, uint64_t y, int c) { return x < 20 || y >= 140 ? 0.0 : pattern(x, y, c) + 1.0; };
+  const std::string plain = dir.file("plain.tif"), tagged = dir.file("tagged.tif");
+  ASSERT_TRUE(writeImage(plain, 200, 150, 3, OIIO::TypeDesc::UINT8, collared));
+  ASSERT_EQ(shell("gdal_translate -q -a_nodata 0 " + quoted(plain) + " " + quoted(tagged)), 0);
+  const RunResult given = runTiler({plain, dir.file("given.cst"), "--nodata", "0"});
+  ASSERT_EQ(given.exit_code, 0) << given.output;
+  EXPECT_NE(given.output.find("no-data: pixels whose every channel is 0 are transparent"), std::string::npos)
+      << given.output;
+  const RunResult tag = runTiler({tagged, dir.file("tag.cst")});
+  ASSERT_EQ(tag.exit_code, 0) << tag.output;
+  const RunResult gdal = runTiler({tagged, dir.file("gdal.cst"), "--reader", "gdal"});
+  ASSERT_EQ(gdal.exit_code, 0) << gdal.output;
+  expectSameTiles(dir.file("given.cst"), dir.file("tag.cst"));
+  expectSameTiles(dir.file("given.cst"), dir.file("gdal.cst"));
+
+  PyramidGeometry g;
+  GeoReference geo;
+  const std::vector<uint8_t> px = level0(dir.file("given.cst"), &g, &geo);
+  ASSERT_EQ(g.format, PixelFormat::kRGBA8);
+  for (uint64_t y = 0; y < 150; ++y) {
+    for (uint64_t x = 0; x < 200; ++x) {
+      const uint8_t* p = px.data() + (y * 200 + x) * 4;
+      const bool empty = x < 20 || y >= 140;
+      if (empty) {
+        ASSERT_EQ(p[0] + p[1] + p[2] + p[3], 0) << x << "," << y;
+      } else {
+        ASSERT_EQ(p[3], 255) << x << "," << y;
+        ASSERT_EQ(p[0], uint8_t(collared(x, y, 0))) << x << "," << y;
+      }
+    }
+  }
+  // Forced to RGB8: opaque, as asked.
+  const RunResult forced = runTiler({tagged, dir.file("rgb.cst"), "--format", "RGB8"});
+  ASSERT_EQ(forced.exit_code, 0) << forced.output;
+  EXPECT_EQ(forced.output.find("transparent"), std::string::npos) << forced.output;
+  // 16-bit colour: stays opaque, and says so.
+  ASSERT_TRUE(writeImage(dir.file("wide.tif"), 60, 40, 3, OIIO::TypeDesc::UINT16, collared));
+  const RunResult wide = runTiler({dir.file("wide.tif"), dir.file("wide.cst"), "--nodata", "0"});
+  ASSERT_EQ(wide.exit_code, 0) << wide.output;
+  EXPECT_NE(wide.output.find("no-data value 0 stays opaque"), std::string::npos) << wide.output;
+}
+
+}  // namespace
+}  // namespace clipstream::test

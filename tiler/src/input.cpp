@@ -6,6 +6,7 @@
 #include <clipstream/tiler/georef.h>
 
 #include "elevation_input.h"
+#include "nodata_alpha.h"
 #include "relief_source.h"
 
 #include <cmath>
@@ -70,6 +71,38 @@ Status makeRelief(const TilerOptions& o, GeoReference* geo, std::unique_ptr<Imag
   if (!s) return Status::error(s.code, o.input_path + ": " + s.message);
   *source = std::move(shaded);
   *elevation = ElevationInfo{};
+  return okStatus();
+}
+
+// A colour input's no-data value (--nodata, else what GDAL or the file's
+// GDAL_NODATA tag says) as transparency: 8-bit grey or RGB inputs whose
+// format was not forced to one without alpha become RGBA8.
+Status makeNoDataTransparent(const TilerOptions& o, TilerInput* in, std::vector<std::string>* warnings) {
+  const SourceInfo& info = in->source->info();
+  std::optional<double> nodata = o.nodata;
+  if (!nodata && info.metadata.present && info.metadata.has_nodata) nodata = info.metadata.nodata;
+  if (!nodata && !info.metadata.present) {
+    ElevationTags tags;
+    Status s = readElevationTags(o.input_path, &tags);
+    if (!s) return s;
+    if (tags.has_nodata) nodata = tags.nodata;
+  }
+  if (!nodata) return okStatus();
+  const bool eight_bit = info.input_type == "uint8";
+  const bool plain = info.format == PixelFormat::kR8 || info.format == PixelFormat::kRGB8;
+  const bool forced_opaque = o.format && *o.format != PixelFormat::kRGBA8;
+  if (info.input_channels == 2 || info.input_channels == 4 || forced_opaque) return okStatus();  // has or wants no alpha
+  if (!eight_bit || !plain || !(*nodata >= 0.0 && *nodata <= 255.0 && *nodata == std::floor(*nodata))) {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  ": no-data value %.9g stays opaque: only an 8-bit grey or RGB input's whole-number "
+                  "no-data becomes transparent (this one is %s)",
+                  *nodata, info.input_type.c_str());
+    warnings->push_back(o.input_path + text);
+    return okStatus();
+  }
+  in->source = std::make_unique<NoDataAlphaSource>(std::move(in->source), uint8_t(*nodata));
+  in->transparent_nodata = *nodata;
   return okStatus();
 }
 
@@ -159,6 +192,10 @@ Status openInput(const TilerOptions& o, TilerInput* out, std::vector<std::string
     if (!s) return s;
   }
   if (out->elevation.present && o.target_crs.empty()) warnIfStretched(o, *out, warnings);
+  if (!out->elevation.present && o.relief_scale == 0 && !o.mosaic && !o.input_path.empty()) {
+    s = makeNoDataTransparent(o, out, warnings);
+    if (!s) return s;
+  }
   if (o.relief_scale > 0) {
     s = makeRelief(o, &out->geo, &out->source, &out->elevation);
     if (!s) return s;

@@ -18,6 +18,7 @@
 #include "height_source.h"
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,8 @@ struct TilerInput {
   MosaicInfo mosaic;              // sheets and gaps of a mosaic; empty otherwise
   HeightSource* heights = nullptr;  // inside `source` for an elevation store, else null
   ElevationInfo elevation;        // present for an elevation store
+  // A colour input's no-data value, drawn transparent (nodata_alpha.h).
+  std::optional<double> transparent_nodata;
 };
 
 // How the tiler's options read image files: the reader, TIFF decode

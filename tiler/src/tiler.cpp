@@ -293,6 +293,7 @@ void fillSummary(const TilerOptions& o, const SourceInfo& src, const TilerInput&
   summary->geo = wopt.geo;
   summary->elevation = input.elevation;
   summary->shard = wopt.shard;
+  summary->transparent_nodata = input.transparent_nodata;
   summary->mosaic_sheets = input.mosaic.sheets.size();
   summary->gap_px = input.mosaic.gap_px;
   summary->read_s = figures.read_s;

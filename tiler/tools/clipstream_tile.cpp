@@ -87,6 +87,7 @@ nlohmann::json toJson(const clipstream::TilerSummary& s, const std::string& inpu
   j["input_type"] = s.input_type;
   j["decoder"] = s.decoder;
   j["reprojection"] = s.reprojection.empty() ? nlohmann::json() : nlohmann::json(s.reprojection);
+  j["transparent_nodata"] = s.transparent_nodata ? nlohmann::json(*s.transparent_nodata) : nlohmann::json();
   j["input_channels"] = s.input_channels;
   j["levels"] = s.levels;
   j["tiles"] = s.tiles;
@@ -174,7 +175,9 @@ void addOptions(CLI::App& app, Args* args) {
       app.add_option("--relief-scale", a.relief_scale, "with --relief: pixels per DEM sample along each axis (1..64)")
           ->capture_default_str()
           ->transform(cli::wholeInRange(1, kMaxReliefScale));
-  app.add_option("--nodata", a.nodata_text, "elevation: the no-data value (overrides the file's; 'nan' for float DEMs)");
+  app.add_option("--nodata", a.nodata_text,
+                 "the no-data value (overrides the file's): elevation: filled ('nan' for float DEMs); "
+                 "an 8-bit grey or RGB image: transparent");
   app.add_option("--vertical-units", a.units_text, "elevation: metre, foot or us-foot (overrides the file's)");
   app.add_option("--tile-size", a.tile_px, "tile edge in pixels (power of two, 16..4096)")
       ->transform(cli::wholeInRange(kMinTilePx, kMaxTilePx));
@@ -393,6 +396,10 @@ void printSummary(const clipstream::TilerSummary& summary, const clipstream::Til
       megabytes(summary.input_bytes).c_str(), megabytes(summary.output_bytes).c_str(),
       summary.output_bytes ? double(summary.raw_bytes) / double(summary.output_bytes) : 0.0,
       megabytes(summary.peak_rss_bytes).c_str(), summary.wall_s);
+  if (summary.transparent_nodata) {
+    std::printf("no-data: pixels whose every channel is %g are transparent (alpha 0, RGBA8)\n",
+                *summary.transparent_nodata);
+  }
   if (!summary.reprojection.empty()) {
     std::printf("reprojected: %s\n", printableText(summary.reprojection, 600).c_str());
   }

@@ -43,7 +43,8 @@ Status parseTileFormat(const std::string& name, TileContent* out);
 // success.
 Status parseTerrainMethod(const std::string& name, TerrainMethod* out);
 
-// --look-at X,Y[,HEIGHT]: a map point and optionally its height, finite
+// --look-at X,Y[,HEIGHT] or lonlat:LON,LAT[,HEIGHT]: a map point (or
+// longitude and latitude in degrees) and optionally its height, finite
 // numbers separated by commas. kInvalidArgument naming the text otherwise.
 Status parseLookAt(const std::string& text, LookAt* out);
 

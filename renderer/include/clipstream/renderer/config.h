@@ -115,7 +115,8 @@ inline constexpr float kDetailFadeLevels = 2.0f;
 inline constexpr double kTerrainClearance = 2.0;
 
 // Colour written where the view ray misses the textured ground (sky, or
-// outside the texture). Tests compare against the same constant.
+// outside the texture), and shown through ground whose colour is not
+// opaque (a no-data pixel: alpha 0). Tests compare against the same constant.
 inline constexpr uint8_t kSkyRgba[4] = {46, 51, 64, 255};
 
 }  // namespace clipstream::renderer_config

@@ -17,6 +17,7 @@
 #include <glm/glm.hpp>
 
 #include <optional>
+#include <string>
 
 namespace clipstream {
 
@@ -25,7 +26,13 @@ namespace clipstream {
 struct LookAt {
   glm::dvec2 map{0.0, 0.0};
   std::optional<double> height;
+  bool lon_lat = false;  // map holds longitude and latitude in degrees (WGS 84)
 };
+
+// Longitude and latitude in degrees (WGS 84) as map coordinates of `crs`
+// (a store's CRS text: EPSG:n or WKT), by PROJ. kInvalidArgument when the
+// CRS is empty or PROJ does not know it, or the point has no place in it.
+Status lonLatToMap(const std::string& crs, const glm::dvec2& lon_lat, glm::dvec2* map);
 
 // Map point `map` (the georeference's CRS units) in world units (the
 // colour layer's level-0 texels, x and z): the inverse of its transform.

@@ -113,6 +113,7 @@ struct TilerSummary {
   std::string input_type;        // "uint8", "synthetic", ...
   std::string decoder;           // SourceInfo::decoder: "libtiff", "openimageio", ...
   std::string reprojection;      // SourceInfo::reprojection: "" unless warped
+  std::optional<double> transparent_nodata;  // a colour input's no-data value, made alpha 0
   uint32_t input_channels = 0;
   uint32_t levels = 0;
   uint64_t tiles = 0;
