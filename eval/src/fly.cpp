@@ -285,12 +285,14 @@ Status setFlightPlan(const FlyOptions& o, const PyramidGeometry& geometry, Fligh
     k.pitch_deg = camera.pitch_rad * 180.0 / M_PI;
     r.path.keyframes = {k, k};
     r.path.keyframes[1].t_s = 1.0;
-  } else if (o.path == kSummitPath) {
-    // The built-in orbit around the terrain's highest point instead of the
-    // texture's centre.
-    if (!r.terrain) return Status::error(ErrorCode::kInvalidArgument, "--path summit needs --elevation");
+  } else if (o.path == kSummitPath || o.path == kRoughPath) {
+    // The built-in orbit around the terrain's highest point, or the middle
+    // of its roughest area, instead of the texture's centre.
+    if (!r.terrain) return Status::error(ErrorCode::kInvalidArgument, "--path " + o.path + " needs --elevation");
     glm::dvec3 peak;
-    if (Status s = highestPoint(*r.terrain->source, r.terrain->alignment, &peak); !s) return s;
+    Status found = o.path == kSummitPath ? highestPoint(*r.terrain->source, r.terrain->alignment, &peak)
+                                         : roughestPoint(*r.terrain->source, r.terrain->alignment, &peak);
+    if (!found) return found;
     if (Status s = FlightPath::builtin("orbit", geometry, &r.path); !s) return s;
     const glm::dvec2 shift = glm::dvec2(peak.x, peak.z) - 0.5 * glm::dvec2(geometry.width_px, geometry.height_px);
     for (Keyframe& k : r.path.keyframes) k.position += glm::dvec3(shift.x, 0.0, shift.y);

@@ -50,7 +50,7 @@ void addOptions(CLI::App& app, Args* args) {
   app.add_option("store", o.store_path, "Tile store file or http(s):// URL (omit with --procedural)");
   app.add_option("--path", o.path,
                  "Built-in path (pass, dive, orbit, teleport, zoom, valley; over terrain also summit, the orbit "
-                 "around the highest point) or JSON file");
+                 "around the highest point, and rough, the orbit around the roughest area) or JSON file");
   app.add_flag("--path-in-map-units", o.path_in_map_units,
                "The --path JSON file's x and z are the colour store's map coordinates and its heights are "
                "in the elevation's unit (docs/cli.md, \"Cameras in map coordinates\")");

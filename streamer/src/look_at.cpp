@@ -101,6 +101,52 @@ Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::d
   return okStatus();
 }
 
+Status roughestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world) {
+  const PyramidGeometry& g = heights.geometry();
+  uint32_t level = g.levelCount() - 1;
+  while (level > 0 && uint64_t(g.levels[level - 1].tiles_x) * g.levels[level - 1].tiles_y <= 16) --level;
+  const LevelInfo& info = g.levels[level];
+  const int64_t w = int64_t(info.width_px), h = int64_t(info.height_px), tp = g.tile_px;
+  std::vector<float> field(size_t(w * h));
+  std::vector<uint8_t> bytes;
+  for (uint32_t ty = 0; ty < info.tiles_y; ++ty)
+    for (uint32_t tx = 0; tx < info.tiles_x; ++tx) {
+      if (Status s = heights.fetch({level, tx, ty}, &bytes); !s) return s;
+      const float* f = reinterpret_cast<const float*>(bytes.data());
+      for (int64_t j = ty * tp; j < std::min(h, int64_t(ty + 1) * tp); ++j)
+        for (int64_t i = tx * tp; i < std::min(w, int64_t(tx + 1) * tp); ++i)
+          field[size_t(j * w + i)] = f[size_t((j - ty * tp) * tp + (i - tx * tp))];
+    }
+  // |Laplacian| in height units, edges repeated; a summed-area table of it.
+  auto at = [&](int64_t i, int64_t j) {
+    return double(field[size_t(std::clamp<int64_t>(j, 0, h - 1) * w + std::clamp<int64_t>(i, 0, w - 1))]);
+  };
+  std::vector<double> sat(size_t((w + 1) * (h + 1)), 0.0);
+  for (int64_t j = 0; j < h; ++j)
+    for (int64_t i = 0; i < w; ++i) {
+      const double r = std::abs(at(i - 1, j) + at(i + 1, j) + at(i, j - 1) + at(i, j + 1) - 4.0 * at(i, j));
+      sat[size_t((j + 1) * (w + 1) + i + 1)] = r + sat[size_t(j * (w + 1) + i + 1)] +
+                                               sat[size_t((j + 1) * (w + 1) + i)] - sat[size_t(j * (w + 1) + i)];
+    }
+  const int64_t side = std::clamp<int64_t>(int64_t(std::lround(kRoughAreaFraction * double(std::max(w, h)))), 1,
+                                           std::min(w, h));
+  double best = -1.0;
+  int64_t bx = 0, by = 0;
+  for (int64_t j = 0; j + side <= h; ++j)
+    for (int64_t i = 0; i + side <= w; ++i) {
+      const double sum = sat[size_t((j + side) * (w + 1) + i + side)] - sat[size_t(j * (w + 1) + i + side)] -
+                         sat[size_t((j + side) * (w + 1) + i)] + sat[size_t(j * (w + 1) + i)];
+      if (sum > best) best = sum, bx = i, by = j;
+    }
+  // The square's middle, in level-0 samples, and the ground there.
+  const double cx = (double(bx) + 0.5 * double(side - 1)) * double(1u << level);
+  const double cy = (double(by) + 0.5 * double(side - 1)) * double(1u << level);
+  const double ground = at(bx + side / 2, by + side / 2);
+  const glm::dvec2 xz = alignment.sample0_world + glm::dvec2(cx, cy) * alignment.world_per_sample;
+  *world = {xz.x, ground * alignment.world_per_height, xz.y};
+  return okStatus();
+}
+
 Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad) {
   Camera c;
   c.heading_rad = heading_rad;

@@ -118,6 +118,37 @@ HeightField smoothField(uint32_t side) {
 
 }  // namespace
 
+// The middle of the roughest area (--path rough): smooth rolling hills, a
+// tall smooth bump (the summit, not rough: its curvature is small) and a
+// patch of sample-scale noise far from it: the orbit goes to the noise.
+TEST(LookAt, TheRoughestAreaIsTheNoiseNotTheSummit) {
+  HeightField f = smoothField(1024);
+  for (uint32_t y = 0; y < 1024; ++y)
+    for (uint32_t x = 0; x < 1024; ++x) {
+      const double d2 = (double(x) - 300.0) * (double(x) - 300.0) + (double(y) - 700.0) * (double(y) - 700.0);
+      f.samples[size_t(y) * 1024 + x] += float(200.0 * std::exp(-d2 / 20000.0));
+      if (x >= 700 && x < 828 && y >= 100 && y < 228) {
+        f.samples[size_t(y) * 1024 + x] += float(((x * 7919u + y * 104729u) % 17u) * 1.5);
+      }
+    }
+  FieldSource source(f);
+  LayerAlignment alignment;
+  alignment.world_per_sample = {2.0, 2.0};
+  alignment.sample0_world = {1.0, 1.0};
+  alignment.world_per_height = 0.5;
+  glm::dvec3 rough, peak;
+  ASSERT_TRUE(roughestPoint(source, alignment, &rough).ok());
+  ASSERT_TRUE(highestPoint(source, alignment, &peak).ok());
+  // The patch's middle, sample (764, 164), is world (1529, 329); within
+  // the square's half side (64 samples, 128 world units).
+  EXPECT_NEAR(rough.x, 1.0 + 2.0 * 764.0, 128.0);
+  EXPECT_NEAR(rough.z, 1.0 + 2.0 * 164.0, 128.0);
+  EXPECT_GT(glm::length(glm::dvec2(rough.x - peak.x, rough.z - peak.z)), 500.0) << "the summit is not rough";
+  // On the ground there, as the decimated level sees it.
+  EXPECT_GT(rough.y, 0.5 * f.lowest());
+  EXPECT_LT(rough.y, 0.5 * f.highest());
+}
+
 // The summit the built-in path circles (--path summit): the DEM's highest
 // sample, found by a climb from its coarse levels, in world units.
 TEST(LookAt, TheHighestPointIsTheSummit) {

@@ -128,6 +128,9 @@ struct FlyOptions {
 // --path summit: over terrain, the built-in orbit around the DEM's highest
 // point (highestPoint()) instead of the texture's centre.
 inline constexpr const char* kSummitPath = "summit";
+// --path rough: over terrain, the built-in orbit around the middle of the
+// DEM's roughest area (roughestPoint(), streamer/look_at.h).
+inline constexpr const char* kRoughPath = "rough";
 
 // Largest --vertical-scale: beyond it every slope is a wall.
 inline constexpr double kMaxVerticalScale = 1000.0;

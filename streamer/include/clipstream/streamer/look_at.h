@@ -60,6 +60,19 @@ Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevat
 // highest hill). Reads at most 16 tiles, then 4 a level; their errors.
 Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world);
 
+// The middle of the roughest area of the elevation layer `heights` placed
+// by `alignment` (world x, ground height, z): on its coarsest level of at
+// most 16 tiles, each sample's roughness is the magnitude of the
+// heights' Laplacian (curvature: a steady slope is not rough), and the
+// roughest area is the square of kRoughAreaFraction of the level's larger
+// side whose mean roughness is highest. Reads at most 16 tiles; their
+// errors.
+Status roughestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world);
+
+// The side of the square roughestPoint() scores, as a fraction of the
+// DEM's larger side: about the footprint the built-in orbit circles.
+inline constexpr double kRoughAreaFraction = 0.125;
+
 // The camera that looks along heading `heading_rad`, pitched `pitch_rad`
 // (negative: down), at world point `target` from `distance` world units.
 Camera lookAtCamera(const glm::dvec3& target, double distance, double heading_rad, double pitch_rad);
