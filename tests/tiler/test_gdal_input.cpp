@@ -317,6 +317,13 @@ TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
   }
   EXPECT_GT(compared, w * h / 2);
   EXPECT_EQ(differ, 0u) << "of " << compared;
+
+  // --t-srs STORE: the CRS of a texture's store (the bundled DEM's own, here).
+  const RunResult texture = runTiler({bundledDataPath("mount_st_helens_30m.tif"), dir.file("texture.cst")});
+  ASSERT_EQ(texture.exit_code, 0) << texture.output;
+  const RunResult like = runTiler({dem, dir.file("like.cst"), "--t-srs", dir.file("texture.cst")});
+  ASSERT_EQ(like.exit_code, 0) << like.output;
+  expectSameTiles(dir.file("utm.cst"), dir.file("like.cst"));
 }
 
 // --t-srs auto: a geographic input goes to the WGS 84 UTM zone of its
@@ -363,6 +370,12 @@ TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
   RunResult r = runTiler({bundledDataPath("autzen.jpg"), out, "--t-srs", "EPSG:32610"});
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("autzen.jpg: has no coordinate system to reproject from"), std::string::npos)
+      << r.output;
+  // A store without a CRS names none to reproject to.
+  ASSERT_EQ(runTiler({bundledDataPath("autzen.jpg"), dir.file("autzen.cst")}).exit_code, 0);
+  r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", dir.file("autzen.cst")});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("autzen.cst: the store names no coordinate system to reproject to"), std::string::npos)
       << r.output;
   r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", "EPSG:99999999"});
   EXPECT_NE(r.exit_code, 0);
