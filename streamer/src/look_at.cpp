@@ -138,10 +138,15 @@ Status roughestPoint(TileSource& heights, const LayerAlignment& alignment, glm::
                          sat[size_t((j + side) * (w + 1) + i)] + sat[size_t(j * (w + 1) + i)];
       if (sum > best) best = sum, bx = i, by = j;
     }
-  // The square's middle, in level-0 samples, and the ground there.
-  const double cx = (double(bx) + 0.5 * double(side - 1)) * double(1u << level);
-  const double cy = (double(by) + 0.5 * double(side - 1)) * double(1u << level);
-  const double ground = at(bx + side / 2, by + side / 2);
+  // The square's middle, in level-0 samples (level sample i covers
+  // level-0 samples [i 2^level, (i + 1) 2^level)), and the ground there:
+  // the level's samples around it, averaged.
+  const double mx = double(bx) + 0.5 * double(side - 1), my = double(by) + 0.5 * double(side - 1);
+  const double scale = double(uint64_t(1) << level);
+  const double cx = mx * scale + 0.5 * (scale - 1.0), cy = my * scale + 0.5 * (scale - 1.0);
+  const int64_t i0 = int64_t(std::floor(mx)), j0 = int64_t(std::floor(my));
+  const int64_t i1 = int64_t(std::ceil(mx)), j1 = int64_t(std::ceil(my));
+  const double ground = 0.25 * (at(i0, j0) + at(i1, j0) + at(i0, j1) + at(i1, j1));
   const glm::dvec2 xz = alignment.sample0_world + glm::dvec2(cx, cy) * alignment.world_per_sample;
   *world = {xz.x, ground * alignment.world_per_height, xz.y};
   return okStatus();

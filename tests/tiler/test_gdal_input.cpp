@@ -11,6 +11,7 @@
 #include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -317,13 +318,6 @@ TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
   }
   EXPECT_GT(compared, w * h / 2);
   EXPECT_EQ(differ, 0u) << "of " << compared;
-
-  // --t-srs STORE: the CRS of a texture's store (the bundled DEM's own, here).
-  const RunResult texture = runTiler({bundledDataPath("mount_st_helens_30m.tif"), dir.file("texture.cst")});
-  ASSERT_EQ(texture.exit_code, 0) << texture.output;
-  const RunResult like = runTiler({dem, dir.file("like.cst"), "--t-srs", dir.file("texture.cst")});
-  ASSERT_EQ(like.exit_code, 0) << like.output;
-  expectSameTiles(dir.file("utm.cst"), dir.file("like.cst"));
 }
 
 // --t-srs auto: a geographic input goes to the WGS 84 UTM zone of its
@@ -352,14 +346,43 @@ TEST(TilerWarp, AutoPicksTheUtmZoneAndTheCollarIsTransparent) {
   GeoReference geo;
   const std::vector<uint8_t> ours = level0(dir.file("rgb.cst"), &g, &geo);
   uint64_t w = 0, h = 0;
-  const std::vector<uint8_t> theirs = wholeImage(ref, PixelFormat::kRGBA8, &w, &h);
+  std::vector<uint8_t> theirs = wholeImage(ref, PixelFormat::kRGBA8, &w, &h);
   ASSERT_EQ(g.format, PixelFormat::kRGBA8);
   ASSERT_EQ(g.width_px, w);
   ASSERT_EQ(g.height_px, h);
+  // gdalwarp's alpha is straight, the store's colour premultiplied by it
+  // (the same where alpha is 0 or 255, as it is everywhere here).
+  for (size_t i = 0; i < theirs.size(); i += 4) {
+    for (int k = 0; k < 3; ++k) theirs[i + k] = uint8_t((theirs[i + k] * uint32_t(theirs[i + 3]) + 127) / 255);
+  }
   EXPECT_TRUE(ours == theirs);
   uint64_t transparent = 0;
   for (size_t i = 3; i < ours.size(); i += 4) transparent += ours[i] == 0;
   EXPECT_GT(transparent, 0u) << "a rotated footprint leaves corners no input pixel reaches";
+}
+
+// --t-srs auto in the corners of the world: longitudes given as 0..360
+// (190 E is 170 W: zone 2), an input already in the target (kept, said),
+// one too wide for a zone (refused).
+TEST(TilerWarp, AutoFindsTheZoneOfLongitudesPast180AndRefusesTooWide) {
+  TempDir dir("warp");
+  ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 120, 100, 3, OIIO::TypeDesc::UINT8, pattern));
+  auto placed = [&](const std::string& name, const std::string& ullr) {
+    const std::string out = dir.file(name);
+    EXPECT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr " + ullr + " " + quoted(dir.file("rgb.tif")) + " " +
+                    quoted(out)),
+              0);
+    return out;
+  };
+  const RunResult east = runTiler({placed("east.tif", "190 10 191 9"), dir.file("east.cst"), "--t-srs", "auto"});
+  ASSERT_EQ(east.exit_code, 0) << east.output;
+  EXPECT_NE(east.output.find("EPSG:32602 (WGS 84 / UTM zone 2N)"), std::string::npos) << east.output;
+  const RunResult kept = runTiler({placed("kept.tif", "10 10 11 9"), dir.file("kept.cst"), "--t-srs", "EPSG:4326"});
+  ASSERT_EQ(kept.exit_code, 0) << kept.output;
+  EXPECT_NE(kept.output.find("kept (the input is in it already)"), std::string::npos) << kept.output;
+  const RunResult wide = runTiler({placed("wide.tif", "-180 60 180 -60"), dir.file("wide.cst"), "--t-srs", "auto"});
+  EXPECT_NE(wide.exit_code, 0);
+  EXPECT_NE(wide.output.find("spans 360.0 degrees of longitude"), std::string::npos) << wide.output;
 }
 
 TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
@@ -371,12 +394,6 @@ TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("autzen.jpg: has no coordinate system to reproject from"), std::string::npos)
       << r.output;
-  // A store without a CRS names none to reproject to.
-  ASSERT_EQ(runTiler({bundledDataPath("autzen.jpg"), dir.file("autzen.cst")}).exit_code, 0);
-  r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", dir.file("autzen.cst")});
-  EXPECT_NE(r.exit_code, 0);
-  EXPECT_NE(r.output.find("autzen.cst: the store names no coordinate system to reproject to"), std::string::npos)
-      << r.output;
   r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", "EPSG:99999999"});
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--t-srs 'EPSG:99999999' is not a coordinate system GDAL knows"), std::string::npos)
@@ -384,6 +401,14 @@ TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
   r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-srs", "auto", "--resampling", "sharp"});
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--resampling 'sharp' is not"), std::string::npos) << r.output;
+  // Refused after the warp was made (five bands): the warp and the file are closed in order.
+  ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 40, 30, 3, OIIO::TypeDesc::UINT8, pattern));
+  ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr 10 10 11 9 -b 1 -b 2 -b 3 -b 1 -b 2 " +
+                  quoted(dir.file("rgb.tif")) + " " + quoted(dir.file("five.tif"))),
+            0);
+  r = runTiler({dir.file("five.tif"), out, "--t-srs", "auto"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("5 bands; only 1 (grey)"), std::string::npos) << r.output;
   r = runTiler({bundledDataPath("mount_st_helens_30m.tif"), out, "--t-res", "10"});
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--t-res needs --t-srs"), std::string::npos) << r.output;
@@ -402,7 +427,9 @@ namespace {
 // keeps the pixels opaque.
 TEST(TilerNoData, AColourNoDataCollarIsTransparent) {
   TempDir dir("nodata");
-  auto collared = [](uint64_t x, uint64_t y, int c) { return x < 20 || y >= 140 ? 0.0 : pattern(x, y, c) + 1.0; };
+  auto collared = [](uint64_t x, uint64_t y, int c) {
+    return x < 20 || y >= 140 ? 0.0 : std::fmod(pattern(x, y, c), 255.0) + 1.0;  // 1..255
+  };
   const std::string plain = dir.file("plain.tif"), tagged = dir.file("tagged.tif");
   ASSERT_TRUE(writeImage(plain, 200, 150, 3, OIIO::TypeDesc::UINT8, collared));
   ASSERT_EQ(shell("gdal_translate -q -a_nodata 0 " + quoted(plain) + " " + quoted(tagged)), 0);
@@ -437,6 +464,23 @@ TEST(TilerNoData, AColourNoDataCollarIsTransparent) {
   const RunResult forced = runTiler({tagged, dir.file("rgb.cst"), "--format", "RGB8"});
   ASSERT_EQ(forced.exit_code, 0) << forced.output;
   EXPECT_EQ(forced.output.find("transparent"), std::string::npos) << forced.output;
+  // Forced to RGBA8: transparent as by default.
+  const RunResult rgba = runTiler({tagged, dir.file("rgba.cst"), "--format", "RGBA8"});
+  ASSERT_EQ(rgba.exit_code, 0) << rgba.output;
+  expectSameTiles(dir.file("given.cst"), dir.file("rgba.cst"));
+  // Grey: (v, v, v, 255), or all 0 where v is the no-data value.
+  ASSERT_TRUE(writeImage(dir.file("grey.tif"), 60, 40, 1, OIIO::TypeDesc::UINT8, collared));
+  const RunResult grey = runTiler({dir.file("grey.tif"), dir.file("grey.cst"), "--nodata", "0"});
+  ASSERT_EQ(grey.exit_code, 0) << grey.output;
+  const std::vector<uint8_t> gp = level0(dir.file("grey.cst"), &g, &geo);
+  ASSERT_EQ(g.format, PixelFormat::kRGBA8);
+  for (uint64_t y = 0; y < 40; ++y)
+    for (uint64_t x = 0; x < 60; ++x) {
+      const uint8_t* p = gp.data() + (y * 60 + x) * 4;
+      const uint8_t v = uint8_t(collared(x, y, 0));
+      ASSERT_EQ(p[3], v == 0 ? 0 : 255) << x << "," << y;
+      ASSERT_TRUE(p[0] == v && p[1] == v && p[2] == v) << x << "," << y;
+    }
   // 16-bit colour: stays opaque, and says so.
   ASSERT_TRUE(writeImage(dir.file("wide.tif"), 60, 40, 3, OIIO::TypeDesc::UINT16, collared));
   const RunResult wide = runTiler({dir.file("wide.tif"), dir.file("wide.cst"), "--nodata", "0"});

@@ -152,6 +152,9 @@ class GdalSource final : public ImageSource {
 
   const SourceInfo& info() const override { return m_info; }
 
+  // RGBA8 rows come out premultiplied (for alpha the warper added).
+  void setPremultiply(bool on) { m_premultiply = on; }
+
   Status readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
                   size_t dst_stride) override {
     if (y0 + rows > m_info.height_px || x0 + width > m_info.width_px) {
@@ -171,9 +174,9 @@ class GdalSource final : public ImageSource {
     for (uint32_t done = 0; done < rows;) {
       const uint32_t n = std::min(chunk, rows - done);
       m_scratch.resize(read_row * n);
-      const CPLErr e = GDALDatasetRasterIO(m_ds, GF_Read, int(x0), int(y0 + done), int(width), int(n),
-                                           m_scratch.data(), int(width), int(n), m_read_type, bands,
-                                           nullptr, int(read_pixel), int(read_row), int(sample));
+      const CPLErr e = GDALDatasetRasterIOEx(m_ds, GF_Read, int(x0), int(y0 + done), int(width), int(n),
+                                             m_scratch.data(), int(width), int(n), m_read_type, bands, nullptr,
+                                             GSpacing(read_pixel), GSpacing(read_row), GSpacing(sample), nullptr);
       if (e != CE_None || errors.failed()) {
         return Status::error(ErrorCode::kIo, m_path + ": cannot read rows " + std::to_string(y0 + done) +
                                                  "-" + std::to_string(y0 + done + n - 1) + ": " +
@@ -182,8 +185,9 @@ class GdalSource final : public ImageSource {
       for (uint32_t r = 0; r < n; ++r) {
         const uint8_t* src = m_scratch.data() + size_t(r) * read_row;
         if (!m_palette.empty()) src = expand(src, width);
-        convertNativeRow(m_kind, src, nch, width, m_info.format, fast_copy,
-                         dst + size_t(done + r) * dst_stride, &m_info.clamped_samples);
+        uint8_t* out = dst + size_t(done + r) * dst_stride;
+        convertNativeRow(m_kind, src, nch, width, m_info.format, fast_copy, out, &m_info.clamped_samples);
+        if (m_premultiply) premultiply(out, width);
       }
       done += n;
     }
@@ -191,6 +195,17 @@ class GdalSource final : public ImageSource {
   }
 
  private:
+  // Colour times alpha, for the alpha the warper added: its edges are
+  // partial (resampled coverage), and the renderer and the filters take
+  // colour as premultiplied (docs/decisions.md D293).
+  void premultiply(uint8_t* rgba, uint64_t width) const {
+    if (m_info.format != PixelFormat::kRGBA8) return;
+    for (uint64_t x = 0; x < width; ++x, rgba += 4) {
+      const uint32_t a = rgba[3];
+      for (int c = 0; c < 3; ++c) rgba[c] = uint8_t((rgba[c] * a + 127) / 255);
+    }
+  }
+
   // One row of palette indices (uint16) as RGB or RGBA bytes.
   const uint8_t* expand(const uint8_t* indices, uint64_t width) {
     const uint32_t nch = m_info.input_channels;
@@ -212,6 +227,7 @@ class GdalSource final : public ImageSource {
   SampleKind m_kind;
   GDALDataType m_read_type;
   std::vector<std::array<uint8_t, 4>> m_palette;  // empty unless the file is paletted
+  bool m_premultiply = false;
   std::vector<uint8_t> m_scratch, m_expanded;
 };
 
@@ -242,12 +258,19 @@ std::string describeSrs(OGRSpatialReferenceH srs) {
   return text.empty() ? "a CRS without a name" : text;
 }
 
+// The CRS the input's georeference is in: its transform's, else its
+// ground control points'.
+OGRSpatialReferenceH sourceSrs(GDALDatasetH src) {
+  OGRSpatialReferenceH srs = GDALGetSpatialRef(src);
+  return srs != nullptr ? srs : GDALGetGCPSpatialRef(src);
+}
+
 // The target CRS of --t-srs into `dst`: as GDAL takes it, or "auto": the
 // WGS 84 UTM zone of a geographic input's centre (a projected input stays
 // as it is: *keep set).
 Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& text, Srs* dst, bool* keep) {
   *keep = false;
-  OGRSpatialReferenceH from = GDALGetSpatialRef(src);
+  OGRSpatialReferenceH from = sourceSrs(src);
   if (from == nullptr) {
     return Status::error(ErrorCode::kInvalidArgument,
                          path + ": has no coordinate system to reproject from (--t-srs)");
@@ -266,25 +289,45 @@ Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& t
   }
   double gt[6];
   if (GDALGetGeoTransform(src, gt) != CE_None) {
-    return Status::error(ErrorCode::kInvalidArgument, path + ": has no georeference to reproject");
+    return Status::error(ErrorCode::kInvalidArgument,
+                         path + ": --t-srs auto needs a georeference (ground control points alone do not "
+                                "say where the middle is); give a CRS");
   }
-  const double cx = GDALGetRasterXSize(src) * 0.5, cy = GDALGetRasterYSize(src) * 0.5;
-  double x = gt[0] + gt[1] * cx + gt[2] * cy, y = gt[3] + gt[4] * cx + gt[5] * cy;
-  // The centre in longitude and latitude, whatever the axis order of the CRS.
+  // The centre and the corners in longitude and latitude, whatever the
+  // axis order of the CRS.
+  const double w = GDALGetRasterXSize(src), h = GDALGetRasterYSize(src);
+  double xs[5] = {0.5 * w, 0, w, 0, w}, ys[5] = {0.5 * h, 0, 0, h, h};
+  for (int i = 0; i < 5; ++i) {
+    const double px = xs[i], py = ys[i];
+    xs[i] = gt[0] + gt[1] * px + gt[2] * py;
+    ys[i] = gt[3] + gt[4] * px + gt[5] * py;
+  }
   Srs lonlat;
   OSRSetWellKnownGeogCS(lonlat.h, "WGS84");
   OGRSpatialReferenceH from_gis = OSRClone(from);
   OSRSetAxisMappingStrategy(from_gis, OAMS_TRADITIONAL_GIS_ORDER);
   OGRCoordinateTransformationH ct = OCTNewCoordinateTransformation(from_gis, lonlat.h);
-  const bool moved = ct != nullptr && OCTTransform(ct, 1, &x, &y, nullptr);
+  const bool moved = ct != nullptr && OCTTransform(ct, 5, xs, ys, nullptr);
   if (ct != nullptr) OCTDestroyCoordinateTransformation(ct);
   OSRDestroySpatialReference(from_gis);
+  const double x = xs[0] - 360.0 * std::floor((xs[0] + 180.0) / 360.0), y = ys[0];  // longitude in [-180, 180)
   if (!moved || !(std::abs(y) <= 84.0)) {
     return Status::error(ErrorCode::kInvalidArgument,
                          path + ": --t-srs auto picks a UTM zone, and the input's centre is not between "
                                 "84 degrees south and north; give a CRS");
   }
-  const int zone = std::clamp(int(std::floor((x + 180.0) / 6.0)) + 1, 1, 60);
+  // A zone is 6 degrees wide; beyond a few zones either side UTM's scale
+  // error grows past what a terrain view should show.
+  const double west = std::min(xs[1], xs[3]), east = std::max(xs[2], xs[4]);
+  if (!(east - west <= 18.0) || std::max({std::abs(ys[1]), std::abs(ys[2]), std::abs(ys[3]), std::abs(ys[4])}) > 84.0) {
+    char message[200];
+    std::snprintf(message, sizeof message,
+                  ": --t-srs auto picks one UTM zone, and the input spans %.1f degrees of longitude "
+                  "(at most 18) or reaches past 84 degrees of latitude; give a CRS",
+                  east - west);
+    return Status::error(ErrorCode::kInvalidArgument, path + message);
+  }
+  const int zone = std::min(int(std::floor((x + 180.0) / 6.0)) + 1, 60);
   OSRImportFromEPSG(dst->h, (y >= 0 ? 32600 : 32700) + zone);
   OSRSetAxisMappingStrategy(dst->h, OAMS_TRADITIONAL_GIS_ORDER);
   return okStatus();
@@ -295,17 +338,24 @@ Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& t
 // nothing is held whole. An RGB input gains an alpha band, transparent
 // where no input pixel lands.
 Status warp(const std::string& path, GDALDatasetH src, const ImageReadOptions& read, GDALDatasetH* out,
-            std::string* description) {
+            std::string* description, bool* alpha_added) {
   *out = nullptr;
+  *alpha_added = false;
   Srs dst;
   bool keep = false;
   Status s = targetSrs(path, src, read.target_crs, &dst, &keep);
   if (!s) return s;
-  OGRSpatialReferenceH from = GDALGetSpatialRef(src);
-  if (keep || OSRIsSame(from, dst.h)) {
-    *description = describeSrs(from) + " kept (already projected" +
-                   std::string(keep ? "; --t-srs auto reprojects geographic inputs only)" : ")");
+  OGRSpatialReferenceH from = sourceSrs(src);
+  const bool gcps = GDALGetSpatialRef(src) == nullptr;
+  if ((keep || OSRIsSame(from, dst.h)) && read.target_resolution <= 0 && !gcps) {
+    *description = describeSrs(from) + (keep ? " kept (already projected; --t-srs auto reprojects "
+                                               "geographic inputs only)"
+                                             : " kept (the input is in it already)");
     return okStatus();
+  }
+  if (keep) {  // --t-res asked for in the input's own projected CRS
+    OSRDestroySpatialReference(dst.h);
+    dst.h = OSRClone(from);
   }
   char* wkt = nullptr;
   OSRExportToWkt(dst.h, &wkt);
@@ -320,11 +370,25 @@ Status warp(const std::string& path, GDALDatasetH src, const ImageReadOptions& r
     std::snprintf(res, sizeof res, "%.17g", read.target_resolution);
     args.insert(args.end(), {"-tr", res, res});
   }
+  // Where no input pixel lands: the input's no-data value if it has one;
+  // else alpha for 8-bit images (every value is a colour), and for
+  // heights a no-data value no sample holds, so the collar is filled like
+  // any void rather than drawn as a cliff down to 0.
   const int bands = GDALGetRasterCount(src);
-  if (bands == 3 && GDALGetRasterColorInterpretation(GDALGetRasterBand(src, 3)) != GCI_AlphaBand) {
-    int has_nodata = 0;
-    GDALGetRasterNoDataValue(GDALGetRasterBand(src, 1), &has_nodata);
-    if (!has_nodata) args.push_back("-dstalpha");
+  GDALRasterBandH first = GDALGetRasterBand(src, 1);
+  int has_nodata = 0;
+  GDALGetRasterNoDataValue(first, &has_nodata);
+  const GDALDataType type = GDALGetRasterDataType(first);
+  const bool has_alpha = GDALGetRasterColorInterpretation(GDALGetRasterBand(src, bands)) == GCI_AlphaBand;
+  if (!has_nodata && !has_alpha && GDALGetRasterColorTable(first) == nullptr) {
+    if (bands == 1 && type == GDT_Int16) {
+      args.insert(args.end(), {"-dstnodata", "-32768"});
+    } else if (bands == 1 && (type == GDT_Float32 || type == GDT_Float64)) {
+      args.insert(args.end(), {"-dstnodata", "nan"});
+    } else if (bands == 1 || bands == 3) {
+      args.push_back("-dstalpha");
+      *alpha_added = true;
+    }
   }
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());
@@ -377,22 +441,26 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   // A remote file's folder is not listed for side-car files: one request
   // saved, and servers that refuse listings do not fail the open.
   if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "EMPTY_DIR");
+  // Drivers read their decode threads at open (GTiff's NUM_THREADS).
   const std::string threads = read.decode_threads == 0 ? "ALL_CPUS" : std::to_string(read.decode_threads);
   CPLSetThreadLocalConfigOption("GDAL_NUM_THREADS", threads.c_str());
+  // The file is closed after the warped dataset over it: declared first.
+  DatasetCloser underlying;
   DatasetCloser closer;
   closer.ds = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
                          nullptr, nullptr);
+  CPLSetThreadLocalConfigOption("GDAL_NUM_THREADS", nullptr);
   if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", nullptr);
   if (closer.ds == nullptr) {
     return Status::error(ErrorCode::kIo,
                          path + ": cannot open image: GDAL: " + errors.message("not a raster GDAL can read"));
   }
   // Reprojected: the rest reads the warped dataset, which reads the file.
-  DatasetCloser underlying;
   std::string reprojection;
+  bool alpha_added = false;
   if (!read.target_crs.empty() && GDALGetRasterCount(closer.ds) > 0) {
     GDALDatasetH warped = nullptr;
-    Status w = warp(path, closer.ds, read, &warped, &reprojection);
+    Status w = warp(path, closer.ds, read, &warped, &reprojection, &alpha_added);
     if (!w) return w;
     if (warped != nullptr) {
       underlying.ds = closer.ds;
@@ -491,8 +559,8 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
     std::copy(gt, gt + 6, meta.geo.transform);
     meta.geo.crs = crsText(ds);
   } else if (GDALGetGCPCount(ds) > 0) {
-    info.warnings.push_back(path + ": placed by ground control points, which the tiler does not use; "
-                                   "it is tiled without a georeference (warp it first: gdalwarp)");
+    info.warnings.push_back(path + ": placed by ground control points, which the tiler does not use "
+                                   "as they are; it is tiled without a georeference (--t-srs warps by them)");
   }
   int has_nodata = 0;
   const double nodata = GDALGetRasterNoDataValue(first, &has_nodata);
@@ -501,8 +569,10 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   meta.units = heightUnits(first);
 
   info.reprojection = reprojection;
-  *out = std::make_unique<GdalSource>(path, ds, underlying.ds, std::move(info), kind, read_type,
-                                      std::move(palette));
+  auto source = std::make_unique<GdalSource>(path, ds, underlying.ds, std::move(info), kind, read_type,
+                                             std::move(palette));
+  source->setPremultiply(alpha_added);
+  *out = std::move(source);
   closer.ds = underlying.ds = nullptr;  // the source owns them now
   return okStatus();
 }

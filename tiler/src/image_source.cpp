@@ -256,7 +256,7 @@ bool isGdalName(const std::string& path) {
                              std::isdigit(static_cast<unsigned char>(path[i])) || path[i] == '_')) {
     ++i;
   }
-  return i >= 3 && i < path.size() && path[i] == ':' && std::isupper(static_cast<unsigned char>(path[0]));
+  return i >= 2 && i < path.size() && path[i] == ':' && std::isupper(static_cast<unsigned char>(path[0]));
 }
 
 Status openImageFile(const std::string& path, std::optional<PixelFormat> forced,

@@ -89,10 +89,9 @@ Status makeNoDataTransparent(const TilerOptions& o, TilerInput* in, std::vector<
   }
   if (!nodata) return okStatus();
   const bool eight_bit = info.input_type == "uint8";
-  const bool plain = info.format == PixelFormat::kR8 || info.format == PixelFormat::kRGB8;
   const bool forced_opaque = o.format && *o.format != PixelFormat::kRGBA8;
   if (info.input_channels == 2 || info.input_channels == 4 || forced_opaque) return okStatus();  // has or wants no alpha
-  if (!eight_bit || !plain || !(*nodata >= 0.0 && *nodata <= 255.0 && *nodata == std::floor(*nodata))) {
+  if (!eight_bit || !(*nodata >= 0.0 && *nodata <= 255.0 && *nodata == std::floor(*nodata))) {
     char text[160];
     std::snprintf(text, sizeof text,
                   ": no-data value %.9g stays opaque: only an 8-bit grey or RGB input's whole-number "
@@ -100,6 +99,12 @@ Status makeNoDataTransparent(const TilerOptions& o, TilerInput* in, std::vector<
                   *nodata, info.input_type.c_str());
     warnings->push_back(o.input_path + text);
     return okStatus();
+  }
+  // The samples as they are (R8 or RGB8), then alpha from the value.
+  if (info.format == PixelFormat::kRGBA8) {
+    const Status s = openImageFile(o.input_path, info.input_channels == 1 ? PixelFormat::kR8 : PixelFormat::kRGB8,
+                                   &in->source, imageReadOptions(o));
+    if (!s) return s;
   }
   in->source = std::make_unique<NoDataAlphaSource>(std::move(in->source), uint8_t(*nodata));
   in->transparent_nodata = *nodata;

@@ -81,6 +81,12 @@ Status runFingerprint(const TilerOptions& o, const SourceInfo& src, const GeoRef
   h.u64(o.predictor ? 1 : 0);
   h.u64(uint64_t(o.filter));
   h.u64(o.linear_light ? 1 : 0);
+  // What changes the pixels beyond the input: reprojection and no-data.
+  h.text(o.target_crs);
+  h.text(o.resampling);
+  h.bytes(&o.target_resolution, sizeof o.target_resolution);
+  h.u64(o.nodata ? 1 : 0);
+  if (o.nodata) h.bytes(&*o.nodata, sizeof *o.nodata);
   h.u64(geo.present ? 1 : 0);
   h.bytes(geo.transform, sizeof(geo.transform));
   h.text(geo.crs);

@@ -368,28 +368,7 @@ Status tileImageImpl(const TilerOptions& o, TilerSummary* summary) {
 
 }  // namespace
 
-// --t-srs STORE: the CRS of that tile store (a texture the DEM must meet).
-Status resolveTargetCrs(const TilerOptions& o, TilerOptions* out) {
-  *out = o;
-  std::error_code ec;
-  if (o.target_crs.empty() || o.target_crs == "auto" || !fs::is_regular_file(o.target_crs, ec)) return okStatus();
-  std::unique_ptr<TileStoreReader> store;
-  if (!TileStoreReader::open(o.target_crs, &store)) return okStatus();  // a file GDAL reads (a .prj, a WKT file)
-  const GeoReference& geo = store->info().geo;
-  if (!geo.present || geo.crs.empty()) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "--t-srs " + o.target_crs + ": the store names no coordinate system to reproject to");
-  }
-  out->target_crs = geo.crs;
-  return okStatus();
-}
-
-Status tileImage(const TilerOptions& given, TilerSummary* summary) {
-  TilerOptions options;
-  if (Status s = resolveTargetCrs(given, &options); !s) {
-    *summary = TilerSummary{};
-    return s;
-  }
+Status tileImage(const TilerOptions& options, TilerSummary* summary) {
   // Allocation failure is the one exception the pipeline can meet (huge
   // budgets on small machines); every thread turns it into a Status, and
   // this catches the building thread's. The writer is destroyed on the way

@@ -192,7 +192,7 @@ void addOptions(CLI::App& app, Args* args) {
                  "formats; GDAL for what OpenImageIO cannot read), openimageio or gdal (every file)");
   app.add_option("--t-srs", a.t_srs,
                  "reproject the input to this CRS with GDAL's warper (EPSG:n, WKT, a PROJ string; "
-                 "a tile store: its CRS; auto: the UTM zone of a geographic input's centre)");
+                 "auto: the UTM zone of a geographic input's centre)");
   app.add_option("--resampling", a.resampling,
                  "with --t-srs: near, bilinear (default), cubic, cubicspline, lanczos, average or mode");
   app.add_option("--t-res", a.t_res,
