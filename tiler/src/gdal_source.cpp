@@ -429,10 +429,16 @@ std::string subdatasetList(GDALDatasetH ds) {
   return list;
 }
 
-Status openGdal(const std::string& path, std::optional<PixelFormat> forced, const ImageReadOptions& read,
-                std::unique_ptr<ImageSource>* out) {
-  out->reset();
-  initialiseGdal(read.memory_budget_bytes);
+// The file opened (and, for --t-srs, the warped dataset over it: *ds
+// then reads *underlying).
+struct Opened {
+  DatasetCloser underlying;  // closed after the warped dataset over it: declared first
+  DatasetCloser ds;
+  std::string reprojection;
+  bool alpha_added = false;
+};
+
+Status openDataset(const std::string& path, const ImageReadOptions& read, Opened* out) {
   ErrorCollector errors;
   const std::string name = gdalName(path);
   const bool remote = startsWith(name, "/vsicurl") || startsWith(name, "/vsis3") ||
@@ -444,30 +450,37 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
   // Drivers read their decode threads at open (GTiff's NUM_THREADS).
   const std::string threads = read.decode_threads == 0 ? "ALL_CPUS" : std::to_string(read.decode_threads);
   CPLSetThreadLocalConfigOption("GDAL_NUM_THREADS", threads.c_str());
-  // The file is closed after the warped dataset over it: declared first.
-  DatasetCloser underlying;
-  DatasetCloser closer;
-  closer.ds = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
-                         nullptr, nullptr);
+  out->ds.ds = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
+                          nullptr, nullptr);
   CPLSetThreadLocalConfigOption("GDAL_NUM_THREADS", nullptr);
   if (remote) CPLSetThreadLocalConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", nullptr);
-  if (closer.ds == nullptr) {
+  if (out->ds.ds == nullptr) {
     return Status::error(ErrorCode::kIo,
                          path + ": cannot open image: GDAL: " + errors.message("not a raster GDAL can read"));
   }
-  // Reprojected: the rest reads the warped dataset, which reads the file.
-  std::string reprojection;
-  bool alpha_added = false;
-  if (!read.target_crs.empty() && GDALGetRasterCount(closer.ds) > 0) {
-    GDALDatasetH warped = nullptr;
-    Status w = warp(path, closer.ds, read, &warped, &reprojection, &alpha_added);
-    if (!w) return w;
-    if (warped != nullptr) {
-      underlying.ds = closer.ds;
-      closer.ds = warped;
-    }
+  if (read.target_crs.empty() || GDALGetRasterCount(out->ds.ds) == 0) return okStatus();
+  GDALDatasetH warped = nullptr;
+  Status w = warp(path, out->ds.ds, read, &warped, &out->reprojection, &out->alpha_added);
+  if (!w) return w;
+  if (warped != nullptr) {
+    out->underlying.ds = out->ds.ds;
+    out->ds.ds = warped;
   }
-  GDALDatasetH ds = closer.ds;
+  return okStatus();
+}
+
+// How the bands are read: their sample kind, the type RasterIO converts
+// to, a name for the summary, the channels delivered, and the palette of
+// a paletted band (which becomes RGB, or RGBA when an entry is not opaque).
+struct BandLayout {
+  SampleKind kind = SampleKind::kU8;
+  GDALDataType read_type = GDT_Byte;
+  std::string type_name;
+  uint32_t channels = 0;
+  std::vector<std::array<uint8_t, 4>> palette;
+};
+
+Status bandLayout(const std::string& path, GDALDatasetH ds, BandLayout* out) {
   const int bands = GDALGetRasterCount(ds);
   if (bands == 0) {
     const std::string subdatasets = subdatasetList(ds);
@@ -476,11 +489,6 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
                            path + ": holds several rasters; name one as the input:" + subdatasets);
     }
     return Status::error(ErrorCode::kUnsupported, path + ": GDAL finds no raster band in it");
-  }
-  const int width = GDALGetRasterXSize(ds), height = GDALGetRasterYSize(ds);
-  if (width <= 0 || height <= 0) {
-    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(width) + "x" +
-                                                          std::to_string(height) + " is empty");
   }
   GDALRasterBandH first = GDALGetRasterBand(ds, 1);
   const GDALDataType type = GDALGetRasterDataType(first);
@@ -491,66 +499,50 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
                                   "(gdal_translate -ot)");
     }
   }
-  // A paletted band becomes RGB, or RGBA when an entry is not opaque.
-  std::vector<std::array<uint8_t, 4>> palette;
   GDALColorTableH table = GDALGetRasterColorTable(first);
   if (bands == 1 && table != nullptr && GDALGetRasterColorInterpretation(first) == GCI_PaletteIndex &&
       (type == GDT_Byte || type == GDT_UInt16) && GDALGetPaletteInterpretation(table) == GPI_RGB) {
     const int entries = GDALGetColorEntryCount(table);
-    palette.resize(size_t(std::max(entries, 0)));
+    out->palette.resize(size_t(std::max(entries, 0)));
     for (int i = 0; i < entries; ++i) {
       const GDALColorEntry* c = GDALGetColorEntry(table, i);
       auto clamp = [](short v) { return uint8_t(std::clamp<int>(v, 0, 255)); };
-      palette[size_t(i)] = {clamp(c->c1), clamp(c->c2), clamp(c->c3), clamp(c->c4)};
+      out->palette[size_t(i)] = {clamp(c->c1), clamp(c->c2), clamp(c->c3), clamp(c->c4)};
     }
   }
   const bool translucent =
-      std::any_of(palette.begin(), palette.end(), [](const auto& c) { return c[3] != 255; });
-  const uint32_t channels = palette.empty() ? uint32_t(bands) : translucent ? 4u : 3u;
-  if (channels > 4) {
+      std::any_of(out->palette.begin(), out->palette.end(), [](const auto& c) { return c[3] != 255; });
+  out->channels = out->palette.empty() ? uint32_t(bands) : translucent ? 4u : 3u;
+  if (out->channels > 4) {
     return Status::error(ErrorCode::kUnsupported,
                          path + ": " + std::to_string(bands) +
                              " bands; only 1 (grey), 2 (grey+alpha), 3 (RGB), 4 (RGBA) are supported "
                              "(pick bands with gdal_translate -b or a VRT)");
   }
-  SampleKind kind;
-  GDALDataType read_type;
-  std::string type_name;
   switch (type) {
-    case GDT_Byte: kind = SampleKind::kU8, read_type = GDT_Byte, type_name = "uint8"; break;
-    case GDT_UInt16: kind = SampleKind::kU16, read_type = GDT_UInt16, type_name = "uint16"; break;
-    case GDT_Int16: kind = SampleKind::kI16, read_type = GDT_Int16, type_name = "int16"; break;
-    case GDT_UInt32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "uint32"; break;
-    case GDT_Int32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "int32"; break;
-    case GDT_Float32: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "float"; break;
-    case GDT_Float64: kind = SampleKind::kF32, read_type = GDT_Float32, type_name = "double"; break;
+    case GDT_Byte: out->kind = SampleKind::kU8, out->read_type = GDT_Byte, out->type_name = "uint8"; break;
+    case GDT_UInt16: out->kind = SampleKind::kU16, out->read_type = GDT_UInt16, out->type_name = "uint16"; break;
+    case GDT_Int16: out->kind = SampleKind::kI16, out->read_type = GDT_Int16, out->type_name = "int16"; break;
+    case GDT_UInt32: out->kind = SampleKind::kF32, out->read_type = GDT_Float32, out->type_name = "uint32"; break;
+    case GDT_Int32: out->kind = SampleKind::kF32, out->read_type = GDT_Float32, out->type_name = "int32"; break;
+    case GDT_Float32: out->kind = SampleKind::kF32, out->read_type = GDT_Float32, out->type_name = "float"; break;
+    case GDT_Float64: out->kind = SampleKind::kF32, out->read_type = GDT_Float32, out->type_name = "double"; break;
     default:
       return Status::error(ErrorCode::kUnsupported,
                            path + ": sample type " + GDALGetDataTypeName(type) +
                                " is not supported (8/16/32-bit integers and 32/64-bit floats are)");
   }
-  if (!palette.empty()) {
-    kind = SampleKind::kU8;
-    read_type = GDT_UInt16;  // the indices; expanded to bytes per row
-    type_name = "uint8 palette";
+  if (!out->palette.empty()) {
+    out->kind = SampleKind::kU8;
+    out->read_type = GDT_UInt16;  // the indices; expanded to bytes per row
+    out->type_name = "uint8 palette";
   }
-  SourceInfo info;
-  info.width_px = uint64_t(width);
-  info.height_px = uint64_t(height);
-  info.input_channels = channels;
-  info.input_type = type_name;
-  GDALDriverH driver = GDALGetDatasetDriver(underlying.ds != nullptr ? underlying.ds : ds);
-  info.decoder = std::string("gdal ") + (driver != nullptr ? GDALGetDriverShortName(driver) : "?") +
-                 (underlying.ds != nullptr ? ", warped" : "");
-  int block_w = 0, block_h = 0;
-  GDALGetBlockSize(first, &block_w, &block_h);
-  info.tiled = block_w < width;
-  info.sequential_only = false;
-  VSIStatBufL st;
-  if (VSIStatL(name.c_str(), &st) == 0 && VSI_ISREG(st.st_mode)) info.file_bytes = uint64_t(st.st_size);
-  info.format = forced ? *forced : defaultFormat(channels, kind);
+  return okStatus();
+}
 
-  SourceMetadata& meta = info.metadata;
+// What GDAL says of where the data lies and what its samples mean.
+void readMetadata(const std::string& path, GDALDatasetH ds, SourceInfo* info) {
+  SourceMetadata& meta = info->metadata;
   meta.present = true;
   double gt[6];
   if (GDALGetGeoTransform(ds, gt) == CE_None && !(gt[0] == 0 && gt[1] == 1 && gt[2] == 0 && gt[3] == 0 &&
@@ -559,21 +551,56 @@ Status openGdal(const std::string& path, std::optional<PixelFormat> forced, cons
     std::copy(gt, gt + 6, meta.geo.transform);
     meta.geo.crs = crsText(ds);
   } else if (GDALGetGCPCount(ds) > 0) {
-    info.warnings.push_back(path + ": placed by ground control points, which the tiler does not use "
-                                   "as they are; it is tiled without a georeference (--t-srs warps by them)");
+    info->warnings.push_back(path + ": placed by ground control points, which the tiler does not use "
+                                    "as they are; it is tiled without a georeference (--t-srs warps by them)");
   }
+  GDALRasterBandH first = GDALGetRasterBand(ds, 1);
   int has_nodata = 0;
   const double nodata = GDALGetRasterNoDataValue(first, &has_nodata);
   meta.has_nodata = has_nodata != 0;
   meta.nodata = nodata;
   meta.units = heightUnits(first);
+}
 
-  info.reprojection = reprojection;
-  auto source = std::make_unique<GdalSource>(path, ds, underlying.ds, std::move(info), kind, read_type,
-                                             std::move(palette));
-  source->setPremultiply(alpha_added);
+Status openGdal(const std::string& path, std::optional<PixelFormat> forced, const ImageReadOptions& read,
+                std::unique_ptr<ImageSource>* out) {
+  out->reset();
+  initialiseGdal(read.memory_budget_bytes);
+  Opened opened;
+  Status s = openDataset(path, read, &opened);
+  if (!s) return s;
+  GDALDatasetH ds = opened.ds.ds;
+  BandLayout layout;
+  s = bandLayout(path, ds, &layout);
+  if (!s) return s;
+  const int width = GDALGetRasterXSize(ds), height = GDALGetRasterYSize(ds);
+  if (width <= 0 || height <= 0) {
+    return Status::error(ErrorCode::kInvalidArgument, path + ": image size " + std::to_string(width) + "x" +
+                                                          std::to_string(height) + " is empty");
+  }
+  SourceInfo info;
+  info.width_px = uint64_t(width);
+  info.height_px = uint64_t(height);
+  info.input_channels = layout.channels;
+  info.input_type = layout.type_name;
+  GDALDatasetH file = opened.underlying.ds != nullptr ? opened.underlying.ds : ds;
+  GDALDriverH driver = GDALGetDatasetDriver(file);
+  info.decoder = std::string("gdal ") + (driver != nullptr ? GDALGetDriverShortName(driver) : "?") +
+                 (opened.underlying.ds != nullptr ? ", warped" : "");
+  int block_w = 0, block_h = 0;
+  GDALGetBlockSize(GDALGetRasterBand(ds, 1), &block_w, &block_h);
+  info.tiled = block_w < width;
+  info.sequential_only = false;
+  VSIStatBufL st;
+  if (VSIStatL(gdalName(path).c_str(), &st) == 0 && VSI_ISREG(st.st_mode)) info.file_bytes = uint64_t(st.st_size);
+  info.format = forced ? *forced : defaultFormat(layout.channels, layout.kind);
+  readMetadata(path, ds, &info);
+  info.reprojection = opened.reprojection;
+  auto source = std::make_unique<GdalSource>(path, ds, opened.underlying.ds, std::move(info), layout.kind,
+                                             layout.read_type, std::move(layout.palette));
+  source->setPremultiply(opened.alpha_added);
   *out = std::move(source);
-  closer.ds = underlying.ds = nullptr;  // the source owns them now
+  opened.ds.ds = opened.underlying.ds = nullptr;  // the source owns them now
   return okStatus();
 }
 
