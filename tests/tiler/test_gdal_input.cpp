@@ -23,6 +23,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A command's exit status (the reference files come from GDAL's own programs).
+int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
+
+std::string quoted(const std::string& s) { return "'" + s + "'"; }
+
 double pattern(uint64_t x, uint64_t y, int c) {
   return double((x * 131 + y * 71 + uint64_t(c) * 29 + ((x * y) >> 3)) & 255);
 }
@@ -208,6 +213,28 @@ TEST(TilerGdal, GdalIsLoadedOnlyWhenAnInputNeedsIt) {
   EXPECT_EQ(meta.units, HeightUnits::kMetre);
 }
 
+// A format neither our readers nor OpenImageIO open (NetCDF) goes to
+// GDAL, as a file or by its driver's connection string, and tiles like the
+// GeoTIFF it was made from (same heights and georeference).
+TEST(TilerGdal, ANetCdfFileAndItsConnectionStringTileLikeTheirGeoTiff) {
+  TempDir dir("gdal");
+  const std::string nc = dir.file("dem.nc");
+  ASSERT_EQ(shell("gdal_translate -q -of netCDF " + quoted(bundledDataPath("mount_st_helens_30m.tif")) + " " +
+                  quoted(nc)),
+            0);
+  const RunResult tiff = runTiler({bundledDataPath("mount_st_helens_30m.tif"), dir.file("tiff.cst")});
+  ASSERT_EQ(tiff.exit_code, 0) << tiff.output;
+  const RunResult file = runTiler({nc, dir.file("nc.cst"), "--json-summary", dir.file("nc.json")});
+  ASSERT_EQ(file.exit_code, 0) << file.output;
+  EXPECT_NE(readText(dir.file("nc.json")).find("\"decoder\": \"gdal netCDF\""), std::string::npos);
+  const RunResult named = runTiler({"NETCDF:\"" + nc + "\":Band1", dir.file("named.cst")});
+  ASSERT_EQ(named.exit_code, 0) << named.output;
+  expectSameTiles(dir.file("tiff.cst"), dir.file("nc.cst"));
+  expectSameTiles(dir.file("tiff.cst"), dir.file("named.cst"));
+  const RunResult info = runInfo({dir.file("nc.cst")});
+  EXPECT_NE(info.output.find("CRS          EPSG:26710"), std::string::npos) << info.output;
+}
+
 // A name that is neither a file nor anything GDAL opens is "no such file",
 // as before; a connection string GDAL cannot open is GDAL's error.
 TEST(TilerGdal, MissingNamesAreErrorsNamingThem) {
@@ -227,10 +254,6 @@ TEST(TilerGdal, MissingNamesAreErrorsNamingThem) {
 namespace clipstream::test {
 namespace {
 
-// A command's exit status (the reference files come from GDAL's own programs).
-int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
-
-std::string quoted(const std::string& s) { return "'" + s + "'"; }
 
 // Level 0 of a store, row-major, in its pixel format.
 std::vector<uint8_t> level0(const std::string& store, PyramidGeometry* geometry, GeoReference* geo) {
