@@ -235,6 +235,42 @@ TEST(TilerGdal, ANetCdfFileAndItsConnectionStringTileLikeTheirGeoTiff) {
   EXPECT_NE(info.output.find("CRS          EPSG:26710"), std::string::npos) << info.output;
 }
 
+// A NetCDF file of two variables (made by gdalmdimtranslate from a
+// multidimensional VRT over the DEM) is refused naming both as the inputs
+// to give instead; each opens by its name.
+TEST(TilerGdal, AContainerOfSeveralRastersNamesThem) {
+  TempDir dir("gdal");
+  std::unique_ptr<ImageSource> dem;
+  ASSERT_TRUE(openImageFile(bundledDataPath("mount_st_helens_30m.tif"), std::nullopt, &dem).ok());
+  const uint64_t w = dem->info().width_px, h = dem->info().height_px;
+  std::ofstream vrt(dir.file("two.vrt"));
+  vrt << "<VRTDataset><Group name=\"/\"><Dimension name=\"y\" size=\"" << h << "\"/><Dimension name=\"x\" size=\""
+      << w << "\"/>";
+  for (const char* name : {"first", "second"}) {
+    vrt << "<Array name=\"" << name << "\"><DataType>Int16</DataType><DimensionRef ref=\"y\"/>"
+        << "<DimensionRef ref=\"x\"/><Source><SourceFilename>"
+        << fs::absolute(bundledDataPath("mount_st_helens_30m.tif")).string()
+        << "</SourceFilename><SourceBand>1</SourceBand></Source></Array>";
+  }
+  vrt << "</Group></VRTDataset>\n";
+  vrt.close();
+  const std::string nc = dir.file("two.nc");
+  ASSERT_EQ(shell("gdalmdimtranslate " + quoted(dir.file("two.vrt")) + " " + quoted(nc)), 0);
+  const RunResult whole = runTiler({nc, dir.file("whole.cst")});
+  EXPECT_NE(whole.exit_code, 0);
+  EXPECT_NE(whole.output.find(nc + ": holds several rasters; name one as the input: NETCDF:\"" + nc +
+                              "\":first, NETCDF:\"" + nc + "\":second"),
+            std::string::npos)
+      << whole.output;
+  EXPECT_FALSE(fs::exists(dir.file("whole.cst")));
+  std::unique_ptr<ImageSource> second;
+  const Status s = openImageFile("NETCDF:\"" + nc + "\":second", std::nullopt, &second);
+  ASSERT_TRUE(s.ok()) << s.toString();
+  EXPECT_EQ(second->info().decoder, "gdal netCDF");
+  EXPECT_EQ(second->info().width_px, w);
+  EXPECT_EQ(second->info().height_px, h);
+}
+
 // A name that is neither a file nor anything GDAL opens is "no such file",
 // as before; a connection string GDAL cannot open is GDAL's error.
 TEST(TilerGdal, MissingNamesAreErrorsNamingThem) {

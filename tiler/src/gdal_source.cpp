@@ -421,11 +421,11 @@ std::string subdatasetList(GDALDatasetH ds) {
     if (eq == std::string::npos || entry.find("_NAME=") == std::string::npos) continue;
     ++total;
     if (shown < 8) {
-      list += "\n  " + entry.substr(eq + 1);
+      list += (shown == 0 ? " " : ", ") + entry.substr(eq + 1);
       ++shown;
     }
   }
-  if (total > shown) list += "\n  ... and " + std::to_string(total - shown) + " more";
+  if (total > shown) list += " and " + std::to_string(total - shown) + " more";
   return list;
 }
 
