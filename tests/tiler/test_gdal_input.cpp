@@ -53,6 +53,16 @@ bool tilerLoads(const TempDir& dir, const std::string& input, const std::string&
   return found;
 }
 
+// Side-car files GDAL would write beside its inputs (.aux.xml), anywhere
+// under `dir`: reading an input must write nothing beside it.
+std::vector<std::string> sidecars(const TempDir& dir) {
+  std::vector<std::string> found;
+  for (const auto& e : fs::recursive_directory_iterator(dir.path())) {
+    if (e.path().string().ends_with(".aux.xml")) found.push_back(e.path().string());
+  }
+  return found;
+}
+
 // clipstream-info's description of a store, less its first line (the path).
 std::string describe(const std::string& store) {
   const RunResult r = runInfo({store});
@@ -103,7 +113,7 @@ TEST(TilerGdal, AVrtTilesLikeItsFile) {
   // Same georeference, CRS, heights, no-data and unit.
   EXPECT_EQ(describe(dir.file("file.cst")), describe(dir.file("vrt.cst")));
   EXPECT_NE(readText(dir.file("vrt.json")).find("\"decoder\": \"gdal VRT\""), std::string::npos)
-      << readText(dir.file("vrt.json"));
+      << readText(dir.file("vrt.json"));  EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
 TEST(TilerGdal, AUrlTilesLikeItsFileThroughRangeRequests) {
@@ -173,7 +183,7 @@ TEST(TilerGdal, JpegTwoThousandGoesToGdalWithTheSamePixels) {
       << readText(dir.file("gdal.json"));
   const RunResult oiio = runTiler({jp2, dir.file("oiio.cst"), "--reader", "openimageio"});
   ASSERT_EQ(oiio.exit_code, 0) << oiio.output;
-  expectSameTiles(dir.file("oiio.cst"), dir.file("gdal.cst"));
+  expectSameTiles(dir.file("oiio.cst"), dir.file("gdal.cst"));  EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
 // GDAL decodes what the tiler's own readers decode to the same tiles:
@@ -191,7 +201,7 @@ TEST(TilerGdal, ReaderGdalGivesTheTilesOfTheTilersOwnReaders) {
     ASSERT_EQ(gdal.exit_code, 0) << gdal.output;
     expectSameTiles(dir.file(name + ".own.cst"), dir.file(name + ".gdal.cst"));
     EXPECT_EQ(describe(dir.file(name + ".own.cst")), describe(dir.file(name + ".gdal.cst"))) << name;
-  }
+  }  EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
 // Formats the tiler reads itself never load GDAL (nor its ~200
@@ -232,7 +242,7 @@ TEST(TilerGdal, ANetCdfFileAndItsConnectionStringTileLikeTheirGeoTiff) {
   expectSameTiles(dir.file("tiff.cst"), dir.file("nc.cst"));
   expectSameTiles(dir.file("tiff.cst"), dir.file("named.cst"));
   const RunResult info = runInfo({dir.file("nc.cst")});
-  EXPECT_NE(info.output.find("CRS          EPSG:26710"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("CRS          EPSG:26710"), std::string::npos) << info.output;  EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
 // A NetCDF file of two variables (made by gdalmdimtranslate from a
@@ -377,6 +387,7 @@ TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
   }
   EXPECT_GT(compared, w * h / 2);
   EXPECT_EQ(differ, 0u) << "of " << compared;
+  EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
 // --t-srs auto: a geographic input goes to the WGS 84 UTM zone of its

@@ -75,14 +75,13 @@ class ErrorCollector {
   std::string m_failure, m_warning, m_ignored;
 };
 
-// Process-wide GDAL settings, once: drivers, a block cache within the
-// budget, and nothing written beside the inputs (GDAL's .aux.xml side-car
-// files are written on close when statistics were computed; the tiler
-// computes none, and says so).
+// Process-wide GDAL settings, once: drivers and a block cache within the
+// budget. GDAL reads .aux.xml side-car files and writes one on close only
+// when something it saves changed (statistics, metadata): the tiler
+// changes none, so nothing is written beside an input (tested).
 void initialiseGdal(uint64_t budget_bytes) {
   static std::once_flag once;
   std::call_once(once, [budget_bytes] {
-    CPLSetConfigOption("GDAL_PAM_ENABLED", "NO");
     GDALAllRegister();
     const uint64_t quarter = budget_bytes > 0 ? budget_bytes / 4 : kMaxCacheBytes;
     GDALSetCacheMax64(GIntBig(std::clamp(quarter, kMinCacheBytes, kMaxCacheBytes)));
