@@ -40,7 +40,7 @@ run() {
   python3 -c 'import json,sys; s=json.load(open(sys.argv[1])); print(s["wall_s"], s["peak_rss_bytes"] / 2**20)' "$work/s.json"
 }
 
-median() { sort -g | awk '{v[NR]=$1} END {print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2}'; }
+source scripts/bench_lib.sh  # median
 
 printf 'kind\tinput_MB\town_s\tgdal_s\tgdal_over_own\town_rss_MB\tgdal_rss_MB\n'
 for kind in tiff_strips_deflate tiff_tiled_lzw jpeg png; do

@@ -7,6 +7,7 @@
 # Usage: scripts/bench_terrain.sh [PAIRS] (default 3). Needs a built build/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+source scripts/bench_lib.sh  # median
 pairs=${1:-3}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -30,6 +31,6 @@ for i in $(seq 1 "$pairs"); do
   ratios+=("$ratio")
   printf '| %d | %.1f / %.1f | %.1f / %.1f | %s | %.0f | %.1f |\n' "$i" "$fm" "$fp" "$tm" "$tp" "$ratio" "$tri" "$mib"
 done
-median=$(printf '%s\n' "${ratios[@]}" | sort -n | awk '{v[NR]=$1} END{print (NR%2 ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2)}')
+median=$(printf '%s\n' "${ratios[@]}" | median)
 echo
 echo "median ratio terrain / flat: $median"

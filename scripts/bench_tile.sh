@@ -93,7 +93,7 @@ timed() {
   rm -rf "$output"
 }
 
-median() { tr ' ' '\n' | grep -v '^$' | sort -g | awk '{a[NR]=$1} END {if (NR==0) print "nan"; else if (NR%2) print a[(NR+1)/2]; else print (a[NR/2]+a[NR/2+1])/2}'; }
+source scripts/bench_lib.sh  # median
 
 echo "# $(nproc) cores, load before: $(cut -d' ' -f1-3 /proc/loadavg), rounds: $ROUNDS, $(date -u +%F)"
 printf 'size\tkind\tinput_MB\tdecoder\tfloor_s\tclip_s\tgdal_s\tvips_s\tspeed_vs_gdal\tspeed_vs_vips\tclip_rss_MB\tgdal_rss_MB\tvips_rss_MB\tclip_MB\tgdal_MB\tbytes_vs_gdal\tbound\ttarget_s\tmet\n'

@@ -31,7 +31,7 @@ globe="$DATA/globe4326.tif"
   "$SHARED/fg_globe_colors_8192x4096.jpg" "$globe"
 
 seconds() { local t0 t1; t0=$(date +%s.%N); "$@" >/dev/null 2>&1; t1=$(date +%s.%N); echo "$t1 - $t0" | bc; }
-median() { sort -g | awk '{v[NR]=$1} END {print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2}'; }
+source scripts/bench_lib.sh  # median
 
 printf 'input\ttarget\tsize\tclip_s\tgdalwarp_s\tclip_over_gdalwarp\tsamples\tmax_diff\tmean_diff\tshare_differing\torigin_offset_px\n'
 while read -r name input target; do

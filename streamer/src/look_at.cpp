@@ -64,10 +64,21 @@ Status pathFromMapUnits(const GeoReference& colour, const LayerAlignment* elevat
   return okStatus();
 }
 
-Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world) {
-  const PyramidGeometry& g = heights.geometry();
+namespace {
+
+// The finest level of at most 16 tiles: where highestPoint() and
+// roughestPoint() look at the whole DEM.
+uint32_t wholeDemLevel(const PyramidGeometry& g) {
   uint32_t level = g.levelCount() - 1;
   while (level > 0 && uint64_t(g.levels[level - 1].tiles_x) * g.levels[level - 1].tiles_y <= 16) --level;
+  return level;
+}
+
+}  // namespace
+
+Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world) {
+  const PyramidGeometry& g = heights.geometry();
+  uint32_t level = wholeDemLevel(g);
   std::vector<uint8_t> bytes;
   // The highest sample of `level` within [x0, x1] x [y0, y1] (clamped).
   auto highest = [&](uint32_t l, int64_t x0, int64_t y0, int64_t x1, int64_t y1, int64_t* bx, int64_t* by,
@@ -103,8 +114,7 @@ Status highestPoint(TileSource& heights, const LayerAlignment& alignment, glm::d
 
 Status roughestPoint(TileSource& heights, const LayerAlignment& alignment, glm::dvec3* world) {
   const PyramidGeometry& g = heights.geometry();
-  uint32_t level = g.levelCount() - 1;
-  while (level > 0 && uint64_t(g.levels[level - 1].tiles_x) * g.levels[level - 1].tiles_y <= 16) --level;
+  const uint32_t level = wholeDemLevel(g);
   const LevelInfo& info = g.levels[level];
   const int64_t w = int64_t(info.width_px), h = int64_t(info.height_px), tp = g.tile_px;
   std::vector<float> field(size_t(w * h));

@@ -138,6 +138,16 @@ bool wantsElevation(const TilerOptions& o, const SourceInfo& first, const GeoRef
   return false;
 }
 
+Status inputTags(const SourceInfo& info, const std::string& tags_path, ElevationTags* out) {
+  const SourceMetadata& meta = info.metadata;
+  if (!meta.present) return readElevationTags(tags_path, out);
+  *out = ElevationTags{};
+  out->has_nodata = meta.has_nodata;
+  out->nodata = meta.nodata;
+  out->units = meta.units;
+  return okStatus();
+}
+
 Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::string& tags_path,
                      const ReopenHeights& reopen_input, std::unique_ptr<ImageSource>* source,
                      HeightSource** heights, ElevationInfo* elevation,
@@ -154,14 +164,8 @@ Status openElevation(const TilerOptions& o, const GeoReference& geo, const std::
   Status s = planHeights(o, (*source)->info(), &plan);
   if (!s) return s;
   ElevationTags tags;
-  if (const SourceMetadata& meta = (*source)->info().metadata; meta.present) {
-    tags.has_nodata = meta.has_nodata;  // the decoder read them (GDAL)
-    tags.nodata = meta.nodata;
-    tags.units = meta.units;
-  } else {
-    s = readElevationTags(tags_path, &tags);
-    if (!s) return s;
-  }
+  s = inputTags((*source)->info(), tags_path, &tags);
+  if (!s) return s;
   HeightConversion conversion;
   conversion.stored = plan.stored;
   conversion.has_nodata = o.nodata.has_value() || tags.has_nodata;

@@ -9,6 +9,7 @@
 
 #include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
+#include <clipstream/tiler/georef.h>
 #include <clipstream/tiler/image_source.h>
 #include <clipstream/tiler/tiler.h>
 
@@ -27,6 +28,11 @@ namespace clipstream {
 // floating-point one that is georeferenced.
 bool wantsElevation(const TilerOptions& o, const SourceInfo& first, const GeoReference& geo);
 
+// What the input says of its samples' no-data value and unit: what its
+// decoder read itself (GDAL: SourceInfo::metadata), else the tags of the
+// file at `tags_path` (readElevationTags). Its errors.
+Status inputTags(const SourceInfo& info, const std::string& tags_path, ElevationTags* out);
+
 // Opens the input again delivering native samples in `native`;
 // `conversion` says the no-data value (a mosaic fills its gaps with it).
 using ReopenHeights = std::function<Status(PixelFormat native, const HeightConversion& conversion,
@@ -34,7 +40,7 @@ using ReopenHeights = std::function<Status(PixelFormat native, const HeightConve
 
 // Decides whether the input in *source becomes an elevation store
 // (wantsElevation) and, if so, checks the options against its samples,
-// reads the no-data value and units from `tags_path` (readElevationTags),
+// reads the no-data value and units (inputTags() of `tags_path`),
 // reopens it through `reopen_input` (twice when --height-step must scan the
 // heights' range first) and replaces *source by a HeightSource over it;
 // *heights then points into *source and *elevation describes the store. A

@@ -25,6 +25,15 @@ using OpenGdalFn = void (*)(const std::string* path, const std::optional<PixelFo
                             const ImageReadOptions* read, std::unique_ptr<ImageSource>* out,
                             Status* status);
 
+// Whether `path` is an http://, https:// or ftp:// URL (GDAL reads them
+// through /vsicurl/).
+inline bool isUrl(const std::string& path) {
+  for (const char* scheme : {"http://", "https://", "ftp://"}) {
+    if (path.rfind(scheme, 0) == 0) return true;
+  }
+  return false;
+}
+
 // Whether `path` is a name only GDAL opens: an http(s) or ftp URL, a /vsi
 // path, or a driver's connection string (NETCDF:"f.nc":var). Checked by
 // openImageFile() when no file has that name. Defined in image_source.cpp.

@@ -7,6 +7,7 @@
 // them. This file must not use symbols from clipstream_store: the module
 // links GDAL only.
 #include "gdal_module.h"
+#include "height_units.h"
 #include "pixel_convert.h"
 
 #include <cpl_conv.h>
@@ -92,12 +93,7 @@ bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefi
 
 // What GDAL opens for `path`: http(s) and ftp URLs through /vsicurl/,
 // anything else as given.
-std::string gdalName(const std::string& path) {
-  if (startsWith(path, "http://") || startsWith(path, "https://") || startsWith(path, "ftp://")) {
-    return "/vsicurl/" + path;
-  }
-  return path;
-}
+std::string gdalName(const std::string& path) { return isUrl(path) ? "/vsicurl/" + path : path; }
 
 // The CRS as the store keeps it: "EPSG:n" when the whole CRS is one EPSG
 // code (as the GeoTIFF reader writes it), else its WKT.
@@ -118,17 +114,6 @@ std::string crsText(GDALDatasetH ds) {
   }
   OSRDestroySpatialReference(copy);
   return text;
-}
-
-std::optional<HeightUnits> heightUnits(GDALRasterBandH band) {
-  std::string unit = GDALGetRasterUnitType(band);
-  std::transform(unit.begin(), unit.end(), unit.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (unit == "m" || unit == "metre" || unit == "meter" || unit == "metres" || unit == "meters") {
-    return HeightUnits::kMetre;
-  }
-  if (unit == "ft" || unit == "foot" || unit == "feet") return HeightUnits::kFoot;
-  if (unit == "us-ft" || unit == "ftus" || unit == "us survey foot") return HeightUnits::kUsSurveyFoot;
-  return std::nullopt;
 }
 
 class GdalSource final : public ImageSource {
@@ -558,7 +543,7 @@ void readMetadata(const std::string& path, GDALDatasetH ds, SourceInfo* info) {
   const double nodata = GDALGetRasterNoDataValue(first, &has_nodata);
   meta.has_nodata = has_nodata != 0;
   meta.nodata = nodata;
-  meta.units = heightUnits(first);
+  meta.units = heightUnitsFromText(GDALGetRasterUnitType(first));
 }
 
 Status openGdal(const std::string& path, std::optional<PixelFormat> forced, const ImageReadOptions& read,

@@ -4,6 +4,8 @@
 // count checked against the file size.
 #include <clipstream/tiler/georef.h>
 
+#include "height_units.h"
+
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -102,19 +104,11 @@ Status readWorldFile(const std::string& path, GeoReference* out) {
 
 namespace {
 
-// Heights' unit from an EPSG linear unit code or GDAL's UNITTYPE text.
+// Heights' unit from an EPSG linear unit code (GDAL's UNITTYPE text: height_units.h).
 std::optional<HeightUnits> unitsFromEpsg(uint32_t code) {
   if (code == 9001) return HeightUnits::kMetre;
   if (code == 9002) return HeightUnits::kFoot;
   if (code == 9003) return HeightUnits::kUsSurveyFoot;
-  return std::nullopt;
-}
-std::optional<HeightUnits> unitsFromText(const std::string& text) {
-  if (text == "m" || text == "metre" || text == "meter" || text == "metres" || text == "meters") {
-    return HeightUnits::kMetre;
-  }
-  if (text == "ft" || text == "foot" || text == "feet") return HeightUnits::kFoot;
-  if (text == "US survey foot" || text == "ftUS" || text == "us-ft") return HeightUnits::kUsSurveyFoot;
   return std::nullopt;
 }
 
@@ -200,7 +194,7 @@ void readGdalTag(TiffBytes& tb, const uint8_t* e, bool big, uint16_t tag, uint16
       elevation->has_nodata = true;
       elevation->nodata = v;  // may be nan, as GDAL writes it
     }
-  } else if (auto units = unitsFromText(gdalUnitType(text))) {
+  } else if (auto units = heightUnitsFromText(gdalUnitType(text))) {
     elevation->units = units;
   }
 }

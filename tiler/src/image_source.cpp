@@ -246,10 +246,7 @@ Status makeSyntheticSource(uint64_t width_px, uint64_t height_px, PixelFormat fo
 }
 
 bool isGdalName(const std::string& path) {
-  if (startsWith(path, "http://") || startsWith(path, "https://") || startsWith(path, "ftp://") ||
-      startsWith(path, "/vsi")) {
-    return true;
-  }
+  if (isUrl(path) || startsWith(path, "/vsi")) return true;
   // A driver's connection string: NETCDF:"file.nc":variable, HDF5:..., GPKG:...
   size_t i = 0;
   while (i < path.size() && (std::isupper(static_cast<unsigned char>(path[i])) ||

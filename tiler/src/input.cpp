@@ -80,10 +80,9 @@ Status makeRelief(const TilerOptions& o, GeoReference* geo, std::unique_ptr<Imag
 Status makeNoDataTransparent(const TilerOptions& o, TilerInput* in, std::vector<std::string>* warnings) {
   const SourceInfo& info = in->source->info();
   std::optional<double> nodata = o.nodata;
-  if (!nodata && info.metadata.present && info.metadata.has_nodata) nodata = info.metadata.nodata;
-  if (!nodata && !info.metadata.present) {
+  if (!nodata) {
     ElevationTags tags;
-    Status s = readElevationTags(o.input_path, &tags);
+    Status s = inputTags(info, o.input_path, &tags);
     if (!s) return s;
     if (tags.has_nodata) nodata = tags.nodata;
   }
@@ -99,12 +98,6 @@ Status makeNoDataTransparent(const TilerOptions& o, TilerInput* in, std::vector<
                   *nodata, info.input_type.c_str());
     warnings->push_back(o.input_path + text);
     return okStatus();
-  }
-  // The samples as they are (R8 or RGB8), then alpha from the value.
-  if (info.format == PixelFormat::kRGBA8) {
-    const Status s = openImageFile(o.input_path, info.input_channels == 1 ? PixelFormat::kR8 : PixelFormat::kRGB8,
-                                   &in->source, imageReadOptions(o));
-    if (!s) return s;
   }
   in->source = std::make_unique<NoDataAlphaSource>(std::move(in->source), uint8_t(*nodata));
   in->transparent_nodata = *nodata;

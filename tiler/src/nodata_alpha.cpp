@@ -1,6 +1,8 @@
 // A colour input's no-data value as transparency (nodata_alpha.h).
 #include "nodata_alpha.h"
 
+#include <algorithm>
+
 namespace clipstream {
 
 NoDataAlphaSource::NoDataAlphaSource(std::unique_ptr<ImageSource> inner, uint8_t nodata)
@@ -10,15 +12,16 @@ NoDataAlphaSource::NoDataAlphaSource(std::unique_ptr<ImageSource> inner, uint8_t
 
 Status NoDataAlphaSource::readRows(uint64_t y0, uint32_t rows, uint64_t x0, uint64_t width, uint8_t* dst,
                                    size_t dst_stride) {
-  const uint32_t channels = bytesPerPixel(m_inner->info().format);  // 1 (R8) or 3 (RGB8)
-  const size_t row = size_t(width) * channels;
+  const uint32_t stride = bytesPerPixel(m_inner->info().format);  // 1 (R8), 3 (RGB8) or 4 (RGBA8)
+  const uint32_t channels = std::min(stride, 3u);                   // the colour ones
+  const size_t row = size_t(width) * stride;
   m_rows.resize(row * rows);
   Status s = m_inner->readRows(y0, rows, x0, width, m_rows.data(), row);
   if (!s) return s;
   for (uint32_t r = 0; r < rows; ++r) {
     const uint8_t* in = m_rows.data() + r * row;
     uint8_t* out = dst + r * dst_stride;
-    for (uint64_t x = 0; x < width; ++x, in += channels, out += 4) {
+    for (uint64_t x = 0; x < width; ++x, in += stride, out += 4) {
       bool empty = true;
       for (uint32_t c = 0; c < channels; ++c) empty = empty && in[c] == m_nodata;
       if (empty) {

@@ -19,7 +19,8 @@ namespace clipstream {
 
 class NoDataAlphaSource final : public ImageSource {
  public:
-  // `inner` delivers R8 or RGB8 rows; `nodata` is compared with each channel.
+  // `inner` delivers R8, RGB8 or (forced by --format) opaque RGBA8 rows;
+  // `nodata` is compared with each colour channel.
   NoDataAlphaSource(std::unique_ptr<ImageSource> inner, uint8_t nodata);
 
   const SourceInfo& info() const override { return m_info; }
