@@ -9,6 +9,7 @@
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
 #include <clipstream/util/output_file.h>
+#include <clipstream/store/cog.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/tile_source.h>
@@ -256,13 +257,14 @@ Status openFlySources(const FlyOptions& o, FlightRunOptions* out, PyramidGeometr
   return okStatus();
 }
 
-// The colour store's georeference, from its header (none for --procedural).
+// The colour layer's georeference, from its store's header or COG's tags
+// (none for --procedural).
 Status colourGeoReference(const FlyOptions& o, GeoReference* out) {
   *out = GeoReference{};
   if (o.store_path.empty()) return okStatus();
-  std::unique_ptr<TileStoreReader> reader;
-  if (Status s = TileStoreReader::open(o.store_path, o.remote, &reader); !s) return s;
-  *out = reader->info().geo;
+  StoreInfo info;
+  if (Status s = readRasterInfo(o.store_path, o.remote, &info); !s) return s;
+  *out = info.geo;
   return okStatus();
 }
 

@@ -5,6 +5,7 @@
 
 #include <clipstream/renderer/config.h>
 #include <clipstream/renderer/gl_context.h>
+#include <clipstream/store/cog.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/alignment.h>
 
@@ -111,11 +112,8 @@ Status openTerrainLayer(const std::string& colour_path, const PyramidGeometry& c
   out->ring_cells = ring_cells;
   StoreInfo colour;
   colour.geometry = colour_geometry;
-  if (!colour_path.empty()) {
-    std::unique_ptr<TileStoreReader> reader;
-    if (s = TileStoreReader::open(colour_path, remote, &reader); !s) return s;
-    colour = reader->info();
-  }
+  if (!colour_path.empty())
+    if (s = readRasterInfo(colour_path, remote, &colour); !s) return s;
   StoreInfo heights;
   {
     std::unique_ptr<TileStoreReader> reader;

@@ -2,6 +2,7 @@
 // wheel/shift for speed, the statistics on screen, keys for the overlay and
 // its legend, recording the flown path to JSON for clipstream-fly, going
 // home and screenshots (kKeys below). Usage: docs/renderer.md.
+#include <clipstream/store/cog.h>
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/renderer_options.h>
 #include <clipstream/cli/sizes.h>
@@ -426,13 +427,14 @@ GLFWwindow* openWindow(const Viewport& vp, Input* input) {
 // One frame's move of the camera by the keys and the mouse, at `speed`
 // (texels a second, returned: Shift multiplies it), kept near the scene and
 // above the ground.
-// The store's georeference, read from its header (none for --procedural).
+// The store's georeference, read from its header or a COG's tags (none for
+// --procedural).
 Status storeGeoReference(const Args& a, GeoReference* out) {
   *out = GeoReference{};
   if (a.store_path.empty()) return okStatus();
-  std::unique_ptr<TileStoreReader> reader;
-  if (Status s = TileStoreReader::open(a.store_path, a.remote, &reader); !s) return s;
-  *out = reader->info().geo;
+  StoreInfo info;
+  if (Status s = readRasterInfo(a.store_path, a.remote, &info); !s) return s;
+  *out = info.geo;
   return okStatus();
 }
 

@@ -2,6 +2,7 @@
 // TileStoreReader (no lock around I/O), then decodeTileRgba8 (decode,
 // predictor inverse and conversion to RGBA8 in one pass) for colour
 // stores, decodeTileHeights (heights as float32) for elevation stores.
+#include <clipstream/store/cog.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/tile_source.h>
 
@@ -134,6 +135,47 @@ class ElevationStoreSource final : public TileSource {
   std::string m_path;
 };
 
+// A Cloud-Optimized GeoTIFF read directly (CogReader): its tiles in the
+// COG's pixel format, converted to RGBA8 like a store's.
+class CogSource final : public TileSource {
+ public:
+  CogSource(std::unique_ptr<CogReader> reader, std::string path)
+      : m_reader(std::move(reader)), m_path(std::move(path)) {}
+
+  const PyramidGeometry& geometry() const override { return m_reader->geometry(); }
+
+  Status fetch(const TileKey& key, std::vector<uint8_t>* rgba) override {
+    FetchInfo info;
+    return fetchWithInfo(key, rgba, &info);
+  }
+
+  Status fetchWithInfo(const TileKey& key, std::vector<uint8_t>* rgba, FetchInfo* info) override {
+    *info = {};
+    const PyramidGeometry& geo = m_reader->geometry();
+    thread_local std::vector<uint8_t> pixels;
+    pixels.resize(geo.tileBytes());
+    const auto start = std::chrono::steady_clock::now();
+    // Reading and decoding happen together here (an internal tile is
+    // decoded whole), so decode_ms includes the read.
+    Status status = m_reader->readTile(key, pixels, &info->bytes_read);
+    if (!status) return status;
+    const size_t count = size_t(geo.tile_px) * geo.tile_px;
+    rgba->resize(count * 4);
+    status = convertToRgba8(geo.format, pixels, rgba->data(), count);
+    info->decode_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return status;
+  }
+
+  std::string describe() const override { return "cog:" + m_path; }
+  unsigned suggestedLoaderThreads() const override { return m_reader->suggestedReadThreads(); }
+  RemoteStats remoteStats() const override { return m_reader->remoteStats(); }
+
+ private:
+  std::unique_ptr<CogReader> m_reader;
+  std::string m_path;
+};
+
 }  // namespace
 
 Status convertToRgba8(PixelFormat format, std::span<const uint8_t> src, uint8_t* dst,
@@ -199,6 +241,19 @@ std::shared_ptr<TileSource> openStoreSource(const std::string& path, const Remot
                                             Status* status) {
   std::unique_ptr<TileStoreReader> reader;
   *status = TileStoreReader::open(path, remote, &reader);
+  if (!*status && status->code == ErrorCode::kBadMagic) {
+    // Not a store: a Cloud-Optimized GeoTIFF is read directly.
+    std::unique_ptr<CogReader> cog;
+    const Status opened = CogReader::open(path, remote, &cog);
+    if (opened.code == ErrorCode::kBadMagic) {
+      *status = Status::error(ErrorCode::kBadMagic, displayStorePath(path) +
+                                                        ": not a clipstream tile store nor a TIFF (bad magic)");
+      return nullptr;
+    }
+    *status = opened;
+    if (!opened) return nullptr;
+    return std::make_shared<CogSource>(std::move(cog), displayStorePath(path));
+  }
   if (!*status) return nullptr;
   if (reader->info().elevation.present) {
     *status = Status::error(ErrorCode::kUnsupported,

@@ -7,7 +7,7 @@
 // them. This file must not use symbols from clipstream_store: the module
 // links GDAL only.
 #include "gdal_module.h"
-#include "height_units.h"
+#include <clipstream/store/geotiff.h>
 #include "pixel_convert.h"
 
 #include <cpl_conv.h>

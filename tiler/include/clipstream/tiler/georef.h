@@ -5,6 +5,7 @@
 // Thread-safe: free functions with no shared state.
 #pragma once
 
+#include <clipstream/store/geotiff.h>
 #include <clipstream/store/tile_store.h>
 #include <clipstream/store/types.h>
 
@@ -30,13 +31,7 @@ Status readWorldFile(const std::string& path, GeoReference* out);
 // false when the file has no such tags. Malformed tags are an error.
 Status readGeoTiffTags(const std::string& path, GeoReference* out);
 
-// What a TIFF says about the heights it holds: GDAL's no-data tag (42113),
-// and the unit from the VerticalUnitsGeoKey or GDAL's UNITTYPE metadata.
-struct ElevationTags {
-  bool has_nodata = false;
-  double nodata = 0.0;  // may be NaN
-  std::optional<HeightUnits> units;
-};
+// What a TIFF says about the heights it holds (ElevationTags: geotiff.h).
 // Empty for files that are not TIFFs or carry none of these. Malformed
 // GeoTIFF tags are an error as for readGeoTiffTags.
 Status readElevationTags(const std::string& path, ElevationTags* out);

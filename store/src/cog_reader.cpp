@@ -1,0 +1,744 @@
+// CogReader: a tiled TIFF as a pyramid of 128 x 128 tiles (cog.h).
+//
+// libtiff parses the directories and decodes the tiles; the bytes come from
+// a ByteSource (a file, or HTTP range requests). The header, every
+// directory and the tile tables are read once at open into `head` (grown
+// while libtiff walks the directories, each growth one read); afterwards
+// head is frozen and read-only, so the libtiff handles that decode tiles on
+// loader threads (a pool per directory, one thread per handle at a time)
+// are opened from memory. A tile's bytes are read by one positional read
+// outside any lock and decoded with TIFFReadFromUserBuffer().
+#include <clipstream/store/cog.h>
+
+#include <clipstream/store/geotiff.h>
+
+#include "byte_source.h"
+#include "disk_cache.h"
+#include "format.h"
+
+#include <tiffio.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <future>
+#include <list>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+namespace clipstream {
+namespace {
+
+// Bytes read first at open: the header and, in a COG, usually every
+// directory and tile table (GDAL writes them first). More is read, doubling,
+// only while libtiff asks for bytes beyond.
+constexpr uint64_t kFirstHeadBytes = 64 << 10;
+// Decoded internal tiles kept for the pyramid tiles cut from them: a 512 px
+// RGB tile feeds 16 pyramid tiles, which the streamer asks for one by one,
+// often on other threads; without the cache each would read and decode it
+// again. 64 MiB holds 64 such tiles (two screens of the finest level at
+// 1080p); at least four tiles are kept whatever their size.
+constexpr uint64_t kDecodedCacheBytes = 64ull << 20;
+constexpr size_t kDecodedCacheMinTiles = 4;
+// Largest side of the coarsest level a COG stores for the levels above it
+// to be built (docs/decisions.md D294): building the single top tile reads
+// the whole of that level, so a file without overviews larger than this is
+// refused with the command that adds them rather than read whole.
+constexpr uint64_t kMaxBuildFromPx = 4096;
+// Internal tile sides accepted: powers of two in this range (GDAL's COG
+// writer takes 16 to 4096... and so does any tiled TIFF worth streaming).
+constexpr uint32_t kMinInternalTilePx = 16;
+constexpr uint32_t kMaxInternalTilePx = 4096;
+constexpr uint32_t kMaxDirectories = 64;
+
+using Pixels = std::shared_ptr<const std::vector<uint8_t>>;
+
+std::string codecName(uint16_t compression) {
+  switch (compression) {
+    case COMPRESSION_NONE: return "none";
+    case COMPRESSION_LZW: return "lzw";
+    case COMPRESSION_JPEG: return "jpeg";
+    case COMPRESSION_ADOBE_DEFLATE:
+    case COMPRESSION_DEFLATE: return "deflate";
+    case COMPRESSION_PACKBITS: return "packbits";
+    case COMPRESSION_ZSTD: return "zstd";
+    case COMPRESSION_WEBP: return "webp";
+    case COMPRESSION_LERC: return "lerc";
+    case COMPRESSION_LZMA: return "lzma";
+    default: {
+      const TIFFCodec* codec = TIFFFindCODEC(compression);
+      return codec != nullptr ? codec->name : "compression " + std::to_string(compression);
+    }
+  }
+}
+
+// One image directory the pyramid reads from.
+struct Directory {
+  uint16_t index = 0;  // in the file
+  uint32_t width = 0, height = 0;
+  uint32_t tiles_across = 0, tiles_down = 0;
+  std::vector<uint64_t> offsets, counts;  // per internal tile, row by row
+};
+
+struct Level {
+  int directory = -1;  // index into Impl::directories; -1: built from the level below
+};
+
+// The bytes libtiff reads through a Client.
+class FileBytes {
+ public:
+  virtual ~FileBytes() = default;
+  // Reads up to `n` bytes at `offset`; returns how many (0 past the end or on failure).
+  virtual size_t readHead(uint64_t offset, void* dst, size_t n) = 0;
+  virtual uint64_t fileSize() const = 0;
+};
+
+}  // namespace
+
+struct CogReader::Impl final : FileBytes {
+  std::string path;  // as given (a URL keys the disk cache)
+  std::string name;  // for messages (displayStorePath())
+  RemoteOptions remote;
+  std::unique_ptr<ByteSource> source;
+  StoreInfo info;
+  CogLayout layout;
+  std::vector<uint8_t> head;  // file bytes [0, head.size()); frozen after open
+  bool growing = true;        // open() may still extend head
+  Status head_status;         // the first failed read while growing
+  std::vector<Directory> directories;
+  std::vector<Level> levels;
+  uint32_t tile_px = 0;      // internal tile side
+  uint16_t samples = 0;      // per pixel, as decoded
+  uint16_t bits = 8;
+  bool grey_alpha = false;   // two samples, widened to RGBA8
+  bool ycbcr_jpeg = false;   // decoded as RGB (JPEGCOLORMODE)
+  size_t decoded_bytes = 0;  // one decoded internal tile
+
+  mutable std::atomic<uint64_t> bytes_read{0};
+  // Disk cache of a URL (RemoteOptions::disk_cache_dir), or null.
+  std::shared_ptr<DiskCache> disk_cache;
+  std::string cache_key;
+  bool disk_folder_refused = false;
+  mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
+
+  // Idle libtiff handles per directory.
+  mutable std::mutex handles_mutex;
+  mutable std::vector<std::vector<TIFF*>> idle_handles;
+
+  // Decoded internal tiles, least recently used first out; a tile being
+  // decoded is there as an unfinished future, so a second thread waits for
+  // it instead of reading it again.
+  struct Decoded {
+    Status status;
+    Pixels pixels;
+  };
+  struct CacheEntry {
+    std::shared_future<Decoded> result;
+    std::list<uint64_t>::iterator lru;
+  };
+  mutable std::mutex cache_mutex;
+  mutable std::list<uint64_t> lru;  // most recent first
+  mutable std::unordered_map<uint64_t, CacheEntry> decoded;
+  // Built tiles (levels the file lacks), kept: they are few and coarse.
+  mutable std::mutex built_mutex;
+  mutable std::unordered_map<TileKey, Pixels, TileKeyHash> built;
+
+  ~Impl() {
+    for (auto& list : idle_handles)
+      for (TIFF* tif : list) TIFFClose(tif);
+  }
+
+  Status readSource(void* data, size_t bytes, uint64_t offset) const {
+    bytes_read.fetch_add(bytes, std::memory_order_relaxed);
+    return source->read(data, bytes, offset);
+  }
+
+  // Bytes for libtiff: from head, which grows (one read each time) while
+  // the file is being opened; later, directly from the source.
+  uint64_t fileSize() const override { return source->size(); }
+
+  size_t readHead(uint64_t offset, void* dst, size_t n) override {
+    const uint64_t size = source->size();
+    if (offset >= size) return 0;
+    n = size_t(std::min<uint64_t>(n, size - offset));
+    if (offset + n > head.size() && growing) {
+      const uint64_t want = std::min<uint64_t>(size, std::max<uint64_t>(offset + n, 2 * head.size()));
+      const size_t old = head.size();
+      head.resize(size_t(want));
+      if (Status s = readSource(head.data() + old, head.size() - old, old); !s) {
+        head.resize(old);
+        if (head_status) head_status = s;
+        return 0;
+      }
+      layout.header_bytes = head.size();
+    }
+    if (offset + n <= head.size()) {
+      std::memcpy(dst, head.data() + offset, n);
+      return n;
+    }
+    if (growing) return 0;
+    return readSource(dst, n, offset) ? n : 0;
+  }
+
+  Status openImpl();
+  Status readDirectories(TIFF* tif);
+  Status openHandle(uint16_t directory, TIFF** out, std::string* error) const;
+  Status internalTile(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
+  Status decodeInternal(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
+  Status rawTile(size_t directory, uint32_t cx, uint32_t cy, std::vector<uint8_t>* out, uint64_t* bytes_read) const;
+  Status cutTile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* bytes_read) const;
+  Status buildTile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* bytes_read) const;
+  Status tile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* bytes_read) const;
+};
+
+namespace {
+
+// libtiff's view of a file: the reader's head and source, and a position.
+struct Client {
+  FileBytes* file = nullptr;
+  uint64_t position = 0;
+  std::string error;  // libtiff's first error message
+};
+
+tmsize_t clientRead(thandle_t handle, void* data, tmsize_t size) {
+  Client* c = static_cast<Client*>(handle);
+  if (size <= 0) return 0;
+  const size_t n = c->file->readHead(c->position, data, size_t(size));
+  c->position += n;
+  return tmsize_t(n);
+}
+tmsize_t clientWrite(thandle_t, void*, tmsize_t) { return -1; }
+toff_t clientSeek(thandle_t handle, toff_t offset, int whence) {
+  Client* c = static_cast<Client*>(handle);
+  if (whence == SEEK_SET) c->position = offset;
+  else if (whence == SEEK_CUR) c->position += offset;
+  else if (whence == SEEK_END) c->position = c->file->fileSize() + offset;
+  return c->position;
+}
+int clientClose(thandle_t handle) {
+  delete static_cast<Client*>(handle);
+  return 0;
+}
+toff_t clientSize(thandle_t handle) { return static_cast<Client*>(handle)->file->fileSize(); }
+int clientMap(thandle_t, void**, toff_t*) { return 0; }
+void clientUnmap(thandle_t, void*, toff_t) {}
+
+int onError(TIFF*, void* user, const char* module, const char* format, va_list ap) {
+  Client* c = static_cast<Client*>(user);
+  if (c->error.empty()) {
+    char text[512];
+    std::vsnprintf(text, sizeof text, format, ap);
+    c->error = (module != nullptr && *module != '\0' ? std::string(module) + ": " : std::string()) + text;
+  }
+  return 1;  // handled: nothing reaches stderr
+}
+int onWarning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
+
+// Opens a libtiff handle over `impl`'s bytes; null with *error set on failure.
+TIFF* openClient(FileBytes* file, const std::string& name, std::string* error) {
+  Client* client = new Client{file};
+  TIFFOpenOptions* options = TIFFOpenOptionsAlloc();
+  TIFFOpenOptionsSetErrorHandlerExtR(options, onError, client);
+  TIFFOpenOptionsSetWarningHandlerExtR(options, onWarning, client);
+  // "m": no memory mapping (the client has none); "h": read the header only
+  // on open, directories as asked.
+  TIFF* tif = TIFFClientOpenExt(name.c_str(), "rm", client, clientRead, clientWrite, clientSeek,
+                                clientClose, clientSize, clientMap, clientUnmap, options);
+  TIFFOpenOptionsFree(options);
+  if (tif == nullptr) {
+    // A failed open does not close the client.
+    *error = client->error.empty() ? "not a TIFF libtiff reads" : client->error;
+    delete client;
+  }
+  return tif;
+}
+
+std::string lastError(TIFF* tif) { return static_cast<Client*>(TIFFClientdata(tif))->error; }
+
+uint64_t cacheId(size_t directory, uint32_t cx, uint32_t cy) {
+  return (uint64_t(directory) << 56) | (uint64_t(cy) << 28) | uint64_t(cx);
+}
+
+// Fills the texels of a pyramid tile beyond [0, valid_w) x [0, valid_h)
+// with the nearest texel inside (the stores' clamp-to-edge padding).
+void clampEdges(std::span<uint8_t> tile, uint32_t tile_px, uint32_t bpp, uint32_t valid_w, uint32_t valid_h) {
+  const size_t row = size_t(tile_px) * bpp;
+  for (uint32_t y = 0; y < valid_h; ++y) {
+    uint8_t* r = tile.data() + y * row;
+    for (uint32_t x = valid_w; x < tile_px; ++x) std::memcpy(r + x * bpp, r + (valid_w - 1) * bpp, bpp);
+  }
+  for (uint32_t y = valid_h; y < tile_px; ++y)
+    std::memcpy(tile.data() + y * row, tile.data() + (valid_h - 1) * row, row);
+}
+
+}  // namespace
+
+Status CogReader::Impl::openImpl() {
+  name = displayStorePath(path);
+  Status opened = isStoreUrl(path) ? openHttpSource(path, remote, &source) : openFileSource(path, &source);
+  if (!opened) return opened;
+  const uint64_t size = source->size();
+  head.resize(size_t(std::min<uint64_t>(size, kFirstHeadBytes)));
+  if (Status s = readSource(head.data(), head.size(), 0); !s) return s;
+  layout.header_bytes = head.size();
+  const bool tiff = head.size() >= 8 && ((head[0] == 'I' && head[1] == 'I' && (head[2] == 42 || head[2] == 43) && head[3] == 0) ||
+                                         (head[0] == 'M' && head[1] == 'M' && head[2] == 0 && (head[3] == 42 || head[3] == 43)));
+  if (!tiff) return Status::error(ErrorCode::kBadMagic, name + ": not a TIFF (bad magic)");
+
+  std::string error;
+  TIFF* tif = openClient(this, name, &error);
+  if (tif == nullptr) {
+    if (!head_status) return head_status;
+    return Status::error(ErrorCode::kBadHeader, name + ": not a readable TIFF: " + error);
+  }
+  Status status = readDirectories(tif);
+  if (status && !head_status) status = head_status;
+  TIFFClose(tif);
+  if (!status) return status;
+
+  // The georeference, from the first directory's GeoTIFF tags.
+  const TiffByteReader read = [this](uint64_t offset, void* dst, size_t n) { return readHead(offset, dst, n) == n; };
+  ElevationTags ignored;
+  if (Status s = parseGeoTiffTags(name, size, read, &info.geo, &ignored); !s) return s;
+  growing = false;  // head is read-only from here on: loader threads share it
+  info.file_bytes = size;
+
+  if (!remote.disk_cache_dir.empty() && isStoreUrl(path) && !source->version().empty()) {
+    if (Status s = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache); !s) return s;
+    cache_key = DiskCache::storeKey(path, source->version());
+    disk_folder_refused = !disk_cache->usableStoreDir(cache_key);
+  }
+  idle_handles.resize(directories.size());
+  return okStatus();
+}
+
+Status CogReader::Impl::readDirectories(TIFF* tif) {
+  auto refuse = [&](const std::string& what) { return Status::error(ErrorCode::kUnsupported, name + ": " + what); };
+  auto damaged = [&](const std::string& what) {
+    const std::string why = lastError(tif);
+    return Status::error(ErrorCode::kBadHeader, name + ": " + what + (why.empty() ? "" : ": " + why));
+  };
+  uint16_t compression = COMPRESSION_NONE;
+  for (uint16_t d = 0;; ++d) {
+    if (d >= kMaxDirectories) return refuse("more than " + std::to_string(kMaxDirectories) + " image directories");
+    uint32_t subfile = 0, width = 0, height = 0, tw = 0, th = 0;
+    TIFFGetField(tif, TIFFTAG_SUBFILETYPE, &subfile);
+    layout.directories = d + 1u;
+    if (!TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &width) || !TIFFGetField(tif, TIFFTAG_IMAGELENGTH, &height) ||
+        width == 0 || height == 0)
+      return damaged("directory " + std::to_string(d) + " has no image size");
+    const bool mask = (subfile & FILETYPE_MASK) != 0;
+    if (d == 0 && (subfile & FILETYPE_REDUCEDIMAGE) != 0) return damaged("the first directory is an overview");
+    if (!mask) {
+      if (!TIFFIsTiled(tif))
+        return refuse(std::string(d == 0 ? "a striped TIFF" : "a striped overview") +
+                      ", not tiled: make a COG of it (gdal_translate -of COG IN OUT.tif) or tile it "
+                      "(clipstream-tile IN OUT.cstore)");
+      TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
+      TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
+      uint16_t spp = 1, bps = 1, format = SAMPLEFORMAT_UINT, planar = PLANARCONFIG_CONTIG,
+               photometric = PHOTOMETRIC_MINISBLACK, comp = COMPRESSION_NONE;
+      TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &spp);
+      TIFFGetFieldDefaulted(tif, TIFFTAG_BITSPERSAMPLE, &bps);
+      TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
+      TIFFGetFieldDefaulted(tif, TIFFTAG_PLANARCONFIG, &planar);
+      TIFFGetFieldDefaulted(tif, TIFFTAG_COMPRESSION, &comp);
+      TIFFGetField(tif, TIFFTAG_PHOTOMETRIC, &photometric);
+      if (d == 0) {
+        if (tw != th || tw < kMinInternalTilePx || tw > kMaxInternalTilePx || (tw & (tw - 1)) != 0)
+          return refuse("internal tiles of " + std::to_string(tw) + " x " + std::to_string(th) +
+                        " px: only square power-of-two tiles of 16 to 4096 px are cut into the pyramid "
+                        "(gdal_translate -of COG -co BLOCKSIZE=512 IN OUT.tif)");
+        if (format == SAMPLEFORMAT_INT || format == SAMPLEFORMAT_IEEEFP)
+          return refuse(std::string("holds ") + (format == SAMPLEFORMAT_INT ? "signed integers" : "floating-point samples") +
+                        " (heights?), not colour: tile a DEM for the elevation layer (clipstream-tile DEM.tif "
+                        "dem.cstore)");
+        if (planar != PLANARCONFIG_CONTIG)
+          return refuse("stores its bands in separate planes: rewrite it pixel-interleaved "
+                        "(gdal_translate -of COG -co INTERLEAVE=PIXEL IN OUT.tif)");
+        if (photometric == PHOTOMETRIC_PALETTE)
+          return refuse("is paletted: expand it to RGB (gdal_translate -of COG -expand rgb IN OUT.tif)");
+        if (photometric == PHOTOMETRIC_SEPARATED || photometric == PHOTOMETRIC_CIELAB ||
+            photometric == PHOTOMETRIC_ICCLAB || photometric == PHOTOMETRIC_ITULAB)
+          return refuse("holds CMYK or Lab colour: convert it to RGB (gdal_translate -of COG -co "
+                        "PHOTOMETRIC=RGB IN OUT.tif)");
+        const bool grey16 = bps == 16 && spp == 1;
+        if (!(bps == 8 && spp >= 1 && spp <= 4) && !grey16)
+          return refuse(std::to_string(spp) + " bands of " + std::to_string(bps) +
+                        " bits: COGs are read as 8-bit grey, grey + alpha, RGB or RGBA, or 16-bit grey; "
+                        "tile it instead (clipstream-tile IN OUT.cstore)");
+        if (!TIFFIsCODECConfigured(comp))
+          return refuse("compressed with " + codecName(comp) + ", which this libtiff cannot decode");
+        compression = comp;
+        samples = spp;
+        bits = bps;
+        grey_alpha = spp == 2;
+        ycbcr_jpeg = photometric == PHOTOMETRIC_YCBCR && comp == COMPRESSION_JPEG;
+        if (photometric == PHOTOMETRIC_YCBCR && comp != COMPRESSION_JPEG)
+          return refuse("holds YCbCr samples without JPEG: convert it to RGB (gdal_translate -of COG IN OUT.tif)");
+        tile_px = tw;
+        const PixelFormat pf = grey16            ? PixelFormat::kR16
+                               : spp == 1        ? PixelFormat::kR8
+                               : spp == 3        ? PixelFormat::kRGB8
+                                                 : PixelFormat::kRGBA8;
+        if (!makePyramidGeometry(width, height, kCogPyramidTilePx, pf, &info.geometry))
+          return damaged("image of " + std::to_string(width) + " x " + std::to_string(height) + " px");
+        levels.assign(info.geometry.levelCount(), Level{});
+      } else if (tw != tile_px || th != tile_px || spp != samples || bps != bits || comp != compression ||
+                 planar != PLANARCONFIG_CONTIG) {
+        // An overview unlike the full image is not used; its level is built.
+        if (!TIFFReadDirectory(tif)) break;
+        continue;
+      }
+      if (d == 0 || (subfile & FILETYPE_REDUCEDIMAGE) != 0) {
+        Directory dir;
+        dir.index = d;
+        dir.width = width;
+        dir.height = height;
+        dir.tiles_across = (width + tile_px - 1) / tile_px;
+        dir.tiles_down = (height + tile_px - 1) / tile_px;
+        const uint64_t count = uint64_t(dir.tiles_across) * dir.tiles_down;
+        if (count != TIFFNumberOfTiles(tif)) return damaged("directory " + std::to_string(d) + "'s tile count");
+        dir.offsets.resize(count);
+        dir.counts.resize(count);
+        for (uint64_t t = 0; t < count; ++t) {
+          int err = 0;
+          dir.offsets[t] = TIFFGetStrileOffsetWithErr(tif, uint32_t(t), &err);
+          if (err == 0) dir.counts[t] = TIFFGetStrileByteCountWithErr(tif, uint32_t(t), &err);
+          if (err != 0) return damaged("directory " + std::to_string(d) + "'s tile table");
+          if (dir.counts[t] > 0 && (dir.offsets[t] > source->size() || dir.counts[t] > source->size() - dir.offsets[t]))
+            return Status::error(ErrorCode::kTruncated, name + ": tile " + std::to_string(t) + " of directory " +
+                                                            std::to_string(d) + " lies past the end of the file");
+          if (dir.counts[t] > (uint64_t(64) << 20)) return damaged("a tile of " + std::to_string(dir.counts[t]) + " bytes");
+        }
+        // Which pyramid level it is: the one of its size.
+        for (size_t l = 0; l < levels.size(); ++l) {
+          const LevelInfo& li = info.geometry.levels[l];
+          if (li.width_px == width && li.height_px == height && levels[l].directory < 0) {
+            levels[l].directory = int(directories.size());
+            directories.push_back(std::move(dir));
+            break;
+          }
+        }
+      }
+    }
+    if (!TIFFReadDirectory(tif)) break;
+  }
+  if (levels.empty() || levels[0].directory != 0) return damaged("no full-resolution image");
+  layout.internal_tile_px = tile_px;
+  layout.compression = codecName(compression);
+  layout.stored_levels.resize(levels.size());
+  size_t coarsest = 0;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    layout.stored_levels[l] = levels[l].directory >= 0;
+    if (levels[l].directory >= 0) coarsest = l;
+  }
+  const LevelInfo& top = info.geometry.levels[coarsest];
+  if (coarsest + 1 < levels.size() && std::max(top.width_px, top.height_px) > kMaxBuildFromPx)
+    return refuse("its coarsest image is " + std::to_string(top.width_px) + " x " + std::to_string(top.height_px) +
+                  " px: the levels above it would be built by reading all of it; add overviews "
+                  "(gdal_translate -of COG IN OUT.tif, or gdaladdo -r average IN)");
+  // One decoded internal tile, as libtiff hands it out (JPEG's YCbCr as RGB).
+  decoded_bytes = size_t(tile_px) * tile_px * samples * (bits / 8);
+  return okStatus();
+}
+
+Status CogReader::Impl::openHandle(uint16_t directory, TIFF** out, std::string* error) const {
+  *out = nullptr;
+  TIFF* tif = openClient(const_cast<Impl*>(this), name, error);
+  if (tif == nullptr) return Status::error(ErrorCode::kIo, name + ": cannot reopen: " + *error);
+  if (!TIFFSetDirectory(tif, directory)) {
+    *error = lastError(tif);
+    TIFFClose(tif);
+    return Status::error(ErrorCode::kIo, name + ": cannot reopen directory " + std::to_string(directory) + ": " + *error);
+  }
+  if (ycbcr_jpeg) TIFFSetField(tif, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+  *out = tif;
+  return okStatus();
+}
+
+Status CogReader::Impl::rawTile(size_t d, uint32_t cx, uint32_t cy, std::vector<uint8_t>* out,
+                                uint64_t* read) const {
+  const Directory& dir = directories[d];
+  const size_t t = size_t(cy) * dir.tiles_across + cx;
+  const uint64_t bytes = dir.counts[t];
+  // The disk cache's copy carries its own checksum (a COG records none).
+  const std::string entry = "t" + std::to_string(dir.index) + "-" + std::to_string(cx) + "-" + std::to_string(cy);
+  if (disk_cache) {
+    std::vector<uint8_t> cached;
+    switch (disk_cache->get(cache_key, entry, bytes + 4, &cached)) {
+      case DiskCache::Lookup::kHit: {
+        uint32_t sum;
+        std::memcpy(&sum, cached.data(), 4);
+        if (format::tileChecksum(cached.data() + 4, bytes) == sum) {
+          disk_hits.fetch_add(1, std::memory_order_relaxed);
+          out->assign(cached.begin() + 4, cached.end());
+          return okStatus();
+        }
+        disk_cache->drop(cache_key, entry);
+        [[fallthrough]];
+      }
+      case DiskCache::Lookup::kBad:
+        disk_dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case DiskCache::Lookup::kMiss:
+        break;
+    }
+    disk_misses.fetch_add(1, std::memory_order_relaxed);
+  }
+  out->resize(size_t(bytes));
+  if (Status s = readSource(out->data(), out->size(), dir.offsets[t]); !s) return s;
+  *read += bytes;
+  if (disk_cache) {
+    std::vector<uint8_t> kept(size_t(bytes) + 4);
+    const uint32_t sum = format::tileChecksum(out->data(), out->size());
+    std::memcpy(kept.data(), &sum, 4);
+    std::memcpy(kept.data() + 4, out->data(), out->size());
+    disk_cache->put(cache_key, entry, kept);
+  }
+  return okStatus();
+}
+
+Status CogReader::Impl::decodeInternal(size_t d, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* read) const {
+  const Directory& dir = directories[d];
+  const size_t t = size_t(cy) * dir.tiles_across + cx;
+  auto pixels = std::make_shared<std::vector<uint8_t>>(decoded_bytes);
+  if (dir.counts[t] == 0) {
+    // A sparse tile (GDAL's SPARSE_OK): never written, read as zeros.
+    *out = std::move(pixels);
+    return okStatus();
+  }
+  thread_local std::vector<uint8_t> raw;
+  if (Status s = rawTile(d, cx, cy, &raw, read); !s) return s;
+  TIFF* tif = nullptr;
+  {
+    std::lock_guard lock(handles_mutex);
+    if (!idle_handles[d].empty()) {
+      tif = idle_handles[d].back();
+      idle_handles[d].pop_back();
+    }
+  }
+  if (tif == nullptr) {
+    std::string error;
+    if (Status s = openHandle(dir.index, &tif, &error); !s) return s;
+  }
+  static_cast<Client*>(TIFFClientdata(tif))->error.clear();
+  const bool ok = TIFFReadFromUserBuffer(tif, uint32_t(t), raw.data(), tmsize_t(raw.size()), pixels->data(),
+                                         tmsize_t(pixels->size())) != 0;
+  const std::string why = ok ? std::string() : lastError(tif);
+  {
+    std::lock_guard lock(handles_mutex);
+    idle_handles[d].push_back(tif);
+  }
+  if (!ok)
+    return Status::error(ErrorCode::kCorruptTile, name + ": internal tile (" + std::to_string(cx) + ", " +
+                                                      std::to_string(cy) + ") of directory " + std::to_string(dir.index) +
+                                                      " does not decode" + (why.empty() ? "" : ": " + why));
+  *out = std::move(pixels);
+  return okStatus();
+}
+
+Status CogReader::Impl::internalTile(size_t d, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* read) const {
+  const uint64_t id = cacheId(d, cx, cy);
+  std::promise<Decoded> promise;
+  std::shared_future<Decoded> result;
+  bool mine = false;
+  {
+    std::lock_guard lock(cache_mutex);
+    auto it = decoded.find(id);
+    if (it != decoded.end()) {
+      lru.splice(lru.begin(), lru, it->second.lru);
+      result = it->second.result;
+    } else {
+      lru.push_front(id);
+      result = promise.get_future().share();
+      decoded.emplace(id, CacheEntry{result, lru.begin()});
+      mine = true;
+      // Keep the byte cap, but never drop a tile still being decoded.
+      const size_t keep = std::max<size_t>(kDecodedCacheMinTiles, size_t(kDecodedCacheBytes / std::max<size_t>(1, decoded_bytes)));
+      for (auto victim = std::prev(lru.end()); decoded.size() > keep && victim != lru.begin();) {
+        auto entry = decoded.find(*victim);
+        auto previous = std::prev(victim);
+        if (entry->second.result.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+          decoded.erase(entry);
+          lru.erase(victim);
+        }
+        victim = previous;
+      }
+    }
+  }
+  if (mine) {
+    Decoded d_out;
+    d_out.status = decodeInternal(d, cx, cy, &d_out.pixels, read);
+    promise.set_value(d_out);
+    if (!d_out.status) {
+      // A failure is not kept: the next ask tries again.
+      std::lock_guard lock(cache_mutex);
+      auto it = decoded.find(id);
+      if (it != decoded.end()) {
+        lru.erase(it->second.lru);
+        decoded.erase(it);
+      }
+    }
+  }
+  const Decoded& done = result.get();
+  *out = done.pixels;
+  return done.status;
+}
+
+Status CogReader::Impl::cutTile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* read) const {
+  const size_t d = size_t(levels[key.level].directory);
+  const Directory& dir = directories[d];
+  const uint32_t bpp = bytesPerPixel(info.geometry.format);
+  const uint32_t P = kCogPyramidTilePx;
+  const uint64_t x0 = uint64_t(key.x) * P, y0 = uint64_t(key.y) * P;
+  const uint32_t valid_w = uint32_t(std::min<uint64_t>(P, dir.width - x0));
+  const uint32_t valid_h = uint32_t(std::min<uint64_t>(P, dir.height - y0));
+  const size_t src_bpp = size_t(samples) * (bits / 8);
+  // Every internal tile under the pyramid tile's valid texels.
+  for (uint64_t cy = y0 / tile_px; cy * tile_px < y0 + valid_h; ++cy) {
+    for (uint64_t cx = x0 / tile_px; cx * tile_px < x0 + valid_w; ++cx) {
+      Pixels source_tile;
+      if (Status s = internalTile(d, uint32_t(cx), uint32_t(cy), &source_tile, read); !s) return s;
+      const uint64_t ix0 = std::max(x0, cx * tile_px), ix1 = std::min(x0 + valid_w, (cx + 1) * tile_px);
+      const uint64_t iy0 = std::max(y0, cy * tile_px), iy1 = std::min(y0 + valid_h, (cy + 1) * tile_px);
+      for (uint64_t y = iy0; y < iy1; ++y) {
+        const uint8_t* src = source_tile->data() + ((y - cy * tile_px) * tile_px + (ix0 - cx * tile_px)) * src_bpp;
+        uint8_t* dst = pixels.data() + ((y - y0) * P + (ix0 - x0)) * bpp;
+        if (!grey_alpha) {
+          std::memcpy(dst, src, (ix1 - ix0) * bpp);
+        } else {
+          for (uint64_t x = ix0; x < ix1; ++x, src += 2, dst += 4) dst[0] = dst[1] = dst[2] = src[0], dst[3] = src[1];
+        }
+      }
+    }
+  }
+  clampEdges(pixels, P, bpp, valid_w, valid_h);
+  return okStatus();
+}
+
+Status CogReader::Impl::buildTile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* read) const {
+  {
+    std::lock_guard lock(built_mutex);
+    if (auto it = built.find(key); it != built.end()) {
+      std::memcpy(pixels.data(), it->second->data(), pixels.size());
+      return okStatus();
+    }
+  }
+  const PyramidGeometry& g = info.geometry;
+  const uint32_t P = kCogPyramidTilePx;
+  const uint32_t bpp = bytesPerPixel(g.format);
+  const LevelInfo& fine = g.levels[key.level - 1];
+  const LevelInfo& coarse = g.levels[key.level];
+  // The (up to) four tiles of the level below.
+  std::vector<uint8_t> children[2][2];
+  for (uint32_t j = 0; j < 2; ++j)
+    for (uint32_t i = 0; i < 2; ++i) {
+      const TileKey child{key.level - 1, 2 * key.x + i, 2 * key.y + j};
+      if (child.x >= fine.tiles_x || child.y >= fine.tiles_y) continue;
+      children[j][i].resize(g.tileBytes());
+      if (Status s = tile(child, children[j][i], read); !s) return s;
+    }
+  // The box filter of docs/tile-store.md: (a + b + c + d + 2) / 4 of the
+  // 2 x 2 texels below, coordinates clamped into the level below; texels
+  // past the level's edge take the nearest inside.
+  const uint64_t fx_base = uint64_t(2) * key.x * P, fy_base = uint64_t(2) * key.y * P;
+  auto texel = [&](uint64_t fx, uint64_t fy) {
+    fx = std::min<uint64_t>(fx, fine.width_px - 1);
+    fy = std::min<uint64_t>(fy, fine.height_px - 1);
+    const uint64_t lx = fx - fx_base, ly = fy - fy_base;
+    const std::vector<uint8_t>& t = children[ly / P][lx / P];
+    return t.data() + ((ly % P) * P + lx % P) * bpp;
+  };
+  const uint32_t channels = channelCount(g.format);
+  const bool wide = g.format == PixelFormat::kR16;
+  for (uint32_t y = 0; y < P; ++y) {
+    const uint64_t cy = std::min<uint64_t>(uint64_t(key.y) * P + y, coarse.height_px - 1);
+    for (uint32_t x = 0; x < P; ++x) {
+      const uint64_t cx = std::min<uint64_t>(uint64_t(key.x) * P + x, coarse.width_px - 1);
+      const uint8_t* a = texel(2 * cx, 2 * cy);
+      const uint8_t* b = texel(2 * cx + 1, 2 * cy);
+      const uint8_t* c = texel(2 * cx, 2 * cy + 1);
+      const uint8_t* e = texel(2 * cx + 1, 2 * cy + 1);
+      uint8_t* dst = pixels.data() + (size_t(y) * P + x) * bpp;
+      if (wide) {
+        auto v = [](const uint8_t* p) { return uint32_t(p[0]) | uint32_t(p[1]) << 8; };
+        const uint32_t sum = (v(a) + v(b) + v(c) + v(e) + 2) / 4;
+        dst[0] = uint8_t(sum);
+        dst[1] = uint8_t(sum >> 8);
+      } else {
+        for (uint32_t ch = 0; ch < channels; ++ch) dst[ch] = uint8_t((a[ch] + b[ch] + c[ch] + e[ch] + 2) / 4);
+      }
+    }
+  }
+  auto keep = std::make_shared<std::vector<uint8_t>>(pixels.begin(), pixels.end());
+  std::lock_guard lock(built_mutex);
+  built.emplace(key, std::move(keep));
+  return okStatus();
+}
+
+Status CogReader::Impl::tile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* read) const {
+  return levels[key.level].directory >= 0 ? cutTile(key, pixels, read) : buildTile(key, pixels, read);
+}
+
+CogReader::CogReader() : m_impl(std::make_unique<Impl>()) {}
+CogReader::~CogReader() = default;
+
+Status CogReader::open(const std::string& path, const RemoteOptions& remote, std::unique_ptr<CogReader>* out) {
+  if (out == nullptr) return Status::error(ErrorCode::kInvalidArgument, "null output");
+  out->reset();
+  std::unique_ptr<CogReader> reader(new CogReader());
+  reader->m_impl->path = path;
+  reader->m_impl->remote = remote;
+  if (Status s = reader->m_impl->openImpl(); !s) return s;
+  *out = std::move(reader);
+  return okStatus();
+}
+
+const StoreInfo& CogReader::info() const { return m_impl->info; }
+const CogLayout& CogReader::layout() const { return m_impl->layout; }
+
+Status CogReader::readTile(const TileKey& key, std::span<uint8_t> pixels, uint64_t* bytes_read) const {
+  *bytes_read = 0;
+  const PyramidGeometry& g = m_impl->info.geometry;
+  if (!g.contains(key))
+    return Status::error(ErrorCode::kOutOfRange, m_impl->name + ": no tile " + format::keyText(key));
+  if (pixels.size() != g.tileBytes())
+    return Status::error(ErrorCode::kInvalidArgument, "pixel buffer is not one tile");
+  return m_impl->tile(key, pixels, bytes_read);
+}
+
+unsigned CogReader::suggestedReadThreads() const { return m_impl->source->suggestedReadThreads(); }
+
+RemoteStats CogReader::remoteStats() const {
+  RemoteStats stats = m_impl->source->remoteStats();
+  stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
+  stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
+  stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
+  stats.disk_cache_folders_refused = m_impl->disk_folder_refused ? 1 : 0;
+  return stats;
+}
+
+uint64_t CogReader::bytesRead() const { return m_impl->bytes_read.load(std::memory_order_relaxed); }
+
+Status readRasterInfo(const std::string& path, const RemoteOptions& remote, StoreInfo* out) {
+  *out = StoreInfo{};
+  std::unique_ptr<TileStoreReader> store;
+  Status s = TileStoreReader::open(path, remote, &store);
+  if (s) {
+    *out = store->info();
+    return okStatus();
+  }
+  if (s.code != ErrorCode::kBadMagic) return s;
+  std::unique_ptr<CogReader> cog;
+  const Status c = CogReader::open(path, remote, &cog);
+  if (!c) return c.code == ErrorCode::kBadMagic ? s : c;
+  *out = cog->info();
+  return okStatus();
+}
+
+}  // namespace clipstream
