@@ -31,8 +31,12 @@
 // HTTP/1.1 only (RemoteOptions::http2 off); h2 = TLS with HTTP/2 (ALPN).
 // The TLS rows go to a second nginx with `listen ... ssl http2` and a
 // self-signed certificate, through the same kind of proxy.
-// COG: made with gdal_translate -of COG (docs/benchmarks.md); the GDAL rows
-// need /usr/bin/python3 with GDAL (python3-gdal) and bench/gdal_read_windows.py.
+// COG: made with gdal_translate -of COG (docs/benchmarks.md). With a COG,
+// two more kinds of rows: "cog_direct", the same teleports streamed from
+// the COG itself (openStoreSource() of its URL: CogReader, no tiling), at
+// each connection count over cleartext HTTP; and "gdal_vsicurl", which
+// needs /usr/bin/python3 with GDAL (python3-gdal) and
+// bench/gdal_read_windows.py.
 #include <clipstream/store/tile_store.h>
 #include <clipstream/streamer/streamer.h>
 #include <clipstream/streamer/tile_source.h>
@@ -244,7 +248,8 @@ bool measureGlide(const Target& target, const RemoteOptions& remote, const Strea
 // of teleport t for the GDAL rows. False on a fatal error (printed).
 bool measureClipstream(const Options& o, const Target& target, const std::string& protocol,
                        double rtt, unsigned connections, const std::string& ca_file,
-                       std::vector<std::string>* windows, bench::TsvOut* table) {
+                       std::vector<std::string>* windows, bench::TsvOut* table,
+                       const char* reader = "clipstream") {
   const bool tls = protocol != "http";
   RemoteOptions remote;
   remote.connections = connections;
@@ -299,9 +304,9 @@ bool measureClipstream(const Options& o, const Target& target, const std::string
   std::sort(sorted.begin(), sorted.end());
   double total_s = 0.0;
   for (double v : seconds) total_s += v;
-  table->row("clipstream\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
+  table->row("%s\t%s\t%g\t%u\t%llu\t%.1f\t%llu\t%.3f\t%.3f%s\t%llu\t%.0f\t%llu\t%.2f\t"
              "%.2f\n",
-             protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
+             reader, protocol.c_str(), rtt, remote.connections, (unsigned long long)connections_opened,
              open_ms, (unsigned long long)open_log.requests, sorted[sorted.size() / 2],
              sorted.back(), timed_out ? " (timeout)" : "", (unsigned long long)tiles,
              total_s > 0 ? double(tiles) / total_s : 0.0, (unsigned long long)log.requests,
@@ -435,7 +440,18 @@ int main(int argc, char** argv) {
         }
       }
     }
-    if (!o.cog_path.empty()) measureGdal(*server, *proxy, rtt, windows, &table);
+    if (!o.cog_path.empty()) {
+      // The COG streamed directly, as clipstream-fly COG_URL does.
+      Target cog;
+      cog.host = server.get();
+      cog.url = proxy->url("cog.tif");
+      cog.geometry = geometry;
+      std::vector<std::string> cog_windows(o.teleports);
+      for (const double count : o.connections)
+        if (!measureClipstream(o, cog, "http", rtt, unsigned(count), "", &cog_windows, &table, "cog_direct"))
+          return 1;
+      measureGdal(*server, *proxy, rtt, windows, &table);
+    }
   }
   server.reset();
   tls_server.reset();

@@ -8,6 +8,7 @@
 #include <clipstream/eval/flight_run.h>
 #include <clipstream/testing/net.h>
 #include <clipstream/testing/sources.h>
+#include <clipstream/testing/test_data.h>
 
 #include <gtest/gtest.h>
 
@@ -290,6 +291,66 @@ TEST_F(HttpFlight, SlowServerNeverHoldsAFrame) {
   EXPECT_EQ(http.run.tile_failures, 0u);
   std::printf("  identical frames at 50 ms: %zu of %zu\n", identicalFrames(http, *s_local),
               http.frames.size());
+}
+
+// A Cloud-Optimized GeoTIFF made by gdal_translate, served by nginx and
+// streamed directly (no tiling), gives the frames of the store the tiler
+// makes of it once the flight rests: its overviews (GDAL's average) are
+// the store's box levels and its missing levels are built with the same
+// filter. clipstream-fly takes its URL like a store's.
+TEST(HttpCogFlight, AServedCogGivesItsTiledStoresFramesAtRest) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir("cog-flight"), work("cog-flight-nginx");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string half = dir.file("half.tif"), cog = dir.file("www/image.tif"), store = dir.file("image.cstore");
+  // Halved first, then made a COG: gdal_translate -of COG of a source with
+  // overviews of its own (a JPEG's) would take them over.
+  ASSERT_EQ(std::system(("gdal_translate -q -outsize 50% 50% -co TILED=YES '" + test::bundledDataPath("autzen.jpg") +
+                         "' '" + half + "' >/dev/null 2>&1")
+                            .c_str()),
+            0);
+  ASSERT_EQ(std::system(("gdal_translate -q -of COG -co OVERVIEW_RESAMPLING=AVERAGE -co COMPRESS=DEFLATE '" + half +
+                         "' '" + cog + "' >/dev/null 2>&1")
+                            .c_str()),
+            0);
+  ASSERT_EQ(std::system((std::string("'") + CLIPSTREAM_TILE_EXE + "' '" + cog + "' '" + store + "' >/dev/null 2>&1").c_str()), 0);
+  std::unique_ptr<NginxServer> server;
+  const Status started = NginxServer::start(work.path().string(), dir.file("www"), &server);
+  ASSERT_TRUE(started.ok()) << started.toString();
+
+  Status s;
+  const std::shared_ptr<TileSource> local = openStoreSource(store, &s);
+  ASSERT_TRUE(local) << s.toString();
+  const std::shared_ptr<TileSource> streamed = openStoreSource(server->url("image.tif"), &s);
+  ASSERT_TRUE(streamed) << s.toString();
+  EXPECT_EQ(streamed->describe().rfind("cog:", 0), 0u);
+  FlightPath path;
+  ASSERT_TRUE(FlightPath::builtin("pass", local->geometry(), &path).ok());
+  CapturedFlight tiled, direct;
+  ASSERT_TRUE(fly(local, path, {}, true, &tiled).ok());
+  ASSERT_EQ(tiled.run.final_max_abs_error, 0) << "the store's flight did not converge";
+  const Status flown = fly(streamed, path, {}, false, &direct);
+  ASSERT_TRUE(flown.ok()) << flown.toString();
+  ASSERT_EQ(direct.frames.size(), tiled.frames.size());
+  EXPECT_EQ(direct.run.tile_failures, 0u);
+  EXPECT_EQ(direct.run.render_thread_fetches, 0u) << "a frame waited on the network";
+  for (size_t i = direct.frames.size() - kSettledFrames; i < direct.frames.size(); ++i)
+    EXPECT_TRUE(direct.frames[i] == tiled.frames[i]) << "frame " << i << " differs";
+  for (const test::LoggedRequest& r : server->requests()) EXPECT_EQ(r.status, 206) << r.range;
+
+  // The program, by URL.
+  const std::string out = work.file("fly");
+  const std::string command = std::string("'") + CLIPSTREAM_FLY_EXE + "' '" + server->url("image.tif") +
+                              "' --frames 10 --size 160x96 --out '" + out + "' 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string output;
+  char buffer[4096];
+  for (size_t got; (got = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0;) output.append(buffer, got);
+  const int status = ::pclose(pipe);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << output;
+  EXPECT_TRUE(std::filesystem::exists(out + "/frames.csv")) << output;
 }
 
 }  // namespace
