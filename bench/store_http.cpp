@@ -92,7 +92,7 @@ const double kPlaces[][2] = {{0.25, 0.25}, {0.75, 0.70}, {0.30, 0.80}, {0.70, 0.
 struct Teleport {
   double seconds = 0.0;
   uint64_t tiles = 0;
-  std::string windows;  // the stack levels' windows, for the GDAL script
+  std::string windows;  // the stack tiles the plan wants, for the GDAL script
 };
 
 // Update and hand off until the plan is met; false on timeout.
@@ -107,13 +107,32 @@ bool settle(Streamer& streamer, const Camera& camera, Clock::time_point epoch) {
   }
 }
 
+// The tiles the plan wants, as windows for the GDAL script: each row's runs
+// of wanted tiles of each needed stack level (the whole window where the
+// plan wants all of it), so GDAL reads what the streamer was asked for.
 std::string planWindows(const ClipmapPlan& plan) {
   std::string out;
+  auto add = [&](uint32_t level, int64_t x0, int64_t y0, int64_t x1, int64_t y1) {
+    out += std::to_string(level) + ":" + std::to_string(x0) + ":" + std::to_string(y0) + ":" +
+           std::to_string(x1) + ":" + std::to_string(y1) + ";";
+  };
   for (const ClipLevelPlan& level : plan.stack) {
     if (!level.needed || level.window.empty()) continue;
-    out += std::to_string(level.level) + ":" + std::to_string(level.window.x0) + ":" +
-           std::to_string(level.window.y0) + ":" + std::to_string(level.window.x1) + ":" +
-           std::to_string(level.window.y1) + ";";
+    if (level.sampled.empty()) {
+      add(level.level, level.window.x0, level.window.y0, level.window.x1, level.window.y1);
+      continue;
+    }
+    for (int64_t y = level.window.y0; y < level.window.y1; ++y)
+      for (int64_t x = level.window.x0; x < level.window.x1;) {
+        if (!level.wants(x, y)) {
+          ++x;
+          continue;
+        }
+        int64_t end = x;
+        while (end < level.window.x1 && level.wants(end, y)) ++end;
+        add(level.level, x, y, end, y + 1);
+        x = end;
+      }
   }
   return out;
 }
@@ -244,7 +263,7 @@ bool measureGlide(const Target& target, const RemoteOptions& remote, const Strea
 }
 
 // One clipstream row (and its glide row, with --glide): open the store, settle
-// at the start, time each teleport. Fills windows[t] with the stack windows
+// at the start, time each teleport. Fills windows[t] with the stack tiles the plan wants
 // of teleport t for the GDAL rows. False on a fatal error (printed).
 bool measureClipstream(const Options& o, const Target& target, const std::string& protocol,
                        double rtt, unsigned connections, const std::string& ca_file,
@@ -324,7 +343,7 @@ bool measureClipstream(const Options& o, const Target& target, const std::string
   return true;
 }
 
-// The GDAL row: GDAL over the same proxy reads the stack windows of each
+// The GDAL row: GDAL over the same proxy reads the stack tiles the plan wanted at each
 // teleport from the COG.
 void measureGdal(const test::NginxServer& server, const test::DelayProxy& proxy, double rtt,
                  const std::vector<std::string>& windows, bench::TsvOut* table) {
