@@ -1,8 +1,9 @@
-// clipstream-info: prints what a tile store holds and, with --verify,
-// decodes every tile. Thin: all format knowledge lives in clipstream_store.
+// clipstream-info: prints what a tile store (or a COG, as the programs
+// stream it) holds and, with --verify, decodes every tile. Thin: all format knowledge lives in clipstream_store.
 #include <clipstream/cli/cli.h>
 #include <clipstream/cli/progress.h>
 #include <clipstream/cli/store_json.h>
+#include <clipstream/store/cog.h>
 #include <clipstream/store/tile_store.h>
 
 #include <nlohmann/json.hpp>
@@ -260,6 +261,78 @@ bool verifyStore(const TileStoreReader& reader, bool json, unsigned threads, nlo
 
 }  // namespace
 
+// A Cloud-Optimized GeoTIFF, as the programs stream it (CogReader): its
+// size, internal tiles, compression, which pyramid levels it stores and
+// which are built, its georeference; with --verify, every pyramid tile read
+// and decoded. Returns the exit code.
+int describeCog(const CogReader& cog, const std::string& path, bool json, bool verify) {
+  const StoreInfo& info = cog.info();
+  const PyramidGeometry& g = info.geometry;
+  const CogLayout& layout = cog.layout();
+  uint64_t failed = 0, tiles = 0;
+  std::vector<std::string> problems;
+  if (verify) {
+    std::vector<uint8_t> pixels(g.tileBytes());
+    for (uint32_t l = 0; l < g.levelCount(); ++l)
+      for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+        for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) {
+          uint64_t bytes = 0;
+          ++tiles;
+          if (Status s = cog.readTile({l, x, y}, pixels, &bytes); !s) {
+            if (++failed <= 100) problems.push_back(errorCodeName(s.code) + std::string(": ") + s.message);
+          }
+        }
+  }
+  if (json) {
+    nlohmann::json out;
+    out["path"] = path;
+    out["kind"] = "cog";
+    out["file_bytes"] = info.file_bytes;
+    out["width_px"] = g.width_px;
+    out["height_px"] = g.height_px;
+    out["format"] = pixelFormatName(g.format);
+    out["tile_px"] = g.tile_px;
+    out["internal_tile_px"] = layout.internal_tile_px;
+    out["compression"] = layout.compression;
+    nlohmann::json levels = nlohmann::json::array();
+    for (uint32_t l = 0; l < g.levelCount(); ++l)
+      levels.push_back({{"level", l}, {"width_px", g.levels[l].width_px}, {"height_px", g.levels[l].height_px},
+                        {"tiles", uint64_t(g.levels[l].tiles_x) * g.levels[l].tiles_y},
+                        {"stored", bool(layout.stored_levels[l])}});
+    out["levels"] = levels;
+    if (info.geo.present) {
+      out["georeference"] = {{"transform", std::vector<double>(info.geo.transform, info.geo.transform + 6)},
+                             {"crs", info.geo.crs}};
+    }
+    if (verify) out["verify"] = {{"tiles", tiles}, {"failed", failed}, {"problems", problems}};
+    std::printf("%s\n", out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+  } else {
+    std::printf("COG          %s\n", path.c_str());
+    std::printf("file size    %" PRIu64 " bytes (%s)\n", info.file_bytes, humanBytes(info.file_bytes).c_str());
+    std::printf("image        %" PRIu64 " x %" PRIu64 " px, %s\n", g.width_px, g.height_px, pixelFormatName(g.format));
+    std::printf("tiles        %u px inside the file, streamed as %u px\n", layout.internal_tile_px, g.tile_px);
+    std::printf("compression  %s\n", layout.compression.c_str());
+    if (info.geo.present) {
+      const double* t = info.geo.transform;
+      std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n", t[0],
+                  t[3], t[1], t[5], t[2], t[4]);
+      std::printf("CRS          %s\n", info.geo.crs.empty() ? "(none)" : printableText(info.geo.crs).c_str());
+    } else {
+      std::printf("georeference none\n");
+    }
+    std::printf("\nlevel\twidth_px\theight_px\ttiles\tin_file\n");
+    for (uint32_t l = 0; l < g.levelCount(); ++l)
+      std::printf("%u\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%s\n", l, g.levels[l].width_px, g.levels[l].height_px,
+                  uint64_t(g.levels[l].tiles_x) * g.levels[l].tiles_y,
+                  layout.stored_levels[l] ? "yes" : "no: built from the level below");
+    if (verify) {
+      std::printf("\nverify       %" PRIu64 " of %" PRIu64 " tiles read and decoded\n", tiles - failed, tiles);
+      for (const std::string& p : problems) std::printf("  %s\n", p.c_str());
+    }
+  }
+  return failed > 0 ? kExitCorrupt : kExitOk;
+}
+
 int main(int argc, char** argv) {
   CLI::App app{"Describe a clipstream tile store and optionally verify every tile.",
                "clipstream-info"};
@@ -291,6 +364,21 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<TileStoreReader> reader;
   Status status = TileStoreReader::open(path, remote, &reader);
+  if (!status && status.code == ErrorCode::kBadMagic) {
+    // Not a store: a Cloud-Optimized GeoTIFF is described as streamed.
+    std::unique_ptr<CogReader> cog;
+    const Status opened = CogReader::open(path, remote, &cog);
+    if (opened.code != ErrorCode::kBadMagic) {
+      if (!opened) {
+        cli::printError(app, "cannot open COG: " + opened.toString());
+        return kExitOpenFailed;
+      }
+      if (tiles) return cli::usageError(app, "--tiles lists a store's index; a COG has none");
+      const int code = describeCog(*cog, displayStorePath(path), json, verify);
+      const int finished = cli::finish(app, code);
+      return finished == cli::kExitFailure && code == kExitCorrupt ? kExitCorrupt : finished;
+    }
+  }
   if (!status) {
     cli::printError(app, "cannot open store: " + status.toString());
     return kExitOpenFailed;

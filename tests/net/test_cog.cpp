@@ -320,5 +320,29 @@ TEST_F(Cog, OpenStoreSourceServesACogAsRgba8) {
   EXPECT_EQ(info.geometry.width_px, source->geometry().width_px);
 }
 
+// clipstream-info describes a COG as the programs stream it and, with
+// --verify, reads every pyramid tile; a damaged one fails with exit 3.
+TEST_F(Cog, ClipstreamInfoDescribesAndVerifiesACog) {
+  const std::string cog = makeCog("described.tif", "-co COMPRESS=LZW");
+  RunResult r = runInfo({cog, "--verify"});
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("512 px inside the file, streamed as 128 px"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("lzw"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("no: built from the level below"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("verify       "), std::string::npos) << r.output;
+  r = runInfo({cog, "--json"});
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("\"internal_tile_px\": 512"), std::string::npos) << r.output;
+  {
+    std::fstream f(cog, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(std::streamoff(fs::file_size(cog) / 2));
+    const std::string junk(50000, '\x33');
+    f.write(junk.data(), std::streamsize(junk.size()));
+  }
+  r = runInfo({cog, "--verify"});
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("corrupt tile"), std::string::npos) << r.output;
+}
+
 }  // namespace
 }  // namespace clipstream::test
