@@ -77,7 +77,7 @@ ctest --test-dir build --output-on-failure -j "$jobs" --timeout 900
 echo "== ThreadSanitizer build of the store, streamer, HTTP and image reader tests =="
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCLIPSTREAM_SANITIZE=thread -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_tiler_readers
+cmake --build build-tsan -j "$jobs" --target test_store test_streamer test_net test_net_cog test_tiler_readers
 # tests/tsan.supp: third-party code TSan cannot see into (OpenImageIO).
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/tsan.supp" \
   ctest --test-dir build-tsan -L 'store|streamer|net' --output-on-failure -j "$jobs" --timeout 900
@@ -118,15 +118,15 @@ ASAN_OPTIONS="detect_leaks=1 halt_on_error=1 intercept_tls_get_addr=0" LSAN_OPTI
 
 # A regression guard, not a campaign: each libFuzzer driver (tests/fuzz:
 # the store reader, the store's format checks in memory, a store over HTTP,
-# the TIFF/JPEG/PNG readers, mosaic lists and VRTs, flight paths, traces)
-# from the seeds it writes itself, with a fixed seed, for a fixed time: a
-# minute in all. Any crash, sanitizer report, leak or 10 s hang fails the
+# COGs, the TIFF/JPEG/PNG readers, mosaic lists and VRTs, flight paths,
+# traces) from the seeds it writes itself, with a fixed seed, for a fixed
+# time: about a minute in all. Any crash, sanitizer report, leak or 10 s hang fails the
 # suite (docs/cli.md, "Fuzzing").
-echo "== Fuzzing every parser of untrusted bytes for 60 s (clang, libFuzzer, ASan + UBSan) =="
+echo "== Fuzzing every parser of untrusted bytes for 69 s (clang, libFuzzer, ASan + UBSan) =="
 cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ -DCLIPSTREAM_FUZZ=ON \
   -DCLIPSTREAM_SANITIZE=address -DCLIPSTREAM_BUILD_RENDERER=OFF -DCLIPSTREAM_BUILD_BENCH=OFF
-fuzzers=(store:10 format_check:5 http:9 image:9 mosaic:9 path:9 trace:9)  # name:seconds
+fuzzers=(store:10 format_check:5 http:9 cog:9 image:9 mosaic:9 path:9 trace:9)  # name:seconds
 cmake --build build-fuzz -j "$jobs" --target "${fuzzers[@]/%:*/_fuzz}"
 corpus=$(mktemp -d)
 trap 'rm -rf "$corpus"' EXIT

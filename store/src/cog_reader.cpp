@@ -403,6 +403,11 @@ Status CogReader::Impl::readDirectories(TIFF* tif) {
         dir.tiles_down = (height + tile_px - 1) / tile_px;
         const uint64_t count = uint64_t(dir.tiles_across) * dir.tiles_down;
         if (count != TIFFNumberOfTiles(tif)) return damaged("directory " + std::to_string(d) + "'s tile count");
+        // Each tile has an offset and a byte count of at least 4 bytes each
+        // in the file: a size claiming more tiles than that is a lie.
+        if (count > 1 && count > source->size() / 8)
+          return damaged("directory " + std::to_string(d) + " claims " + std::to_string(count) +
+                         " tiles, more than the file has room to list");
         dir.offsets.resize(count);
         dir.counts.resize(count);
         for (uint64_t t = 0; t < count; ++t) {

@@ -20,6 +20,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 namespace clipstream::test {
 namespace {
@@ -318,6 +319,39 @@ TEST_F(Cog, OpenStoreSourceServesACogAsRgba8) {
   ASSERT_TRUE(readRasterInfo(cog, {}, &info).ok());
   EXPECT_TRUE(info.geo.present);
   EXPECT_EQ(info.geometry.width_px, source->geometry().width_px);
+}
+
+// Loader threads share one reader: the decoded-tile cache (one decode
+// for many askers), the libtiff handle pools and the built levels give
+// every thread the tiles one thread reads alone, in any order.
+TEST_F(Cog, ConcurrentReadersGetTheTilesOneReaderGets) {
+  const std::string cog = makeCog("shared.tif", "-co COMPRESS=DEFLATE -co BLOCKSIZE=256");
+  const auto alone = openCog(cog);
+  const auto shared = openCog(cog);
+  ASSERT_TRUE(alone && shared);
+  const PyramidGeometry& g = alone->geometry();
+  std::vector<TileKey> keys;
+  for (uint32_t l = 0; l < g.levelCount(); ++l)
+    for (uint32_t y = 0; y < g.levels[l].tiles_y; ++y)
+      for (uint32_t x = 0; x < g.levels[l].tiles_x; ++x) keys.push_back({l, x, y});
+  std::vector<std::vector<uint8_t>> expected(keys.size(), std::vector<uint8_t>(g.tileBytes()));
+  uint64_t bytes = 0;
+  for (size_t i = 0; i < keys.size(); ++i) ASSERT_TRUE(alone->readTile(keys[i], expected[i], &bytes).ok());
+  constexpr unsigned kThreads = 6;
+  std::vector<uint64_t> wrong(kThreads, 0);
+  std::vector<std::thread> threads;
+  for (unsigned t = 0; t < kThreads; ++t)
+    threads.emplace_back([&, t] {
+      std::vector<uint8_t> pixels(g.tileBytes());
+      // Each thread its own order: coarsest first, finest first, strided.
+      for (size_t n = 0; n < keys.size(); ++n) {
+        const size_t i = t % 2 == 0 ? (n * (2 * t + 1)) % keys.size() : keys.size() - 1 - n;
+        uint64_t read = 0;
+        if (!shared->readTile(keys[i], pixels, &read).ok() || pixels != expected[i]) ++wrong[t];
+      }
+    });
+  for (std::thread& t : threads) t.join();
+  for (unsigned t = 0; t < kThreads; ++t) EXPECT_EQ(wrong[t], 0u) << "thread " << t;
 }
 
 // clipstream-info describes a COG as the programs stream it and, with

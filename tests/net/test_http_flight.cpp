@@ -6,6 +6,7 @@
 #include "test_helpers.h"
 
 #include <clipstream/eval/flight_run.h>
+#include <clipstream/renderer/flight.h>
 #include <clipstream/testing/net.h>
 #include <clipstream/testing/sources.h>
 #include <clipstream/testing/test_data.h>
@@ -351,6 +352,42 @@ TEST(HttpCogFlight, AServedCogGivesItsTiledStoresFramesAtRest) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0) << output;
   EXPECT_TRUE(std::filesystem::exists(out + "/frames.csv")) << output;
+}
+
+// A COG's georeference is the scene's as its tiled store's would be: a
+// colour relief of the bundled DEM, made a COG by GDAL and served by
+// nginx, lines up with the DEM's store exactly as the store the tiler
+// makes of the same COG does.
+TEST(HttpCogFlight, ACogLinesUpWithAnElevationStoreAsItsTiledStoreDoes) {
+  test::TempDir dir("cog-align"), work("cog-align-nginx");
+  std::filesystem::create_directories(dir.file("www"));
+  const std::string dem = test::bundledDataPath("mount_st_helens_30m.tif");
+  const std::string colours = dir.file("colours.txt"), relief = dir.file("relief.tif"),
+                    cog = dir.file("www/relief.tif"), store = dir.file("relief.cstore"),
+                    dem_store = dir.file("dem.cstore");
+  std::ofstream(colours) << "700 40 90 40\n1500 140 120 80\n2600 250 250 250\n";
+  ASSERT_EQ(std::system(("gdaldem color-relief -q '" + dem + "' '" + colours + "' '" + relief + "' >/dev/null 2>&1").c_str()), 0);
+  ASSERT_EQ(std::system(("gdal_translate -q -of COG '" + relief + "' '" + cog + "' >/dev/null 2>&1").c_str()), 0);
+  for (const auto& [in, out] : {std::pair{cog, store}, std::pair{dem, dem_store}})
+    ASSERT_EQ(std::system((std::string("'") + CLIPSTREAM_TILE_EXE + "' '" + in + "' '" + out + "' >/dev/null 2>&1").c_str()), 0);
+  std::unique_ptr<NginxServer> server;
+  const Status started = NginxServer::start(work.path().string(), dir.file("www"), &server);
+  ASSERT_TRUE(started.ok()) << started.toString();
+
+  Status s;
+  const auto tiled = openStoreSource(store, &s);
+  ASSERT_TRUE(tiled) << s.toString();
+  TerrainLayerConfig by_cog, by_store;
+  std::vector<std::string> warnings;
+  s = openTerrainLayer(server->url("relief.tif"), tiled->geometry(), dem_store, 1.0, false, 64, &by_cog, &warnings);
+  ASSERT_TRUE(s.ok()) << s.toString();
+  s = openTerrainLayer(store, tiled->geometry(), dem_store, 1.0, false, 64, &by_store, &warnings);
+  ASSERT_TRUE(s.ok()) << s.toString();
+  EXPECT_FALSE(by_cog.alignment.stretched) << "placed by its georeference";
+  EXPECT_EQ(by_cog.alignment.world_per_sample, by_store.alignment.world_per_sample);
+  EXPECT_EQ(by_cog.alignment.sample0_world, by_store.alignment.sample0_world);
+  EXPECT_EQ(by_cog.alignment.world_per_height, by_store.alignment.world_per_height);
+  EXPECT_EQ(by_cog.alignment.metres_per_world, by_store.alignment.metres_per_world);
 }
 
 }  // namespace
