@@ -134,9 +134,11 @@ class TileSource {
 };
 
 // Opens a colour tile store file, or a URL of one (isStoreUrl()), as a
-// source. On failure returns null and sets *status; an elevation store is
-// refused (kUnsupported, naming the path): heights are not colour, and
-// openElevationSource() opens them.
+// source; a path that is no store but a TIFF is opened as a
+// Cloud-Optimized GeoTIFF, streamed without tiling (CogReader, store/cog.h;
+// describe() "cog:PATH"). On failure returns null and sets *status; an
+// elevation store is refused (kUnsupported, naming the path): heights are
+// not colour, and openElevationSource() opens them.
 // Conversion to RGBA8: R8 -> (v, v, v, 255); R16 -> grey of the high byte
 // (v >> 8: a linear rescale, exact for data that uses the full 16-bit range;
 // data sets needing a window belong in the tiler); RGB8 -> A = 255.
