@@ -3,8 +3,8 @@
 // libtiff parses the directories and decodes the tiles; the bytes come from
 // a ByteSource (a file, or HTTP range requests). The header, every
 // directory and the tile tables are read once at open into `head` (grown
-// while libtiff walks the directories, each growth one read); afterwards
-// head is frozen and read-only, so the libtiff handles that decode tiles on
+// while libtiff walks the directories, each growth one read; blocks far
+// from it into `far`); afterwards both are frozen and read-only, so the libtiff handles that decode tiles on
 // loader threads (a pool per directory, one thread per handle at a time)
 // are opened from memory. A tile's bytes are read by one positional read
 // outside any lock and decoded with TIFFReadFromUserBuffer().
@@ -13,6 +13,7 @@
 #include <clipstream/store/geotiff.h>
 
 #include "byte_source.h"
+#include "cog_tiff.h"
 #include "disk_cache.h"
 #include "format.h"
 
@@ -21,22 +22,27 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cstdarg>
-#include <cstdio>
 #include <cstring>
 #include <future>
 #include <list>
+#include <map>
 #include <mutex>
 #include <unordered_map>
 #include <vector>
 
 namespace clipstream {
+
+using cog::FileBytes;
+using cog::ImageFields;
+
 namespace {
 
 // Bytes read first at open: the header and, in a COG, usually every
 // directory and tile table (GDAL writes them first). More is read, doubling,
 // only while libtiff asks for bytes beyond.
 constexpr uint64_t kFirstHeadBytes = 64 << 10;
+// Blocks read for the directories and tables that lie far from the start.
+constexpr uint64_t kFarBlockBytes = 16 << 10;
 // Decoded internal tiles kept for the pyramid tiles cut from them: a 512 px
 // RGB tile feeds 16 pyramid tiles, which the streamer asks for one by one,
 // often on other threads; without the cache each would read and decode it
@@ -49,32 +55,9 @@ constexpr size_t kDecodedCacheMinTiles = 4;
 // the whole of that level, so a file without overviews larger than this is
 // refused with the command that adds them rather than read whole.
 constexpr uint64_t kMaxBuildFromPx = 4096;
-// Internal tile sides accepted: powers of two in this range (GDAL's COG
-// writer takes 16 to 4096... and so does any tiled TIFF worth streaming).
-constexpr uint32_t kMinInternalTilePx = 16;
-constexpr uint32_t kMaxInternalTilePx = 4096;
 constexpr uint32_t kMaxDirectories = 64;
 
 using Pixels = std::shared_ptr<const std::vector<uint8_t>>;
-
-std::string codecName(uint16_t compression) {
-  switch (compression) {
-    case COMPRESSION_NONE: return "none";
-    case COMPRESSION_LZW: return "lzw";
-    case COMPRESSION_JPEG: return "jpeg";
-    case COMPRESSION_ADOBE_DEFLATE:
-    case COMPRESSION_DEFLATE: return "deflate";
-    case COMPRESSION_PACKBITS: return "packbits";
-    case COMPRESSION_ZSTD: return "zstd";
-    case COMPRESSION_WEBP: return "webp";
-    case COMPRESSION_LERC: return "lerc";
-    case COMPRESSION_LZMA: return "lzma";
-    default: {
-      const TIFFCodec* codec = TIFFFindCODEC(compression);
-      return codec != nullptr ? codec->name : "compression " + std::to_string(compression);
-    }
-  }
-}
 
 // One image directory the pyramid reads from.
 struct Directory {
@@ -88,15 +71,6 @@ struct Level {
   int directory = -1;  // index into Impl::directories; -1: built from the level below
 };
 
-// The bytes libtiff reads through a Client.
-class FileBytes {
- public:
-  virtual ~FileBytes() = default;
-  // Reads up to `n` bytes at `offset`; returns how many (0 past the end or on failure).
-  virtual size_t readHead(uint64_t offset, void* dst, size_t n) = 0;
-  virtual uint64_t fileSize() const = 0;
-};
-
 }  // namespace
 
 struct CogReader::Impl final : FileBytes {
@@ -107,13 +81,16 @@ struct CogReader::Impl final : FileBytes {
   StoreInfo info;
   CogLayout layout;
   std::vector<uint8_t> head;  // file bytes [0, head.size()); frozen after open
-  bool growing = true;        // open() may still extend head
+  bool growing = true;        // open() may still extend head and far
+  std::map<uint64_t, std::vector<uint8_t>> far;  // kFarBlockBytes blocks read while opening, by index
   Status head_status;         // the first failed read while growing
   std::vector<Directory> directories;
   std::vector<Level> levels;
   uint32_t tile_px = 0;      // internal tile side
+  uint32_t coarsest_stored = 0;  // the coarsest pyramid level the file holds
   uint16_t samples = 0;      // per pixel, as decoded
   uint16_t bits = 8;
+  uint16_t compression = COMPRESSION_NONE;
   bool grey_alpha = false;   // two samples, widened to RGBA8
   bool ycbcr_jpeg = false;   // decoded as RGB (JPEGCOLORMODE)
   size_t decoded_bytes = 0;  // one decoded internal tile
@@ -143,7 +120,8 @@ struct CogReader::Impl final : FileBytes {
   mutable std::mutex cache_mutex;
   mutable std::list<uint64_t> lru;  // most recent first
   mutable std::unordered_map<uint64_t, CacheEntry> decoded;
-  // Built tiles (levels the file lacks), kept: they are few and coarse.
+  // Built tiles of the levels above the coarsest the file holds, kept:
+  // they are few.
   mutable std::mutex built_mutex;
   mutable std::unordered_map<TileKey, Pixels, TileKeyHash> built;
 
@@ -157,15 +135,20 @@ struct CogReader::Impl final : FileBytes {
     return source->read(data, bytes, offset);
   }
 
-  // Bytes for libtiff: from head, which grows (one read each time) while
-  // the file is being opened; later, directly from the source.
   uint64_t fileSize() const override { return source->size(); }
 
+  // Bytes for libtiff. While the file is opened, a read near the end of
+  // `head` grows it (doubling, one read each time: a COG's directories and
+  // tile tables lie together at the start); a read far beyond it (a TIFF
+  // that keeps its directories at the end, as libtiff writes them) reads
+  // the aligned blocks around it into `far`, so the file is never read
+  // whole. Afterwards head and far are read-only: later libtiff handles
+  // open from them, and anything else comes from the source.
   size_t readHead(uint64_t offset, void* dst, size_t n) override {
     const uint64_t size = source->size();
     if (offset >= size) return 0;
     n = size_t(std::min<uint64_t>(n, size - offset));
-    if (offset + n > head.size() && growing) {
+    if (offset + n > head.size() && growing && offset <= 2 * uint64_t(head.size())) {
       const uint64_t want = std::min<uint64_t>(size, std::max<uint64_t>(offset + n, 2 * head.size()));
       const size_t old = head.size();
       head.resize(size_t(want));
@@ -174,18 +157,43 @@ struct CogReader::Impl final : FileBytes {
         if (head_status) head_status = s;
         return 0;
       }
-      layout.header_bytes = head.size();
+      layout.header_bytes += head.size() - old;
     }
     if (offset + n <= head.size()) {
       std::memcpy(dst, head.data() + offset, n);
       return n;
     }
-    if (growing) return 0;
-    return readSource(dst, n, offset) ? n : 0;
+    // Block by block from `far` (filled while growing).
+    uint8_t* out = static_cast<uint8_t*>(dst);
+    size_t done = 0;
+    while (done < n) {
+      const uint64_t at = offset + done;
+      const uint64_t block = at / kFarBlockBytes;
+      auto it = far.find(block);
+      if (it == far.end()) {
+        if (!growing) break;
+        std::vector<uint8_t> bytes(size_t(std::min<uint64_t>(kFarBlockBytes, size - block * kFarBlockBytes)));
+        if (Status s = readSource(bytes.data(), bytes.size(), block * kFarBlockBytes); !s) {
+          if (head_status) head_status = s;
+          return done;
+        }
+        layout.header_bytes += bytes.size();
+        it = far.emplace(block, std::move(bytes)).first;
+      }
+      const size_t within = size_t(at - block * kFarBlockBytes);
+      const size_t take = std::min(n - done, it->second.size() - within);
+      std::memcpy(out + done, it->second.data() + within, take);
+      done += take;
+    }
+    if (done == n) return n;
+    return readSource(out + done, n - done, offset + done) ? n : done;
   }
 
   Status openImpl();
   Status readDirectories(TIFF* tif);
+  Status acceptFullImage(const ImageFields& f);
+  Status readTileTable(TIFF* tif, uint16_t d, const ImageFields& f, Directory* dir);
+  Status finishLayout();
   Status openHandle(uint16_t directory, TIFF** out, std::string* error) const;
   Status internalTile(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
   Status decodeInternal(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
@@ -196,68 +204,6 @@ struct CogReader::Impl final : FileBytes {
 };
 
 namespace {
-
-// libtiff's view of a file: the reader's head and source, and a position.
-struct Client {
-  FileBytes* file = nullptr;
-  uint64_t position = 0;
-  std::string error;  // libtiff's first error message
-};
-
-tmsize_t clientRead(thandle_t handle, void* data, tmsize_t size) {
-  Client* c = static_cast<Client*>(handle);
-  if (size <= 0) return 0;
-  const size_t n = c->file->readHead(c->position, data, size_t(size));
-  c->position += n;
-  return tmsize_t(n);
-}
-tmsize_t clientWrite(thandle_t, void*, tmsize_t) { return -1; }
-toff_t clientSeek(thandle_t handle, toff_t offset, int whence) {
-  Client* c = static_cast<Client*>(handle);
-  if (whence == SEEK_SET) c->position = offset;
-  else if (whence == SEEK_CUR) c->position += offset;
-  else if (whence == SEEK_END) c->position = c->file->fileSize() + offset;
-  return c->position;
-}
-int clientClose(thandle_t handle) {
-  delete static_cast<Client*>(handle);
-  return 0;
-}
-toff_t clientSize(thandle_t handle) { return static_cast<Client*>(handle)->file->fileSize(); }
-int clientMap(thandle_t, void**, toff_t*) { return 0; }
-void clientUnmap(thandle_t, void*, toff_t) {}
-
-int onError(TIFF*, void* user, const char* module, const char* format, va_list ap) {
-  Client* c = static_cast<Client*>(user);
-  if (c->error.empty()) {
-    char text[512];
-    std::vsnprintf(text, sizeof text, format, ap);
-    c->error = (module != nullptr && *module != '\0' ? std::string(module) + ": " : std::string()) + text;
-  }
-  return 1;  // handled: nothing reaches stderr
-}
-int onWarning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
-
-// Opens a libtiff handle over `impl`'s bytes; null with *error set on failure.
-TIFF* openClient(FileBytes* file, const std::string& name, std::string* error) {
-  Client* client = new Client{file};
-  TIFFOpenOptions* options = TIFFOpenOptionsAlloc();
-  TIFFOpenOptionsSetErrorHandlerExtR(options, onError, client);
-  TIFFOpenOptionsSetWarningHandlerExtR(options, onWarning, client);
-  // "m": no memory mapping (the client has none); "h": read the header only
-  // on open, directories as asked.
-  TIFF* tif = TIFFClientOpenExt(name.c_str(), "rm", client, clientRead, clientWrite, clientSeek,
-                                clientClose, clientSize, clientMap, clientUnmap, options);
-  TIFFOpenOptionsFree(options);
-  if (tif == nullptr) {
-    // A failed open does not close the client.
-    *error = client->error.empty() ? "not a TIFF libtiff reads" : client->error;
-    delete client;
-  }
-  return tif;
-}
-
-std::string lastError(TIFF* tif) { return static_cast<Client*>(TIFFClientdata(tif))->error; }
 
 uint64_t cacheId(size_t directory, uint32_t cx, uint32_t cy) {
   return (uint64_t(directory) << 56) | (uint64_t(cy) << 28) | uint64_t(cx);
@@ -290,7 +236,7 @@ Status CogReader::Impl::openImpl() {
   if (!tiff) return Status::error(ErrorCode::kBadMagic, name + ": not a TIFF (bad magic)");
 
   std::string error;
-  TIFF* tif = openClient(this, name, &error);
+  TIFF* tif = cog::openClient(this, name, &error);
   if (tif == nullptr) {
     if (!head_status) return head_status;
     return Status::error(ErrorCode::kBadHeader, name + ": not a readable TIFF: " + error);
@@ -316,137 +262,116 @@ Status CogReader::Impl::openImpl() {
   return okStatus();
 }
 
-Status CogReader::Impl::readDirectories(TIFF* tif) {
-  auto refuse = [&](const std::string& what) { return Status::error(ErrorCode::kUnsupported, name + ": " + what); };
+Status CogReader::Impl::acceptFullImage(const ImageFields& f) {
+  if (const std::string why = cog::refusalOf(f); !why.empty())
+    return Status::error(ErrorCode::kUnsupported, name + ": " + why);
+  samples = f.samples;
+  bits = f.bits;
+  compression = f.compression;
+  grey_alpha = f.samples == 2;
+  ycbcr_jpeg = f.photometric == PHOTOMETRIC_YCBCR && f.compression == COMPRESSION_JPEG;
+  tile_px = f.tile_w;
+  const PixelFormat pf = f.bits == 16      ? PixelFormat::kR16
+                         : f.samples == 1  ? PixelFormat::kR8
+                         : f.samples == 3  ? PixelFormat::kRGB8
+                                           : PixelFormat::kRGBA8;
+  if (!makePyramidGeometry(f.width, f.height, kCogPyramidTilePx, pf, &info.geometry))
+    return Status::error(ErrorCode::kBadHeader, name + ": image of " + std::to_string(f.width) + " x " +
+                                                    std::to_string(f.height) + " px");
+  levels.assign(info.geometry.levelCount(), Level{});
+  return okStatus();
+}
+
+Status CogReader::Impl::readTileTable(TIFF* tif, uint16_t d, const ImageFields& f, Directory* dir) {
   auto damaged = [&](const std::string& what) {
-    const std::string why = lastError(tif);
-    return Status::error(ErrorCode::kBadHeader, name + ": " + what + (why.empty() ? "" : ": " + why));
+    const std::string why = cog::lastError(tif);
+    return Status::error(ErrorCode::kBadHeader, name + ": directory " + std::to_string(d) + what +
+                                                    (why.empty() ? "" : ": " + why));
   };
-  uint16_t compression = COMPRESSION_NONE;
+  dir->index = d;
+  dir->width = f.width;
+  dir->height = f.height;
+  dir->tiles_across = (f.width + tile_px - 1) / tile_px;
+  dir->tiles_down = (f.height + tile_px - 1) / tile_px;
+  const uint64_t count = uint64_t(dir->tiles_across) * dir->tiles_down;
+  if (count != TIFFNumberOfTiles(tif)) return damaged("'s tile count");
+  // Each tile has an offset and a byte count of at least 4 bytes each in
+  // the file: a size claiming more tiles than that is a lie.
+  if (count > 1 && count > source->size() / 8)
+    return damaged(" claims " + std::to_string(count) + " tiles, more than the file has room to list");
+  dir->offsets.resize(count);
+  dir->counts.resize(count);
+  for (uint64_t t = 0; t < count; ++t) {
+    int err = 0;
+    dir->offsets[t] = TIFFGetStrileOffsetWithErr(tif, uint32_t(t), &err);
+    if (err == 0) dir->counts[t] = TIFFGetStrileByteCountWithErr(tif, uint32_t(t), &err);
+    if (err != 0) return damaged("'s tile table");
+    if (dir->counts[t] > 0 && (dir->offsets[t] > source->size() || dir->counts[t] > source->size() - dir->offsets[t]))
+      return Status::error(ErrorCode::kTruncated, name + ": tile " + std::to_string(t) + " of directory " +
+                                                      std::to_string(d) + " lies past the end of the file");
+    if (dir->counts[t] > (uint64_t(64) << 20)) return damaged(" has a tile of " + std::to_string(dir->counts[t]) + " bytes");
+  }
+  return okStatus();
+}
+
+Status CogReader::Impl::readDirectories(TIFF* tif) {
   for (uint16_t d = 0;; ++d) {
-    if (d >= kMaxDirectories) return refuse("more than " + std::to_string(kMaxDirectories) + " image directories");
-    uint32_t subfile = 0, width = 0, height = 0, tw = 0, th = 0;
-    TIFFGetField(tif, TIFFTAG_SUBFILETYPE, &subfile);
+    if (d >= kMaxDirectories)
+      return Status::error(ErrorCode::kUnsupported,
+                           name + ": more than " + std::to_string(kMaxDirectories) + " image directories");
+    const ImageFields f = cog::readFields(tif);
     layout.directories = d + 1u;
-    if (!TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &width) || !TIFFGetField(tif, TIFFTAG_IMAGELENGTH, &height) ||
-        width == 0 || height == 0)
-      return damaged("directory " + std::to_string(d) + " has no image size");
-    const bool mask = (subfile & FILETYPE_MASK) != 0;
-    if (d == 0 && (subfile & FILETYPE_REDUCEDIMAGE) != 0) return damaged("the first directory is an overview");
-    if (!mask) {
-      if (!TIFFIsTiled(tif))
-        return refuse(std::string(d == 0 ? "a striped TIFF" : "a striped overview") +
-                      ", not tiled: make a COG of it (gdal_translate -of COG IN OUT.tif) or tile it "
-                      "(clipstream-tile IN OUT.cstore)");
-      TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
-      TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
-      uint16_t spp = 1, bps = 1, format = SAMPLEFORMAT_UINT, planar = PLANARCONFIG_CONTIG,
-               photometric = PHOTOMETRIC_MINISBLACK, comp = COMPRESSION_NONE;
-      TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLESPERPIXEL, &spp);
-      TIFFGetFieldDefaulted(tif, TIFFTAG_BITSPERSAMPLE, &bps);
-      TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
-      TIFFGetFieldDefaulted(tif, TIFFTAG_PLANARCONFIG, &planar);
-      TIFFGetFieldDefaulted(tif, TIFFTAG_COMPRESSION, &comp);
-      TIFFGetField(tif, TIFFTAG_PHOTOMETRIC, &photometric);
-      if (d == 0) {
-        if (tw != th || tw < kMinInternalTilePx || tw > kMaxInternalTilePx || (tw & (tw - 1)) != 0)
-          return refuse("internal tiles of " + std::to_string(tw) + " x " + std::to_string(th) +
-                        " px: only square power-of-two tiles of 16 to 4096 px are cut into the pyramid "
-                        "(gdal_translate -of COG -co BLOCKSIZE=512 IN OUT.tif)");
-        if (format == SAMPLEFORMAT_INT || format == SAMPLEFORMAT_IEEEFP)
-          return refuse(std::string("holds ") + (format == SAMPLEFORMAT_INT ? "signed integers" : "floating-point samples") +
-                        " (heights?), not colour: tile a DEM for the elevation layer (clipstream-tile DEM.tif "
-                        "dem.cstore)");
-        if (planar != PLANARCONFIG_CONTIG)
-          return refuse("stores its bands in separate planes: rewrite it pixel-interleaved "
-                        "(gdal_translate -of COG -co INTERLEAVE=PIXEL IN OUT.tif)");
-        if (photometric == PHOTOMETRIC_PALETTE)
-          return refuse("is paletted: expand it to RGB (gdal_translate -of COG -expand rgb IN OUT.tif)");
-        if (photometric == PHOTOMETRIC_SEPARATED || photometric == PHOTOMETRIC_CIELAB ||
-            photometric == PHOTOMETRIC_ICCLAB || photometric == PHOTOMETRIC_ITULAB)
-          return refuse("holds CMYK or Lab colour: convert it to RGB (gdal_translate -of COG -co "
-                        "PHOTOMETRIC=RGB IN OUT.tif)");
-        const bool grey16 = bps == 16 && spp == 1;
-        if (!(bps == 8 && spp >= 1 && spp <= 4) && !grey16)
-          return refuse(std::to_string(spp) + " bands of " + std::to_string(bps) +
-                        " bits: COGs are read as 8-bit grey, grey + alpha, RGB or RGBA, or 16-bit grey; "
-                        "tile it instead (clipstream-tile IN OUT.cstore)");
-        if (!TIFFIsCODECConfigured(comp))
-          return refuse("compressed with " + codecName(comp) + ", which this libtiff cannot decode");
-        compression = comp;
-        samples = spp;
-        bits = bps;
-        grey_alpha = spp == 2;
-        ycbcr_jpeg = photometric == PHOTOMETRIC_YCBCR && comp == COMPRESSION_JPEG;
-        if (photometric == PHOTOMETRIC_YCBCR && comp != COMPRESSION_JPEG)
-          return refuse("holds YCbCr samples without JPEG: convert it to RGB (gdal_translate -of COG IN OUT.tif)");
-        tile_px = tw;
-        const PixelFormat pf = grey16            ? PixelFormat::kR16
-                               : spp == 1        ? PixelFormat::kR8
-                               : spp == 3        ? PixelFormat::kRGB8
-                                                 : PixelFormat::kRGBA8;
-        if (!makePyramidGeometry(width, height, kCogPyramidTilePx, pf, &info.geometry))
-          return damaged("image of " + std::to_string(width) + " x " + std::to_string(height) + " px");
-        levels.assign(info.geometry.levelCount(), Level{});
-      } else if (tw != tile_px || th != tile_px || spp != samples || bps != bits || comp != compression ||
-                 planar != PLANARCONFIG_CONTIG) {
-        // An overview unlike the full image is not used; its level is built.
-        if (!TIFFReadDirectory(tif)) break;
-        continue;
-      }
-      if (d == 0 || (subfile & FILETYPE_REDUCEDIMAGE) != 0) {
+    if (f.width == 0 || f.height == 0)
+      return Status::error(ErrorCode::kBadHeader, name + ": directory " + std::to_string(d) + " has no image size");
+    if (d == 0 && (f.subfile & FILETYPE_REDUCEDIMAGE) != 0)
+      return Status::error(ErrorCode::kBadHeader, name + ": the first directory is an overview");
+    const bool image = (f.subfile & FILETYPE_MASK) == 0 && (d == 0 || (f.subfile & FILETYPE_REDUCEDIMAGE) != 0);
+    if (d == 0 && !TIFFIsTiled(tif))
+      return Status::error(ErrorCode::kUnsupported,
+                           name + ": a striped TIFF, not tiled: make a COG of it (gdal_translate -of COG IN "
+                                  "OUT.tif) or tile it (clipstream-tile IN OUT.cstore)");
+    if (d == 0)
+      if (Status s = acceptFullImage(f); !s) return s;
+    // An overview unlike the full image (striped, other tiles, samples or
+    // codec) is not used; its level is built.
+    const bool like_full = TIFFIsTiled(tif) && f.tile_w == tile_px && f.tile_h == tile_px && f.samples == samples && f.bits == bits &&
+                           f.compression == compression && f.planar == PLANARCONFIG_CONTIG;
+    if (image && like_full) {
+      // Which pyramid level it is: the one of its size.
+      for (size_t l = 0; l < levels.size(); ++l) {
+        const LevelInfo& li = info.geometry.levels[l];
+        if (li.width_px != f.width || li.height_px != f.height || levels[l].directory >= 0) continue;
         Directory dir;
-        dir.index = d;
-        dir.width = width;
-        dir.height = height;
-        dir.tiles_across = (width + tile_px - 1) / tile_px;
-        dir.tiles_down = (height + tile_px - 1) / tile_px;
-        const uint64_t count = uint64_t(dir.tiles_across) * dir.tiles_down;
-        if (count != TIFFNumberOfTiles(tif)) return damaged("directory " + std::to_string(d) + "'s tile count");
-        // Each tile has an offset and a byte count of at least 4 bytes each
-        // in the file: a size claiming more tiles than that is a lie.
-        if (count > 1 && count > source->size() / 8)
-          return damaged("directory " + std::to_string(d) + " claims " + std::to_string(count) +
-                         " tiles, more than the file has room to list");
-        dir.offsets.resize(count);
-        dir.counts.resize(count);
-        for (uint64_t t = 0; t < count; ++t) {
-          int err = 0;
-          dir.offsets[t] = TIFFGetStrileOffsetWithErr(tif, uint32_t(t), &err);
-          if (err == 0) dir.counts[t] = TIFFGetStrileByteCountWithErr(tif, uint32_t(t), &err);
-          if (err != 0) return damaged("directory " + std::to_string(d) + "'s tile table");
-          if (dir.counts[t] > 0 && (dir.offsets[t] > source->size() || dir.counts[t] > source->size() - dir.offsets[t]))
-            return Status::error(ErrorCode::kTruncated, name + ": tile " + std::to_string(t) + " of directory " +
-                                                            std::to_string(d) + " lies past the end of the file");
-          if (dir.counts[t] > (uint64_t(64) << 20)) return damaged("a tile of " + std::to_string(dir.counts[t]) + " bytes");
-        }
-        // Which pyramid level it is: the one of its size.
-        for (size_t l = 0; l < levels.size(); ++l) {
-          const LevelInfo& li = info.geometry.levels[l];
-          if (li.width_px == width && li.height_px == height && levels[l].directory < 0) {
-            levels[l].directory = int(directories.size());
-            directories.push_back(std::move(dir));
-            break;
-          }
-        }
+        if (Status s = readTileTable(tif, d, f, &dir); !s) return s;
+        levels[l].directory = int(directories.size());
+        directories.push_back(std::move(dir));
+        break;
       }
     }
     if (!TIFFReadDirectory(tif)) break;
   }
-  if (levels.empty() || levels[0].directory != 0) return damaged("no full-resolution image");
+  if (levels.empty() || levels[0].directory != 0)
+    return Status::error(ErrorCode::kBadHeader, name + ": no full-resolution image");
+  return finishLayout();
+}
+
+Status CogReader::Impl::finishLayout() {
   layout.internal_tile_px = tile_px;
-  layout.compression = codecName(compression);
+  layout.compression = cog::codecName(compression);
   layout.stored_levels.resize(levels.size());
   size_t coarsest = 0;
   for (size_t l = 0; l < levels.size(); ++l) {
     layout.stored_levels[l] = levels[l].directory >= 0;
     if (levels[l].directory >= 0) coarsest = l;
   }
+  coarsest_stored = uint32_t(coarsest);
   const LevelInfo& top = info.geometry.levels[coarsest];
   if (coarsest + 1 < levels.size() && std::max(top.width_px, top.height_px) > kMaxBuildFromPx)
-    return refuse("its coarsest image is " + std::to_string(top.width_px) + " x " + std::to_string(top.height_px) +
-                  " px: the levels above it would be built by reading all of it; add overviews "
-                  "(gdal_translate -of COG IN OUT.tif, or gdaladdo -r average IN)");
+    return Status::error(ErrorCode::kUnsupported,
+                         name + ": its coarsest image is " + std::to_string(top.width_px) + " x " +
+                             std::to_string(top.height_px) +
+                             " px: the levels above it would be built by reading all of it; add overviews "
+                             "(gdal_translate -of COG IN OUT.tif, or gdaladdo -r average IN)");
   // One decoded internal tile, as libtiff hands it out (JPEG's YCbCr as RGB).
   decoded_bytes = size_t(tile_px) * tile_px * samples * (bits / 8);
   return okStatus();
@@ -454,10 +379,10 @@ Status CogReader::Impl::readDirectories(TIFF* tif) {
 
 Status CogReader::Impl::openHandle(uint16_t directory, TIFF** out, std::string* error) const {
   *out = nullptr;
-  TIFF* tif = openClient(const_cast<Impl*>(this), name, error);
+  TIFF* tif = cog::openClient(const_cast<Impl*>(this), name, error);
   if (tif == nullptr) return Status::error(ErrorCode::kIo, name + ": cannot reopen: " + *error);
   if (!TIFFSetDirectory(tif, directory)) {
-    *error = lastError(tif);
+    *error = cog::lastError(tif);
     TIFFClose(tif);
     return Status::error(ErrorCode::kIo, name + ": cannot reopen directory " + std::to_string(directory) + ": " + *error);
   }
@@ -531,10 +456,10 @@ Status CogReader::Impl::decodeInternal(size_t d, uint32_t cx, uint32_t cy, Pixel
     std::string error;
     if (Status s = openHandle(dir.index, &tif, &error); !s) return s;
   }
-  static_cast<Client*>(TIFFClientdata(tif))->error.clear();
+  cog::clearError(tif);
   const bool ok = TIFFReadFromUserBuffer(tif, uint32_t(t), raw.data(), tmsize_t(raw.size()), pixels->data(),
                                          tmsize_t(pixels->size())) != 0;
-  const std::string why = ok ? std::string() : lastError(tif);
+  const std::string why = ok ? std::string() : cog::lastError(tif);
   {
     std::lock_guard lock(handles_mutex);
     idle_handles[d].push_back(tif);
@@ -680,9 +605,15 @@ Status CogReader::Impl::buildTile(const TileKey& key, std::span<uint8_t> pixels,
       }
     }
   }
-  auto keep = std::make_shared<std::vector<uint8_t>>(pixels.begin(), pixels.end());
-  std::lock_guard lock(built_mutex);
-  built.emplace(key, std::move(keep));
+  // Kept only above the coarsest level the file holds: those levels are a
+  // few tiles, and each is built from all of the level below. A level
+  // missing between two the file holds may be huge; its tiles are built
+  // again from four stored tiles when asked (the decoded cache holds those).
+  if (key.level > coarsest_stored) {
+    auto keep = std::make_shared<std::vector<uint8_t>>(pixels.begin(), pixels.end());
+    std::lock_guard lock(built_mutex);
+    built.emplace(key, std::move(keep));
+  }
   return okStatus();
 }
 

@@ -17,6 +17,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tiffio.h>
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -136,7 +138,9 @@ TEST_F(Cog, EveryCompressionAndTileSizeGivesItsTiledStoresTiles) {
     EXPECT_EQ(reader->layout().internal_tile_px, c.tile_px);
     EXPECT_EQ(reader->layout().compression, c.codec);
     EXPECT_FALSE(reader->layout().stored_levels.back()) << "the one-tile level is below GDAL's last overview";
-    if (c.tile_px >= 512) EXPECT_TRUE(reader->layout().stored_levels[1]) << "GDAL's overviews are the pyramid's levels";
+    if (c.tile_px >= 512) {
+      EXPECT_TRUE(reader->layout().stored_levels[1]) << "GDAL's overviews are the pyramid's levels";
+    }
     EXPECT_EQ(differingTiles(*reader, *store, 0, c.lossy ? 1 : reader->geometry().levelCount()), 0u);
     // The georeference the tiler read from the same file.
     EXPECT_TRUE(reader->info().geo.present);
@@ -319,6 +323,47 @@ TEST_F(Cog, OpenStoreSourceServesACogAsRgba8) {
   ASSERT_TRUE(readRasterInfo(cog, {}, &info).ok());
   EXPECT_TRUE(info.geo.present);
   EXPECT_EQ(info.geometry.width_px, source->geometry().width_px);
+}
+
+// A tiled TIFF that keeps its directory at the end (as libtiff writes
+// one) is opened by reading the blocks around it, not the file whole.
+TEST_F(Cog, ATiledTiffWithItsDirectoryAtTheEndIsNotReadWhole) {
+  const std::string tiff = s_dir->file("directory_last.tif");
+  {
+    // libtiff writes the directory after the image data.
+    TIFF* t = TIFFOpen(tiff.c_str(), "w");
+    ASSERT_NE(t, nullptr);
+    const uint32_t w = 2000, h = 1500, tile = 256;
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, w);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, h);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 3);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, 8);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_RGB);
+    TIFFSetField(t, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+    TIFFSetField(t, TIFFTAG_TILEWIDTH, tile);
+    TIFFSetField(t, TIFFTAG_TILELENGTH, tile);
+    std::vector<uint8_t> pixels(size_t(tile) * tile * 3);
+    for (uint32_t ty = 0; ty < h; ty += tile)
+      for (uint32_t tx = 0; tx < w; tx += tile) {
+        for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t((tx + i / 3 % tile) * 7 + (ty + i / 3 / tile) * 3 + i % 3 * 50);
+        ASSERT_GE(TIFFWriteTile(t, pixels.data(), tx, ty, 0, 0), 0);
+      }
+    TIFFClose(t);
+  }
+  {
+    std::ifstream in(tiff, std::ios::binary);
+    uint8_t head[8] = {};
+    in.read(reinterpret_cast<char*>(head), 8);
+    const uint32_t first_ifd = uint32_t(head[4]) | uint32_t(head[5]) << 8 | uint32_t(head[6]) << 16 | uint32_t(head[7]) << 24;
+    ASSERT_GT(first_ifd, fs::file_size(tiff) / 2) << "the writer put the directory first: the test needs it last";
+  }
+  const auto reader = openCog(tiff);
+  ASSERT_TRUE(reader);
+  EXPECT_LT(reader->layout().header_bytes, 256u << 10) << "of " << fs::file_size(tiff);
+  EXPECT_LT(reader->bytesRead(), 256u << 10);
+  const auto store = openStore(tileIt(tiff));
+  ASSERT_TRUE(store);
+  EXPECT_EQ(differingTiles(*reader, *store), 0u);
 }
 
 // Loader threads share one reader: the decoded-tile cache (one decode
