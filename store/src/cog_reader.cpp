@@ -56,6 +56,14 @@ constexpr size_t kDecodedCacheMinTiles = 4;
 // refused with the command that adds them rather than read whole.
 constexpr uint64_t kMaxBuildFromPx = 4096;
 constexpr uint32_t kMaxDirectories = 64;
+// Levels missing in a row between two the file holds that are refused
+// (finishLayout()): 3 would cost 64 stored tiles per built tile.
+constexpr size_t kMaxMissingLevelsInARow = 3;
+// The head grows at most to this (a COG's directories and tile tables lie
+// together first: a 2^20-tile image's tables are 16 MiB); anything further
+// is read in blocks into `far`. Opening reads at most kMaxOpenBytes in all.
+constexpr uint64_t kMaxHeadBytes = 16 << 20;
+constexpr uint64_t kMaxOpenBytes = 256 << 20;
 
 using Pixels = std::shared_ptr<const std::vector<uint8_t>>;
 
@@ -63,6 +71,9 @@ using Pixels = std::shared_ptr<const std::vector<uint8_t>>;
 struct Directory {
   uint16_t index = 0;  // in the file
   uint32_t width = 0, height = 0;
+  uint32_t tile_px = 0;       // its internal tile side (overviews may differ from the full image)
+  bool ycbcr_jpeg = false;    // JPEG of YCbCr samples, decoded as RGB (JPEGCOLORMODE)
+  size_t decoded_bytes = 0;   // one decoded internal tile
   uint32_t tiles_across = 0, tiles_down = 0;
   std::vector<uint64_t> offsets, counts;  // per internal tile, row by row
 };
@@ -86,14 +97,12 @@ struct CogReader::Impl final : FileBytes {
   Status head_status;         // the first failed read while growing
   std::vector<Directory> directories;
   std::vector<Level> levels;
-  uint32_t tile_px = 0;      // internal tile side
+  uint32_t tile_px = 0;      // the full image's internal tile side
   uint32_t coarsest_stored = 0;  // the coarsest pyramid level the file holds
   uint16_t samples = 0;      // per pixel, as decoded
   uint16_t bits = 8;
   uint16_t compression = COMPRESSION_NONE;
   bool grey_alpha = false;   // two samples, widened to RGBA8
-  bool ycbcr_jpeg = false;   // decoded as RGB (JPEGCOLORMODE)
-  size_t decoded_bytes = 0;  // one decoded internal tile
 
   mutable std::atomic<uint64_t> bytes_read{0};
   // Disk cache of a URL (RemoteOptions::disk_cache_dir), or null.
@@ -148,9 +157,11 @@ struct CogReader::Impl final : FileBytes {
     const uint64_t size = source->size();
     if (offset >= size) return 0;
     n = size_t(std::min<uint64_t>(n, size - offset));
-    if (offset + n > head.size() && growing && offset <= 2 * uint64_t(head.size())) {
-      const uint64_t want = std::min<uint64_t>(size, std::max<uint64_t>(offset + n, 2 * head.size()));
+    if (offset + n > head.size() && growing && offset <= 2 * uint64_t(head.size()) &&
+        offset + n <= kMaxHeadBytes) {
+      const uint64_t want = std::min({size, kMaxHeadBytes, std::max<uint64_t>(offset + n, 2 * head.size())});
       const size_t old = head.size();
+      if (!mayReadAtOpen(want - old)) return 0;
       head.resize(size_t(want));
       if (Status s = readSource(head.data() + old, head.size() - old, old); !s) {
         head.resize(old);
@@ -163,30 +174,52 @@ struct CogReader::Impl final : FileBytes {
       std::memcpy(dst, head.data() + offset, n);
       return n;
     }
-    // Block by block from `far` (filled while growing).
+    // Block by block from `far`; while opening, the blocks missing from
+    // the first one missing to the last asked for come in one read.
+    const uint64_t first = offset / kFarBlockBytes, last = (offset + n - 1) / kFarBlockBytes;
+    if (growing) {
+      uint64_t from = first;
+      while (from <= last && far.count(from) != 0) ++from;
+      if (from <= last) {
+        const uint64_t begin = from * kFarBlockBytes, end = std::min(size, (last + 1) * kFarBlockBytes);
+        if (!mayReadAtOpen(end - begin)) return 0;
+        std::vector<uint8_t> bytes(size_t(end - begin));
+        if (Status s = readSource(bytes.data(), bytes.size(), begin); !s) {
+          if (head_status) head_status = s;
+          return 0;
+        }
+        layout.header_bytes += bytes.size();
+        for (uint64_t b = from; b <= last; ++b) {
+          const size_t at = size_t((b - from) * kFarBlockBytes);
+          far.emplace(b, std::vector<uint8_t>(bytes.begin() + at, bytes.begin() + std::min(bytes.size(), at + kFarBlockBytes)));
+        }
+      }
+    }
     uint8_t* out = static_cast<uint8_t*>(dst);
     size_t done = 0;
     while (done < n) {
       const uint64_t at = offset + done;
-      const uint64_t block = at / kFarBlockBytes;
-      auto it = far.find(block);
-      if (it == far.end()) {
-        if (!growing) break;
-        std::vector<uint8_t> bytes(size_t(std::min<uint64_t>(kFarBlockBytes, size - block * kFarBlockBytes)));
-        if (Status s = readSource(bytes.data(), bytes.size(), block * kFarBlockBytes); !s) {
-          if (head_status) head_status = s;
-          return done;
-        }
-        layout.header_bytes += bytes.size();
-        it = far.emplace(block, std::move(bytes)).first;
-      }
-      const size_t within = size_t(at - block * kFarBlockBytes);
+      const auto it = far.find(at / kFarBlockBytes);
+      if (it == far.end()) break;
+      const size_t within = size_t(at - it->first * kFarBlockBytes);
+      if (within >= it->second.size()) break;
       const size_t take = std::min(n - done, it->second.size() - within);
       std::memcpy(out + done, it->second.data() + within, take);
       done += take;
     }
-    if (done == n) return n;
+    if (done == n || growing) return done;
     return readSource(out + done, n - done, offset + done) ? n : done;
+  }
+
+  // Whether opening may read `bytes` more (kMaxOpenBytes in all); records
+  // why not in head_status.
+  bool mayReadAtOpen(uint64_t bytes) {
+    if (layout.header_bytes + bytes <= kMaxOpenBytes) return true;
+    if (head_status)
+      head_status = Status::error(ErrorCode::kUnsupported,
+                                  name + ": its directories and tile tables take more than " +
+                                      std::to_string(kMaxOpenBytes >> 20) + " MiB to read");
+    return false;
   }
 
   Status openImpl();
@@ -194,7 +227,7 @@ struct CogReader::Impl final : FileBytes {
   Status acceptFullImage(const ImageFields& f);
   Status readTileTable(TIFF* tif, uint16_t d, const ImageFields& f, Directory* dir);
   Status finishLayout();
-  Status openHandle(uint16_t directory, TIFF** out, std::string* error) const;
+  Status openHandle(const Directory& dir, TIFF** out, std::string* error) const;
   Status internalTile(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
   Status decodeInternal(size_t directory, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* bytes_read) const;
   Status rawTile(size_t directory, uint32_t cx, uint32_t cy, std::vector<uint8_t>* out, uint64_t* bytes_read) const;
@@ -242,14 +275,14 @@ Status CogReader::Impl::openImpl() {
     return Status::error(ErrorCode::kBadHeader, name + ": not a readable TIFF: " + error);
   }
   Status status = readDirectories(tif);
-  if (status && !head_status) status = head_status;
+  if (!head_status) status = head_status;  // a failed read, not the damage it looked like
   TIFFClose(tif);
   if (!status) return status;
 
   // The georeference, from the first directory's GeoTIFF tags.
   const TiffByteReader read = [this](uint64_t offset, void* dst, size_t n) { return readHead(offset, dst, n) == n; };
   ElevationTags ignored;
-  if (Status s = parseGeoTiffTags(name, size, read, &info.geo, &ignored); !s) return s;
+  if (Status s = parseGeoTiffTags(name, size, read, &info.geo, &ignored); !s) return head_status ? s : head_status;
   growing = false;  // head is read-only from here on: loader threads share it
   info.file_bytes = size;
 
@@ -269,7 +302,6 @@ Status CogReader::Impl::acceptFullImage(const ImageFields& f) {
   bits = f.bits;
   compression = f.compression;
   grey_alpha = f.samples == 2;
-  ycbcr_jpeg = f.photometric == PHOTOMETRIC_YCBCR && f.compression == COMPRESSION_JPEG;
   tile_px = f.tile_w;
   const PixelFormat pf = f.bits == 16      ? PixelFormat::kR16
                          : f.samples == 1  ? PixelFormat::kR8
@@ -291,10 +323,15 @@ Status CogReader::Impl::readTileTable(TIFF* tif, uint16_t d, const ImageFields& 
   dir->index = d;
   dir->width = f.width;
   dir->height = f.height;
-  dir->tiles_across = (f.width + tile_px - 1) / tile_px;
-  dir->tiles_down = (f.height + tile_px - 1) / tile_px;
-  const uint64_t count = uint64_t(dir->tiles_across) * dir->tiles_down;
-  if (count != TIFFNumberOfTiles(tif)) return damaged("'s tile count");
+  dir->tile_px = f.tile_w;
+  dir->ycbcr_jpeg = f.photometric == PHOTOMETRIC_YCBCR && f.compression == COMPRESSION_JPEG;
+  dir->decoded_bytes = size_t(f.tile_w) * f.tile_w * samples * (bits / 8);
+  const uint64_t across = (uint64_t(f.width) + f.tile_w - 1) / f.tile_w;
+  const uint64_t down = (uint64_t(f.height) + f.tile_w - 1) / f.tile_w;
+  dir->tiles_across = uint32_t(across);
+  dir->tiles_down = uint32_t(down);
+  const uint64_t count = across * down;
+  if (count == 0 || count != TIFFNumberOfTiles(tif)) return damaged("'s tile count");
   // Each tile has an offset and a byte count of at least 4 bytes each in
   // the file: a size claiming more tiles than that is a lie.
   if (count > 1 && count > source->size() / 8)
@@ -319,6 +356,7 @@ Status CogReader::Impl::readDirectories(TIFF* tif) {
     if (d >= kMaxDirectories)
       return Status::error(ErrorCode::kUnsupported,
                            name + ": more than " + std::to_string(kMaxDirectories) + " image directories");
+    cog::clearError(tif);  // a message below is this directory's
     const ImageFields f = cog::readFields(tif);
     layout.directories = d + 1u;
     if (f.width == 0 || f.height == 0)
@@ -332,11 +370,11 @@ Status CogReader::Impl::readDirectories(TIFF* tif) {
                                   "OUT.tif) or tile it (clipstream-tile IN OUT.cstore)");
     if (d == 0)
       if (Status s = acceptFullImage(f); !s) return s;
-    // An overview unlike the full image (striped, other tiles, samples or
-    // codec) is not used; its level is built.
-    const bool like_full = TIFFIsTiled(tif) && f.tile_w == tile_px && f.tile_h == tile_px && f.samples == samples && f.bits == bits &&
-                           f.compression == compression && f.planar == PLANARCONFIG_CONTIG;
-    if (image && like_full) {
+    // An overview is used when it can be read like the full image (its own
+    // tile size and codec allowed: each directory decodes with its own);
+    // one that cannot (striped, other samples) is skipped and its level built.
+    const bool usable = TIFFIsTiled(tif) && f.samples == samples && f.bits == bits && cog::refusalOf(f).empty();
+    if (image && usable) {
       // Which pyramid level it is: the one of its size.
       for (size_t l = 0; l < levels.size(); ++l) {
         const LevelInfo& li = info.geometry.levels[l];
@@ -372,12 +410,24 @@ Status CogReader::Impl::finishLayout() {
                              std::to_string(top.height_px) +
                              " px: the levels above it would be built by reading all of it; add overviews "
                              "(gdal_translate -of COG IN OUT.tif, or gdaladdo -r average IN)");
-  // One decoded internal tile, as libtiff hands it out (JPEG's YCbCr as RGB).
-  decoded_bytes = size_t(tile_px) * tile_px * samples * (bits / 8);
+  // Levels missing between two the file holds are built from the level
+  // below on every ask (only the few above the coarsest are kept): each
+  // tile of the k-th missing level in a row costs 4^k tiles of the stored
+  // one. Three in a row (64 per tile) is past what a loader should do.
+  for (size_t l = 0, run = 0; l <= coarsest; ++l) {
+    run = levels[l].directory >= 0 ? 0 : run + 1;
+    if (run >= kMaxMissingLevelsInARow)
+      return Status::error(ErrorCode::kUnsupported,
+                           name + ": its overviews leave " + std::to_string(run) +
+                               " levels in a row missing (from level " + std::to_string(l + 1 - run) +
+                               "): make overviews at every factor of 2 (gdal_translate -of COG IN OUT.tif, or "
+                               "gdaladdo -r average IN 2 4 8 16 ...)");
+  }
   return okStatus();
 }
 
-Status CogReader::Impl::openHandle(uint16_t directory, TIFF** out, std::string* error) const {
+Status CogReader::Impl::openHandle(const Directory& dir, TIFF** out, std::string* error) const {
+  const uint16_t directory = dir.index;
   *out = nullptr;
   TIFF* tif = cog::openClient(const_cast<Impl*>(this), name, error);
   if (tif == nullptr) return Status::error(ErrorCode::kIo, name + ": cannot reopen: " + *error);
@@ -386,7 +436,7 @@ Status CogReader::Impl::openHandle(uint16_t directory, TIFF** out, std::string* 
     TIFFClose(tif);
     return Status::error(ErrorCode::kIo, name + ": cannot reopen directory " + std::to_string(directory) + ": " + *error);
   }
-  if (ycbcr_jpeg) TIFFSetField(tif, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+  if (dir.ycbcr_jpeg) TIFFSetField(tif, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
   *out = tif;
   return okStatus();
 }
@@ -436,7 +486,7 @@ Status CogReader::Impl::rawTile(size_t d, uint32_t cx, uint32_t cy, std::vector<
 Status CogReader::Impl::decodeInternal(size_t d, uint32_t cx, uint32_t cy, Pixels* out, uint64_t* read) const {
   const Directory& dir = directories[d];
   const size_t t = size_t(cy) * dir.tiles_across + cx;
-  auto pixels = std::make_shared<std::vector<uint8_t>>(decoded_bytes);
+  auto pixels = std::make_shared<std::vector<uint8_t>>(dir.decoded_bytes);
   if (dir.counts[t] == 0) {
     // A sparse tile (GDAL's SPARSE_OK): never written, read as zeros.
     *out = std::move(pixels);
@@ -454,7 +504,7 @@ Status CogReader::Impl::decodeInternal(size_t d, uint32_t cx, uint32_t cy, Pixel
   }
   if (tif == nullptr) {
     std::string error;
-    if (Status s = openHandle(dir.index, &tif, &error); !s) return s;
+    if (Status s = openHandle(dir, &tif, &error); !s) return s;
   }
   cog::clearError(tif);
   const bool ok = TIFFReadFromUserBuffer(tif, uint32_t(t), raw.data(), tmsize_t(raw.size()), pixels->data(),
@@ -489,7 +539,8 @@ Status CogReader::Impl::internalTile(size_t d, uint32_t cx, uint32_t cy, Pixels*
       decoded.emplace(id, CacheEntry{result, lru.begin()});
       mine = true;
       // Keep the byte cap, but never drop a tile still being decoded.
-      const size_t keep = std::max<size_t>(kDecodedCacheMinTiles, size_t(kDecodedCacheBytes / std::max<size_t>(1, decoded_bytes)));
+      const size_t keep = std::max<size_t>(kDecodedCacheMinTiles,
+                                           size_t(kDecodedCacheBytes / std::max<size_t>(1, directories[d].decoded_bytes)));
       for (auto victim = std::prev(lru.end()); decoded.size() > keep && victim != lru.begin();) {
         auto entry = decoded.find(*victim);
         auto previous = std::prev(victim);
@@ -503,7 +554,13 @@ Status CogReader::Impl::internalTile(size_t d, uint32_t cx, uint32_t cy, Pixels*
   }
   if (mine) {
     Decoded d_out;
-    d_out.status = decodeInternal(d, cx, cy, &d_out.pixels, read);
+    try {
+      d_out.status = decodeInternal(d, cx, cy, &d_out.pixels, read);
+    } catch (const std::exception& e) {
+      // The waiting threads must get an answer, never a broken promise.
+      d_out.status = Status::error(ErrorCode::kIo, name + ": internal tile (" + std::to_string(cx) + ", " +
+                                                       std::to_string(cy) + "): " + e.what());
+    }
     promise.set_value(d_out);
     if (!d_out.status) {
       // A failure is not kept: the next ask tries again.
@@ -529,15 +586,16 @@ Status CogReader::Impl::cutTile(const TileKey& key, std::span<uint8_t> pixels, u
   const uint32_t valid_w = uint32_t(std::min<uint64_t>(P, dir.width - x0));
   const uint32_t valid_h = uint32_t(std::min<uint64_t>(P, dir.height - y0));
   const size_t src_bpp = size_t(samples) * (bits / 8);
+  const uint64_t T = dir.tile_px;  // this directory's internal tile side
   // Every internal tile under the pyramid tile's valid texels.
-  for (uint64_t cy = y0 / tile_px; cy * tile_px < y0 + valid_h; ++cy) {
-    for (uint64_t cx = x0 / tile_px; cx * tile_px < x0 + valid_w; ++cx) {
+  for (uint64_t cy = y0 / T; cy * T < y0 + valid_h; ++cy) {
+    for (uint64_t cx = x0 / T; cx * T < x0 + valid_w; ++cx) {
       Pixels source_tile;
       if (Status s = internalTile(d, uint32_t(cx), uint32_t(cy), &source_tile, read); !s) return s;
-      const uint64_t ix0 = std::max(x0, cx * tile_px), ix1 = std::min(x0 + valid_w, (cx + 1) * tile_px);
-      const uint64_t iy0 = std::max(y0, cy * tile_px), iy1 = std::min(y0 + valid_h, (cy + 1) * tile_px);
+      const uint64_t ix0 = std::max(x0, cx * T), ix1 = std::min(x0 + valid_w, (cx + 1) * T);
+      const uint64_t iy0 = std::max(y0, cy * T), iy1 = std::min(y0 + valid_h, (cy + 1) * T);
       for (uint64_t y = iy0; y < iy1; ++y) {
-        const uint8_t* src = source_tile->data() + ((y - cy * tile_px) * tile_px + (ix0 - cx * tile_px)) * src_bpp;
+        const uint8_t* src = source_tile->data() + ((y - cy * T) * T + (ix0 - cx * T)) * src_bpp;
         uint8_t* dst = pixels.data() + ((y - y0) * P + (ix0 - x0)) * bpp;
         if (!grey_alpha) {
           std::memcpy(dst, src, (ix1 - ix0) * bpp);

@@ -56,8 +56,7 @@ TIFF* openClient(FileBytes* file, const std::string& name, std::string* error) {
   TIFFOpenOptions* options = TIFFOpenOptionsAlloc();
   TIFFOpenOptionsSetErrorHandlerExtR(options, onError, client);
   TIFFOpenOptionsSetWarningHandlerExtR(options, onWarning, client);
-  // "m": no memory mapping (the client has none); "h": read the header only
-  // on open, directories as asked.
+  // "r": read; "m": no memory mapping (the client has none).
   TIFF* tif = TIFFClientOpenExt(name.c_str(), "rm", client, clientRead, clientWrite, clientSeek,
                                 clientClose, clientSize, clientMap, clientUnmap, options);
   TIFFOpenOptionsFree(options);
@@ -122,6 +121,9 @@ std::string refusalOf(const ImageFields& f) {
   if (f.planar != PLANARCONFIG_CONTIG)
     return "stores its bands in separate planes: rewrite it pixel-interleaved "
            "(gdal_translate -of COG -co INTERLEAVE=PIXEL IN OUT.tif)";
+  if (f.photometric == PHOTOMETRIC_MINISWHITE)
+    return "is grey with white as zero: rewrite it black-is-zero (gdal_translate -of COG -co PHOTOMETRIC=MINISBLACK IN "
+           "OUT.tif)";
   if (f.photometric == PHOTOMETRIC_PALETTE)
     return "is paletted: expand it to RGB (gdal_translate -of COG -expand rgb IN OUT.tif)";
   if (f.photometric == PHOTOMETRIC_SEPARATED || f.photometric == PHOTOMETRIC_CIELAB ||

@@ -20,6 +20,7 @@
 #include <tiffio.h>
 
 #include <cstdlib>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -323,6 +324,50 @@ TEST_F(Cog, OpenStoreSourceServesACogAsRgba8) {
   ASSERT_TRUE(readRasterInfo(cog, {}, &info).ok());
   EXPECT_TRUE(info.geo.present);
   EXPECT_EQ(info.geometry.width_px, source->geometry().width_px);
+}
+
+// Overviews made apart from the full image: one compressed otherwise (JPEG
+// overviews of a deflate COG) is a level all the same, decoded with its
+// own codec; overviews that skip levels have the gap built, up to two
+// levels in a row, and three in a row are refused naming the fix.
+TEST_F(Cog, OverviewsOfAnotherCodecAreLevelsAndGapsAreBuiltOrRefused) {
+  const std::string square = s_dir->file("square.tif");
+  ASSERT_EQ(shell("gdal_translate -q -co TILED=YES -outsize 2048 2048 " + shellQuoted(bundledDataPath("autzen.jpg")) +
+                  " " + shellQuoted(square)),
+            0);
+  const auto reader = openCog(makeCog("jpeg_overviews.tif", "-co COMPRESS=DEFLATE -co OVERVIEW_COMPRESS=JPEG", square));
+  ASSERT_TRUE(reader);
+  EXPECT_TRUE(reader->layout().stored_levels[1]);
+  const auto store = openStore(tileIt(s_dir->file("jpeg_overviews.tif")));
+  ASSERT_TRUE(store);
+  EXPECT_EQ(differingTiles(*reader, *store, 0, 1), 0u);
+  // Level 1 is GDAL's JPEG-compressed average: near the store's box level.
+  std::vector<uint8_t> a(reader->geometry().tileBytes()), b;
+  uint64_t bytes = 0, sum = 0;
+  ASSERT_TRUE(reader->readTile({1, 3, 2}, a, &bytes).ok());
+  ASSERT_TRUE(store->readTile({1, 3, 2}, &b).ok());
+  for (size_t i = 0; i < a.size(); ++i) sum += uint64_t(std::abs(int(a[i]) - int(b[i])));
+  EXPECT_LT(double(sum) / double(a.size()), 4.0) << "YCbCr JPEG overviews decoded as RGB";
+
+  for (const auto& [factor, opens] : {std::pair{8, true}, std::pair{16, false}}) {
+    SCOPED_TRACE(factor);
+    const std::string sparse = s_dir->file("overview_" + std::to_string(factor) + ".tif");
+    fs::copy_file(square, sparse, fs::copy_options::overwrite_existing);
+    ASSERT_EQ(shell("gdaladdo -q -r average " + shellQuoted(sparse) + " " + std::to_string(factor)), 0);
+    std::unique_ptr<CogReader> gappy;
+    const Status s = CogReader::open(sparse, {}, &gappy);
+    EXPECT_EQ(s.ok(), opens) << s.toString();
+    if (opens) {
+      EXPECT_FALSE(gappy->layout().stored_levels[1]);
+      EXPECT_FALSE(gappy->layout().stored_levels[2]);
+      EXPECT_TRUE(gappy->layout().stored_levels[3]);
+      const auto tiled = openStore(tileIt(sparse));
+      ASSERT_TRUE(tiled);
+      EXPECT_EQ(differingTiles(*gappy, *tiled, 0, 3), 0u) << "levels 1 and 2 built with the box filter";
+    } else {
+      EXPECT_NE(s.message.find("every factor of 2"), std::string::npos) << s.toString();
+    }
+  }
 }
 
 // A tiled TIFF that keeps its directory at the end (as libtiff writes
