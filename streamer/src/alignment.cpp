@@ -43,7 +43,7 @@ Status alignElevation(const StoreInfo& colour, const StoreInfo& elevation, doubl
                              printableText(cg.crs, 80) + " and " + printableText(eg.crs, 80) +
                              "); tile one again in the other's CRS, e.g. clipstream-tile DEM "
                              "OUTPUT --t-srs '" + printableText(cg.crs.size() <= 40 ? cg.crs : "<the colour's CRS>", 80) +
-                             "'");
+                             "' (or --t-srs with the colour's source raster file)");
   }
   if (by_georef) {
     // Elevation sample (i, j) has its centre at pixel (i + 0.5, j + 0.5).

@@ -390,6 +390,39 @@ TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
   EXPECT_TRUE(sidecars(dir).empty()) << sidecars(dir).front();
 }
 
+// --t-srs FILE: the input goes onto the CRS of another raster (a texture
+// onto its DEM's), the same grid gdalwarp makes with that CRS; a file GDAL
+// cannot read is an error naming it.
+TEST(TilerWarp, ARasterFileGivesItsCoordinateSystem) {
+  TempDir dir("warp");
+  const std::string dem = bundledDataPath("mount_st_helens_30m.tif");
+  ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 240, 200, 3, OIIO::TypeDesc::UINT8, pattern));
+  const std::string rgb = dir.file("rgb4326.tif");
+  ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr -122.30 46.30 -122.10 46.12 " +
+                  quoted(dir.file("rgb.tif")) + " " + quoted(rgb)),
+            0);
+  const RunResult r = runTiler({rgb, dir.file("onto_dem.cst"), "--t-srs", dem});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  GeoReference dem_geo, geo;
+  ASSERT_TRUE(findGeoReference(dem, &dem_geo).ok());
+  PyramidGeometry g;
+  (void)level0(dir.file("onto_dem.cst"), &g, &geo);
+  ASSERT_FALSE(dem_geo.crs.empty());
+  EXPECT_EQ(geo.crs, dem_geo.crs);
+  const std::string ref = dir.file("ref.tif");
+  ASSERT_EQ(shell("gdalwarp -q -dstalpha -t_srs " + dem_geo.crs + " " + quoted(rgb) + " " + quoted(ref)), 0);
+  GeoReference ref_geo;
+  ASSERT_TRUE(findGeoReference(ref, &ref_geo).ok());
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(geo.transform[i], ref_geo.transform[i], 1e-6 * 30.0) << i;
+
+  const std::string text = dir.file("not_a_raster.txt");
+  std::ofstream(text) << "EPSG but not quite\n";
+  const RunResult bad = runTiler({rgb, dir.file("bad.cst"), "--t-srs", text});
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("not a raster GDAL reads"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(dir.file("bad.cst")));
+}
+
 // --t-srs auto: a geographic input goes to the WGS 84 UTM zone of its
 // centre, said in the summary; a colour image gains an alpha band that is
 // transparent where no input pixel lands, as gdalwarp -dstalpha draws it.

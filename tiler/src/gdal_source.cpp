@@ -249,7 +249,30 @@ OGRSpatialReferenceH sourceSrs(GDALDatasetH src) {
   return srs != nullptr ? srs : GDALGetGCPSpatialRef(src);
 }
 
-// The target CRS of --t-srs into `dst`: as GDAL takes it, or "auto": the
+// The coordinate system of the raster file at `path` into `dst` (--t-srs
+// FILE: reproject onto another layer's CRS, the DEM's for a texture).
+Status crsOfRaster(const std::string& path, Srs* dst) {
+  GDALDatasetH ds = GDALOpenEx(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
+  if (ds == nullptr)
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--t-srs " + path + ": not a raster GDAL reads (for a tile store, give the CRS "
+                                             "clipstream-info shows)");
+  OGRSpatialReferenceH srs = sourceSrs(ds);
+  Status status = okStatus();
+  if (srs == nullptr) {
+    status = Status::error(ErrorCode::kInvalidArgument, "--t-srs " + path + ": has no coordinate system");
+  } else {
+    char* wkt = nullptr;
+    OSRExportToWkt(srs, &wkt);
+    if (wkt == nullptr || OSRSetFromUserInput(dst->h, wkt) != OGRERR_NONE)
+      status = Status::error(ErrorCode::kInvalidArgument, "--t-srs " + path + ": its coordinate system cannot be read");
+    CPLFree(wkt);
+  }
+  GDALClose(ds);
+  return status;
+}
+
+// The target CRS of --t-srs into `dst`: as GDAL takes it, a raster file's, or "auto": the
 // WGS 84 UTM zone of a geographic input's centre (a projected input stays
 // as it is: *keep set).
 Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& text, Srs* dst, bool* keep) {
@@ -260,10 +283,15 @@ Status targetSrs(const std::string& path, GDALDatasetH src, const std::string& t
                          path + ": has no coordinate system to reproject from (--t-srs)");
   }
   if (text != "auto") {
+    VSIStatBufL stat;
+    if (VSIStatL(text.c_str(), &stat) == 0 && VSI_ISREG(stat.st_mode)) {
+      // A raster file: its coordinate system (the DEM a texture must lie on).
+      return crsOfRaster(text, dst);
+    }
     if (OSRSetFromUserInput(dst->h, text.c_str()) != OGRERR_NONE) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "--t-srs '" + text + "' is not a coordinate system GDAL knows "
-                                                "(EPSG:n, WKT, a PROJ string, or auto)");
+                                                "(EPSG:n, WKT, a PROJ string, a raster file, or auto)");
     }
     return okStatus();
   }

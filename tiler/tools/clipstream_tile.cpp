@@ -191,8 +191,8 @@ void addOptions(CLI::App& app, Args* args) {
                  "cover; GDAL for URLs, VRTs and JPEG 2000; OpenImageIO for the other image "
                  "formats; GDAL for what OpenImageIO cannot read), openimageio or gdal (every file)");
   app.add_option("--t-srs", a.t_srs,
-                 "reproject the input to this CRS with GDAL's warper (EPSG:n, WKT, a PROJ string; "
-                 "auto: the UTM zone of a geographic input's centre)");
+                 "reproject the input to this CRS with GDAL's warper (EPSG:n, WKT, a PROJ string, "
+                 "a raster file's CRS; auto: the UTM zone of a geographic input's centre)");
   app.add_option("--resampling", a.resampling,
                  "with --t-srs: near, bilinear (default), cubic, cubicspline, lanczos, average or mode");
   app.add_option("--t-res", a.t_res,
