@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <future>
 #include <list>
@@ -103,6 +104,11 @@ struct CogReader::Impl final : FileBytes {
   uint16_t bits = 8;
   uint16_t compression = COMPRESSION_NONE;
   bool grey_alpha = false;   // two samples, widened to RGBA8
+  // GDAL's no-data value of an 8-bit grey or RGB file, as the tiler takes
+  // it (docs/decisions.md D293): RGBA8, a pixel whose every sample is
+  // `nodata` becomes (0, 0, 0, 0), every other one opaque.
+  bool nodata_alpha = false;
+  uint8_t nodata = 0;
 
   mutable std::atomic<uint64_t> bytes_read{0};
   // Disk cache of a URL (RemoteOptions::disk_cache_dir), or null.
@@ -281,8 +287,14 @@ Status CogReader::Impl::openImpl() {
 
   // The georeference, from the first directory's GeoTIFF tags.
   const TiffByteReader read = [this](uint64_t offset, void* dst, size_t n) { return readHead(offset, dst, n) == n; };
-  ElevationTags ignored;
-  if (Status s = parseGeoTiffTags(name, size, read, &info.geo, &ignored); !s) return head_status ? s : head_status;
+  ElevationTags tags;
+  if (Status s = parseGeoTiffTags(name, size, read, &info.geo, &tags); !s) return head_status ? s : head_status;
+  if (tags.has_nodata && bits == 8 && (samples == 1 || samples == 3) && tags.nodata >= 0.0 && tags.nodata <= 255.0 &&
+      tags.nodata == std::floor(tags.nodata)) {
+    nodata_alpha = true;
+    nodata = uint8_t(tags.nodata);
+    info.geometry.format = PixelFormat::kRGBA8;
+  }
   growing = false;  // head is read-only from here on: loader threads share it
   info.file_bytes = size;
 
@@ -597,7 +609,16 @@ Status CogReader::Impl::cutTile(const TileKey& key, std::span<uint8_t> pixels, u
       for (uint64_t y = iy0; y < iy1; ++y) {
         const uint8_t* src = source_tile->data() + ((y - cy * T) * T + (ix0 - cx * T)) * src_bpp;
         uint8_t* dst = pixels.data() + ((y - y0) * P + (ix0 - x0)) * bpp;
-        if (!grey_alpha) {
+        if (nodata_alpha) {
+          for (uint64_t x = ix0; x < ix1; ++x, src += samples, dst += 4) {
+            bool empty = true;
+            for (uint32_t c = 0; c < samples; ++c) empty = empty && src[c] == nodata;
+            dst[0] = empty ? 0 : src[0];
+            dst[1] = empty ? 0 : src[samples == 3 ? 1 : 0];
+            dst[2] = empty ? 0 : src[samples == 3 ? 2 : 0];
+            dst[3] = empty ? 0 : 255;
+          }
+        } else if (!grey_alpha) {
           std::memcpy(dst, src, (ix1 - ix0) * bpp);
         } else {
           for (uint64_t x = ix0; x < ix1; ++x, src += 2, dst += 4) dst[0] = dst[1] = dst[2] = src[0], dst[3] = src[1];

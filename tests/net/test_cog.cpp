@@ -326,6 +326,28 @@ TEST_F(Cog, OpenStoreSourceServesACogAsRgba8) {
   EXPECT_EQ(info.geometry.width_px, source->geometry().width_px);
 }
 
+// A COG's no-data value is transparency, as the tiler makes it of the same
+// file (D293): RGBA8, black under alpha 0 where every sample is no-data.
+TEST_F(Cog, ANoDataCollarIsTransparentAsInTheTiledStore) {
+  const std::string collar = s_dir->file("collar.tif");
+  // 100 px outside the image on every side: GDAL fills them with 0.
+  ASSERT_EQ(shell("gdal_translate -q -a_nodata 0 -srcwin -100 -100 1824 2393 " + shellQuoted(s_base) + " " +
+                  shellQuoted(collar)),
+            0);
+  const std::string cog = makeCog("collar_cog.tif", "-co COMPRESS=DEFLATE", collar);
+  const auto reader = openCog(cog);
+  const auto store = openStore(tileIt(cog));
+  ASSERT_TRUE(reader && store);
+  EXPECT_EQ(reader->geometry().format, PixelFormat::kRGBA8);
+  EXPECT_EQ(store->geometry().format, PixelFormat::kRGBA8);
+  EXPECT_EQ(differingTiles(*reader, *store, 0, 1), 0u);
+  std::vector<uint8_t> corner(reader->geometry().tileBytes());
+  uint64_t bytes = 0;
+  ASSERT_TRUE(reader->readTile({0, 0, 0}, corner, &bytes).ok());
+  EXPECT_EQ(corner[3], 0) << "the collar's first texel";
+  EXPECT_EQ(corner[((120 * 128) + 120) * 4 + 3], 255) << "inside the image";
+}
+
 // Overviews made apart from the full image: one compressed otherwise (JPEG
 // overviews of a deflate COG) is a level all the same, decoded with its
 // own codec; overviews that skip levels have the gap built, up to two
