@@ -2,6 +2,8 @@
 // store.
 #include "test_helpers.h"
 
+#include <clipstream/testing/test_data.h>
+
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -35,6 +37,35 @@ TEST(ClipstreamView, RunsUnderXvfb) {
   ss << log.rdbuf();
   EXPECT_EQ(rc, 0) << ss.str();
   fs::remove_all(dir);
+}
+
+// A Cloud-Optimized GeoTIFF where the store goes: opened directly (no
+// tiling), its georeference taken for --look-at in map coordinates.
+TEST(ClipstreamView, OpensACogAndLooksAtAPointOfItsMap) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) GTEST_SKIP() << "no xvfb-run";
+  test::TempDir dir;
+  const std::string cog = dir.file("autzen.tif");
+  ASSERT_EQ(std::system(("gdal_translate -q -of COG -outsize 25% 25% '" + test::bundledDataPath("autzen.jpg") + "' '" +
+                         cog + "' > /dev/null 2>&1")
+                            .c_str()),
+            0);
+  // autzen.wld places it from (635615, 853363), 4 m a pixel at this size.
+  const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(CLIPSTREAM_VIEW_EXE) + " '" + cog +
+                          "' --look-at 637000,851000 --size 320x240 --frames 20 > " + dir.file("log.txt") + " 2>&1";
+  const int rc = std::system(cmd.c_str());
+  std::ifstream log(dir.file("log.txt"));
+  std::stringstream ss;
+  ss << log.rdbuf();
+  EXPECT_EQ(rc, 0) << ss.str();
+  // A file that is neither a store nor a TIFF says both, exit 1.
+  std::ofstream(dir.file("notes.tif")) << "not an image\n";
+  const std::string bad = std::string(CLIPSTREAM_VIEW_EXE) + " '" + dir.file("notes.tif") + "' > " + dir.file("bad.txt") + " 2>&1";
+  const int bad_rc = std::system(bad.c_str());
+  std::ifstream bad_log(dir.file("bad.txt"));
+  std::stringstream bad_text;
+  bad_text << bad_log.rdbuf();
+  EXPECT_TRUE(WIFEXITED(bad_rc) && WEXITSTATUS(bad_rc) == 1) << bad_text.str();
+  EXPECT_NE(bad_text.str().find("not a clipstream tile store nor a TIFF"), std::string::npos) << bad_text.str();
 }
 
 // Over terrain: a procedural texture over an elevation store, 20 frames,
