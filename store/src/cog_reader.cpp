@@ -114,8 +114,7 @@ struct CogReader::Impl final : FileBytes {
   // Disk cache of a URL (RemoteOptions::disk_cache_dir), or null.
   std::shared_ptr<DiskCache> disk_cache;
   std::string cache_key;
-  bool disk_folder_refused = false;
-  mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
+  mutable DiskCache::Counts disk_counts;
 
   // Idle libtiff handles per directory.
   mutable std::mutex handles_mutex;
@@ -301,7 +300,7 @@ Status CogReader::Impl::openImpl() {
   if (!remote.disk_cache_dir.empty() && isStoreUrl(path) && !source->version().empty()) {
     if (Status s = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache); !s) return s;
     cache_key = DiskCache::storeKey(path, source->version());
-    disk_folder_refused = !disk_cache->usableStoreDir(cache_key);
+    disk_counts.folder_refused = !disk_cache->usableStoreDir(cache_key);
   }
   idle_handles.resize(directories.size());
   return okStatus();
@@ -462,25 +461,15 @@ Status CogReader::Impl::rawTile(size_t d, uint32_t cx, uint32_t cy, std::vector<
   const std::string entry = "t" + std::to_string(dir.index) + "-" + std::to_string(cx) + "-" + std::to_string(cy);
   if (disk_cache) {
     std::vector<uint8_t> cached;
-    switch (disk_cache->get(cache_key, entry, bytes + 4, &cached)) {
-      case DiskCache::Lookup::kHit: {
-        uint32_t sum;
-        std::memcpy(&sum, cached.data(), 4);
-        if (format::tileChecksum(cached.data() + 4, bytes) == sum) {
-          disk_hits.fetch_add(1, std::memory_order_relaxed);
-          out->assign(cached.begin() + 4, cached.end());
-          return okStatus();
-        }
-        disk_cache->drop(cache_key, entry);
-        [[fallthrough]];
-      }
-      case DiskCache::Lookup::kBad:
-        disk_dropped.fetch_add(1, std::memory_order_relaxed);
-        break;
-      case DiskCache::Lookup::kMiss:
-        break;
+    const auto valid = [&](const std::vector<uint8_t>& b) {
+      uint32_t sum;
+      std::memcpy(&sum, b.data(), 4);
+      return format::tileChecksum(b.data() + 4, bytes) == sum;
+    };
+    if (disk_cache->getChecked(cache_key, entry, size_t(bytes) + 4, &cached, valid, &disk_counts)) {
+      out->assign(cached.begin() + 4, cached.end());
+      return okStatus();
     }
-    disk_misses.fetch_add(1, std::memory_order_relaxed);
   }
   out->resize(size_t(bytes));
   if (Status s = readSource(out->data(), out->size(), dir.offsets[t]); !s) return s;
@@ -731,10 +720,7 @@ unsigned CogReader::suggestedReadThreads() const { return m_impl->source->sugges
 
 RemoteStats CogReader::remoteStats() const {
   RemoteStats stats = m_impl->source->remoteStats();
-  stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
-  stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
-  stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
-  stats.disk_cache_folders_refused = m_impl->disk_folder_refused ? 1 : 0;
+  m_impl->disk_counts.fill(&stats);
   return stats;
 }
 

@@ -30,8 +30,10 @@
 // as a miss.
 #pragma once
 
+#include <clipstream/store/remote.h>
 #include <clipstream/store/types.h>
 
+#include <atomic>
 #include <cstdint>
 #include <list>
 #include <memory>
@@ -64,6 +66,45 @@ class DiskCache {
   // exactly `bytes` bytes of content.
   Lookup get(const std::string& store_key, const std::string& name, size_t bytes,
              std::vector<uint8_t>* out);
+  // What one reader's lookups found (RemoteStats' disk cache figures).
+  struct Counts {
+    std::atomic<uint64_t> hits{0};     // there, and accepted by the reader's check
+    std::atomic<uint64_t> misses{0};   // not there, or dropped: read from the server
+    std::atomic<uint64_t> dropped{0};  // there but torn, or rejected: removed
+    bool folder_refused = false;       // the store's sub-folder is not ours to use (set at open)
+    // These figures into a reader's RemoteStats.
+    void fill(RemoteStats* stats) const {
+      stats->disk_cache_hits = hits.load(std::memory_order_relaxed);
+      stats->disk_cache_misses = misses.load(std::memory_order_relaxed);
+      stats->disk_cache_dropped = dropped.load(std::memory_order_relaxed);
+      stats->disk_cache_folders_refused = folder_refused ? 1 : 0;
+    }
+  };
+  // get() for a reader that checks what it gets, as it checks the
+  // server's bytes: true when an entry of `bytes` is there and `valid`
+  // accepts it; an entry it rejects is removed. Counts the hit, the miss or
+  // the dropped entry in *counts.
+  template <typename Valid>
+  bool getChecked(const std::string& store_key, const std::string& name, size_t bytes, std::vector<uint8_t>* out,
+                  const Valid& valid, Counts* counts) {
+    switch (get(store_key, name, bytes, out)) {
+      case Lookup::kHit:
+        if (valid(*out)) {
+          counts->hits.fetch_add(1, std::memory_order_relaxed);
+          return true;
+        }
+        drop(store_key, name);
+        [[fallthrough]];
+      case Lookup::kBad:
+        counts->dropped.fetch_add(1, std::memory_order_relaxed);
+        break;
+      case Lookup::kMiss:
+        break;
+    }
+    counts->misses.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+
   // Stores an entry (replacing one of the same name), then evicts least
   // recently used entries until the folder is under its cap. Failures
   // (disk full, permissions) are counted and otherwise ignored: the cache

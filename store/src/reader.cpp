@@ -54,8 +54,7 @@ struct TileStoreReader::Impl {
   // The disk cache of a URL store (RemoteOptions::disk_cache_dir), or null.
   std::shared_ptr<DiskCache> disk_cache;
   std::string cache_key;  // this store version's sub-folder
-  mutable std::atomic<uint64_t> disk_hits{0}, disk_misses{0}, disk_dropped{0};
-  bool disk_folder_refused = false;  // the store's cache sub-folder is not ours to use
+  mutable DiskCache::Counts disk_counts;
 
   ~Impl() {
     for (LevelRead& level : levels) {
@@ -73,28 +72,11 @@ struct TileStoreReader::Impl {
     source->readMany(ranges, statuses);
   }
 
-  // Looks `name` up in the disk cache: true when an entry of `bytes` is
-  // there and `valid` accepts it; an entry it rejects is removed. Counts
-  // the hit, the miss or the dropped entry.
+  // Looks `name` up in the disk cache (DiskCache::getChecked()).
   template <typename Valid>
   bool fromDiskCache(const std::string& name, uint64_t bytes, std::vector<uint8_t>* out,
                      const Valid& valid) const {
-    switch (disk_cache->get(cache_key, name, bytes, out)) {
-      case DiskCache::Lookup::kHit:
-        if (valid(*out)) {
-          disk_hits.fetch_add(1, std::memory_order_relaxed);
-          return true;
-        }
-        disk_cache->drop(cache_key, name);
-        [[fallthrough]];
-      case DiskCache::Lookup::kBad:
-        disk_dropped.fetch_add(1, std::memory_order_relaxed);
-        break;
-      case DiskCache::Lookup::kMiss:
-        break;
-    }
-    disk_misses.fetch_add(1, std::memory_order_relaxed);
-    return false;
+    return disk_cache->getChecked(cache_key, name, size_t(bytes), out, valid, &disk_counts);
   }
   static std::string tileName(const TileKey& key) {
     return "t" + std::to_string(key.level) + "-" + std::to_string(key.x) + "-" + std::to_string(key.y);
@@ -181,7 +163,7 @@ Status TileStoreReader::Impl::openImpl() {
     Status cache = DiskCache::open(remote.disk_cache_dir, remote.disk_cache_bytes, &disk_cache);
     if (!cache) return cache;
     cache_key = DiskCache::storeKey(path, source->version());
-    disk_folder_refused = !disk_cache->usableStoreDir(cache_key);
+    disk_counts.folder_refused = !disk_cache->usableStoreDir(cache_key);
   }
   path = displayStorePath(path);  // from here on `path` only names the store in messages
   Status status = openHeader();
@@ -603,10 +585,7 @@ unsigned TileStoreReader::suggestedReadThreads() const {
 
 RemoteStats TileStoreReader::remoteStats() const {
   RemoteStats stats = m_impl->source->remoteStats();
-  stats.disk_cache_hits = m_impl->disk_hits.load(std::memory_order_relaxed);
-  stats.disk_cache_misses = m_impl->disk_misses.load(std::memory_order_relaxed);
-  stats.disk_cache_dropped = m_impl->disk_dropped.load(std::memory_order_relaxed);
-  stats.disk_cache_folders_refused = m_impl->disk_folder_refused ? 1 : 0;
+  m_impl->disk_counts.fill(&stats);
   return stats;
 }
 
