@@ -65,6 +65,18 @@ std::string problemLine(const TileStoreReader::Problem& problem) {
   return key + ": " + errorCodeName(problem.status.code) + ": " + message;
 }
 
+// The georeference lines of the text report (a store's or a COG's).
+void printGeoReference(const GeoReference& geo) {
+  if (geo.present) {
+    const double* t = geo.transform;
+    std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n",
+                t[0], t[3], t[1], t[5], t[2], t[4]);
+    std::printf("CRS          %s\n", geo.crs.empty() ? "(none)" : printableText(geo.crs).c_str());
+  } else {
+    std::printf("georeference none\n");
+  }
+}
+
 void printText(const std::string& path, const StoreInfo& info,
                const std::vector<LevelStats>* stats) {
   const PyramidGeometry& g = info.geometry;
@@ -84,15 +96,7 @@ void printText(const std::string& path, const StoreInfo& info,
   std::printf("predictor    %s\n", predictorName(info.encoding.predictor));
   std::printf("filter       %s%s\n", downsampleFilterName(info.encoding.filter),
               info.encoding.linear_light ? " (linear light)" : "");
-  if (info.geo.present) {
-    const double* t = info.geo.transform;
-    std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n",
-                t[0], t[3], t[1], t[5], t[2], t[4]);
-    std::printf("CRS          %s\n",
-                info.geo.crs.empty() ? "(none)" : printableText(info.geo.crs).c_str());
-  } else {
-    std::printf("georeference none\n");
-  }
+  printGeoReference(info.geo);
   if (info.elevation.present) {
     const ElevationInfo& e = info.elevation;
     std::printf("layer        elevation\n");
@@ -290,7 +294,7 @@ int describeCog(const CogReader& cog, const std::string& path, bool json, bool v
     out["file_bytes"] = info.file_bytes;
     out["width_px"] = g.width_px;
     out["height_px"] = g.height_px;
-    out["format"] = pixelFormatName(g.format);
+    out["pixel_format"] = pixelFormatName(g.format);
     out["tile_px"] = g.tile_px;
     out["internal_tile_px"] = layout.internal_tile_px;
     out["compression"] = layout.compression;
@@ -300,10 +304,7 @@ int describeCog(const CogReader& cog, const std::string& path, bool json, bool v
                         {"tiles", uint64_t(g.levels[l].tiles_x) * g.levels[l].tiles_y},
                         {"stored", bool(layout.stored_levels[l])}});
     out["levels"] = levels;
-    if (info.geo.present) {
-      out["georeference"] = {{"transform", std::vector<double>(info.geo.transform, info.geo.transform + 6)},
-                             {"crs", info.geo.crs}};
-    }
+    out["georeference"] = cli::georeferenceJson(info.geo);
     if (verify) out["verify"] = {{"tiles", tiles}, {"failed", failed}, {"problems", problems}};
     std::printf("%s\n", out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
   } else {
@@ -312,14 +313,7 @@ int describeCog(const CogReader& cog, const std::string& path, bool json, bool v
     std::printf("image        %" PRIu64 " x %" PRIu64 " px, %s\n", g.width_px, g.height_px, pixelFormatName(g.format));
     std::printf("tiles        %u px inside the file, streamed as %u px\n", layout.internal_tile_px, g.tile_px);
     std::printf("compression  %s\n", layout.compression.c_str());
-    if (info.geo.present) {
-      const double* t = info.geo.transform;
-      std::printf("georeference origin (%.10g, %.10g), pixel size (%.10g, %.10g), rotation (%.10g, %.10g)\n", t[0],
-                  t[3], t[1], t[5], t[2], t[4]);
-      std::printf("CRS          %s\n", info.geo.crs.empty() ? "(none)" : printableText(info.geo.crs).c_str());
-    } else {
-      std::printf("georeference none\n");
-    }
+    printGeoReference(info.geo);
     std::printf("\nlevel\twidth_px\theight_px\ttiles\tin_file\n");
     for (uint32_t l = 0; l < g.levelCount(); ++l)
       std::printf("%u\t%" PRIu64 "\t%" PRIu64 "\t%" PRIu64 "\t%s\n", l, g.levels[l].width_px, g.levels[l].height_px,

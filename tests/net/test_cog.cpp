@@ -30,9 +30,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
-std::string shellQuoted(const std::string& s) { return "'" + s + "'"; }
-
 class Cog : public ::testing::Test {
  protected:
   // The bundled aerial image at half size (1624 x 2193: edge tiles in both

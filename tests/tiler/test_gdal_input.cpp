@@ -23,11 +23,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A command's exit status (the reference files come from GDAL's own programs).
-int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
-
-std::string quoted(const std::string& s) { return "'" + s + "'"; }
-
 double pattern(uint64_t x, uint64_t y, int c) {
   return double((x * 131 + y * 71 + uint64_t(c) * 29 + ((x * y) >> 3)) & 255);
 }
@@ -229,8 +224,8 @@ TEST(TilerGdal, GdalIsLoadedOnlyWhenAnInputNeedsIt) {
 TEST(TilerGdal, ANetCdfFileAndItsConnectionStringTileLikeTheirGeoTiff) {
   TempDir dir("gdal");
   const std::string nc = dir.file("dem.nc");
-  ASSERT_EQ(shell("gdal_translate -q -of netCDF " + quoted(bundledDataPath("mount_st_helens_30m.tif")) + " " +
-                  quoted(nc)),
+  ASSERT_EQ(shell("gdal_translate -q -of netCDF " + shellQuoted(bundledDataPath("mount_st_helens_30m.tif")) + " " +
+                  shellQuoted(nc)),
             0);
   const RunResult tiff = runTiler({bundledDataPath("mount_st_helens_30m.tif"), dir.file("tiff.cst")});
   ASSERT_EQ(tiff.exit_code, 0) << tiff.output;
@@ -265,7 +260,7 @@ TEST(TilerGdal, AContainerOfSeveralRastersNamesThem) {
   vrt << "</Group></VRTDataset>\n";
   vrt.close();
   const std::string nc = dir.file("two.nc");
-  ASSERT_EQ(shell("gdalmdimtranslate " + quoted(dir.file("two.vrt")) + " " + quoted(nc)), 0);
+  ASSERT_EQ(shell("gdalmdimtranslate " + shellQuoted(dir.file("two.vrt")) + " " + shellQuoted(nc)), 0);
   const RunResult whole = runTiler({nc, dir.file("whole.cst")});
   EXPECT_NE(whole.exit_code, 0);
   EXPECT_NE(whole.output.find(nc + ": holds several rasters; name one as the input: NETCDF:\"" + nc +
@@ -342,7 +337,7 @@ std::vector<uint8_t> wholeImage(const std::string& path, PixelFormat format, uin
 std::string geographicDem(const TempDir& dir) {
   const std::string out = dir.file("dem4326.tif");
   EXPECT_EQ(shell("gdalwarp -q -t_srs EPSG:4326 -r bilinear " +
-                  quoted(bundledDataPath("mount_st_helens_30m.tif")) + " " + quoted(out)),
+                  shellQuoted(bundledDataPath("mount_st_helens_30m.tif")) + " " + shellQuoted(out)),
             0)
       << "gdalwarp (Debian's gdal-bin, scripts/deps.sh) failed";
   return out;
@@ -361,7 +356,7 @@ TEST(TilerWarp, AGeographicDemReprojectedMatchesGdalwarp) {
             std::string::npos)
       << r.output;
   const std::string ref = dir.file("ref.tif");
-  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:26710 -r bilinear " + quoted(dem) + " " + quoted(ref)), 0);
+  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:26710 -r bilinear " + shellQuoted(dem) + " " + shellQuoted(ref)), 0);
 
   PyramidGeometry g;
   GeoReference geo, ref_geo;
@@ -399,7 +394,7 @@ TEST(TilerWarp, ARasterFileGivesItsCoordinateSystem) {
   ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 240, 200, 3, OIIO::TypeDesc::UINT8, pattern));
   const std::string rgb = dir.file("rgb4326.tif");
   ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr -122.30 46.30 -122.10 46.12 " +
-                  quoted(dir.file("rgb.tif")) + " " + quoted(rgb)),
+                  shellQuoted(dir.file("rgb.tif")) + " " + shellQuoted(rgb)),
             0);
   const RunResult r = runTiler({rgb, dir.file("onto_dem.cst"), "--t-srs", dem});
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -410,7 +405,7 @@ TEST(TilerWarp, ARasterFileGivesItsCoordinateSystem) {
   ASSERT_FALSE(dem_geo.crs.empty());
   EXPECT_EQ(geo.crs, dem_geo.crs);
   const std::string ref = dir.file("ref.tif");
-  ASSERT_EQ(shell("gdalwarp -q -dstalpha -t_srs " + dem_geo.crs + " " + quoted(rgb) + " " + quoted(ref)), 0);
+  ASSERT_EQ(shell("gdalwarp -q -dstalpha -t_srs " + dem_geo.crs + " " + shellQuoted(rgb) + " " + shellQuoted(ref)), 0);
   GeoReference ref_geo;
   ASSERT_TRUE(findGeoReference(ref, &ref_geo).ok());
   for (int i = 0; i < 6; ++i) EXPECT_NEAR(geo.transform[i], ref_geo.transform[i], 1e-6 * 30.0) << i;
@@ -439,12 +434,12 @@ TEST(TilerWarp, AutoPicksTheUtmZoneAndTheCollarIsTransparent) {
   ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 240, 200, 3, OIIO::TypeDesc::UINT8, pattern));
   const std::string rgb = dir.file("rgb4326.tif");
   ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr -122.30 46.30 -122.10 46.12 " +
-                  quoted(dir.file("rgb.tif")) + " " + quoted(rgb)),
+                  shellQuoted(dir.file("rgb.tif")) + " " + shellQuoted(rgb)),
             0);
   const RunResult c = runTiler({rgb, dir.file("rgb.cst"), "--t-srs", "auto"});
   ASSERT_EQ(c.exit_code, 0) << c.output;
   const std::string ref = dir.file("rgb_ref.tif");
-  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:32610 -r bilinear -dstalpha " + quoted(rgb) + " " + quoted(ref)), 0);
+  ASSERT_EQ(shell("gdalwarp -q -t_srs EPSG:32610 -r bilinear -dstalpha " + shellQuoted(rgb) + " " + shellQuoted(ref)), 0);
   PyramidGeometry g;
   GeoReference geo;
   const std::vector<uint8_t> ours = level0(dir.file("rgb.cst"), &g, &geo);
@@ -472,8 +467,8 @@ TEST(TilerWarp, AutoFindsTheZoneOfLongitudesPast180AndRefusesTooWide) {
   ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 120, 100, 3, OIIO::TypeDesc::UINT8, pattern));
   auto placed = [&](const std::string& name, const std::string& ullr) {
     const std::string out = dir.file(name);
-    EXPECT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr " + ullr + " " + quoted(dir.file("rgb.tif")) + " " +
-                    quoted(out)),
+    EXPECT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr " + ullr + " " + shellQuoted(dir.file("rgb.tif")) + " " +
+                    shellQuoted(out)),
               0);
     return out;
   };
@@ -507,7 +502,7 @@ TEST(TilerWarp, WhatCannotBeReprojectedIsAnErrorNamingItWithNothingWritten) {
   // Refused after the warp was made (five bands): the warp and the file are closed in order.
   ASSERT_TRUE(writeImage(dir.file("rgb.tif"), 40, 30, 3, OIIO::TypeDesc::UINT8, pattern));
   ASSERT_EQ(shell("gdal_translate -q -a_srs EPSG:4326 -a_ullr 10 10 11 9 -b 1 -b 2 -b 3 -b 1 -b 2 " +
-                  quoted(dir.file("rgb.tif")) + " " + quoted(dir.file("five.tif"))),
+                  shellQuoted(dir.file("rgb.tif")) + " " + shellQuoted(dir.file("five.tif"))),
             0);
   r = runTiler({dir.file("five.tif"), out, "--t-srs", "auto"});
   EXPECT_NE(r.exit_code, 0);
@@ -535,7 +530,7 @@ TEST(TilerNoData, AColourNoDataCollarIsTransparent) {
   };
   const std::string plain = dir.file("plain.tif"), tagged = dir.file("tagged.tif");
   ASSERT_TRUE(writeImage(plain, 200, 150, 3, OIIO::TypeDesc::UINT8, collared));
-  ASSERT_EQ(shell("gdal_translate -q -a_nodata 0 " + quoted(plain) + " " + quoted(tagged)), 0);
+  ASSERT_EQ(shell("gdal_translate -q -a_nodata 0 " + shellQuoted(plain) + " " + shellQuoted(tagged)), 0);
   const RunResult given = runTiler({plain, dir.file("given.cst"), "--nodata", "0"});
   ASSERT_EQ(given.exit_code, 0) << given.output;
   EXPECT_NE(given.output.find("no-data: pixels whose every channel is 0 are transparent"), std::string::npos)

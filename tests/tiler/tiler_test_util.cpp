@@ -271,4 +271,8 @@ bool readImage8(const std::string& path, RefImage* out) {
   return true;
 }
 
+int shell(const std::string& command) { return std::system((command + " >/dev/null 2>&1").c_str()); }
+
+std::string shellQuoted(const std::string& s) { return "'" + s + "'"; }
+
 }  // namespace clipstream::test

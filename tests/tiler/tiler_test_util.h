@@ -55,6 +55,11 @@ bool writeImage(const std::string& path, uint64_t w, uint64_t h, int channels, O
 // (edge clamp). Returns the largest absolute sample difference.
 uint32_t maxTileError(const TileStoreReader& reader, uint32_t level, const RefImage& ref);
 
+// A shell command's exit status, its output discarded (the reference files
+// come from GDAL's own programs), and a path quoted for it.
+int shell(const std::string& command);
+std::string shellQuoted(const std::string& s);
+
 struct RunResult {
   int exit_code = -1;
   std::string output;  // stdout + stderr
