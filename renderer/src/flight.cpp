@@ -251,6 +251,7 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
   if (m_terrain)
     if (Status s = makeTerrain(); !s) return s;
   m_streamer->resetGpuResidency();
+  m_seen_read = false;  // read again at the new size
   ++m_resizes;
   return okStatus();
 }
@@ -300,6 +301,50 @@ void countLevels(const StreamerStats& now, const StreamerStats& before, uint32_t
 
 }  // namespace
 
+void Flight::bindFrame() {
+  if (m_target) {
+    m_target->bind();
+  } else {
+    const Viewport fb = m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
+    bindWindowFramebuffer(fb);
+  }
+}
+
+void Flight::readGroundSeen(const Camera& camera, const Camera& planning) {
+  auto seen = std::make_shared<GroundSeen>();
+  const Viewport fb = !m_target && m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
+  m_terrain->readGroundSeen(camera, m_config.viewport, fb, seen.get());
+  // In the planner's space: without height bounds its camera stands at its
+  // height above the ground (step()), and the ground with it.
+  const double dy = planning.position.y - camera.position.y;
+  if (dy != 0.0) {
+    seen->camera = planning;
+    for (glm::dvec3& p : seen->points) p.y += dy;
+  }
+  m_streamer->setGroundSeen(std::move(seen));
+  m_seen_read = true;
+}
+
+Camera Flight::planningCamera(const Camera& camera, double* ground_height) {
+  // Over terrain with the elevation store's per-tile bounds the streamer
+  // plans against the terrain itself and takes the real camera. Without
+  // them the planner sees the ground under the camera as its plane (the
+  // flat planner's assumption, moved to the local ground height).
+  Camera planning = camera;
+  if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, ground_height) &&
+      !m_streamer->plansOnTerrain()) {
+    planning.position.y = std::max(camera.position.y - *ground_height, camera.near_dist);
+    // ... and sees the relief around it: the footprint also covers the
+    // highest and lowest ground in reach (a slope in front loads what the
+    // frame shows of it).
+    double lowest = 0.0, highest = 0.0;
+    if (m_terrain->groundRange(camera, &lowest, &highest)) {
+      m_streamer->setGroundRelief(highest - *ground_height, *ground_height - lowest);
+    }
+  }
+  return planning;
+}
+
 FrameSample Flight::step(const Camera& camera) {
   return step(camera, double(m_steps) * renderer_config::kSimulatedFrameSeconds);
 }
@@ -310,8 +355,8 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   f.frame = f.warmup ? m_steps : m_steps - m_config.warmup_frames;
   f.clock_s = clock_s;
   const double step_texels = glm::length(camera.position - m_previous.position);
-  if (!f.warmup)
-    f.cut = f.frame == 0 ? m_config.warmup_frames == 0 : isCut(m_previous, camera, m_previous_step);
+  const bool jumped = m_steps > 0 && isCut(m_previous, camera, m_previous_step);
+  if (!f.warmup) f.cut = f.frame == 0 ? m_config.warmup_frames == 0 : jumped;
   m_previous_step = step_texels;
   m_previous = camera;
   ++m_steps;
@@ -319,21 +364,17 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   const auto t0 = Clock::now();
   timespec cpu0{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu0);
-  // Over terrain with the elevation store's per-tile bounds the streamer
-  // plans against the terrain itself and takes the real camera. Without
-  // them the planner sees the ground under the camera as its plane (the
-  // flat planner's assumption, moved to the local ground height).
-  Camera planning = camera;
-  if (m_terrain && m_terrain->groundHeight({camera.position.x, camera.position.z}, &f.ground_height) &&
-      !m_streamer->plansOnTerrain()) {
-    planning.position.y = std::max(camera.position.y - f.ground_height, camera.near_dist);
-    // ... and sees the relief around it: the footprint also covers the
-    // highest and lowest ground in reach (a slope in front loads what the
-    // frame shows of it).
-    double lowest = 0.0, highest = 0.0;
-    if (m_terrain->groundRange(camera, &lowest, &highest)) {
-      m_streamer->setGroundRelief(highest - f.ground_height, f.ground_height - lowest);
-    }
+  const Camera planning = planningCamera(camera, &f.ground_height);
+  // Over terrain the plan loads the ground the last frame showed. At the
+  // first frame and after a jump there is none that says anything of this
+  // view: the terrain is drawn once first, from what is resident (the
+  // coarse levels at least), to read what this view shows.
+  const bool read_seen = m_terrain && m_config.streamer.planner.scope == PlanScope::kSampled;
+  if (read_seen && (jumped || !m_seen_read)) {
+    bindFrame();
+    ClipmapRenderer::clearSky();
+    m_terrain->draw(camera, m_config.viewport, *m_renderer);
+    readGroundSeen(camera, planning);
   }
   m_streamer->update(planning, m_config.viewport, clock_s);
   FrameHandoff handoff;
@@ -352,12 +393,7 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   const auto t_streamer = Clock::now();
   m_renderer->applyHandoff(handoff);
   const auto t_upload = Clock::now();
-  if (m_target) {
-    m_target->bind();
-  } else {
-    const Viewport fb = m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
-    bindWindowFramebuffer(fb);
-  }
+  bindFrame();
   ClipmapRenderer::clearSky();
   if (m_terrain) {
     m_terrain->draw(camera, m_config.viewport, *m_renderer);
@@ -367,6 +403,8 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
     f.terrain_triangles = tf.triangles;
     f.terrain_error_px = tf.achieved_error_px;
     f.terrain_select_ms = tf.select_ms;
+    // What this frame showed, for the next frames' plans.
+    if (read_seen) readGroundSeen(camera, planning);
   } else {
     m_renderer->draw(camera, m_config.viewport);
   }

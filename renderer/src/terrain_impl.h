@@ -5,6 +5,7 @@
 //  - terrain_draw.cpp: the per-frame uniforms, the frustum, the clipmap's
 //    rings and the full-resolution mesh's patches;
 //  - terrain_quadtree.cpp: the quadtree's node selection and draws;
+//  - terrain_seen.cpp: the ground a frame showed, read from its depth;
 //  - terrain_height_stack.h: the height clip stack (texture and CPU copies);
 //  - terrain_mesh.h: the ring and patch meshes, built on the CPU;
 //  - terrain_gl.h: the meshes' buffers, the programs, the position target.
@@ -108,6 +109,8 @@ class TerrainRendererImpl {
   // The ring mesh: the plain (n + 1)^2 grid first (vertex j (n + 1) + i is
   // (i, j)), then the blocks' copies (terrain_mesh::RingMesh).
   const TerrainMeshBuffers& ringMesh() const { return *m_ring_mesh; }
+  // The far plane of every draw for this camera (setFrameUniforms()).
+  double farDistance(const Camera& camera) const;
 
  private:
   TerrainRendererImpl() = default;
@@ -119,7 +122,6 @@ class TerrainRendererImpl {
   // samples), and setting it (with the colour image's extent) for a frame.
   uint32_t coarsestFor(const glm::dvec2& cam) const;
   void updateCoarsest(const Camera& camera, const ClipmapRenderer& colour);
-  double farDistance(const Camera& camera) const;
   using Frustum = std::array<glm::dvec4, 6>;
   Frustum frustum(const Camera& camera, const Viewport& viewport) const;
 

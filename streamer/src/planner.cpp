@@ -282,8 +282,12 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
   placeStackLevels(geometry, camera, fp, finest, first_stack, &plan);
 
   const bool flat = !config.terrain.bounds && !(config.ground_above > 0.0) && !(config.ground_below > 0.0);
-  if (config.scope == PlanScope::kSampled && flat && fp.any_hit && viewport.height_px > 0)
-    markSampled(geometry, viewport, camera, farLimit(geometry, camera), &plan);
+  if (config.scope == PlanScope::kSampled && fp.any_hit && viewport.height_px > 0) {
+    if (flat)
+      markSampled(geometry, viewport, camera, farLimit(geometry, camera), &plan);
+    else if (config.seen && !config.seen->points.empty())
+      markSeen(geometry.tile_px, viewport, camera, *config.seen, &plan);
+  }
   return plan;
 }
 

@@ -1,6 +1,7 @@
-// PlanScope::kSampled on the flat plane: the screen's cells, their level of
-// detail and ground, a pyramid of blocks of cells, and per needed level the
-// window tiles they sample (sampled_scope.h).
+// PlanScope::kSampled: the screen's cells (on the flat plane from rays, over
+// terrain from the ground a frame showed), their level of detail and ground,
+// a pyramid of blocks of cells, and per needed level the window tiles they
+// sample (sampled_scope.h).
 #include "sampled_scope.h"
 
 #include <algorithm>
@@ -153,6 +154,13 @@ bool allMarked(ClipLevelPlan* lp, const TileRect& r) {
 
 }  // namespace
 
+void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys) {
+  const double W = viewport.width_px, H = viewport.height_px;
+  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
+  *xs = sampleCornerPositions(W, step);
+  *ys = sampleCornerPositions(H, step);
+}
+
 std::vector<double> sampleCornerPositions(double size_px, double step_px) {
   std::vector<double> positions;
   for (double p = 0.5; p < size_px - 0.5; p += step_px) positions.push_back(p);
@@ -191,14 +199,14 @@ std::vector<SampleGrid> buildCellPyramid(SampleGrid cells) {
 // and no other); any other block goes down to its four. A cell marks the
 // window tiles its widened box touches.
 void markSampledLevel(const std::vector<SampleGrid>& pyramid, uint32_t tile_px, glm::dvec2 ahead,
-                      ClipLevelPlan* lp) {
+                      ClipLevelPlan* lp, double lead_tiles) {
   struct Block {
     size_t grid, i, j;
   };
   const double reach = double(lp->level) + 1.0;  // a cell with lod - slack below it samples the level
   const double tile_texels = double(tile_px) * levelScale(lp->level);
   const double tap = 0.5 * levelScale(lp->level);  // bilinear: half a texel of the level
-  const glm::dvec2 lead = ahead * (kSampleLeadTiles * tile_texels);
+  const glm::dvec2 lead = ahead * (lead_tiles * tile_texels);
   std::vector<Block> todo(1, Block{pyramid.size() - 1, 0, 0});
   while (!todo.empty()) {
     const Block b = todo.back();
@@ -230,10 +238,8 @@ void markSampledLevel(const std::vector<SampleGrid>& pyramid, uint32_t tile_px, 
 
 void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, const Camera& camera,
                  double far_h, ClipmapPlan* plan) {
-  const double W = viewport.width_px, H = viewport.height_px;
-  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
-  const std::vector<double> xs = sampleCornerPositions(W, step);
-  const std::vector<double> ys = sampleCornerPositions(H, step);
+  std::vector<double> xs, ys;
+  groundSeenGrid(viewport, &xs, &ys);
   const std::vector<Corner> corners = sampleCorners(ScreenRays(viewport, camera), xs, ys, far_h);
 
   const std::vector<ClipLevelPlan*> levels = startMasks(plan);
@@ -243,6 +249,149 @@ void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, cons
   const std::vector<SampleGrid> pyramid = buildCellPyramid(cellsOf(corners, xs.size(), ys.size()));
   const glm::dvec2 ahead = horizontalAhead(camera);
   for (ClipLevelPlan* lp : levels) markSampledLevel(pyramid, geometry.tile_px, ahead, lp);
+}
+
+// One screen axis at a grid point: the ground vectors to its two
+// neighbours and their steps per pixel (INFINITY: no neighbour on the
+// screen, or one that shows no ground). settle() drops a side whose step is
+// over kSeenEdgeRatio times the other's (a jump across an edge of the
+// relief, not the surface's step) and stands in for each side it has not
+// kept by the other's vector turned back. (Twice that where an edge lies
+// between the grid points, for the surface that may reach on toward the
+// neighbour, missed as many sampled tiles on the St Helens orbits of
+// tests/eval/test_terrain_planning.cpp and loaded a third more on the
+// valley flight: the silhouettes against the sky are the far ground's.)
+struct SeenAxis {
+  glm::dvec2 to[2]{glm::dvec2(0.0), glm::dvec2(0.0)};
+  double step[2]{INFINITY, INFINITY};
+  bool kept[2]{false, false};
+  bool any() const { return kept[0] || kept[1]; }
+  void settle() {
+    kept[0] = std::isfinite(step[0]);
+    kept[1] = std::isfinite(step[1]);
+    if (kept[0] && kept[1]) {
+      if (step[1] > kSeenEdgeRatio * step[0]) kept[1] = false;
+      else if (step[0] > kSeenEdgeRatio * step[1]) kept[0] = false;
+    }
+    for (int k = 0; k < 2; ++k)
+      if (!kept[k] && kept[1 - k]) {
+        to[k] = -to[1 - k];
+        step[k] = step[1 - k];
+      }
+  }
+  // The surface's step per pixel: the mean of the two sides (the ground
+  // recedes, so the step behind is smaller and the one ahead larger).
+  double perPixel() const { return any() ? 0.5 * (step[0] + step[1]) : INFINITY; }
+  // The other axis' stand-in where this one has no neighbour on its surface:
+  // as far, at a right angle.
+  SeenAxis turned() const {
+    SeenAxis t = *this;
+    for (glm::dvec2& v : t.to) v = {-v.y, v.x};
+    t.kept[0] = t.kept[1] = false;
+    return t;
+  }
+};
+
+std::vector<SeenCorner> seenCorners(const GroundSeen& seen, const Viewport& viewport, const Camera& camera) {
+  const size_t w = seen.xs.size(), h = seen.ys.size();
+  std::vector<SeenCorner> corners(w * h);
+  const auto shown = [&](size_t i, size_t j) { return std::isfinite(seen.points[j * w + i].x); };
+  const auto groundAt = [&](size_t i, size_t j) {
+    const glm::dvec3& q = seen.points[j * w + i];
+    return glm::dvec2(q.x, q.z);
+  };
+  // A pixel's angle then and now: a resized view sees the same ground at
+  // other levels.
+  const auto pixelAngle = [](const Camera& c, const Viewport& v) {
+    return 2.0 * std::tan(c.vfov_rad * 0.5) / std::max(1.0, double(v.height_px));
+  };
+  const double angle_ratio = pixelAngle(camera, viewport) / pixelAngle(seen.camera, seen.viewport);
+  for (size_t j = 0; j < h; ++j) {
+    for (size_t i = 0; i < w; ++i) {
+      if (!shown(i, j)) continue;
+      SeenCorner& c = corners[j * w + i];
+      c.shown = true;
+      c.ground = groundAt(i, j);
+      // Per axis, the ground vectors to the two neighbours (none: not shown)
+      // and their steps per pixel.
+      SeenAxis axis[2];
+      const auto side = [&](SeenAxis* a, int k, bool has, size_t ni, size_t nj, double px) {
+        if (!has || !shown(ni, nj) || !(px > 0.0)) return;
+        a->to[k] = groundAt(ni, nj) - c.ground;
+        a->step[k] = glm::length(a->to[k]) / px;
+      };
+      side(&axis[0], 0, i > 0, i - 1, j, i > 0 ? seen.xs[i] - seen.xs[i - 1] : 0.0);
+      side(&axis[0], 1, i + 1 < w, i + 1, j, i + 1 < w ? seen.xs[i + 1] - seen.xs[i] : 0.0);
+      side(&axis[1], 0, j > 0, i, j - 1, j > 0 ? seen.ys[j] - seen.ys[j - 1] : 0.0);
+      side(&axis[1], 1, j + 1 < h, i, j + 1, j + 1 < h ? seen.ys[j + 1] - seen.ys[j] : 0.0);
+      for (SeenAxis& a : axis) a.settle();
+      if (!axis[0].any() && !axis[1].any()) continue;  // a lone point: no level of its own
+      if (!axis[0].any()) axis[0] = axis[1].turned();
+      if (!axis[1].any()) axis[1] = axis[0].turned();
+      // The ground halfway to the neighbours on the screen: the box of the
+      // four diagonal midpoints (exact on a plane).
+      c.lo = c.hi = c.ground;
+      for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b) {
+          const glm::dvec2 q = c.ground + 0.5 * (axis[0].to[a] + axis[1].to[b]);
+          c.lo = glm::min(c.lo, q);
+          c.hi = glm::max(c.hi, q);
+        }
+      for (int k = 0; k < 2; ++k) {
+        c.continuous[0][k] = axis[0].kept[k];
+        c.continuous[1][k] = axis[1].kept[k];
+      }
+      // Seen from the camera being planned: a pixel's ground grows with its
+      // distance.
+      double rho = std::max(axis[0].perPixel(), axis[1].perPixel());
+      const glm::dvec3& p = seen.points[j * w + i];
+      const double then = glm::length(p - seen.camera.position);
+      const double now = glm::length(p - camera.position);
+      if (then > 0.0) rho *= now / then;
+      rho *= angle_ratio;
+      c.lod = std::log2(std::max(rho, 1e-30));
+    }
+  }
+  return corners;
+}
+
+void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, const GroundSeen& seen,
+              ClipmapPlan* plan, double lead_tiles) {
+  const size_t w = seen.xs.size(), h = seen.ys.size();
+  if (w < 2 || h < 2 || seen.points.size() != w * h) return;  // no grid: the whole windows
+  const std::vector<ClipLevelPlan*> levels = startMasks(plan);
+  if (levels.empty()) return;
+  const std::vector<SeenCorner> corners = seenCorners(seen, viewport, camera);
+  // A cell per grid point: its ground halfway to its neighbours, at the
+  // least level of detail over it (the level halfway to each neighbour on
+  // its surface lies between theirs).
+  SampleGrid grid;
+  grid.w = w;
+  grid.h = h;
+  grid.cells.resize(w * h);
+  for (size_t j = 0; j < h; ++j) {
+    for (size_t i = 0; i < w; ++i) {
+      const SeenCorner& c = corners[j * w + i];
+      if (!std::isfinite(c.lod)) continue;  // no ground shown with a level of its own
+      SampleCell& cell = grid.cells[j * w + i];
+      // markSampledLevel() takes kSampleLodSlack off; over terrain the
+      // slack is kSeenLodSlack in all.
+      cell.lod = c.lod - (kSeenLodSlack - kSampleLodSlack);
+      const auto halfway = [&](bool kept, size_t ni, size_t nj) {
+        if (kept && std::isfinite(corners[nj * w + ni].lod))
+          cell.lod = std::min(cell.lod, 0.5 * (c.lod + corners[nj * w + ni].lod));
+      };
+      if (i > 0) halfway(c.continuous[0][0], i - 1, j);
+      if (i + 1 < w) halfway(c.continuous[0][1], i + 1, j);
+      if (j > 0) halfway(c.continuous[1][0], i, j - 1);
+      if (j + 1 < h) halfway(c.continuous[1][1], i, j + 1);
+      cell.lo = c.lo;
+      cell.hi = c.hi;
+    }
+  }
+  const std::vector<SampleGrid> pyramid = buildCellPyramid(std::move(grid));
+  const glm::dvec2 ahead = horizontalAhead(camera);
+  for (ClipLevelPlan* lp : levels) markSampledLevel(pyramid, tile_px, ahead, lp, lead_tiles);
 }
 
 }  // namespace clipstream

@@ -1,7 +1,8 @@
-// PlanScope::kSampled on the flat plane: which tiles of each needed clip
-// window the screen samples (planner.h). planClipmap() places the windows,
-// then markSampled() fills each needed level's `sampled` mask. The steps
-// are declared here so the tests can check each alone.
+// PlanScope::kSampled: which tiles of each needed clip window the screen
+// samples (planner.h). planClipmap() places the windows, then markSampled()
+// (the flat plane) or markSeen() (terrain, from the ground a frame showed)
+// fills each needed level's `sampled` mask. The steps are declared here so
+// the tests can check each alone.
 //
 // Thread rule: pure functions, safe from any thread.
 #pragma once
@@ -39,6 +40,24 @@ inline constexpr double kSampleLodSlack = 0.05;
 // (x50: 97.8), one tile none (99.0, 98.4) for an over-fetch of 1.85 at x1
 // instead of 1.27.
 inline constexpr double kSampleLeadTiles = 1.0;
+// Over terrain (markSeen()) the lead is half a tile: the flights of
+// scripts/bench_terrain_planning.sh (1280x720, every 5th frame judged)
+// loaded 1.76 / 1.93 / 2.11 times the clip-level tiles the St Helens valley
+// flight samples with a lead of 0 / 0.5 / 1 tile, and 1.04 / 1.18 / 1.31
+// on the orbit, at the same PSNR to 0.01 dB; half a tile keeps some of
+// the flat plane's margin for a start from rest within the over-fetch
+// target of 2 (docs/decisions.md D295).
+inline constexpr double kSeenLeadTiles = 0.5;
+// Over terrain the levels of detail are compared with this much slack:
+// a grid point's level comes from the ground steps to its neighbours, 4 to
+// 13 pixels away, and a DEM's facets make the level vary within a cell. On
+// the St Helens orbits of tests/eval/test_terrain_planning.cpp (320x180,
+// at rest) the tiles sampled that the plan did not want were 25 of 1,695
+// with the plane's 0.05, 17 with 0.15, 14 with 0.2 and 8 with 0.35, for
+// 1,475 / 1,552 / 1,605 / 1,786 tiles wanted (1,162 sampled at the clip
+// levels). A tile missed this way is one the pixels sample with little
+// weight (their level lies near the next coarser one, which is loaded).
+inline constexpr double kSeenLodSlack = 0.2;
 // A block of cells over at most this many window tiles that are all marked
 // already is not searched further (a larger one costs more to check than
 // its search saves).
@@ -89,11 +108,50 @@ std::vector<SampleGrid> buildCellPyramid(SampleGrid cells);
 // of level lp->level that the cells of `pyramid` (buildCellPyramid())
 // sample: every cell whose level of detail less kSampleLodSlack is below
 // lp->level + 1 marks the tiles its box touches, widened by half a texel
-// of the level and stretched kSampleLeadTiles tiles of the level along
+// of the level and stretched lead_tiles tiles of the level along
 // `ahead` (the unit horizontal view direction, or zero). Searched from the top block down,
 // so the cost follows the tiles marked, not the cells; the result is that
 // of marking cell by cell. Tiles already marked stay marked.
 void markSampledLevel(const std::vector<SampleGrid>& pyramid, uint32_t tile_px, glm::dvec2 ahead,
-                      ClipLevelPlan* lp);
+                      ClipLevelPlan* lp, double lead_tiles = kSampleLeadTiles);
+
+// Over terrain, the steps to a grid point's two neighbours on one screen
+// axis differ by the ground's recession across a cell; more than this
+// ratio means the larger crosses an edge of the relief (a ridge in front of
+// farther ground), and the smaller is the surface's.
+inline constexpr double kSeenEdgeRatio = 3.0;
+
+// A point of a GroundSeen grid as the planned camera would sample it: its
+// ground (x, z) when the frame showed ground there; the box of the ground
+// halfway to its grid neighbours on the screen (`lo`, `hi`); which of the
+// four neighbours (per axis, before and after) lie on its surface
+// (`continuous`: a step over kSeenEdgeRatio times the other side's is a
+// jump across an edge of the relief); and the level of detail there
+// (INFINITY when no neighbour showed ground): log2 of the larger axis' step
+// per pixel (the mean of its two sides'), scaled by the distance from the
+// planned camera over the distance from the camera that saw it (and by the
+// two pixels' angles).
+struct SeenCorner {
+  bool shown = false;
+  glm::dvec2 ground{0.0};
+  glm::dvec2 lo{0.0}, hi{0.0};
+  bool continuous[2][2] = {{false, false}, {false, false}};
+  double lod = INFINITY;
+};
+std::vector<SeenCorner> seenCorners(const GroundSeen& seen, const Viewport& viewport, const Camera& camera);
+
+// Marks, for every needed stack level m of *plan, the window tiles under
+// the ground `seen` showed whose level of detail (seenCorners(), for
+// `camera` in `viewport`) is below m + 1: a cell per grid point, its box
+// halfway to its neighbours at the least level over it (its own, and
+// halfway to each neighbour on its surface), then markSampledLevel() as on
+// the plane with a lead of `lead_tiles`. Not the plane's quads between
+// four corners: over relief a quad may span a ridge and the plain behind
+// it, and its box then covers the ground between, which no pixel shows
+// (on the St Helens orbit at 1280x720 the quads wanted twice the level-0
+// tiles the frame sampled). A grid that does not match its points leaves
+// the windows whole.
+void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, const GroundSeen& seen,
+              ClipmapPlan* plan, double lead_tiles = kSeenLeadTiles);
 
 }  // namespace clipstream

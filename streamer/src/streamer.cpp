@@ -616,6 +616,22 @@ void Streamer::setGroundRelief(double above, double below) {
   s.config.planner.ground_below = std::isfinite(below) ? std::max(below, 0.0) : 0.0;
 }
 
+void Streamer::setGroundSeen(std::shared_ptr<const GroundSeen> seen) {
+  Impl& s = *m_impl;
+  for (Impl::Layer& layer : s.layers) {
+    layer.seen = nullptr;
+    if (!seen || !layer.active() || layer.spec.role != LayerRole::kColour) continue;
+    // The layer's texels, as layerCamera() maps the camera.
+    const glm::dvec2 k = layer.spec.texels_per_unit;
+    const double scale = std::sqrt(k.x * k.y);
+    auto mapped = std::make_shared<GroundSeen>(*seen);
+    mapped->camera = layerCamera(layer.spec, seen->camera);
+    for (glm::dvec3& p : mapped->points)
+      p = {layer.spec.origin_texel.x + k.x * p.x, p.y * scale, layer.spec.origin_texel.y + k.y * p.z};
+    layer.seen = std::move(mapped);
+  }
+}
+
 void Streamer::setPathHint(PathHint hint) {
   Impl& s = *m_impl;
   s.hint = std::move(hint);

@@ -79,6 +79,7 @@ struct Streamer::Impl {
     ClipmapPlan plan;
     ClipmapPlan predicted_plan;
     TerrainView terrain;        // the scene's terrain in this layer's texels (bounds null: flat)
+    std::shared_ptr<const GroundSeen> seen;  // colour layers: the last frame's ground in its texels
     PathHint hint;              // the streamer's hint seen through layerCamera()
     PathLookahead lookahead;    // windows along that hint
 
@@ -91,6 +92,7 @@ struct Streamer::Impl {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
       c.terrain = terrain;
+      c.seen = seen;
       // Relief in world units, scaled like layerCamera() scales heights.
       const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
       c.ground_above *= s;

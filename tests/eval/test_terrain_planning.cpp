@@ -3,13 +3,17 @@
 // stretched under a procedural texture, looked at from low orbits around
 // the crater. Every colour tile a frame samples (from the ground points its
 // pixels show, sampledTilesOfPositions()) must lie in a window the plan
-// loads: a pyramid level, or a needed stack level's window. And the tiles
-// sampled over terrain are those of the frame's own ground points.
+// loads: a pyramid level, or a tile a needed stack level's plan wants (the
+// ground the last frame showed). The loads stay within twice the tiles the
+// frames sample. And the tiles sampled over terrain are those of the
+// frame's own ground points.
 // Headless llvmpipe.
 #include "test_helpers.h"
 
+#include <clipstream/eval/flight_run.h>
 #include <clipstream/eval/metrics.h>
 #include <clipstream/renderer/flight.h>
+#include <clipstream/streamer/flight_path.h>
 #include <clipstream/streamer/planner.h>
 #include <clipstream/testing/cameras.h>
 #include <clipstream/testing/sources.h>
@@ -34,22 +38,31 @@ TileKey unpackTileKey(uint64_t k) {
 // and at a level the plan needs but outside its window (*outside) or at a
 // level finer than the plan needs (*finer).
 void unplannedTiles(const std::unordered_set<uint64_t>& sampled, const ClipmapPlan& plan, size_t* outside,
-                    size_t* finer) {
+                    size_t* finer, size_t* stack) {
   for (uint64_t k : sampled) {
     const TileKey t = unpackTileKey(k);
     if (t.level >= plan.pyramid_level) continue;
+    ++*stack;
     const ClipLevelPlan& l = plan.stack[t.level];
     if (!l.needed) {
       ++*finer;
-    } else if (!l.window.contains(t.x, t.y)) {
+    } else if (!l.wants(t.x, t.y)) {
       ++*outside;
     }
   }
 }
 
+// Tiles the plan wants at its stack levels.
+size_t wantedStackTiles(const ClipmapPlan& plan) {
+  size_t n = 0;
+  for (const ClipLevelPlan& l : plan.stack) n += l.wantedCount();
+  return n;
+}
+
 struct Orbit {
   size_t frames = 0, sampled = 0;
-  size_t outside = 0;      // tiles sampled at a needed level, outside its window
+  size_t outside = 0;      // tiles sampled at a needed level that its plan does not want
+  size_t sampled_stack = 0, wanted_stack = 0;  // finer than the pyramid: sampled, and wanted by the plan
   size_t finer_tiles = 0;  // tiles sampled at a level the plan does not need
   // Frames whose plan needs a level coarser (finer) than the planner's
   // rule gives for the nearest ground the frame shows.
@@ -102,7 +115,8 @@ Orbit flyOrbit(const std::string& dem, bool terrain_planning) {
       std::unordered_set<uint64_t> sampled;
       sampledTilesOfPositions(colour->geometry(), xyzw, c, flight->viewport(), &sampled);
       const ClipmapPlan& plan = flight->streamer().plan(0);
-      unplannedTiles(sampled, plan, &out.outside, &out.finer_tiles);
+      unplannedTiles(sampled, plan, &out.outside, &out.finer_tiles, &out.sampled_stack);
+      out.wanted_stack += wantedStackTiles(plan);
       const double nearest = nearestPositionDistance(xyzw);
       EXPECT_TRUE(std::isfinite(nearest)) << "no terrain in view";
       const uint32_t seen = finestLevelAt(nearest, flight->viewport(), c, fc.streamer.planner,
@@ -149,13 +163,64 @@ TEST(TerrainPlanning, EveryTileSampledOverMountainSlopesIsPlanned) {
   // level finer than needed, a few in a hundred.
   EXPECT_LE(t.outside * 100, t.sampled);
   EXPECT_LE(t.finer_tiles * 20, t.sampled);
+  // And the plan wants little more than the frames sample: the tiles under
+  // the ground the last frame showed (GroundSeen), with a tile's margin.
+  EXPECT_LE(t.wanted_stack, 2 * t.sampled_stack);
+  EXPECT_GT(t.sampled_stack, t.frames * 5) << "the clip levels were sampled too little to judge";
   // The same orbits planned with the relief planes, for comparison.
   const Orbit r = flyOrbit(dem, false);
   std::printf("St Helens orbits, %zu frames: terrain bounds: plan coarser than the nearest ground in %zu "
-              "frames, finer in %zu; of %zu tiles sampled, %zu outside the windows, %zu at levels not "
-              "needed; relief planes: %zu, %zu; %zu, %zu, %zu\n",
-              t.frames, t.coarser_frames, t.finer_frames, t.sampled, t.outside, t.finer_tiles, r.coarser_frames,
-              r.finer_frames, r.sampled, r.outside, r.finer_tiles);
+              "frames, finer in %zu; of %zu tiles sampled, %zu not wanted, %zu at levels not needed; clip "
+              "levels: %zu wanted for %zu sampled; relief planes: %zu, %zu; %zu, %zu, %zu\n",
+              t.frames, t.coarser_frames, t.finer_frames, t.sampled, t.outside, t.finer_tiles, t.wanted_stack,
+              t.sampled_stack, r.coarser_frames, r.finer_frames, r.sampled, r.outside, r.finer_tiles);
+}
+
+// Over-fetch over terrain (docs/terrain.md, "Over-fetch over terrain"): an
+// orbit around St Helens loads at most twice the clip-level tiles its
+// frames sample when the plan follows the ground the frames show, at the
+// PSNR of loading whole windows, which load several times more.
+TEST(TerrainPlanning, LoadsAtMostTwiceTheTilesTheFramesSample) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir;
+  const std::string dem = tileDem(dir);
+  FlightRun runs[2];
+  for (int k = 0; k < 2; ++k) {
+    FlightRunOptions o;
+    o.source = test::procedural(16384, 128);
+    std::vector<std::string> warnings;
+    TerrainLayerConfig tl;
+    const Status s = openTerrainLayer("", o.source->geometry(), dem, 0.5, true, 64, &tl, &warnings);
+    ASSERT_TRUE(s.ok()) << s.toString();
+    o.terrain = tl;
+    // Low around the crater, looking a little down at the slopes.
+    for (int i = 0; i <= 6; ++i) {
+      const double angle = i * (test::kPi / 18);
+      Keyframe key;
+      key.t_s = i * 0.25;
+      key.position = {8192.0 + 4000.0 * std::cos(angle), 500.0, 8192.0 + 4000.0 * std::sin(angle)};
+      key.heading_deg = std::atan2(-std::cos(angle), std::sin(angle)) * 180.0 / test::kPi;
+      key.pitch_deg = -12.0;
+      o.path.keyframes.push_back(key);
+    }
+    o.frames = 90;
+    o.viewport = {320, 180};
+    o.reference_every = 10;
+    o.sample_tiles = true;
+    o.streamer.io_threads = 2;
+    o.streamer.planner.scope = k == 0 ? PlanScope::kSampled : PlanScope::kWindow;
+    ASSERT_TRUE(runFlight(o, &runs[k]).ok());
+  }
+  const RunSummary &seen = runs[0].summary, &window = runs[1].summary;
+  std::printf("orbit, clip levels: ground seen %llu loaded / %llu sampled = %.2f, PSNR %.2f dB; whole windows "
+              "%llu / %llu = %.2f, %.2f dB\n",
+              (unsigned long long)seen.tiles_loaded_stack, (unsigned long long)seen.tiles_sampled_stack,
+              seen.over_fetch_stack_ratio, seen.psnr_mean_db, (unsigned long long)window.tiles_loaded_stack,
+              (unsigned long long)window.tiles_sampled_stack, window.over_fetch_stack_ratio, window.psnr_mean_db);
+  ASSERT_GT(seen.tiles_sampled_stack, 20u) << "the clip levels were sampled too little to judge";
+  EXPECT_LE(seen.over_fetch_stack_ratio, 2.0);
+  EXPECT_GT(window.over_fetch_stack_ratio, 2.0 * seen.over_fetch_stack_ratio);
+  EXPECT_GE(seen.psnr_mean_db, window.psnr_mean_db - 0.5);
 }
 
 // The tiles sampled over terrain follow the ground points: a flat terrain

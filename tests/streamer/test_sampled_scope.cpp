@@ -1,6 +1,7 @@
 // The steps of PlanScope::kSampled (sampled_scope.h), each alone: the
 // screen's cell corners, the pyramid of blocks of cells, and the marking
-// of one level's window, which must equal marking cell by cell. Whole plans
+// of one level's window, which must equal marking cell by cell; over
+// terrain (markSeen()), the ground a frame showed. Whole plans
 // with the sampled scope are in test_planner.cpp and the eval tests.
 #include "../../streamer/src/sampled_scope.h"  // private: the steps under test
 
@@ -171,5 +172,171 @@ TEST(SampledScope, OnlyNeededLevelsGetAMaskAndTheGroundUnderTheViewIsMarked) {
   for (size_t l = 0; l < plan.stack.size(); ++l) EXPECT_EQ(sampled.stack[l].sampled, plan.stack[l].sampled) << l;
 }
 
+
+// Over terrain (markSeen()): the ground a frame showed, here cast on the
+// CPU. `hit` takes a ray (origin, direction) and gives the point it shows,
+// or false for sky.
+template <typename Hit>
+GroundSeen seenBy(const Camera& camera, const Viewport& viewport, Hit hit) {
+  GroundSeen seen;
+  seen.camera = camera;
+  seen.viewport = viewport;
+  groundSeenGrid(viewport, &seen.xs, &seen.ys);
+  const double tan_half = std::tan(camera.vfov_rad * 0.5);
+  const glm::dvec3 right = camera.right() * (tan_half * viewport.width_px / viewport.height_px);
+  const glm::dvec3 up = camera.up() * tan_half;
+  for (double y : seen.ys)
+    for (double x : seen.xs) {
+      const glm::dvec3 d = camera.forward() + right * (2.0 * x / viewport.width_px - 1.0) +
+                           up * (1.0 - 2.0 * y / viewport.height_px);
+      glm::dvec3 p(NAN);
+      if (!hit(camera.position, d, &p)) p = glm::dvec3(NAN);
+      seen.points.push_back(p);
+    }
+  return seen;
+}
+
+bool planeHit(const glm::dvec3& o, const glm::dvec3& d, glm::dvec3* p) {
+  if (d.y >= 0.0) return false;
+  *p = o + d * (-o.y / d.y);
+  return true;
+}
+
+size_t marked(const ClipLevelPlan& lp) { return size_t(std::count(lp.sampled.begin(), lp.sampled.end(), 1)); }
+
+TEST(SeenScope, FlatGroundSeenMarksWhatThePlaneMarks) {
+  PyramidGeometry geometry;
+  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const Viewport viewport{320, 180};
+  size_t both = 0, plane_only = 0, seen_only = 0;
+  for (const double pitch : {-1.5707963267948966, -0.9, -0.45, -0.25}) {
+    Camera camera;
+    camera.position = {30000.0, 600.0, 31000.0};
+    camera.heading_rad = 0.7;
+    camera.pitch_rad = pitch;
+    PlannerConfig config;
+    config.scope = PlanScope::kWindow;
+    ClipmapPlan plane = planClipmap(geometry, viewport, camera, config);
+    ClipmapPlan seen = plane;
+    markSampled(geometry, viewport, camera, 2.0 * 65536.0 + 600.0, &plane);
+    // With the plane's lead, to compare like with like.
+    markSeen(geometry.tile_px, viewport, camera, seenBy(camera, viewport, planeHit), &seen, kSampleLeadTiles);
+    for (size_t l = 0; l < plane.stack.size(); ++l) {
+      const ClipLevelPlan &a = plane.stack[l], &b = seen.stack[l];
+      if (!a.needed) continue;
+      ASSERT_EQ(a.sampled.size(), b.sampled.size()) << l;
+      for (size_t k = 0; k < a.sampled.size(); ++k) {
+        both += a.sampled[k] && b.sampled[k];
+        plane_only += a.sampled[k] && !b.sampled[k];
+        seen_only += !a.sampled[k] && b.sampled[k];
+      }
+    }
+  }
+  std::printf("plane and seen: %zu tiles, the plane's alone %zu, the seen ground's alone %zu\n", both, plane_only,
+              seen_only);
+  ASSERT_GT(both, 150u);
+  // On a plane the two agree but at the margins: the plane's grid also
+  // stands for the ground beyond the horizon, the seen grid only for what
+  // its points showed; the seen ground's larger slack (kSeenLodSlack)
+  // marks a few more tiles where the level lies near the next.
+  EXPECT_LE(seen_only * 10, both);
+  EXPECT_LE(plane_only * 20, both);
+}
+
+TEST(SeenScope, GroundHiddenBehindARidgeIsNotMarked) {
+  PyramidGeometry geometry;
+  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const Viewport viewport{320, 180};
+  // Looking north (-z) from 300 up at a wall facing the camera 2,000 ahead,
+  // 250 high, with the plain beyond it: the ray over the wall's top meets
+  // the plain 12,000 ahead, so the plain from 2,000 to 12,000 is hidden.
+  Camera camera;
+  camera.position = {30000.0, 300.0, 40000.0};
+  camera.pitch_rad = -0.05;
+  const double wall_z = 38000.0, wall_top = 250.0;
+  auto ridge = [&](const glm::dvec3& o, const glm::dvec3& d, glm::dvec3* p) {
+    if (d.z < 0.0) {
+      const double t = (wall_z - o.z) / d.z;
+      const glm::dvec3 at = o + d * t;
+      if (at.y >= 0.0 && at.y <= wall_top && (!(d.y < 0.0) || -o.y / d.y >= t)) {
+        *p = at;
+        return true;
+      }
+    }
+    return planeHit(o, d, p);
+  };
+  PlannerConfig config;
+  config.scope = PlanScope::kWindow;
+  ClipmapPlan plan = planClipmap(geometry, viewport, camera, config);
+  markSeen(geometry.tile_px, viewport, camera, seenBy(camera, viewport, ridge), &plan);
+  // The wall's level: its face seen square on, a pixel spans its distance
+  // times the pixel's angle.
+  const double pixel = 2.0 * std::tan(camera.vfov_rad * 0.5) / viewport.height_px;
+  const uint32_t wall_level = uint32_t(std::floor(std::log2(2000.0 * pixel)));
+  size_t wall_tiles = 0, hidden_tiles = 0;
+  ASSERT_LT(wall_level + 2, plan.stack.size());
+  for (uint32_t level = wall_level; level < plan.stack.size(); ++level) {
+    const ClipLevelPlan& lp = plan.stack[level];
+    ASSERT_TRUE(lp.needed) << level;
+    const double tile = 128.0 * std::ldexp(1.0, int(level));
+    for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+      for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) {
+        if (!lp.wants(x, y)) continue;
+        if (y * tile <= wall_z && (y + 1) * tile > wall_z - 1.0) ++wall_tiles;
+        // Wholly within the hidden plain, a tile clear of both ends and of
+        // the lead the wall's ground reaches ahead (kSeenLeadTiles).
+        if ((y + 1) * tile < wall_z - (kSeenLeadTiles + 0.5) * tile && y * tile > camera.position.z - 11000.0)
+          ++hidden_tiles;
+      }
+  }
+  EXPECT_GT(wall_tiles, 0u);
+  EXPECT_EQ(hidden_tiles, 0u);
+}
+
+TEST(SeenScope, TheLevelFollowsThePlannedCameraAndNoGroundMarksNothing) {
+  const Viewport viewport{320, 180};
+  Camera camera;
+  camera.position = {30000.0, 600.0, 31000.0};
+  camera.pitch_rad = -0.6;
+  const GroundSeen seen = seenBy(camera, viewport, planeHit);
+  const std::vector<SeenCorner> then = seenCorners(seen, viewport, camera);
+  // The same ground from twice as far along each point's ray: one level
+  // coarser, point by point.
+  Camera farther = camera;
+  farther.position.y *= 2.0;
+  size_t compared = 0;
+  const size_t w = seen.xs.size();
+  for (size_t j = 0; j < seen.ys.size(); ++j)
+    for (size_t i = 0; i < w; ++i) {
+      const SeenCorner& c = then[j * w + i];
+      if (!std::isfinite(c.lod)) continue;
+      // From a camera at the same point's distance doubled: farther.
+      GroundSeen one = seen;
+      const glm::dvec3 p = seen.points[j * w + i];
+      Camera away = camera;
+      away.position = p + 2.0 * (camera.position - p);
+      const std::vector<SeenCorner> now = seenCorners(one, viewport, away);
+      EXPECT_NEAR(now[j * w + i].lod, c.lod + 1.0, 1e-9);
+      if (++compared > 40) break;
+    }
+  EXPECT_GT(compared, 40u);
+  // A frame that showed no ground marks nothing.
+  PyramidGeometry geometry;
+  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  PlannerConfig config;
+  config.scope = PlanScope::kWindow;
+  ClipmapPlan plan = planClipmap(geometry, viewport, camera, config);
+  GroundSeen sky = seen;
+  std::fill(sky.points.begin(), sky.points.end(), glm::dvec3(NAN));
+  markSeen(geometry.tile_px, viewport, camera, sky, &plan);
+  size_t levels = 0;
+  for (const ClipLevelPlan& lp : plan.stack)
+    if (lp.needed) {
+      ++levels;
+      EXPECT_EQ(marked(lp), 0u) << lp.level;
+      EXPECT_FALSE(lp.sampled.empty()) << lp.level;
+    }
+  EXPECT_GT(levels, 0u);
+}
 }  // namespace
 }  // namespace clipstream

@@ -235,6 +235,16 @@ class Flight {
   // were made. Sets *preload_ms to the pyramid load's time.
   Status makeRenderer(const Viewport& viewport, const Camera& camera, double* preload_ms);
   Status makeTerrain();
+  // The camera the streamer plans with for `camera` (step()'s rule), and
+  // the ground height under it into *ground_height (0 without terrain).
+  Camera planningCamera(const Camera& camera, double* ground_height);
+  // Binds the frame's framebuffer (the offscreen target or the window's).
+  void bindFrame();
+  // Reads the ground the frame just drawn with `camera` showed into the
+  // streamer (over terrain, PlanScope::kSampled; docs/terrain.md "Over-fetch
+  // over terrain"), moved into the space of `planning`, the camera step()
+  // gave the streamer.
+  void readGroundSeen(const Camera& camera, const Camera& planning);
 
   std::shared_ptr<TileSource> m_source;
   FlightConfig m_config;
@@ -250,6 +260,9 @@ class Flight {
   StreamerStats m_before;
   Camera m_previous;
   double m_previous_step = 0.0;
+  // Over terrain with PlanScope::kSampled: the streamer holds the ground a
+  // frame of this view showed (false at first, after a resize).
+  bool m_seen_read = false;
   double m_preload_ms = 0.0;
   uint32_t m_preload_failures = 0;
   uint32_t m_resizes = 0;

@@ -24,6 +24,7 @@
 #include <clipstream/store/types.h>
 #include <clipstream/streamer/alignment.h>
 #include <clipstream/streamer/camera.h>
+#include <clipstream/streamer/planner.h>
 #include <clipstream/streamer/terrain_bounds.h>
 
 #include <glm/glm.hpp>
@@ -204,6 +205,17 @@ class TerrainRenderer {
   // kOutOfMemory / kUnavailable if its float target cannot be made.
   [[nodiscard]] Status readPositions(const Camera& camera, const Viewport& viewport,
                                      const ClipmapRenderer& colour, std::vector<float>* xyzw);
+
+  // The ground the frame just drawn showed (Streamer::setGroundSeen()): at
+  // the points of groundSeenGrid(viewport), the world point each pixel
+  // shows, unprojected from the depth the draw left; NaN where it shows no
+  // ground. Call right after draw() with the camera and viewport it drew
+  // with, while its framebuffer (`framebuffer` pixels, the viewport's unless
+  // the window's is larger) is still bound: it reads one row of depth per
+  // grid row (55 rows of 1280 at 1280x720), so it waits for the draw as
+  // glFinish would. GL thread.
+  void readGroundSeen(const Camera& camera, const Viewport& viewport, const Viewport& framebuffer,
+                      GroundSeen* out) const;
 
   // The lowest and highest ground (world units) around the camera: the
   // bounds of the resident tiles under the ring `kReliefRings` levels

@@ -14,6 +14,7 @@
 #include <clipstream/streamer/terrain_bounds.h>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace clipstream {
@@ -38,13 +39,39 @@ enum class PlanScope {
   // ancestors for the per-tile fallback while it loads, and one tile of
   // each level ahead along the view (a start from rest finds it loaded).
   // Computed on a grid of screen cells, each cell's ground and LOD range
-  // bounded by its corners (exact bounds on the plane). On the flat plane only: over
-  // terrain bounds or relief planes the plan wants the whole window.
+  // bounded by its corners (exact bounds on the plane). Over terrain (height
+  // bounds or relief planes) the cells are those of the ground a frame
+  // showed (PlannerConfig::seen); without it the plan wants the whole window.
   // The default: a scene loads what its frames sample (docs/decisions.md
   // D62).
   kSampled,
   kWindow,  // the whole clip window of every needed level (the classic clipmap)
 };
+
+// The ground a drawn frame showed, for planning the next frames over
+// terrain, where no ray cast on the planner's side knows what a pixel shows
+// (a slope hides what lies behind it): for a grid of screen points
+// (groundSeenGrid()), the point each showed, read back from the frame's
+// depth (TerrainRenderer::readGroundSeen()). With PlanScope::kSampled the
+// planner marks the window tiles under this ground, at the levels its pixels
+// sample seen from the camera being planned (docs/terrain.md, "Over-fetch
+// over terrain"). Ground the frame did not show (a turn brings it in at the
+// screen's border) is missed until a frame shows it; it is drawn from the
+// coarser levels meanwhile.
+struct GroundSeen {
+  Camera camera;                   // the camera that drew it
+  Viewport viewport;               // the frame's size (xs and ys are in its pixels)
+  std::vector<double> xs, ys;      // the grid: groundSeenGrid(viewport)
+  // xs.size() * ys.size() points, row-major (x fastest), in the planner's
+  // space (the streamer maps them into each layer's texels); NaN where the
+  // pixel shows no ground (sky, beyond the texture).
+  std::vector<glm::dvec3> points;
+};
+
+// The screen positions (pixels, y down; pixel centres) of the grid a
+// GroundSeen is read on: the flat planner's cell corners for this viewport
+// (96 cells along the longer side at most, 4 px apart at least).
+void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys);
 
 struct PlannerConfig {
   uint32_t clip_tiles = 0;       // clip size in tiles; 0 = choose from the viewport
@@ -72,6 +99,10 @@ struct PlannerConfig {
   // by the same rule as on the plane.
   TerrainView terrain;
   PlanScope scope = PlanScope::kSampled;
+  // Over terrain with PlanScope::kSampled: the ground the last frame
+  // showed, in this plan's space (the streamer's Streamer::setGroundSeen(),
+  // mapped into the layer's texels). Null: every needed window whole.
+  std::shared_ptr<const GroundSeen> seen;
 };
 
 // One level of the clip stack.

@@ -270,6 +270,15 @@ class Streamer {
   // texels). 0 and 0 (the default): flat. Ignored while plansOnTerrain().
   void setGroundRelief(double above, double below);
 
+  // Render thread. The ground the last drawn frame showed, in world space
+  // (GroundSeen, read back by TerrainRenderer::readGroundSeen()): over
+  // terrain with PlanScope::kSampled the next update()s plan each colour
+  // layer's windows to the tiles under it (the elevation layers keep their
+  // windows: the rings read heights where no pixel looks). Null clears it:
+  // whole windows, as after a jump of the camera, when the last frame's
+  // ground says nothing of the next one's. Ignored over the flat plane.
+  void setGroundSeen(std::shared_ptr<const GroundSeen> seen);
+
   // True when the constructor loaded an elevation layer's per-tile height
   // bounds (StreamLayer::world_per_height > 0 and a source that has them):
   // every layer is then planned against the terrain, and update()'s camera
