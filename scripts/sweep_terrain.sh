@@ -19,8 +19,8 @@
 # texture, coverage (ground in one frame, sky in the other) included, the
 # silhouette figure (outline to outline), the fewest triangles that model each
 # judged frame within its own p95 (FewestTriangles), the quadtree's achieved
-# error bound (its triangle budget), the over-fetch of the colour and height
-# layers; then the same setting on a slow stretch of the flight judged every
+# error bound (its triangle budget), the over-fetch of the colour layer's clip
+# levels; then the same setting on a slow stretch of the flight judged every
 # frame: the mean per-pixel grey change between consecutive frames against the
 # reference's own, and the geometry-only change (the drawn surface moving
 # against the full-resolution one).
@@ -72,7 +72,7 @@ PY
 # ---- runs -------------------------------------------------------------------
 tmp_csv=$CSV.tmp.$$
 trap 'rm -f "$tmp_csv" "$WORK"/*.png.tmp' EXIT
-echo "scene,method,setting,triangles,fewest_triangles,frame_ms,render_cpu_ms,geo_mean_px,geo_p95_px,psnr_db,change,reference_change,silhouette_mean_px,silhouette_p95_px,coverage_pixels,geometry_change_px,geometry_change_max_px,error_bound_px,over_fetch,height_over_fetch" >"$tmp_csv"
+echo "scene,method,setting,triangles,fewest_triangles,frame_ms,render_cpu_ms,geo_mean_px,geo_p95_px,psnr_db,change,reference_change,silhouette_mean_px,silhouette_p95_px,coverage_pixels,geometry_change_px,geometry_change_max_px,error_bound_px,over_fetch_clip,height_over_fetch" >"$tmp_csv"
 run() {  # scene method setting, then clipstream-fly arguments
   local scene=$1 method=$2 setting=$3
   shift 3
@@ -101,7 +101,7 @@ run() {  # scene method setting, then clipstream-fly arguments
     "$(value "$out" geo_silhouette_mean_px)" "$(value "$out" geo_silhouette_p95_px)" \
     "$(value "$out" geo_coverage_pixels_mean)" "$(value "$out/slow" geometry_change_mean_px)" \
     "$(value "$out/slow" geometry_change_max_px)" "$(value "$out" terrain_error_px_mean)" \
-    "$(value "$out" over_fetch_ratio)" "$(jvalue "$out" height_over_fetch_ratio)" >>"$tmp_csv"
+    "$(value "$out" over_fetch_stack_ratio)" "$(jvalue "$out" height_over_fetch_ratio)" >>"$tmp_csv"
   echo "  $scene $method $setting: $(tail -n 1 "$tmp_csv")"
 }
 for scene in $SCENES; do
@@ -190,8 +190,10 @@ GEN=$WORK/terrain_section.md
   echo "outline pixel's distance to the other frame's outline; grey change: the slow stretch's change between"
   echo "consecutive frames minus the reference's; geometry change: the drawn surface moving against the"
   echo "full-resolution one between consecutive frames (mean / largest pair); bound: the quadtree's achieved error"
-  echo "bound (above its setting where the triangle budget binds); over-fetch: tiles loaded over tiles the frames"
-  echo "sample, colour / height (–: not measured)."
+  echo "bound (above its setting where the triangle budget binds); over-fetch: the clip levels' tiles loaded over"
+  echo "those the frames sample (the coarse pyramid, loaded whole at the start, left out), colour / height (–: none"
+  echo "sampled, as on St Helens, whose flight needs no clip level of the orthophoto; or not measured: the height"
+  echo "layer loads whole windows)."
   echo
   echo "| scene | method | setting | triangles | fewest | ratio | frame ms | × flat | geo mean / p95 px | silhouette mean / p95 px | coverage px | PSNR dB | grey change | geometry change px | bound px | over-fetch |"
   echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
@@ -200,9 +202,10 @@ GEN=$WORK/terrain_section.md
                 set = ($2=="clipmap") ? "ring " $3 : ($2=="quadtree") ? $3 " px" : "";
                 cost = (flat[$1] > 0) ? sprintf("%.2f", $6 / flat[$1]) : "";
                 bound = ($2 == "quadtree" && $18 != "") ? sprintf("%.1f", $18) : "";
+                cof = ($19 != "" && $19 > 0) ? sprintf("%.2f", $19) : "–";
                 hof = ($20 != "" && $20 > 0) ? sprintf("%.2f", $20) : "–";
-                printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %s | %.3f / %.3f | %.2f / %.2f | %.0f | %.2f | %+.3f | %.4f / %.3f | %s | %.2f / %s |\n",
-                $1, $2, set, $4, $5, ratio, $6, cost, $8, $9, $13, $14, $15, $10, $11 - $12, $16, $17, bound, $19, hof}' "$CSV" "$CSV"
+                printf "| %s | %s | %s | %.0f | %.0f | %s | %.1f | %s | %.3f / %.3f | %.2f / %.2f | %.0f | %.2f | %+.3f | %.4f / %.3f | %s | %s / %s |\n",
+                $1, $2, set, $4, $5, ratio, $6, cost, $8, $9, $13, $14, $15, $10, $11 - $12, $16, $17, bound, cof, hof}' "$CSV" "$CSV"
   echo
   for scene in $SCENES; do echo "![terrain methods, $scene](charts/terrain_$scene.png)"; echo; done
   echo "![temporal stability](charts/terrain_stability.png)"

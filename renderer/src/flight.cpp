@@ -251,7 +251,7 @@ Status Flight::resize(const Viewport& viewport, const Camera& camera, const View
   if (m_terrain)
     if (Status s = makeTerrain(); !s) return s;
   m_streamer->resetGpuResidency();
-  m_seen_read = false;  // read again at the new size
+  m_seen.reset();  // read again at the new size
   ++m_resizes;
   return okStatus();
 }
@@ -310,19 +310,26 @@ void Flight::bindFrame() {
   }
 }
 
-void Flight::readGroundSeen(const Camera& camera, const Camera& planning) {
+void Flight::readGroundSeen(const Camera& camera) {
   auto seen = std::make_shared<GroundSeen>();
   const Viewport fb = !m_target && m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
   m_terrain->readGroundSeen(camera, m_config.viewport, fb, seen.get());
+  m_seen = std::move(seen);
+}
+
+void Flight::handGroundSeen(const Camera& camera, const Camera& planning) {
   // In the planner's space: without height bounds its camera stands at its
-  // height above the ground (step()), and the ground with it.
+  // height above this frame's ground (planningCamera()), and the ground
+  // seen moves with it, so that the distances from the camera hold.
   const double dy = planning.position.y - camera.position.y;
-  if (dy != 0.0) {
-    seen->camera = planning;
-    for (glm::dvec3& p : seen->points) p.y += dy;
+  if (dy == 0.0) {
+    m_streamer->setGroundSeen(m_seen);
+    return;
   }
-  m_streamer->setGroundSeen(std::move(seen));
-  m_seen_read = true;
+  auto moved = std::make_shared<GroundSeen>(*m_seen);
+  moved->camera.position.y += dy;
+  for (glm::dvec3& p : moved->points) p.y += dy;
+  m_streamer->setGroundSeen(std::move(moved));
 }
 
 Camera Flight::planningCamera(const Camera& camera, double* ground_height) {
@@ -370,12 +377,13 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
   // view: the terrain is drawn once first, from what is resident (the
   // coarse levels at least), to read what this view shows.
   const bool read_seen = m_terrain && m_config.streamer.planner.scope == PlanScope::kSampled;
-  if (read_seen && (jumped || !m_seen_read)) {
+  if (read_seen && (jumped || !m_seen)) {
     bindFrame();
     ClipmapRenderer::clearSky();
     m_terrain->draw(camera, m_config.viewport, *m_renderer);
-    readGroundSeen(camera, planning);
+    readGroundSeen(camera);
   }
+  if (read_seen) handGroundSeen(camera, planning);
   m_streamer->update(planning, m_config.viewport, clock_s);
   FrameHandoff handoff;
   if (m_terrain) {
@@ -404,7 +412,7 @@ FrameSample Flight::step(const Camera& camera, double clock_s) {
     f.terrain_error_px = tf.achieved_error_px;
     f.terrain_select_ms = tf.select_ms;
     // What this frame showed, for the next frames' plans.
-    if (read_seen) readGroundSeen(camera, planning);
+    if (read_seen) readGroundSeen(camera);
   } else {
     m_renderer->draw(camera, m_config.viewport);
   }

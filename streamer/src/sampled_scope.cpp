@@ -156,7 +156,7 @@ bool allMarked(ClipLevelPlan* lp, const TileRect& r) {
 
 void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys) {
   const double W = viewport.width_px, H = viewport.height_px;
-  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
+  const double step = std::max(kSeenStepMinPx, std::max(W, H) / kSeenCellsMax);
   *xs = sampleCornerPositions(W, step);
   *ys = sampleCornerPositions(H, step);
 }
@@ -238,8 +238,10 @@ void markSampledLevel(const std::vector<SampleGrid>& pyramid, uint32_t tile_px, 
 
 void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, const Camera& camera,
                  double far_h, ClipmapPlan* plan) {
-  std::vector<double> xs, ys;
-  groundSeenGrid(viewport, &xs, &ys);
+  const double W = viewport.width_px, H = viewport.height_px;
+  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
+  const std::vector<double> xs = sampleCornerPositions(W, step);
+  const std::vector<double> ys = sampleCornerPositions(H, step);
   const std::vector<Corner> corners = sampleCorners(ScreenRays(viewport, camera), xs, ys, far_h);
 
   const std::vector<ClipLevelPlan*> levels = startMasks(plan);
@@ -281,9 +283,12 @@ struct SeenAxis {
   }
   // The surface's step per pixel: the mean of the two sides (the ground
   // recedes, so the step behind is smaller and the one ahead larger).
-  double perPixel() const { return any() ? 0.5 * (step[0] + step[1]) : INFINITY; }
+  double perPixel() const {
+    return std::isfinite(step[0]) && std::isfinite(step[1]) ? 0.5 * (step[0] + step[1]) : INFINITY;
+  }
   // The other axis' stand-in where this one has no neighbour on its surface:
-  // as far, at a right angle.
+  // as far, at a right angle, with its steps (nothing kept: no neighbour of
+  // this axis is on the surface).
   SeenAxis turned() const {
     SeenAxis t = *this;
     for (glm::dvec2& v : t.to) v = {-v.y, v.x};
@@ -342,7 +347,11 @@ std::vector<SeenCorner> seenCorners(const GroundSeen& seen, const Viewport& view
         c.continuous[1][k] = axis[1].kept[k];
       }
       // Seen from the camera being planned: a pixel's ground grows with its
-      // distance.
+      // distance. (Not with the obliquity to the surface as well: that is
+      // exact for a plane, but from a surface normal taken across the grid's
+      // steps the valley flight of scripts/bench_terrain_planning.sh loaded
+      // twice the tiles, 4.1x those sampled against 2.2x: the prefetch's
+      // camera half a second ahead sees the far ground steeper than it is.)
       double rho = std::max(axis[0].perPixel(), axis[1].perPixel());
       const glm::dvec3& p = seen.points[j * w + i];
       const double then = glm::length(p - seen.camera.position);
@@ -359,9 +368,13 @@ void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, 
               ClipmapPlan* plan, double lead_tiles) {
   const size_t w = seen.xs.size(), h = seen.ys.size();
   if (w < 2 || h < 2 || seen.points.size() != w * h) return;  // no grid: the whole windows
+  const std::vector<SeenCorner> corners = seenCorners(seen, viewport, camera);
+  // A frame that showed no ground (drawn before any height was resident,
+  // or looking at the sky) says nothing of what to load: whole windows.
+  if (std::none_of(corners.begin(), corners.end(), [](const SeenCorner& c) { return std::isfinite(c.lod); }))
+    return;
   const std::vector<ClipLevelPlan*> levels = startMasks(plan);
   if (levels.empty()) return;
-  const std::vector<SeenCorner> corners = seenCorners(seen, viewport, camera);
   // A cell per grid point: its ground halfway to its neighbours, at the
   // least level of detail over it (the level halfway to each neighbour on
   // its surface lies between theirs).
@@ -374,9 +387,7 @@ void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, 
       const SeenCorner& c = corners[j * w + i];
       if (!std::isfinite(c.lod)) continue;  // no ground shown with a level of its own
       SampleCell& cell = grid.cells[j * w + i];
-      // markSampledLevel() takes kSampleLodSlack off; over terrain the
-      // slack is kSeenLodSlack in all.
-      cell.lod = c.lod - (kSeenLodSlack - kSampleLodSlack);
+      cell.lod = c.lod;
       const auto halfway = [&](bool kept, size_t ni, size_t nj) {
         if (kept && std::isfinite(corners[nj * w + ni].lod))
           cell.lod = std::min(cell.lod, 0.5 * (c.lod + corners[nj * w + ni].lod));
@@ -385,6 +396,9 @@ void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, 
       if (i + 1 < w) halfway(c.continuous[0][1], i + 1, j);
       if (j > 0) halfway(c.continuous[1][0], i, j - 1);
       if (j + 1 < h) halfway(c.continuous[1][1], i, j + 1);
+      // markSampledLevel() takes kSampleLodSlack off; over terrain the
+      // slack is kSeenLodSlack in all.
+      cell.lod -= kSeenLodSlack - kSampleLodSlack;
       cell.lo = c.lo;
       cell.hi = c.hi;
     }

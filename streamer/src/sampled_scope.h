@@ -40,23 +40,34 @@ inline constexpr double kSampleLodSlack = 0.05;
 // (x50: 97.8), one tile none (99.0, 98.4) for an over-fetch of 1.85 at x1
 // instead of 1.27.
 inline constexpr double kSampleLeadTiles = 1.0;
+// Over terrain (groundSeenGrid()) the grid is twice as fine: points at
+// least 2 px apart, at most 192 along the longer side. Its boxes and levels
+// follow the relief closer: on the valley flight of
+// scripts/bench_terrain_planning.sh (1280x720) the clip levels loaded 2.16x
+// the tiles sampled on the plane's grid, 1.62x on this one and 1.67x on one
+// twice finer again, for 2.5 / 5.2 / 17.5 ms of streamer time a frame; on
+// the St Helens orbits of tests/eval/test_terrain_planning.cpp (320x180) 11
+// / 3 tiles of 1,162 sampled went unwanted on the plane's grid / this one.
+inline constexpr double kSeenStepMinPx = 2.0;
+inline constexpr double kSeenCellsMax = 192.0;
 // Over terrain (markSeen()) the lead is half a tile: the flights of
-// scripts/bench_terrain_planning.sh (1280x720, every 5th frame judged)
-// loaded 1.76 / 1.93 / 2.11 times the clip-level tiles the St Helens valley
-// flight samples with a lead of 0 / 0.5 / 1 tile, and 1.04 / 1.18 / 1.31
-// on the orbit, at the same PSNR to 0.01 dB; half a tile keeps some of
-// the flat plane's margin for a start from rest within the over-fetch
-// target of 2 (docs/decisions.md D295).
+// scripts/bench_terrain_planning.sh (1280x720, every 5th frame judged, on
+// the plane's grid) loaded 1.76 / 1.93 / 2.11 times the clip-level tiles
+// the St Helens valley flight samples with a lead of 0 / 0.5 / 1 tile, and
+// 1.04 / 1.18 / 1.31 on the orbit, at the same PSNR to 0.01 dB; half a
+// tile keeps some of the flat plane's margin for a start from rest within
+// the over-fetch target of 2 (docs/decisions.md D295).
 inline constexpr double kSeenLeadTiles = 0.5;
 // Over terrain the levels of detail are compared with this much slack:
-// a grid point's level comes from the ground steps to its neighbours, 4 to
-// 13 pixels away, and a DEM's facets make the level vary within a cell. On
+// a grid point's level comes from the ground steps to its neighbours, 2 to
+// 7 pixels away, and a DEM's facets make the level vary within a cell. On
 // the St Helens orbits of tests/eval/test_terrain_planning.cpp (320x180,
-// at rest) the tiles sampled that the plan did not want were 25 of 1,695
-// with the plane's 0.05, 17 with 0.15, 14 with 0.2 and 8 with 0.35, for
-// 1,475 / 1,552 / 1,605 / 1,786 tiles wanted (1,162 sampled at the clip
-// levels). A tile missed this way is one the pixels sample with little
-// weight (their level lies near the next coarser one, which is loaded).
+// at rest, on the plane's grid) the tiles sampled that the plan did not
+// want were 25 of 1,162 at the clip levels with the plane's 0.05, 17 with
+// 0.15, 14 with 0.2 and 8 with 0.35, for 1,475 / 1,552 / 1,605 / 1,786
+// tiles wanted (3 with 0.2 on the finer grid, kSeenCellsMax). A tile
+// missed this way is one the pixels sample with little weight (their level
+// lies near the next coarser one, which is loaded).
 inline constexpr double kSeenLodSlack = 0.2;
 // A block of cells over at most this many window tiles that are all marked
 // already is not searched further (a larger one costs more to check than
@@ -130,7 +141,9 @@ inline constexpr double kSeenEdgeRatio = 3.0;
 // (INFINITY when no neighbour showed ground): log2 of the larger axis' step
 // per pixel (the mean of its two sides'), scaled by the distance from the
 // planned camera over the distance from the camera that saw it (and by the
-// two pixels' angles).
+// two pixels' angles); a change of the view's obliquity to the surface is
+// left out (exact for the small moves between frames, a fraction of a level
+// off for a camera moved far: SeenScope tests).
 struct SeenCorner {
   bool shown = false;
   glm::dvec2 ground{0.0};
@@ -149,8 +162,9 @@ std::vector<SeenCorner> seenCorners(const GroundSeen& seen, const Viewport& view
 // four corners: over relief a quad may span a ridge and the plain behind
 // it, and its box then covers the ground between, which no pixel shows
 // (on the St Helens orbit at 1280x720 the quads wanted twice the level-0
-// tiles the frame sampled). A grid that does not match its points leaves
-// the windows whole.
+// tiles the frame sampled). A grid that does not match its points, or that
+// showed no ground with a level of its own (a frame drawn before any height
+// was resident, or of the sky), leaves the windows whole.
 void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, const GroundSeen& seen,
               ClipmapPlan* plan, double lead_tiles = kSeenLeadTiles);
 

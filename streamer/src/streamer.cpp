@@ -445,7 +445,8 @@ bool Streamer::Impl::trustHint(const Viewport& viewport, double time_s, const st
   // The lookahead serves eviction by return time, which only kGpuFirst does.
   if (agrees && config.eviction == EvictionMode::kGpuFirst)
     for (Layer& layer : layers)
-      if (layer.active()) layer.lookahead.advance(layer.geometry, viewport, layer.planner(config.planner), layer.hint, time_s);
+      if (layer.active())
+        layer.lookahead.advance(layer.geometry, viewport, layer.planner(config.planner, false), layer.hint, time_s);
   return agrees;
 }
 

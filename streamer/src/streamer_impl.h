@@ -88,11 +88,15 @@ struct Streamer::Impl {
     uint32_t published_lod = 0;
 
     bool active() const { return spec.source && geometry.levelCount() != 0; }
-    PlannerConfig planner(const PlannerConfig& base) const {
+    // The layer's planner settings; `with_seen` false leaves the ground the
+    // last frame showed out (whole windows over terrain): for the path
+    // hint's lookahead, seconds ahead, where that frame's ground says
+    // little of what the view will show.
+    PlannerConfig planner(const PlannerConfig& base, bool with_seen = true) const {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
       c.terrain = terrain;
-      c.seen = seen;
+      if (with_seen) c.seen = seen;
       // Relief in world units, scaled like layerCamera() scales heights.
       const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
       c.ground_above *= s;

@@ -240,11 +240,13 @@ class Flight {
   Camera planningCamera(const Camera& camera, double* ground_height);
   // Binds the frame's framebuffer (the offscreen target or the window's).
   void bindFrame();
-  // Reads the ground the frame just drawn with `camera` showed into the
-  // streamer (over terrain, PlanScope::kSampled; docs/terrain.md "Over-fetch
-  // over terrain"), moved into the space of `planning`, the camera step()
-  // gave the streamer.
-  void readGroundSeen(const Camera& camera, const Camera& planning);
+  // Reads the ground the frame just drawn with `camera` showed into m_seen
+  // (over terrain, PlanScope::kSampled; docs/terrain.md "Over-fetch over
+  // terrain").
+  void readGroundSeen(const Camera& camera);
+  // Hands m_seen to the streamer for this frame's plans, moved into the
+  // space of `planning`, the camera the streamer plans `camera` with.
+  void handGroundSeen(const Camera& camera, const Camera& planning);
 
   std::shared_ptr<TileSource> m_source;
   FlightConfig m_config;
@@ -260,9 +262,9 @@ class Flight {
   StreamerStats m_before;
   Camera m_previous;
   double m_previous_step = 0.0;
-  // Over terrain with PlanScope::kSampled: the streamer holds the ground a
-  // frame of this view showed (false at first, after a resize).
-  bool m_seen_read = false;
+  // Over terrain with PlanScope::kSampled: the ground the last frame showed,
+  // in world space (null at first and after a resize).
+  std::shared_ptr<const GroundSeen> m_seen;
   double m_preload_ms = 0.0;
   uint32_t m_preload_failures = 0;
   uint32_t m_resizes = 0;

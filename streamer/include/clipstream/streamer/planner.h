@@ -69,8 +69,8 @@ struct GroundSeen {
 };
 
 // The screen positions (pixels, y down; pixel centres) of the grid a
-// GroundSeen is read on: the flat planner's cell corners for this viewport
-// (96 cells along the longer side at most, 4 px apart at least).
+// GroundSeen is read on: 192 cells along the longer side at most, 2 px
+// apart at least (twice the flat planner's grid).
 void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys);
 
 struct PlannerConfig {
