@@ -154,11 +154,18 @@ bool allMarked(ClipLevelPlan* lp, const TileRect& r) {
 
 }  // namespace
 
-void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys) {
+// The corners of a grid over the viewport: at least min_px apart, at most
+// cells_max cells along the longer side.
+static void cornerGrid(const Viewport& viewport, double min_px, double cells_max, std::vector<double>* xs,
+                       std::vector<double>* ys) {
   const double W = viewport.width_px, H = viewport.height_px;
-  const double step = std::max(kSeenStepMinPx, std::max(W, H) / kSeenCellsMax);
+  const double step = std::max(min_px, std::max(W, H) / cells_max);
   *xs = sampleCornerPositions(W, step);
   *ys = sampleCornerPositions(H, step);
+}
+
+void groundSeenGrid(const Viewport& viewport, std::vector<double>* xs, std::vector<double>* ys) {
+  cornerGrid(viewport, kSeenStepMinPx, kSeenCellsMax, xs, ys);
 }
 
 std::vector<double> sampleCornerPositions(double size_px, double step_px) {
@@ -238,10 +245,8 @@ void markSampledLevel(const std::vector<SampleGrid>& pyramid, uint32_t tile_px, 
 
 void markSampled(const PyramidGeometry& geometry, const Viewport& viewport, const Camera& camera,
                  double far_h, ClipmapPlan* plan) {
-  const double W = viewport.width_px, H = viewport.height_px;
-  const double step = std::max(kSampleStepMinPx, std::max(W, H) / kSampleCellsMax);
-  const std::vector<double> xs = sampleCornerPositions(W, step);
-  const std::vector<double> ys = sampleCornerPositions(H, step);
+  std::vector<double> xs, ys;
+  cornerGrid(viewport, kSampleStepMinPx, kSampleCellsMax, &xs, &ys);
   const std::vector<Corner> corners = sampleCorners(ScreenRays(viewport, camera), xs, ys, far_h);
 
   const std::vector<ClipLevelPlan*> levels = startMasks(plan);

@@ -29,6 +29,13 @@ TEST(SampledScope, CornersArePixelCentresAStepApartEndingAtTheLast) {
   EXPECT_EQ(wide.back(), 1919.5);
 }
 
+// The pyramid of a 65536^2 texture of 128^2 tiles.
+PyramidGeometry texture64k() {
+  PyramidGeometry geometry;
+  EXPECT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  return geometry;
+}
+
 // A w x h grid whose cell (i, j) has level of detail lod(i, j) and the box
 // [i, i + 1] x [j, j + 1] (texels).
 SampleGrid grid(size_t w, size_t h, double (*lod)(size_t, size_t)) {
@@ -139,8 +146,7 @@ TEST(SampledScope, MarkingThroughTheBlocksEqualsMarkingCellByCell) {
 }
 
 TEST(SampledScope, OnlyNeededLevelsGetAMaskAndTheGroundUnderTheViewIsMarked) {
-  PyramidGeometry geometry;
-  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const PyramidGeometry geometry = texture64k();
   const Viewport viewport{320, 180};
   Camera camera;
   camera.position = {30000.0, 600.0, 30000.0};
@@ -205,8 +211,7 @@ bool planeHit(const glm::dvec3& o, const glm::dvec3& d, glm::dvec3* p) {
 size_t marked(const ClipLevelPlan& lp) { return size_t(std::count(lp.sampled.begin(), lp.sampled.end(), 1)); }
 
 TEST(SeenScope, FlatGroundSeenMarksWhatThePlaneMarks) {
-  PyramidGeometry geometry;
-  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const PyramidGeometry geometry = texture64k();
   const Viewport viewport{320, 180};
   size_t both = 0, plane_only = 0, seen_only = 0;
   for (const double pitch : {-1.5707963267948966, -0.9, -0.45, -0.25}) {
@@ -244,8 +249,7 @@ TEST(SeenScope, FlatGroundSeenMarksWhatThePlaneMarks) {
 }
 
 TEST(SeenScope, GroundHiddenBehindARidgeIsNotMarked) {
-  PyramidGeometry geometry;
-  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const PyramidGeometry geometry = texture64k();
   const Viewport viewport{320, 180};
   // Looking north (-z) from 300 up at a wall facing the camera 2,000 ahead,
   // 250 high, with the plain beyond it: the ray over the wall's top meets
@@ -381,8 +385,7 @@ TEST(SeenScope, AGridPointsLevelIsThePixelsSeenFromThePlannedCamera) {
 }
 
 TEST(SeenScope, OneRowOfGroundMarksItsTilesAndNoGroundLeavesTheWindowsWhole) {
-  PyramidGeometry geometry;
-  ASSERT_TRUE(makePyramidGeometry(1 << 16, 1 << 16, 128, PixelFormat::kRGBA8, &geometry));
+  const PyramidGeometry geometry = texture64k();
   const Viewport viewport{320, 180};
   Camera camera;
   camera.position = {30000.0, 600.0, 31000.0};
