@@ -211,8 +211,15 @@ void TerrainRendererImpl::drawGrid(uint32_t p, const Camera& camera, const Frust
   const glm::dvec2 cam = cameraSamples(m, camera);
   const uint32_t block_cells = n / kBlocks;
   setRingUniforms(p, camera, l, o);
-  std::vector<GLsizei> counts;
-  std::vector<const void*> offsets;
+  // The visible blocks, nearest first: a slope hidden behind a nearer one
+  // of the same ring then fails the depth test instead of being shaded
+  // (the rings themselves are drawn finest, nearest, first).
+  struct Block {
+    double distance;
+    GLsizei count;
+    const void* offset;
+  };
+  std::vector<Block> blocks;
   const double spacing = std::ldexp(1.0, int(l));
   for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
     const terrain_mesh::IndexRange range = m_ring_blocks[size_t(pattern)][b];
@@ -247,12 +254,22 @@ void TerrainRendererImpl::drawGrid(uint32_t p, const Camera& camera, const Frust
       ++m_frame.culled_blocks;
       continue;
     }
-    counts.push_back(GLsizei(range.count));
-    offsets.push_back(reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t)));
+    // The camera is the origin: its distance to the block's box.
+    const glm::dvec3 lo(x0.x, y0, x0.y), hi(x1.x, y1, x1.y);
+    const double distance = glm::length(glm::max(glm::max(lo, -hi), glm::dvec3(0.0)));
+    blocks.push_back({distance, GLsizei(range.count),
+                      reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t))});
     m_frame.triangles += range.count / 3;
     ++m_frame.blocks;
   }
-  if (!counts.empty()) {
+  if (!blocks.empty()) {
+    std::sort(blocks.begin(), blocks.end(), [](const Block& a, const Block& b) { return a.distance < b.distance; });
+    std::vector<GLsizei> counts;
+    std::vector<const void*> offsets;
+    for (const Block& b : blocks) {
+      counts.push_back(b.count);
+      offsets.push_back(b.offset);
+    }
     glMultiDrawElements(GL_TRIANGLES, counts.data(), GL_UNSIGNED_INT, offsets.data(), GLsizei(counts.size()));
   }
 }
