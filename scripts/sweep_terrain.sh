@@ -37,8 +37,8 @@ WORK=${SWEEP_WORK:-out/sweep}/terrain
 DOCS=${SWEEP_DOCS:-docs}
 SIZE=${SWEEP_TERRAIN_SIZE:-1280x720}
 FRAMES=60; EVERY=15; SLOW=12
-RINGS="32 64 128 256"; ERRORS="4 10 24"
-if (( QUICK )); then FRAMES=20; EVERY=10; SLOW=4; RINGS="128"; ERRORS="10"; fi
+RINGS="32 64 128 256"; ERRORS="3 6 16"
+if (( QUICK )); then FRAMES=20; EVERY=10; SLOW=4; RINGS="128"; ERRORS="6"; fi
 mkdir -p "$WORK" "$DOCS/data" "$DOCS/charts"
 start=$(date +%s)
 
@@ -129,7 +129,7 @@ panel() {  # y column, y label, y log (1/0), x column, x label, x kind (err|psnr
   [ "$yc" = 4 ] && [ "$xk" = err ] && [ "$xc" = 9 ] &&
     fewest="\"\" using ((sel(\"clipmap\") || sel(\"quadtree\")) ? err(\$9) : 1/0):5 with points pt 2 ps 1.5 title \"fewest at the same p95\", "
   echo "plot \"$CSV\" using (sel(\"clipmap\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 7 title \"clipmap (ring 32..256)\", \
-    \"\" using (sel(\"quadtree\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 5 title \"quadtree (bound 24..4 px)\", \
+    \"\" using (sel(\"quadtree\") ? $x : 1/0):($y > 0 ? $y : 1) with linespoints pt 5 title \"quadtree (bound 16..3 px)\", \
     $fewest\"\" using (sel(\"flat\") ? $x : 1/0):($y > 0 ? $y : 1) with points pt 9 ps 2 title \"flat\", \
     \"\" using (sel(\"full\") ? $x : 1/0):($y > 0 ? $y : 1) with points pt 11 ps 2 title \"full mesh\""
 }

@@ -11,13 +11,16 @@
 //
 // terrain_heights.glsl (heightAt(), normalAt() and their uniforms) comes first.
 layout(location = 0) in ivec2 aGrid;  // vertex index in the ring, 0..N
+// The grid drawn: a ring's, set once for its draw (the attribute's current
+// value), or a quadtree node's, one instance each (terrain_gl.h,
+// TerrainGridOrigin).
+layout(location = 1) in ivec4 aOrigin;  // xy: origin in this level's samples (even for a ring);
+                                        // zw: origin in level-0 samples minus the camera's integer sample
+layout(location = 2) in int aLevel;     // this grid's height level
 
 uniform int uN;                   // cells per ring side
-uniform int uLevel;               // this ring's height level
 uniform int uCoarsest;            // no transition on the coarsest ring
 uniform int uTransition;          // cells of the transition band
-uniform ivec2 uOriginRel;         // ring origin (level-0 samples) minus the camera's integer sample
-uniform ivec2 uOriginLevel;       // ring origin in this level's samples (even)
 uniform vec2 uCamFrac;            // camera position minus its integer sample (level-0 samples)
 uniform float uCamY;              // camera height in world units
 uniform mat4 uViewProj;           // camera-relative view-projection
@@ -37,19 +40,20 @@ out float vRelY;    // camera-relative height, world units (position pass)
 // The coarser level's surface at this level's sample s: its own samples at
 // even s, the mean of the two ends along an odd axis, and the mean of the
 // cell diagonal (the coarse cells' triangulation) when both are odd.
-float coarseAt(ivec2 s) {
+float coarseAt(int level, ivec2 s) {
   ivec2 c0 = s >> 1;
   ivec2 c1 = (s + 1) >> 1;
-  return 0.5 * (heightAt(uLevel + 1, c0) + heightAt(uLevel + 1, c1));
+  return 0.5 * (heightAt(level + 1, c0) + heightAt(level + 1, c1));
 }
 
 void main() {
-  ivec2 s = uOriginLevel + aGrid;  // this level's sample
-  float h = heightAt(uLevel, s);
-  float spacing = float(1 << uLevel);
-  vec3 n = normalAt(uLevel, s, spacing);
+  int level = aLevel;
+  ivec2 s = aOrigin.xy + aGrid;  // this level's sample
+  float h = heightAt(level, s);
+  float spacing = float(1 << level);
+  vec3 n = normalAt(level, s, spacing);
   float alpha = 0.0;
-  if (uLevel < uCoarsest) {
+  if (level < uCoarsest) {
     // Distance from the ring's centre in cells; alpha is 1 on the outer
     // edge and one cell in, 0 inside the transition band.
     ivec2 d = abs(2 * aGrid - uN);  // twice the distance
@@ -57,12 +61,12 @@ void main() {
     float w = float(uTransition);
     alpha = clamp((dist - (0.5 * float(uN) - w - 1.0)) / w, 0.0, 1.0);
     if (alpha > 0.0) {
-      h = mix(h, coarseAt(s), alpha);
-      n = normalize(mix(n, normalAt(uLevel + 1, s >> 1, 2.0 * spacing), alpha));
+      h = mix(h, coarseAt(level, s), alpha);
+      n = normalize(mix(n, normalAt(level + 1, s >> 1, 2.0 * spacing), alpha));
     }
   }
   // Integer offset from the camera's sample (exact), then the fraction.
-  vec2 rel_samples = vec2(uOriginRel + aGrid * (1 << uLevel)) - uCamFrac;
+  vec2 rel_samples = vec2(aOrigin.zw + aGrid * (1 << level)) - uCamFrac;
   vRel = rel_samples * uWorldPerSample;
   vNormal = n;
   vMorph = alpha;

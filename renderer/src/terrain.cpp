@@ -144,7 +144,8 @@ Status TerrainRendererImpl::buildMeshes() {
   // The rings' five index patterns over one vertex grid, or the
   // full-resolution mesh's one pattern, a plain grid.
   const terrain_mesh::RingMesh ring = terrain_mesh::buildRingMesh(m_config.ring_cells, m_config.full_resolution);
-  if (Status s = TerrainMeshBuffers::create(ring.vertices, ring.indices, "the terrain's ring meshes", &m_ring_mesh);
+  if (Status s = TerrainMeshBuffers::create(ring.vertices, ring.indices, false, "the terrain's ring meshes",
+                                            &m_ring_mesh);
       !s)
     return s;
   m_ring_blocks = ring.blocks;
@@ -153,7 +154,7 @@ Status TerrainRendererImpl::buildMeshes() {
   // The quadtree's patch: one (P + 1)^2 grid, its 16 edge patterns.
   const terrain_mesh::PatchMesh patch = terrain_mesh::buildPatchMesh(m_config.patch_cells);
   if (Status s =
-          TerrainMeshBuffers::create(patch.vertices, patch.indices, "the quadtree's patch meshes", &m_patch_mesh);
+          TerrainMeshBuffers::create(patch.vertices, patch.indices, true, "the quadtree's patch meshes", &m_patch_mesh);
       !s)
     return s;
   m_patch_masks = patch.masks;

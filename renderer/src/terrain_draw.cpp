@@ -106,14 +106,13 @@ void TerrainRendererImpl::setFrameUniforms(uint32_t p, const Camera& camera,
   }
 }
 
-void TerrainRendererImpl::setRingUniforms(uint32_t p, const Camera& camera, uint32_t level,
-                                          const glm::i64vec2& o) const {
+TerrainGridOrigin TerrainRendererImpl::gridOrigin(const Camera& camera, uint32_t level,
+                                                  const glm::i64vec2& o) const {
   const glm::dvec2 cam_int = glm::floor(cameraSamples(m_config.mapping, camera));
-  glProgramUniform1i(p, loc(p, "uLevel"), GLint(level));
-  glProgramUniform2i(p, loc(p, "uOriginLevel"), GLint(o.x), GLint(o.y));
   const int64_t scale = int64_t(1) << level;
-  glProgramUniform2i(p, loc(p, "uOriginRel"), GLint(o.x * scale - int64_t(cam_int.x)),
-                     GLint(o.y * scale - int64_t(cam_int.y)));
+  return {{int32_t(o.x), int32_t(o.y)},
+          {int32_t(o.x * scale - int64_t(cam_int.x)), int32_t(o.y * scale - int64_t(cam_int.y))},
+          int32_t(level)};
 }
 
 TerrainRendererImpl::Frustum TerrainRendererImpl::frustum(const Camera& camera,
@@ -166,7 +165,7 @@ void TerrainRendererImpl::drawClipmapRings(uint32_t p, const Camera& camera, con
     const glm::i64vec2 o = origins[l];
     const int pattern = l == uint32_t(finest) ? 0 : terrain_mesh::holePattern(origins[l - 1], o, n);
     if (pattern < 0 || pattern > 4) continue;  // cannot happen: origins nest (see ringOrigin)
-    drawGrid(p, camera, planes, l, o, pattern);
+    drawGrid(camera, planes, l, o, pattern);
     ++m_frame.rings;
   }
   m_frame.finest_level = uint32_t(finest);
@@ -196,21 +195,21 @@ void TerrainRendererImpl::drawPatches(uint32_t p, const Camera& camera, const Vi
   glDepthFunc(GL_LESS);
   const Frustum planes = frustum(camera, viewport);
   for (int64_t py = floorDiv(s0y, n); py * n < s1y; ++py)
-    for (int64_t px = floorDiv(s0x, n); px * n < s1x; ++px) drawGrid(p, camera, planes, 0, {px * n, py * n}, 0);
+    for (int64_t px = floorDiv(s0x, n); px * n < s1x; ++px) drawGrid(camera, planes, 0, {px * n, py * n}, 0);
   m_frame.rings = 1;
   glDisable(GL_DEPTH_TEST);
   glBindVertexArray(0);
   glUseProgram(0);
 }
 
-void TerrainRendererImpl::drawGrid(uint32_t p, const Camera& camera, const Frustum& planes, uint32_t l,
-                                   const glm::i64vec2& o, int pattern) {
+void TerrainRendererImpl::drawGrid(const Camera& camera, const Frustum& planes, uint32_t l, const glm::i64vec2& o,
+                                   int pattern) {
   constexpr uint32_t kBlocks = terrain_mesh::RingMesh::kBlocks;
   const uint32_t n = m_config.ring_cells;
   const TerrainMapping& m = m_config.mapping;
   const glm::dvec2 cam = cameraSamples(m, camera);
   const uint32_t block_cells = n / kBlocks;
-  setRingUniforms(p, camera, l, o);
+  TerrainMeshBuffers::setOrigin(gridOrigin(camera, l, o));
   // The visible blocks, nearest first: a slope hidden behind a nearer one
   // of the same ring then fails the depth test instead of being shaded
   // (the rings themselves are drawn finest, nearest, first).

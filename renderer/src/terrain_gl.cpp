@@ -4,10 +4,13 @@
 #include "gl_util.h"
 #include "shaders.h"
 
+#include <cstddef>
+
 namespace clipstream {
 
 Status TerrainMeshBuffers::create(const std::vector<int32_t>& vertices, const std::vector<uint32_t>& indices,
-                                  const std::string& what, std::unique_ptr<TerrainMeshBuffers>* out) {
+                                  bool instanced, const std::string& what,
+                                  std::unique_ptr<TerrainMeshBuffers>* out) {
   out->reset();
   std::unique_ptr<TerrainMeshBuffers> m(new TerrainMeshBuffers());
   gl_util::clearErrors();
@@ -21,12 +24,36 @@ Status TerrainMeshBuffers::create(const std::vector<int32_t>& vertices, const st
   glEnableVertexArrayAttrib(m->m_vao, 0);
   glVertexArrayAttribIFormat(m->m_vao, 0, 2, GL_INT, 0);
   glVertexArrayAttribBinding(m->m_vao, 0, 0);
+  if (instanced) {
+    glCreateBuffers(1, &m->m_instances);
+    glVertexArrayVertexBuffer(m->m_vao, 1, m->m_instances, 0, sizeof(TerrainGridOrigin));
+    glVertexArrayBindingDivisor(m->m_vao, 1, 1);
+    glEnableVertexArrayAttrib(m->m_vao, 1);
+    glVertexArrayAttribIFormat(m->m_vao, 1, 4, GL_INT, GLuint(offsetof(TerrainGridOrigin, origin_level)));
+    glVertexArrayAttribBinding(m->m_vao, 1, 1);
+    glEnableVertexArrayAttrib(m->m_vao, 2);
+    glVertexArrayAttribIFormat(m->m_vao, 2, 1, GL_INT, GLuint(offsetof(TerrainGridOrigin, level)));
+    glVertexArrayAttribBinding(m->m_vao, 2, 1);
+  }
   if (Status s = gl_util::checkCreated(what); !s) return s;
   *out = std::move(m);
   return okStatus();
 }
 
+void TerrainMeshBuffers::setOrigin(const TerrainGridOrigin& o) {
+  glVertexAttribI4i(1, o.origin_level[0], o.origin_level[1], o.origin_rel[0], o.origin_rel[1]);
+  glVertexAttribI1i(2, o.level);
+}
+
+void TerrainMeshBuffers::setInstances(const std::vector<TerrainGridOrigin>& origins) {
+  // A new store each time (the draws of the last call may still read the
+  // old one).
+  glNamedBufferData(m_instances, GLsizeiptr(origins.size() * sizeof(TerrainGridOrigin)), origins.data(),
+                    GL_STREAM_DRAW);
+}
+
 TerrainMeshBuffers::~TerrainMeshBuffers() {
+  glDeleteBuffers(1, &m_instances);
   glDeleteVertexArrays(1, &m_vao);
   glDeleteBuffers(1, &m_vertices);
   glDeleteBuffers(1, &m_indices);

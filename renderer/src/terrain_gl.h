@@ -16,24 +16,41 @@
 
 namespace clipstream {
 
+// Where terrain.vert puts a grid: its aOrigin (attribute 1, ivec4) and
+// aLevel (attribute 2, int).
+struct TerrainGridOrigin {
+  int32_t origin_level[2];  // vertex (0, 0)'s sample of `level`
+  int32_t origin_rel[2];    // the same in level-0 samples, minus the camera's integer sample
+  int32_t level;
+};
+
 // A vertex buffer of (i, j) grid coordinates (two int32 a vertex, attribute
 // 0 as ivec2), an index buffer of uint32 triangles, and the vertex array
-// that binds both.
+// that binds both. The grid's origin (attributes 1 and 2) is either one
+// value for a whole draw (setOrigin(), the rings) or, for an instanced
+// mesh, one TerrainGridOrigin an instance from setInstances() (the
+// quadtree's nodes: one draw call per edge pattern instead of per node).
 class TerrainMeshBuffers {
  public:
   // Uploads `vertices` ((i, j) pairs) and `indices`; kOutOfMemory /
   // kUnavailable naming `what` when GL cannot make them.
   static Status create(const std::vector<int32_t>& vertices, const std::vector<uint32_t>& indices,
-                       const std::string& what, std::unique_ptr<TerrainMeshBuffers>* out);
+                       bool instanced, const std::string& what, std::unique_ptr<TerrainMeshBuffers>* out);
   ~TerrainMeshBuffers();
   TerrainMeshBuffers(const TerrainMeshBuffers&) = delete;
   TerrainMeshBuffers& operator=(const TerrainMeshBuffers&) = delete;
 
   uint32_t vao() const { return m_vao; }
+  // Not instanced: the origin of the next draws (the attributes' current
+  // values, read by every vertex).
+  static void setOrigin(const TerrainGridOrigin& origin);
+  // Instanced: replaces the instances' origins (instance k of a draw with
+  // base instance b reads origins[b + k]).
+  void setInstances(const std::vector<TerrainGridOrigin>& origins);
 
  private:
   TerrainMeshBuffers() = default;
-  uint32_t m_vao = 0, m_vertices = 0, m_indices = 0;
+  uint32_t m_vao = 0, m_vertices = 0, m_indices = 0, m_instances = 0;
 };
 
 // terrain.vert linked with the ground's fragment shader, without and with

@@ -85,6 +85,11 @@ class TerrainHeightStack {
   const std::vector<float>& tileTwist(uint32_t level, int64_t tx, int64_t ty) const {
     return m_slot_twist[level][slotIndex(tx, ty)];
   }
+  // The held tile's tile_px^2 heights, row-major; null when the slot does
+  // not hold that tile.
+  const float* tileHeights(uint32_t level, int64_t tx, int64_t ty) const {
+    return holds(level, tx, ty) ? m_slot_heights[level][slotIndex(tx, ty)].data() : nullptr;
+  }
 
   // Height of stored level `level`'s sample (i, j), clamped to the level,
   // from the resident tile; false when that tile is not resident.

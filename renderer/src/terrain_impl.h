@@ -5,13 +5,14 @@
 //  - terrain_draw.cpp: the per-frame uniforms, the frustum, the clipmap's
 //    rings and the full-resolution mesh's patches;
 //  - terrain_quadtree.cpp: the quadtree's node selection and draws;
+//  - terrain_node_error.cpp: the quadtree's node error bounds;
 //  - terrain_seen.cpp: the ground a frame showed, read from its depth;
 //  - terrain_height_stack.h: the height clip stack (texture and CPU copies);
 //  - terrain_mesh.h: the ring and patch meshes, built on the CPU;
 //  - terrain_gl.h: the meshes' buffers, the programs, the position target.
 // Tests include this header to run terrain.vert over a ring's vertices
-// with the renderer's own uniforms and mesh (setFrameUniforms(),
-// setRingUniforms(), ringMesh()).
+// with the renderer's own uniforms, origin and mesh (setFrameUniforms(),
+// gridOrigin(), ringMesh()).
 //
 // Owned by the GL thread: every method must be called on the thread whose
 // context was current at create() (the const queries touch no GL, and are
@@ -102,10 +103,9 @@ class TerrainRendererImpl {
   // Sets terrain.vert's per-frame uniforms on `program` for this camera
   // (and binds the height stack to texture unit 2), as draw() does.
   void setFrameUniforms(uint32_t program, const Camera& camera, const Viewport& viewport) const;
-  // Sets the uniforms of one grid: ring level `level` with vertex (0, 0)
-  // at level sample `origin`.
-  void setRingUniforms(uint32_t program, const Camera& camera, uint32_t level,
-                       const glm::i64vec2& origin) const;
+  // Where terrain.vert puts one grid: level `level` with vertex (0, 0) at
+  // level sample `origin` (TerrainMeshBuffers::setOrigin() or an instance).
+  TerrainGridOrigin gridOrigin(const Camera& camera, uint32_t level, const glm::i64vec2& origin) const;
   // The ring mesh: the plain (n + 1)^2 grid first (vertex j (n + 1) + i is
   // (i, j)), then the blocks' copies (terrain_mesh::RingMesh).
   const TerrainMeshBuffers& ringMesh() const { return *m_ring_mesh; }
@@ -133,11 +133,11 @@ class TerrainRendererImpl {
   // The full_resolution mesh: every patch over the height field and the
   // colour image (m_image_px), culled by blocks.
   void drawPatches(uint32_t program, const Camera& camera, const Viewport& viewport);
-  // Draws the blocks of index pattern `pattern` of the grid whose vertex
-  // (0, 0) is `origin` (level samples) at `level` that meet the frustum;
-  // counts them in m_frame.
-  void drawGrid(uint32_t program, const Camera& camera, const Frustum& planes, uint32_t level,
-                const glm::i64vec2& origin, int pattern);
+  // Draws, with the program in use, the blocks of index pattern `pattern`
+  // of the grid whose vertex (0, 0) is `origin` (level samples) at `level`
+  // that meet the frustum, nearest first; counts them in m_frame.
+  void drawGrid(const Camera& camera, const Frustum& planes, uint32_t level, const glm::i64vec2& origin,
+                int pattern);
 
   // ---- The quadtree (terrain_quadtree.cpp) ----
   // A quadtree node: level-L node (x, y) (TerrainNode's coordinates).
@@ -173,6 +173,9 @@ class TerrainRendererImpl {
   // Height of level sample (i, j) from the resident tiles (clamped to the
   // level; levels past the pyramid decimate its last, as the shader does).
   bool cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const;
+  // The size x size samples of `level` from sample s0 on into `out`
+  // (row-major), as cpuHeight() reads them; false when one is not resident.
+  bool readSamples(uint32_t level, const glm::i64vec2& s0, int64_t size, float* out) const;
   bool samplesResident(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) const;
   uint32_t rootLevel() const;
   // The flat method's plane: the terrain's lowest height (height units;

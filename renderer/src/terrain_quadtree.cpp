@@ -3,13 +3,15 @@
 // selection by projected geometric error, largest first and within the
 // triangle budget, the restriction to neighbours within one level (a
 // worklist), and the draws with the edge patterns that stitch a node to a
-// coarser neighbour. docs/terrain.md, "Geometry: a restricted quadtree",
-// explains it.
+// coarser neighbour, one instanced draw per pattern. The nodes' error
+// bounds are terrain_node_error.cpp's. docs/terrain.md, "Geometry: a
+// restricted quadtree", explains it.
 #include "terrain_impl.h"
 
 #include "gl.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -590,126 +592,6 @@ bool TerrainRendererImpl::nodeVisible(const Camera& camera, const NodeBox& b) co
   return true;
 }
 
-bool TerrainRendererImpl::cpuHeight(uint32_t level, int64_t i, int64_t j, float* h) const {
-  const uint32_t last = m_geometry.levelCount() - 1;
-  if (level > last) {
-    i *= int64_t(1) << (level - last);
-    j *= int64_t(1) << (level - last);
-    level = last;
-  }
-  return m_stack->sample(level, i, j, h);
-}
-
-double TerrainRendererImpl::nodeError(uint32_t level, int64_t x, int64_t y) {
-  if (level == 0) return 0.0;
-  if (m_exact_node_error) return m_exact_node_error(level, x, y);
-  const auto cached = m_error_cache.find(NodeId{level, x, y});
-  if (cached != m_error_cache.end()) return double(cached->second);
-  double error = tileErrorBound(level, x, y);
-  // Where the next finer level is resident under the node: the exact
-  // largest distance of its samples from this node's surface (the two
-  // surfaces are piecewise linear on the finer grid, whose triangles lie
-  // inside the coarser ones, so the largest distance is at a finer
-  // sample), plus the children's own bounds.
-  const int64_t p = m_config.patch_cells;
-  const glm::i64vec2 f0(2 * x * p, 2 * y * p);
-  // Only nodes over the field (beyond it the resident edge tiles would
-  // make a whole unbounded margin look resident).
-  const uint32_t stored = std::min(level - 1, m_geometry.levelCount() - 1);
-  const int64_t scale = int64_t(1) << (level - 1 - stored);
-  const LevelInfo& fine_level = m_geometry.levels[stored];
-  const bool inside = f0.x >= 0 && f0.y >= 0 && f0.x * scale < int64_t(fine_level.width_px) - 1 &&
-                      f0.y * scale < int64_t(fine_level.height_px) - 1;
-  if (error > 0.0 && inside && samplesResident(level - 1, f0, f0 + glm::i64vec2(2 * p, 2 * p))) {
-    double local = 0.0;
-    bool ok = true;
-    // The node's own (P + 1)^2 samples, each read once.
-    const int64_t n = p + 1;
-    std::vector<float> coarse(size_t(n * n));
-    for (int64_t j = 0; j < n && ok; ++j)
-      for (int64_t i = 0; i < n && ok; ++i) ok = cpuHeight(level, x * p + i, y * p + j, &coarse[size_t(j * n + i)]);
-    for (int64_t j = f0.y; j <= f0.y + 2 * p && ok; ++j)
-      for (int64_t i = f0.x; i <= f0.x + 2 * p && ok; ++i) {
-        // The coarser surface at finer sample (i, j): the coarse cell's
-        // diagonal cut (terrain.vert's coarseAt()), the mean of coarse
-        // samples (i >> 1, j >> 1) and ((i + 1) >> 1, (j + 1) >> 1).
-        float fine = 0;
-        ok = cpuHeight(level - 1, i, j, &fine);
-        const float c0 = coarse[size_t(((j >> 1) - y * p) * n + (i >> 1) - x * p)];
-        const float c1 = coarse[size_t((((j + 1) >> 1) - y * p) * n + ((i + 1) >> 1) - x * p)];
-        local = std::max(local, std::abs(double(fine) - 0.5 * (double(c0) + double(c1))));
-      }
-    // The children's bounds only while they can still make it tighter
-    // (each is a recursion down to the finest resident level).
-    double children = 0.0;
-    for (int c = 0; c < 4 && ok && local + children < error; ++c)
-      children = std::max(children, nodeError(level - 1, 2 * x + (c & 1), 2 * y + (c >> 1)));
-    if (ok) error = std::min(error, local + children);
-  }
-  // As cached, so that a bound never depends on whether it was cached.
-  const float rounded = float(error);
-  m_error_cache[NodeId{level, x, y}] = rounded;
-  return double(rounded);
-}
-
-double TerrainRendererImpl::tileErrorBound(uint32_t level, int64_t x, int64_t y) const {
-  const int64_t p = m_config.patch_cells, tile = m_geometry.tile_px;
-  const uint32_t levels = m_geometry.levelCount();
-  if (level >= levels) {
-    // Coarser than the pyramid: no stored bound; the whole height range.
-    if (m_bounds) return double(m_bounds->range.y - m_bounds->range.x);
-    return INFINITY;
-  }
-  const LevelInfo& info = m_geometry.levels[level];
-  // Beyond a corner of the field the surface is the corner's height, flat:
-  // no error (beyond one side it is the edge's profile, the edge tiles').
-  const bool beyond_x = (x + 1) * p <= 0 || x * p >= int64_t(info.width_px) - 1;
-  const bool beyond_y = (y + 1) * p <= 0 || y * p >= int64_t(info.height_px) - 1;
-  if (beyond_x && beyond_y) return 0.0;
-  // The tiles under the node (clamped to the level: beyond the field the
-  // surface is the edge's).
-  const int64_t tx0 = std::clamp<int64_t>(x * p, 0, int64_t(info.width_px) - 1) / tile;
-  const int64_t tx1 = std::clamp<int64_t>((x + 1) * p - 1, 0, int64_t(info.width_px) - 1) / tile;
-  const int64_t ty0 = std::clamp<int64_t>(y * p, 0, int64_t(info.height_px) - 1) / tile;
-  const int64_t ty1 = std::clamp<int64_t>((y + 1) * p - 1, 0, int64_t(info.height_px) - 1) / tile;
-  double error = 0.0;
-  for (int64_t ty = ty0; ty <= ty1; ++ty)
-    for (int64_t tx = tx0; tx <= tx1; ++tx) {
-      // The index's bound of |level-0 ground - bilinear surface of the
-      // tile's samples|; for a level finer than the bounds hold, the
-      // height range of its ancestor at the finest level held (the level-0
-      // ground and the node's samples both lie in it). No bounds: none
-      // (the exact pass in nodeError() may give one).
-      double e = INFINITY;
-      if (m_bounds && !m_bounds->levels.empty()) {
-        const uint32_t bl = std::max(level, m_bounds->finest_level);
-        const TerrainBounds::Level& lv = m_bounds->levels[bl];
-        if (!lv.error.empty()) {
-          const int64_t bx = std::min<int64_t>(tx >> (bl - level), lv.tiles_x - 1);
-          const int64_t by = std::min<int64_t>(ty >> (bl - level), lv.tiles_y - 1);
-          const size_t t = size_t(by) * lv.tiles_x + size_t(bx);
-          e = bl == level ? double(lv.error[t]) : double(lv.range[t].y - lv.range[t].x);
-        }
-      }
-      // The mesh cuts cells along a diagonal: add the distance between
-      // that surface and the bilinear one (a quarter of the cell's twist).
-      if (m_stack->holds(level, tx, ty) && !m_stack->tileTwist(level, tx, ty).empty()) {
-        const std::vector<float>& twist = m_stack->tileTwist(level, tx, ty);
-        const int64_t block = std::min<int64_t>(p, tile), blocks = tile / block;
-        const int64_t i0 = std::max<int64_t>(x * p - tx * tile, 0) / block;
-        const int64_t i1 = std::min<int64_t>((x + 1) * p - 1 - tx * tile, tile - 1) / block;
-        const int64_t j0 = std::max<int64_t>(y * p - ty * tile, 0) / block;
-        const int64_t j1 = std::min<int64_t>((y + 1) * p - 1 - ty * tile, tile - 1) / block;
-        float t = 0.0f;
-        for (int64_t j = j0; j <= j1; ++j)
-          for (int64_t i = i0; i <= i1; ++i) t = std::max(t, twist[size_t(j * blocks + i)]);
-        e += double(t);
-      }
-      error = std::max(error, e);
-    }
-  return error;
-}
-
 void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& viewport) {
   const auto start = std::chrono::steady_clock::now();
   m_nodes.clear();
@@ -737,26 +619,6 @@ void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& view
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-void TerrainRendererImpl::forgetNodeErrors(const TileKey& key) {
-  // Node errors that read this tile: nodes at its level or coarser whose
-  // ground (clamped to the field: nodes beyond it read its edge) meets
-  // the tile's, one sample around (their bounds take their children's).
-  const int64_t p = m_config.patch_cells, w = int64_t(m_geometry.width_px), h = int64_t(m_geometry.height_px);
-  const int64_t span0 = int64_t(m_geometry.tile_px) << key.level, margin = int64_t(1) << key.level;
-  const int64_t tx0 = int64_t(key.x) * span0 - margin, tx1 = (int64_t(key.x) + 1) * span0 + margin;
-  const int64_t ty0 = int64_t(key.y) * span0 - margin, ty1 = (int64_t(key.y) + 1) * span0 + margin;
-  // Bounded: nodes of tiles long evicted are never asked again.
-  if (m_error_cache.size() > kMaxCachedNodeErrors) m_error_cache.clear();
-  for (auto it = m_error_cache.begin(); it != m_error_cache.end();) {
-    const NodeId& n = it->first;
-    const int64_t span = p << n.level;
-    const int64_t nx0 = std::clamp<int64_t>(n.x * span, 0, w - 1), nx1 = std::clamp<int64_t>((n.x + 1) * span, 0, w - 1);
-    const int64_t ny0 = std::clamp<int64_t>(n.y * span, 0, h - 1), ny1 = std::clamp<int64_t>((n.y + 1) * span, 0, h - 1);
-    const bool meets = n.level >= key.level && nx1 >= tx0 && nx0 <= tx1 && ny1 >= ty0 && ny0 <= ty1;
-    it = meets ? m_error_cache.erase(it) : std::next(it);
-  }
-}
-
 void TerrainRendererImpl::drawQuadtree(uint32_t p, const Camera& camera, const Viewport& viewport) {
   m_frame = TerrainFrame{};
   selectNodes(camera, viewport);
@@ -767,19 +629,41 @@ void TerrainRendererImpl::drawQuadtree(uint32_t p, const Camera& camera, const V
   const int64_t cells = m_config.patch_cells;
   uint32_t finest = std::numeric_limits<uint32_t>::max(), coarsest = 0;
   std::unordered_set<uint32_t> levels;
+  // One instanced draw per edge pattern (a draw call per node cost llvmpipe
+  // as much as its triangles at 8-cell nodes): the nodes' origins sorted by
+  // pattern, each pattern's a run of instances, nearest first.
+  std::array<std::vector<std::pair<double, TerrainGridOrigin>>,
+             std::tuple_size<terrain_mesh::PatchMesh::Masks>::value>
+      by_mask;
   for (const TerrainNode& node : m_nodes) {
     if (!node.drawn) continue;
-    setRingUniforms(p, camera, node.level, {node.x * cells, node.y * cells});
-    const uint32_t mask = node.coarse_sides;
-    const terrain_mesh::IndexRange range = m_patch_masks[mask];
-    glDrawElements(GL_TRIANGLES, GLsizei(range.count), GL_UNSIGNED_INT,
-                   reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t)));
-    m_frame.triangles += range.count / 3;
+    const NodeBox b = nodeBox(camera, node.level, node.x, node.y);
+    const double distance = glm::length(glm::max(glm::max(b.lo, -b.hi), glm::dvec3(0.0)));
+    by_mask[node.coarse_sides].emplace_back(distance,
+                                            gridOrigin(camera, node.level, {node.x * cells, node.y * cells}));
+    m_frame.triangles += m_patch_masks[node.coarse_sides].count / 3;
     ++m_frame.nodes;
     ++m_frame.blocks;
     levels.insert(node.level);
     finest = std::min(finest, node.level);
     coarsest = std::max(coarsest, node.level);
+  }
+  std::vector<TerrainGridOrigin> origins;
+  origins.reserve(m_frame.nodes);
+  for (auto& v : by_mask) {
+    std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [distance, origin] : v) origins.push_back(origin);
+  }
+  if (!origins.empty()) m_patch_mesh->setInstances(origins);
+  GLuint first = 0;
+  for (size_t mask = 0; mask < by_mask.size(); ++mask) {
+    const GLsizei count = GLsizei(by_mask[mask].size());
+    if (count == 0) continue;
+    const terrain_mesh::IndexRange range = m_patch_masks[mask];
+    glDrawElementsInstancedBaseInstance(GL_TRIANGLES, GLsizei(range.count), GL_UNSIGNED_INT,
+                                        reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t)),
+                                        count, first);
+    first += GLuint(count);
   }
   m_frame.culled_blocks = uint32_t(m_nodes.size()) - m_frame.nodes;
   m_frame.rings = uint32_t(levels.size());

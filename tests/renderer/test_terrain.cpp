@@ -48,7 +48,7 @@ std::vector<glm::vec4> ringVertices(const TerrainRendererImpl& terrain, const Ca
   EXPECT_TRUE(built.ok()) << built.toString();
   if (!built) return {};
   terrain.setFrameUniforms(p, camera, viewport);
-  terrain.setRingUniforms(p, camera, level, ringOrigin(terrain.config(), camera, level));
+  TerrainMeshBuffers::setOrigin(terrain.gridOrigin(camera, level, ringOrigin(terrain.config(), camera, level)));
   GLuint buffer = 0;
   glCreateBuffers(1, &buffer);
   glNamedBufferStorage(buffer, GLsizeiptr(count * sizeof(glm::vec4)), nullptr, GL_MAP_READ_BIT);

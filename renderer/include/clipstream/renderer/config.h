@@ -64,20 +64,23 @@ inline constexpr uint32_t kTerrainRingCells = 128;
 // A ring's transition band is its cells / this (Losasso & Hoppe's w = n / 10).
 inline constexpr uint32_t kTerrainTransitionDivisor = 10;
 // Quadtree terrain (terrain.h, TerrainMethod::kQuadtree): cells per node
-// side. A node is one draw call of 512 triangles; 16 cells (an eighth of a
-// 128-sample tile a side) refine rough ground where it is rough and not
-// over a whole tile: on the demo orbit it drew 11 % fewer triangles than
-// 32-cell nodes at the same p95 error (20.7k against 23.3k at 1.0 px),
-// for a few hundred draws a frame (docs/decisions.md D255).
-inline constexpr uint32_t kTerrainPatchCells = 16;
+// side. A node is 128 triangles, drawn as an instance (one draw call per
+// edge pattern). 8 cells follow rough ground closer than 16: on the terrain
+// sweep's St Helens orbit (1280x720) 14.6k / 17.2k triangles at 10 / 8 px
+// gave p95 1.06 / 0.94 px where 16-cell nodes drew 27.3k for 0.82 px, 1.2x the
+// fewest triangles at the frame's error instead of 1.6x; on Rainier 1.6x
+// instead of 1.7x (docs/decisions.md D296; D255 chose 16 when each node
+// was its own draw call).
+inline constexpr uint32_t kTerrainPatchCells = 8;
 // Quadtree terrain: a node is split while its geometric error bound (the
 // tile's error from the store's index, tightened by the exact distance of
 // the resident finer level), projected at the node's nearest point,
 // exceeds this many pixels. The bound is a worst case at the nearest
-// point, far above the error the frame shows: 10 px kept the measured p95
-// under 1 px on both real DEMs of the terrain sweep (0.81 px on the demo
-// orbit, 0.90 on Rainier; docs/terrain.md, "The two methods side by side").
-inline constexpr double kTerrainErrorPx = 10.0;
+// point, far above the error the frame shows: with 8-cell nodes 6 px keeps
+// the measured p95 under 1 px on both real DEMs of the terrain sweep
+// (0.72 px on St Helens, 0.81 on Rainier; 7 px: 0.86 and 1.01; docs/
+// terrain.md, "The two methods side by side"; D296).
+inline constexpr double kTerrainErrorPx = 6.0;
 // Quadtree terrain: the most triangles a frame draws (TerrainConfig::
 // triangle_budget, --terrain-triangle-budget; 0: none). Twice a full ring
 // of the clipmap at its default kTerrainRingCells (2 x 2 x 128^2), which
