@@ -8,10 +8,11 @@
 // (mean and largest of each camera's best of --repeat draws), the frame's
 // (selection, draws and glFinish; mean of the best) and the bound met.
 // Then what a frame's draws cost: the quadtree with patches of 8, 16 and 32
-// cells (about the same triangles in 4x as many draws, or a quarter) and
+// cells (about the same triangles in 4x as many nodes, or a quarter) and
 // the clipmap's rings, over the same cameras without a budget; the
-// least-squares fit of frame ms = a + b draws + c kilotriangles says what
-// a draw call and a thousand triangles cost on this GL.
+// least-squares fit of frame ms = a + b nodes + c kilotriangles says what
+// a node (an instance of the patch mesh: the quadtree draws one call per
+// edge pattern) and a thousand triangles cost on this GL.
 //
 //   bench_renderer_quadtree_select [--size 1280x720] [--cameras 24] [--repeat 3]
 //                                  [--errors 4,10] [--tsv FILE] DEM...
@@ -202,7 +203,7 @@ void drawCost(const TerrainLayerConfig& layer, const ClipmapRenderer& colour, co
     table->row("%s\t%s\t%.0f\t%.0f\t%.1f\n", name.c_str(), st.name, draws / n, triangles / n, ms / n);
   }
   const std::array<double, 3> c = fit(quadtree_samples);
-  table->row("%s\tquadtree fit: ms = a + b draws + c ktriangles\ta=%.2f\tb=%.4f\tc=%.3f\n", name.c_str(), c[0], c[1], c[2]);
+  table->row("%s\tquadtree fit: ms = a + b nodes + c ktriangles\ta=%.2f\tb=%.4f\tc=%.3f\n", name.c_str(), c[0], c[1], c[2]);
 }
 
 }  // namespace
@@ -273,7 +274,7 @@ int main(int argc, char** argv) {
     names.push_back(name);
     if (store != dem) temporaries.push_back(store);
   }
-  table.row("dem\tdraws of\tdraws (blocks or nodes)\ttriangles\tframe_ms_mean\n");
+  table.row("dem\tdraws of\tblocks or nodes\ttriangles\tframe_ms_mean\n");
   for (size_t i = 0; i < layers.size(); ++i)
     drawCost(layers[i], *colour, *target, vp, camera_count, repeat, names[i], &table);
   for (const std::string& t : temporaries) std::remove(t.c_str());
