@@ -30,8 +30,8 @@ WORK=${SWEEP_WORK:-out/sweep}/terrain
 DOCS=${SWEEP_DOCS:-docs}
 SIZE=${SWEEP_TERRAIN_SIZE:-1280x720}
 FRAMES=60; EVERY=15
-RINGS="32 64 128 256"; ERRORS="4 10 24"
-if (( QUICK )); then FRAMES=20; EVERY=10; RINGS="128"; ERRORS="10"; fi
+RINGS="32 64 128 256"; ERRORS="3 6 16"
+if (( QUICK )); then FRAMES=20; EVERY=10; RINGS="128"; ERRORS="6"; fi
 mkdir -p "$WORK" "$DOCS/data" "$DOCS/charts" "$DOCS/images"
 start=$(date +%s)
 CSV=$DOCS/data/terrain_detail.csv
@@ -199,13 +199,13 @@ GEN=$WORK/detail_section.md
                           a[1], a[2], set, tri[k], pv[k], pp[k], pp[k] - pv[k], fv[k], fp[k] } }' "$CSV"
   echo
   echo "The fewest triangles that reach a PSNR: for each scene and method, the PSNR its default reaches lit"
-  echo "by vertex (ring 128, bound 10 px), and the fewest triangles that reach it lit each way, interpolated"
+  echo "by vertex (ring 128, bound 6 px), and the fewest triangles that reach it lit each way, interpolated"
   echo "along each lighting's curve of settings (in log triangles; – : no setting reaches it)."
   echo
   echo "| scene | method | target dB (default, by vertex) | fewest triangles by vertex | fewest triangles by pixel | ratio |"
   echo "|---|---|---:|---:|---:|---:|"
   awk -F, 'FNR>1 { k = $1 SUBSEP $2; row[++n] = $0; if (!(k in seen)) { seen[k] = 1; keys[++m] = k }
-                   if (($2 == "clipmap" && $3 == 128 || $2 == "quadtree" && $3 == 10) && $4 == "vertex") target[k] = $7 }
+                   if (($2 == "clipmap" && $3 == 128 || $2 == "quadtree" && $3 == 6) && $4 == "vertex") target[k] = $7 }
            # The fewest triangles on curve (k, l) that reach PSNR t: points by triangles, the first that
            # reaches t, interpolated in log triangles from the point before it.
            function fewest(k, l, t,    i, c, r, tri, ps, j, x, y, best) {

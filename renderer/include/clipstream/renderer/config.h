@@ -88,7 +88,7 @@ inline constexpr double kTerrainErrorPx = 6.0;
 // sweep's scenes), so on rough ground the quadtree costs about what the
 // clipmap does instead of 5-8x (435k triangles, 138 ms a frame on the
 // rough DEM at 10 px), while at the default bound the real DEMs stay
-// under it (27k on St Helens, 60k on Rainier on the sweep's orbits).
+// under it (25k on St Helens, 61k on Rainier on the sweep's orbits).
 inline constexpr uint64_t kTerrainTriangleBudget = 65536;
 // Quadtree terrain: when the restriction's forced splits take a budgeted
 // frame over, the selection searches for the most splits that fit with at
