@@ -111,7 +111,9 @@ TEST(Planner, AViewportOnePixelWideOrHighPlans) {
       for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
         for (int64_t x = lp.window.x0; x < lp.window.x1; ++x) sampled_tiles += lp.wants(x, y) ? 1 : 0;
     }
-    if (vp.height_px > 1) EXPECT_GT(sampled_tiles, 0u);
+    if (vp.height_px > 1) {
+      EXPECT_GT(sampled_tiles, 0u);
+    }
   }
 }
 
