@@ -268,7 +268,7 @@ TEST_F(Cog, OverHttpTheTilesComeByRangeRequestsAndTheDiskCacheKeepsThem) {
   const auto local = openCog(cog);
   auto remote_reader = openCog(server->url("served.tif"), remote);
   ASSERT_TRUE(local && remote_reader);
-  const size_t open_requests = server->requests().size();
+  const size_t open_requests = server->requests(1).size();  // the open reads at least once (the log lands late)
   EXPECT_LE(open_requests, 3u) << "the header and tile tables come in a few reads";
   const PyramidGeometry& g = local->geometry();
   std::vector<uint8_t> a(g.tileBytes()), b(g.tileBytes());
@@ -301,7 +301,8 @@ TEST_F(Cog, OverHttpTheTilesComeByRangeRequestsAndTheDiskCacheKeepsThem) {
     for (uint32_t x = 0; x < g.levels[0].tiles_x; ++x) ASSERT_TRUE(again->readTile({0, x, y}, b, &bytes).ok());
   EXPECT_EQ(again->remoteStats().disk_cache_misses, 0u);
   EXPECT_GT(again->remoteStats().disk_cache_hits, 0u);
-  EXPECT_LE(server->requests().size(), open_requests) << "only the open's reads go to the server";
+  // As many as an open makes (the log may still lack some: it lands late), no tile.
+  EXPECT_LE(server->requests().size(), 3u) << "only the open's reads go to the server";
 }
 
 // The programs' entry: openStoreSource() takes a COG path or URL.
