@@ -253,9 +253,7 @@ void TerrainRendererImpl::drawGrid(const Camera& camera, const Frustum& planes, 
       ++m_frame.culled_blocks;
       continue;
     }
-    // The camera is the origin: its distance to the block's box.
-    const glm::dvec3 lo(x0.x, y0, x0.y), hi(x1.x, y1, x1.y);
-    const double distance = glm::length(glm::max(glm::max(lo, -hi), glm::dvec3(0.0)));
+    const double distance = NodeBox{{x0.x, y0, x0.y}, {x1.x, y1, x1.y}}.distance();
     blocks.push_back({distance, GLsizei(range.count),
                       reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t))});
     m_frame.triangles += range.count / 3;

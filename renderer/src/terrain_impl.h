@@ -159,6 +159,8 @@ class TerrainRendererImpl {
   void selectNodes(const Camera& camera, const Viewport& viewport);
   struct NodeBox {
     glm::dvec3 lo, hi;  // camera-relative world box
+    // The camera's (the origin's) distance to the box: 0 inside it.
+    double distance() const { return glm::length(glm::max(glm::max(lo, -hi), glm::dvec3(0.0))); }
   };
   NodeBox nodeBox(const Camera& camera, uint32_t level, int64_t x, int64_t y) const;
   bool nodeVisible(const Camera& camera, const NodeBox& box) const;

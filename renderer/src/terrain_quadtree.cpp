@@ -191,9 +191,7 @@ bool TerrainRendererImpl::NodeSelection::childrenResident(const NodeKey& k) cons
 bool TerrainRendererImpl::NodeSelection::wantsSplit(const NodeKey& k, const NodeBox& b, double* projected_px) const {
   if (k.level == 0 || m_terrain.m_config.method == TerrainMethod::kFlat) return false;
   const double world_per_height = m_terrain.m_config.mapping.world_per_height;
-  // Distance from the camera (the origin) to the box.
-  const glm::dvec3 d = glm::max(glm::max(b.lo, -b.hi), glm::dvec3(0.0));
-  const double dist = glm::length(d);
+  const double dist = b.distance();
   // The tiles' bound first: the node's is never above it (nor rounded to a
   // float), so where it asks for no split nodeError()'s exact pass (most
   // of a selection on a cold cache: a first frame, a teleport) is skipped.
@@ -644,9 +642,7 @@ void TerrainRendererImpl::drawQuadtree(uint32_t p, const Camera& camera, const V
       by_mask;
   for (const TerrainNode& node : m_nodes) {
     if (!node.drawn) continue;
-    const NodeBox b = nodeBox(camera, node.level, node.x, node.y);
-    const double distance = glm::length(glm::max(glm::max(b.lo, -b.hi), glm::dvec3(0.0)));
-    by_mask[node.coarse_sides].emplace_back(distance,
+    by_mask[node.coarse_sides].emplace_back(nodeBox(camera, node.level, node.x, node.y).distance(),
                                             gridOrigin(camera, node.level, {node.x * cells, node.y * cells}));
     m_frame.triangles += m_patch_masks[node.coarse_sides].count / 3;
     ++m_frame.nodes;
