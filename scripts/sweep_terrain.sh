@@ -20,7 +20,8 @@
 # silhouette figure (outline to outline), the fewest triangles that model each
 # judged frame within its own p95 (FewestTriangles), the quadtree's achieved
 # error bound (its triangle budget), the over-fetch of the colour layer's clip
-# levels; then the same setting on a slow stretch of the flight judged every
+# levels and of the height layer's (against the tiles the drawn geometry
+# read); then the same setting on a slow stretch of the flight judged every
 # frame: the mean per-pixel grey change between consecutive frames against the
 # reference's own, and the geometry-only change (the drawn surface moving
 # against the full-resolution one).
@@ -101,7 +102,7 @@ run() {  # scene method setting, then clipstream-fly arguments
     "$(value "$out" geo_silhouette_mean_px)" "$(value "$out" geo_silhouette_p95_px)" \
     "$(value "$out" geo_coverage_pixels_mean)" "$(value "$out/slow" geometry_change_mean_px)" \
     "$(value "$out/slow" geometry_change_max_px)" "$(value "$out" terrain_error_px_mean)" \
-    "$(value "$out" over_fetch_stack_ratio)" "$(jvalue "$out" height_over_fetch_ratio)" >>"$tmp_csv"
+    "$(value "$out" over_fetch_stack_ratio)" "$(jvalue "$out" height_over_fetch_stack_ratio)" >>"$tmp_csv"
   echo "  $scene $method $setting: $(tail -n 1 "$tmp_csv")"
 }
 for scene in $SCENES; do
@@ -191,9 +192,9 @@ GEN=$WORK/terrain_section.md
   echo "consecutive frames minus the reference's; geometry change: the drawn surface moving against the"
   echo "full-resolution one between consecutive frames (mean / largest pair); bound: the quadtree's achieved error"
   echo "bound (above its setting where the triangle budget binds); over-fetch: the clip levels' tiles loaded over"
-  echo "those the frames sample (the coarse pyramid, loaded whole at the start, left out), colour / height (–: none"
-  echo "sampled, as on St Helens, whose flight needs no clip level of the orthophoto; or not measured: the height"
-  echo "layer loads whole windows)."
+  echo "those the frames sample (the coarse pyramid, loaded whole at the start, left out), colour / height; for the"
+  echo "height, the tiles the drawn geometry read in every frame (–: no clip level, as on St Helens, whose flight needs"
+  echo "none of the orthophoto and whose DEM fits the height windows whole)."
   echo
   echo "| scene | method | setting | triangles | fewest | ratio | frame ms | × flat | geo mean / p95 px | silhouette mean / p95 px | coverage px | PSNR dB | grey change | geometry change px | bound px | over-fetch |"
   echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"

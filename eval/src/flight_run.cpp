@@ -256,7 +256,8 @@ Status createTerrainReferences(const FlightRunOptions& o, const std::shared_ptr<
 // per-judged-frame sums turned into means. `accuracy` is null without the
 // flat reference; over terrain `terrain_sampled` holds the sampled tiles.
 void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyAccuracy* accuracy,
-                     const std::unordered_set<uint64_t>& terrain_sampled, FlightRun* run) {
+                     const std::unordered_set<uint64_t>& terrain_sampled,
+                     const std::unordered_set<uint64_t>& height_sampled, FlightRun* run) {
   std::vector<FrameRecord> records;
   records.reserve(run->frames.size());
   for (const FlightRunFrame& f : run->frames) records.push_back(recordOf(f));
@@ -325,6 +326,19 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
   if (run->summary.tiles_sampled_stack > 0)
     run->summary.over_fetch_stack_ratio =
         double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
+  // The height layer's clip levels (layer 1 over terrain): the levels its
+  // plan holds whole are loaded once, as the colour's pyramid.
+  if (o.terrain && run->streamer.layers.size() > 1) {
+    const uint32_t height_pyramid = flight.streamer().plan(1).pyramid_level;
+    for (uint64_t key : height_sampled)
+      if ((key >> 58) < height_pyramid) ++run->summary.height_tiles_sampled_stack;
+    const std::vector<LevelCounters>& levels = run->streamer.layers[1].levels;
+    for (uint32_t l = 0; l < height_pyramid && l < levels.size(); ++l)
+      run->summary.height_tiles_loaded_stack += levels[l].loads;
+    if (run->summary.height_tiles_sampled_stack > 0)
+      run->summary.height_over_fetch_stack_ratio =
+          double(run->summary.height_tiles_loaded_stack) / double(run->summary.height_tiles_sampled_stack);
+  }
 }
 
 // The flight's settings from the run's options.
@@ -439,6 +453,12 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   // Returns the planner's level for the nearest ground the frame shows
   // (-1: none, or not sampled).
   std::unordered_set<uint64_t> terrain_sampled;
+  // The height tiles the drawn geometry read, every frame.
+  std::unordered_set<uint64_t> height_sampled;
+  auto noteHeightTiles = [&] {
+    if (flight->terrain())
+      for (const TileKey& k : flight->terrain()->lastHeightTiles()) height_sampled.insert(packTileKey(k));
+  };
   Status sample_error;  // a failed readPositions(), returned after the frame
   auto sampleTerrainTiles = [&](const Camera& camera) -> int32_t {
     if (!o.terrain || !o.sample_tiles || !flight->terrain()) return -1;
@@ -486,6 +506,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     // count in the over-fetch ratio (loads and sampled tiles alike).
     const Camera camera = onGround(o.path.sample(0.0));
     flight->step(camera);
+    noteHeightTiles();
     (void)sampleTerrainTiles(camera);
     if (!sample_error) return sample_error;
     AccuracyFrame ignored;
@@ -511,6 +532,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
     previous = camera;
     const auto t0 = Clock::now();
     f.sample = flight->step(camera);
+    noteHeightTiles();
     if (o.on_frame)
       if (Status s = o.on_frame(f.sample, *flight->target(), &f.readback_ms); !s) return s;
     f.seen_level = sampleTerrainTiles(camera);
@@ -566,7 +588,7 @@ Status runFlight(const FlightRunOptions& o, FlightRun* run) {
   if (o.terrain && o.terrain->source) run->remote += o.terrain->source->remoteStats();
   run->rss_end_bytes = currentRssBytes();
 
-  summarizeFlight(o, *flight, accuracy.get(), terrain_sampled, run);
+  summarizeFlight(o, *flight, accuracy.get(), terrain_sampled, height_sampled, run);
   return okStatus();
 }
 

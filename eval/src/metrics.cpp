@@ -136,7 +136,10 @@ std::string RunSummary::toJson() const {
       {"over_fetch_ratio", finite(over_fetch_ratio)},
       {"tiles_loaded_stack", tiles_loaded_stack},
       {"tiles_sampled_stack", tiles_sampled_stack},
-      {"over_fetch_stack_ratio", finite(over_fetch_stack_ratio)}};
+      {"over_fetch_stack_ratio", finite(over_fetch_stack_ratio)},
+      {"height_tiles_loaded_stack", height_tiles_loaded_stack},
+      {"height_tiles_sampled_stack", height_tiles_sampled_stack},
+      {"height_over_fetch_stack_ratio", finite(height_over_fetch_stack_ratio)}};
   return j.dump();
 }
 

@@ -362,6 +362,9 @@ std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   add("tiles_loaded_stack", std::to_string(s.tiles_loaded_stack));
   add("tiles_sampled_stack", std::to_string(s.tiles_sampled_stack));
   add("over_fetch_stack_ratio", num(s.over_fetch_stack_ratio));
+  add("height_tiles_loaded_stack", std::to_string(s.height_tiles_loaded_stack));
+  add("height_tiles_sampled_stack", std::to_string(s.height_tiles_sampled_stack));
+  add("height_over_fetch_stack_ratio", num(s.height_over_fetch_stack_ratio));
   add("ram_hit_rate", num(s.ram_hit_rate));
   add("gpu_hit_rate", num(s.gpu_hit_rate));
   add("peak_rss_mib", num(mib(s.peak_rss_bytes)));
@@ -490,6 +493,11 @@ void printTerrainRows(std::ostream& out, const FlightRun& run) {
     // the texture must too.
     row("texture_agree_pixels_rest", double(run.terrain_rest_agree_pixels), "%.0f");
     row("texture_agree_mismatched_rest", double(run.terrain_rest_agree_mismatched), "%.0f");
+  }
+  if (s.height_tiles_sampled_stack > 0) {
+    row("height_tiles_loaded_stack", double(s.height_tiles_loaded_stack), "%.0f");
+    row("height_tiles_sampled_stack", double(s.height_tiles_sampled_stack), "%.0f");
+    row("height_over_fetch_stack_ratio", s.height_over_fetch_stack_ratio, "%.3f");
   }
   if (run.seen_frames > 0) {
     row("over_fetch_ratio", s.over_fetch_ratio, "%.3f");

@@ -315,12 +315,14 @@ void Flight::readGroundSeen(const Camera& camera) {
   const Viewport fb = !m_target && m_config.framebuffer.width_px > 0 ? m_config.framebuffer : m_config.viewport;
   m_terrain->readGroundSeen(camera, m_config.viewport, fb, seen.get());
   m_seen = std::move(seen);
+  m_reads = std::make_shared<HeightReads>(m_terrain->heightReads());
 }
 
 void Flight::handGroundSeen(const Camera& camera, const Camera& planning) {
   // In the planner's space: without height bounds its camera stands at its
   // height above this frame's ground (planningCamera()), and the ground
   // seen moves with it, so that the distances from the camera hold.
+  m_streamer->setHeightReads(m_reads);
   const double dy = planning.position.y - camera.position.y;
   if (dy == 0.0) {
     m_streamer->setGroundSeen(m_seen);

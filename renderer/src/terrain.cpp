@@ -72,6 +72,8 @@ Status TerrainRenderer::setLighting(TerrainLighting lighting) { return m_impl->s
 Status TerrainRenderer::setDetailTextures(bool on) { return m_impl->setDetailTextures(on); }
 const TerrainFrame& TerrainRenderer::lastFrame() const { return m_impl->lastFrame(); }
 const std::vector<TerrainNode>& TerrainRenderer::lastNodes() const { return m_impl->lastNodes(); }
+const std::vector<TileKey>& TerrainRenderer::lastHeightTiles() const { return m_impl->lastHeightTiles(); }
+const HeightReads& TerrainRenderer::heightReads() const { return m_impl->heightReads(); }
 uint64_t TerrainRenderer::textureBytes() const { return m_impl->textureBytes(); }
 const PyramidGeometry& TerrainRenderer::geometry() const { return m_impl->geometry(); }
 const TerrainConfig& TerrainRenderer::config() const { return m_impl->config(); }

@@ -130,6 +130,9 @@ TerrainRendererImpl::Frustum TerrainRendererImpl::frustum(const Camera& camera,
 }
 
 void TerrainRendererImpl::drawRings(uint32_t p, const Camera& camera, const Viewport& viewport) {
+  m_height_tiles.clear();
+  m_reads.camera = camera;
+  m_reads.rects.clear();
   // terrain.vert's four clip distances bound the ground to the colour image.
   for (GLenum c = GL_CLIP_DISTANCE0; c < GL_CLIP_DISTANCE0 + 4; ++c) glEnable(c);
   if (m_config.full_resolution)
@@ -146,7 +149,16 @@ void TerrainRendererImpl::drawClipmapRings(uint32_t p, const Camera& camera, con
   const uint32_t n = m_config.ring_cells;
   const uint32_t coarsest = m_coarsest;
   std::vector<glm::i64vec2> origins(coarsest + 1);
-  for (uint32_t l = 0; l <= coarsest; ++l) origins[l] = ringOrigin(m_config, camera, l);
+  for (uint32_t l = 0; l <= coarsest; ++l) {
+    origins[l] = ringOrigin(m_config, camera, l);
+    // Every ring's square, resident or not (its normals one sample beyond;
+    // its transition band reads the next ring's square): a ring is drawn
+    // only when all of it is resident. And one step of the ring further
+    // each way (its origin moves two samples at a time): the square it
+    // snaps to next is wanted before the camera gets there.
+    if (l < m_geometry.levelCount())
+      m_reads.rects.push_back({l, origins[l] - int64_t(3), origins[l] + int64_t(n + 3)});
+  }
   // The innermost ring: the finest level that, with every coarser ring, is
   // resident. A gap below it only coarsens the geometry.
   int64_t finest = -1;
@@ -220,6 +232,11 @@ void TerrainRendererImpl::drawGrid(const Camera& camera, const Frustum& planes, 
   };
   std::vector<Block> blocks;
   const double spacing = std::ldexp(1.0, int(l));
+  // Cells of the transition band (terrain.vert: alpha > 0 beyond n / 2 -
+  // w - 1 from the centre); none on the coarsest ring and the patches.
+  const bool rings = m_config.method == TerrainMethod::kClipmap && !m_config.full_resolution;
+  const int64_t transition =
+      rings && l < m_coarsest ? int64_t(std::max(1u, n / renderer_config::kTerrainTransitionDivisor)) + 1 : 0;
   for (uint32_t b = 0; b < kBlocks * kBlocks; ++b) {
     const terrain_mesh::IndexRange range = m_ring_blocks[size_t(pattern)][b];
     if (range.count == 0) continue;
@@ -253,6 +270,22 @@ void TerrainRendererImpl::drawGrid(const Camera& camera, const Frustum& planes, 
       ++m_frame.culled_blocks;
       continue;
     }
+    // The samples its vertices read: their own and their normals' (one
+    // further), and in the ring's transition band the coarser level's
+    // under it (terrain.vert's coarseAt() and its normal).
+    noteHeightReads(l, c0 - int64_t(1), c1 + int64_t(1));
+    if (transition > 0) {
+      const glm::i64vec2 band0 = o + int64_t(transition), band1 = o + int64_t(n - transition);
+      // The parts of the block outside the band's inner square, as rects.
+      auto coarse = [&](glm::i64vec2 lo, glm::i64vec2 hi) {
+        if (lo.x <= hi.x && lo.y <= hi.y)
+          noteHeightReads(l + 1, (lo >> int64_t(1)) - int64_t(1), (hi >> int64_t(1)) + int64_t(1));
+      };
+      coarse(c0, {std::min(c1.x, band0.x), c1.y});
+      coarse({std::max(c0.x, band1.x), c0.y}, c1);
+      coarse(c0, {c1.x, std::min(c1.y, band0.y)});
+      coarse({c0.x, std::max(c0.y, band1.y)}, c1);
+    }
     const double distance = NodeBox{{x0.x, y0, x0.y}, {x1.x, y1, x1.y}}.distance();
     blocks.push_back({distance, GLsizei(range.count),
                       reinterpret_cast<const void*>(uintptr_t(range.first) * sizeof(uint32_t))});
@@ -269,6 +302,27 @@ void TerrainRendererImpl::drawGrid(const Camera& camera, const Frustum& planes, 
     }
     glMultiDrawElements(GL_TRIANGLES, counts.data(), GL_UNSIGNED_INT, offsets.data(), GLsizei(counts.size()));
   }
+}
+
+void TerrainRendererImpl::noteHeightReads(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1) {
+  const uint32_t stored = m_geometry.levelCount();
+  if (stored == 0) return;
+  if (level >= stored) {
+    const int shift = int(level - stored + 1);
+    s0 <<= int64_t(shift);
+    s1 <<= int64_t(shift);
+    level = stored - 1;
+  }
+  const LevelInfo& info = m_geometry.levels[level];
+  const glm::i64vec2 last(int64_t(info.width_px) - 1, int64_t(info.height_px) - 1);
+  const glm::i64vec2 t0 = glm::clamp(s0, glm::i64vec2(0), last) / int64_t(m_geometry.tile_px);
+  const glm::i64vec2 t1 = glm::clamp(s1, glm::i64vec2(0), last) / int64_t(m_geometry.tile_px);
+  for (int64_t y = t0.y; y <= t1.y; ++y)
+    for (int64_t x = t0.x; x <= t1.x; ++x) {
+      const TileKey key{level, uint32_t(x), uint32_t(y)};
+      if (std::find(m_height_tiles.begin(), m_height_tiles.end(), key) == m_height_tiles.end())
+        m_height_tiles.push_back(key);
+    }
 }
 
 }  // namespace clipstream

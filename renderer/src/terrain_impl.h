@@ -83,6 +83,8 @@ class TerrainRendererImpl {
   }
   const TerrainFrame& lastFrame() const { return m_frame; }
   const std::vector<TerrainNode>& lastNodes() const { return m_nodes; }
+  const std::vector<TileKey>& lastHeightTiles() const { return m_height_tiles; }
+  const HeightReads& heightReads() const { return m_reads; }
   uint64_t textureBytes() const { return m_stack->textureBytes(); }
   const PyramidGeometry& geometry() const { return m_geometry; }
   const TerrainConfig& config() const { return m_config; }
@@ -138,6 +140,10 @@ class TerrainRendererImpl {
   // that meet the frustum, nearest first; counts them in m_frame.
   void drawGrid(const Camera& camera, const Frustum& planes, uint32_t level, const glm::i64vec2& origin,
                 int pattern);
+  // Notes in m_height_tiles the tiles holding samples [s0, s1] (inclusive)
+  // of `level` as terrain.vert's heightAt() reads them (clamped to the
+  // level; levels past the pyramid decimate its last).
+  void noteHeightReads(uint32_t level, glm::i64vec2 s0, glm::i64vec2 s1);
 
   // ---- The quadtree (terrain_quadtree.cpp) ----
   // A quadtree node: level-L node (x, y) (TerrainNode's coordinates).
@@ -207,6 +213,13 @@ class TerrainRendererImpl {
   TerrainPositionTarget m_position_target;  // readPositions()
   std::shared_ptr<const TerrainBounds> m_bounds;
   std::vector<TerrainNode> m_nodes;
+  // The height tiles the last drawRings() read, each once (lastHeightTiles()).
+  std::vector<TileKey> m_height_tiles;
+  // What the last drawRings() read and wanted to read (heightReads()).
+  HeightReads m_reads;
+  // Quadtree: the nodes of the last selection that wanted to split but
+  // whose children were not resident (their children's samples are wanted).
+  std::vector<NodeId> m_wanted_splits;
   std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
   // Entries kept at most (cleared beyond): a few frames' nodes, so that an
   // upload's scan stays cheap and the cache cannot grow over a long flight.

@@ -283,7 +283,9 @@ ClipmapPlan planClipmap(const PyramidGeometry& geometry, const Viewport& viewpor
 
   const bool flat = !config.terrain.bounds && !(config.ground_above > 0.0) && !(config.ground_below > 0.0);
   if (config.scope == PlanScope::kSampled && fp.any_hit && viewport.height_px > 0) {
-    if (flat)
+    if (config.reads && !config.reads->rects.empty())
+      markHeightReads(geometry.tile_px, camera, *config.reads, &plan);
+    else if (flat)
       markSampled(geometry, viewport, camera, farLimit(geometry, camera), &plan);
     else if (config.seen && !config.seen->points.empty())
       markSeen(geometry.tile_px, viewport, camera, *config.seen, &plan);

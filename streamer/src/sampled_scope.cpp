@@ -413,4 +413,23 @@ void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, 
   for (ClipLevelPlan* lp : levels) markSampledLevel(pyramid, tile_px, ahead, lp, lead_tiles);
 }
 
+void markHeightReads(uint32_t tile_px, const Camera& camera, const HeightReads& reads, ClipmapPlan* plan) {
+  if (reads.rects.empty() || tile_px == 0) return;
+  for (ClipLevelPlan& lp : plan->stack)
+    if (lp.needed && !lp.window.empty()) lp.sampled.assign(size_t(lp.window.width() * lp.window.height()), 0);
+  const glm::dvec2 moved{camera.position.x - reads.camera.position.x, camera.position.z - reads.camera.position.z};
+  const double tile = double(tile_px);
+  for (const HeightReads::Rect& r : reads.rects) {
+    if (r.level >= plan->stack.size()) continue;
+    ClipLevelPlan& lp = plan->stack[r.level];
+    if (lp.sampled.empty()) continue;  // not needed, or no window
+    const glm::dvec2 d = moved * std::ldexp(1.0, -int(r.level));
+    const glm::dvec2 lo = glm::min(glm::dvec2(r.s0), glm::dvec2(r.s0) + d);
+    const glm::dvec2 hi = glm::max(glm::dvec2(r.s1), glm::dvec2(r.s1) + d);
+    markTiles(&lp, intersect({int64_t(std::floor(lo.x / tile)), int64_t(std::floor(lo.y / tile)),
+                              int64_t(std::floor(hi.x / tile)) + 1, int64_t(std::floor(hi.y / tile)) + 1},
+                             lp.window));
+  }
+}
+
 }  // namespace clipstream

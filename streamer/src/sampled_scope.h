@@ -168,4 +168,19 @@ std::vector<SeenCorner> seenCorners(const GroundSeen& seen, const Viewport& view
 void markSeen(uint32_t tile_px, const Viewport& viewport, const Camera& camera, const GroundSeen& seen,
               ClipmapPlan* plan, double lead_tiles = kSeenLeadTiles);
 
+// Marks, for every needed stack level of *plan, the window tiles under the
+// samples `reads` gives at that level (an elevation layer, its texels the
+// samples; `camera` and reads.camera in them): each rect swept from where
+// the camera that read it stood to `camera` (the geometry moves with the
+// camera: the clipmap's rings are centred on it, and the predicted
+// camera's plan sweeps them along its motion, the prefetch's half second
+// ahead). No lead beyond that: the reads say what is next (the clipmap's
+// give each ring's square one snap wider): on the flight of
+// TerrainPlanning.HeightLoadsAreTheTilesTheRingsRead a lead of four more
+// moves loaded 40 tiles instead of 24 and drew no ring finer, and on the
+// Rainier mountainside (x10) no frame's finest ring is coarser without one
+// than with whole windows. A needed level without rects wants nothing.
+// `reads` without rects leaves the windows whole.
+void markHeightReads(uint32_t tile_px, const Camera& camera, const HeightReads& reads, ClipmapPlan* plan);
+
 }  // namespace clipstream

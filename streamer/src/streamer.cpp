@@ -633,6 +633,19 @@ void Streamer::setGroundSeen(std::shared_ptr<const GroundSeen> seen) {
   }
 }
 
+void Streamer::setHeightReads(std::shared_ptr<const HeightReads> reads) {
+  Impl& s = *m_impl;
+  for (Impl::Layer& layer : s.layers) {
+    layer.reads = nullptr;
+    if (!reads || !layer.active() || layer.spec.role != LayerRole::kElevation) continue;
+    // The rects are in the layer's samples already; the camera as
+    // layerCamera() maps it.
+    auto mapped = std::make_shared<HeightReads>(*reads);
+    mapped->camera = layerCamera(layer.spec, reads->camera);
+    layer.reads = std::move(mapped);
+  }
+}
+
 void Streamer::setPathHint(PathHint hint) {
   Impl& s = *m_impl;
   s.hint = std::move(hint);

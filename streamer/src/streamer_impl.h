@@ -80,6 +80,7 @@ struct Streamer::Impl {
     ClipmapPlan predicted_plan;
     TerrainView terrain;        // the scene's terrain in this layer's texels (bounds null: flat)
     std::shared_ptr<const GroundSeen> seen;  // colour layers: the last frame's ground in its texels
+    std::shared_ptr<const HeightReads> reads;  // elevation layers: the geometry's last reads (its camera mapped)
     PathHint hint;              // the streamer's hint seen through layerCamera()
     PathLookahead lookahead;    // windows along that hint
 
@@ -96,7 +97,10 @@ struct Streamer::Impl {
       PlannerConfig c = base;
       if (spec.clip_tiles != 0) c.clip_tiles = spec.clip_tiles;
       c.terrain = terrain;
-      if (with_seen) c.seen = seen;
+      if (with_seen) {
+        c.seen = seen;
+        c.reads = reads;
+      }
       // Relief in world units, scaled like layerCamera() scales heights.
       const double s = std::sqrt(spec.texels_per_unit.x * spec.texels_per_unit.y);
       c.ground_above *= s;

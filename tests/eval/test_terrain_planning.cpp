@@ -233,6 +233,68 @@ TEST(TerrainPlanning, LoadsAtMostTwiceTheTilesTheFramesSample) {
   EXPECT_GE(seen.psnr_mean_db, window.psnr_mean_db - 0.5);
 }
 
+// The height layer over terrain: the plans want the samples the geometry
+// read (Streamer::setHeightReads()), not whole windows. St Helens tiled in
+// tiles of 32 samples, so that its two finest levels are clip levels of
+// the rings' windows (5 tiles a side for rings of 32 cells), flown low
+// around the crater: the clipmap's rings load at most twice the height
+// tiles they read, under half what whole windows load, and draw the same
+// geometry (no frame's finest ring coarser, the geometric error as with
+// whole windows).
+TEST(TerrainPlanning, HeightLoadsAreTheTilesTheRingsRead) {
+  CLIPSTREAM_REQUIRE_GL();
+  test::TempDir dir;
+  TilerOptions opt;
+  opt.input_path = test::bundledDataPath("mount_st_helens_30m.tif");
+  opt.output_path = dir.file("helens32.cst");
+  opt.tile_px = 32;
+  opt.threads = 2;
+  opt.fsync = false;
+  TilerSummary summary;
+  ASSERT_TRUE(tileImage(opt, &summary).ok());
+  FlightRun runs[2];
+  for (int k = 0; k < 2; ++k) {
+    FlightRunOptions o;
+    o.source = test::procedural(16384, 128);
+    std::vector<std::string> warnings;
+    TerrainLayerConfig tl;
+    const Status s = openTerrainLayer("", o.source->geometry(), opt.output_path, 0.5, true, 32, &tl, &warnings);
+    ASSERT_TRUE(s.ok()) << s.toString();
+    o.terrain = tl;
+    for (int i = 0; i <= 8; ++i) {
+      const double angle = i * (test::kPi / 12);
+      Keyframe key;
+      key.t_s = i * 0.5;
+      key.position = {8192.0 + 3500.0 * std::cos(angle), 400.0, 8192.0 + 3500.0 * std::sin(angle)};
+      key.heading_deg = std::atan2(-std::cos(angle), std::sin(angle)) * 180.0 / test::kPi;
+      key.pitch_deg = -10.0;
+      o.path.keyframes.push_back(key);
+    }
+    o.frames = 120;
+    o.viewport = {320, 180};
+    o.reference_every = 20;
+    o.streamer.io_threads = 2;
+    o.streamer.planner.scope = k == 0 ? PlanScope::kSampled : PlanScope::kWindow;
+    ASSERT_TRUE(runFlight(o, &runs[k]).ok());
+  }
+  const FlightRun &read = runs[0], &window = runs[1];
+  std::printf("height clip levels: reads %llu loaded / %llu read = %.2f, geometric error %.3f / %.3f px; whole "
+              "windows %llu / %llu = %.2f, %.3f / %.3f px\n",
+              (unsigned long long)read.summary.height_tiles_loaded_stack,
+              (unsigned long long)read.summary.height_tiles_sampled_stack, read.summary.height_over_fetch_stack_ratio,
+              read.geometry_mean_px, read.geometry_p95_px,
+              (unsigned long long)window.summary.height_tiles_loaded_stack,
+              (unsigned long long)window.summary.height_tiles_sampled_stack,
+              window.summary.height_over_fetch_stack_ratio, window.geometry_mean_px, window.geometry_p95_px);
+  // No frame draws coarser rings than with whole windows.
+  for (size_t i = 0; i < read.frames.size() && i < window.frames.size(); ++i)
+    EXPECT_LE(read.frames[i].sample.terrain_finest_level, window.frames[i].sample.terrain_finest_level) << "frame " << i;
+  ASSERT_GT(read.summary.height_tiles_sampled_stack, 12u) << "the height clip levels were read too little to judge";
+  EXPECT_LE(read.summary.height_over_fetch_stack_ratio, 2.0);
+  EXPECT_GT(window.summary.height_over_fetch_stack_ratio, 2.0 * read.summary.height_over_fetch_stack_ratio);
+  EXPECT_LE(read.geometry_p95_px, window.geometry_p95_px * 1.05 + 0.01);
+}
+
 // The tiles sampled over terrain follow the ground points: a flat terrain
 // seen from above samples the tiles the flat reference samples.
 TEST(TerrainPlanning, SampledTilesOfFlatTerrainAreThePlanes) {

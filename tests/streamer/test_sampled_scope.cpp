@@ -431,5 +431,74 @@ TEST(SeenScope, OneRowOfGroundMarksItsTilesAndNoGroundLeavesTheWindowsWhole) {
   EXPECT_GT(needed, 0u);
 }
 
+// Two needed stack levels of 8 x 8 tiles of 32 samples (an elevation
+// layer's texels are its samples), with nothing marked yet.
+ClipmapPlan heightPlan() {
+  ClipmapPlan plan;
+  plan.pyramid_level = 2;
+  plan.stack.resize(2);
+  for (uint32_t l = 0; l < 2; ++l) {
+    plan.stack[l].level = l;
+    plan.stack[l].needed = true;
+    plan.stack[l].window = {0, 0, 8, 8};
+  }
+  return plan;
+}
+
+std::vector<glm::i64vec2> wantedTiles(const ClipLevelPlan& lp) {
+  std::vector<glm::i64vec2> out;
+  for (int64_t y = lp.window.y0; y < lp.window.y1; ++y)
+    for (int64_t x = lp.window.x0; x < lp.window.x1; ++x)
+      if (lp.wants(x, y)) out.push_back({x, y});
+  return out;
+}
+
+TEST(HeightReadsScope, ALevelWantsTheTilesUnderItsReadsAndNothingElse) {
+  Camera camera;
+  camera.position = {100.0, 50.0, 100.0};
+  HeightReads reads;
+  reads.camera = camera;
+  reads.rects.push_back({0, {10, 40}, {40, 60}});  // level-0 tiles x 0..1, y 1
+  ClipmapPlan plan = heightPlan();
+  markHeightReads(32, camera, reads, &plan);
+  EXPECT_EQ(wantedTiles(plan.stack[0]), (std::vector<glm::i64vec2>{{0, 1}, {1, 1}}));
+  // Level 1 was read nowhere: it wants nothing (not its whole window).
+  ASSERT_EQ(plan.stack[1].sampled.size(), 64u);
+  EXPECT_TRUE(wantedTiles(plan.stack[1]).empty());
+  // A rect's samples are its last included: one more reaches the next tile.
+  reads.rects[0].s1.x = 64;
+  plan = heightPlan();
+  markHeightReads(32, camera, reads, &plan);
+  EXPECT_EQ(wantedTiles(plan.stack[0]), (std::vector<glm::i64vec2>{{0, 1}, {1, 1}, {2, 1}}));
+}
+
+TEST(HeightReadsScope, ReadsAreSweptToThePlannedCameraAtEachLevelsScale) {
+  Camera seen_from;
+  seen_from.position = {100.0, 50.0, 100.0};
+  HeightReads reads;
+  reads.camera = seen_from;
+  reads.rects.push_back({0, {10, 40}, {40, 60}});
+  reads.rects.push_back({1, {5, 40}, {20, 50}});
+  // The planned camera 64 samples along +x: the level-0 rect sweeps to
+  // x 10..104 (tiles 0..3), level 1's by 32 of its samples to 5..52 (0..1).
+  Camera planned = seen_from;
+  planned.position.x += 64.0;
+  ClipmapPlan plan = heightPlan();
+  markHeightReads(32, planned, reads, &plan);
+  EXPECT_EQ(wantedTiles(plan.stack[0]), (std::vector<glm::i64vec2>{{0, 1}, {1, 1}, {2, 1}, {3, 1}}));
+  EXPECT_EQ(wantedTiles(plan.stack[1]), (std::vector<glm::i64vec2>{{0, 1}, {1, 1}}));
+  // A level the plan does not need keeps no mask; reads without rects
+  // leave every window whole.
+  plan = heightPlan();
+  plan.stack[0].needed = false;
+  markHeightReads(32, planned, reads, &plan);
+  EXPECT_TRUE(plan.stack[0].sampled.empty());
+  EXPECT_EQ(wantedTiles(plan.stack[1]).size(), 2u);
+  plan = heightPlan();
+  markHeightReads(32, planned, HeightReads{}, &plan);
+  EXPECT_TRUE(plan.stack[0].sampled.empty() && plan.stack[1].sampled.empty());
+  EXPECT_EQ(plan.stack[1].wantedCount(), 64u);
+}
+
 }  // namespace
 }  // namespace clipstream

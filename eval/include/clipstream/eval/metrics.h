@@ -83,6 +83,12 @@ struct RunSummary {
   uint64_t tiles_loaded_stack = 0;
   uint64_t tiles_sampled_stack = 0;
   double over_fetch_stack_ratio = 0.0;  // 0 when not measured
+  // Over terrain, the height layer's clip levels (those not held whole):
+  // tiles the streamer loaded, over the distinct tiles the drawn geometry
+  // read in every frame, warm-up included (TerrainRenderer::lastHeightTiles()).
+  uint64_t height_tiles_loaded_stack = 0;
+  uint64_t height_tiles_sampled_stack = 0;
+  double height_over_fetch_stack_ratio = 0.0;  // 0 when not measured
 
   // One JSON object with the fields above (time_to_sharp_frames as an
   // array). Always valid JSON.

@@ -240,12 +240,13 @@ class Flight {
   Camera planningCamera(const Camera& camera, double* ground_height);
   // Binds the frame's framebuffer (the offscreen target or the window's).
   void bindFrame();
-  // Reads the ground the frame just drawn with `camera` showed into m_seen
-  // (over terrain, PlanScope::kSampled; docs/terrain.md "Over-fetch over
-  // terrain").
+  // Reads the ground the frame just drawn with `camera` showed into m_seen,
+  // and the height samples its geometry read into m_reads (over terrain,
+  // PlanScope::kSampled; docs/terrain.md "Over-fetch over terrain").
   void readGroundSeen(const Camera& camera);
   // Hands m_seen to the streamer for this frame's plans, moved into the
-  // space of `planning`, the camera the streamer plans `camera` with.
+  // space of `planning`, the camera the streamer plans `camera` with, and
+  // m_reads.
   void handGroundSeen(const Camera& camera, const Camera& planning);
 
   std::shared_ptr<TileSource> m_source;
@@ -265,6 +266,7 @@ class Flight {
   // Over terrain with PlanScope::kSampled: the ground the last frame showed,
   // in world space (null at first and after a resize).
   std::shared_ptr<const GroundSeen> m_seen;
+  std::shared_ptr<const HeightReads> m_reads;  // read with m_seen
   double m_preload_ms = 0.0;
   uint32_t m_preload_failures = 0;
   uint32_t m_resizes = 0;

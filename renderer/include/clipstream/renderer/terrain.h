@@ -246,6 +246,20 @@ class TerrainRenderer {
   // Quadtree: every leaf of the last draw (culled ones included); empty
   // for the other methods.
   const std::vector<TerrainNode>& lastNodes() const;
+  // The height tiles the last draw's vertices read, each once: the stored
+  // pyramid's (rings coarser than it read its last level), under every
+  // ring block or quadtree leaf drawn, with the samples its normals and
+  // its transition band towards the coarser ring reach. For measuring what
+  // the geometry samples against what the streamer loads (the height
+  // over-fetch); readPositions() draws, so it sets them too.
+  const std::vector<TileKey>& lastHeightTiles() const;
+  // The height samples the last draw read, and those it would have read
+  // had their tiles been resident, for the streamer's plans of the height
+  // layer (Streamer::setHeightReads()): the clipmap's every ring square
+  // from level 0 out (a ring is drawn only when its square is resident);
+  // the quadtree's drawn leaves and the children of the nodes that wanted
+  // to split (for their error or the restriction) but could not.
+  const HeightReads& heightReads() const;
   // Bytes of the height stack texture (video memory), with its gradients
   // when lit per pixel.
   uint64_t textureBytes() const;

@@ -68,6 +68,22 @@ struct GroundSeen {
   std::vector<glm::dvec3> points;
 };
 
+// The samples of an elevation layer the terrain's geometry read to draw a
+// frame, and those it would have read had their tiles been resident
+// (TerrainRenderer::heightReads(): the clipmap's ring squares, the
+// quadtree's leaves and the children of the nodes that wanted to split).
+// Over terrain with PlanScope::kSampled the elevation layer's plans want
+// only the window tiles under them (markHeightReads()), as the colour
+// layers' want the ground seen.
+struct HeightReads {
+  Camera camera;  // the camera that drew the frame, in the planner's space
+  struct Rect {
+    uint32_t level = 0;
+    glm::i64vec2 s0{0}, s1{0};  // the level's samples s0..s1, both included
+  };
+  std::vector<Rect> rects;
+};
+
 // The screen positions (pixels, y down; pixel centres) of the grid a
 // GroundSeen is read on: 192 cells along the longer side at most, 2 px
 // apart at least (twice the flat planner's grid).
@@ -103,6 +119,10 @@ struct PlannerConfig {
   // showed, in this plan's space (the streamer's Streamer::setGroundSeen(),
   // mapped into the layer's texels). Null: every needed window whole.
   std::shared_ptr<const GroundSeen> seen;
+  // An elevation layer over terrain with PlanScope::kSampled: what the
+  // geometry read last (Streamer::setHeightReads(), its camera mapped into
+  // the layer's texels). Null or no rects: every needed window whole.
+  std::shared_ptr<const HeightReads> reads;
 };
 
 // One level of the clip stack.

@@ -273,11 +273,21 @@ class Streamer {
   // Render thread. The ground the last drawn frame showed, in world space
   // (GroundSeen, read back by TerrainRenderer::readGroundSeen()): over
   // terrain with PlanScope::kSampled the next update()s plan each colour
-  // layer's windows to the tiles under it (the elevation layers keep their
-  // windows: the rings read heights where no pixel looks). Null clears it:
+  // layer's windows to the tiles under it (the elevation layers are planned
+  // by what the geometry reads: setHeightReads()). Null clears it:
   // whole windows, as after a jump of the camera, when the last frame's
   // ground says nothing of the next one's. Ignored over the flat plane.
   void setGroundSeen(std::shared_ptr<const GroundSeen> seen);
+
+  // Render thread. The samples of the elevation layer the terrain's
+  // geometry read to draw the last frame, and those it would have read
+  // had they been resident (HeightReads, TerrainRenderer::heightReads();
+  // rects in the elevation layer's own samples, the camera in world
+  // space): with PlanScope::kSampled the next update()s plan each
+  // elevation layer's windows to the tiles under them, swept to the
+  // camera being planned (markHeightReads()). Null clears it: whole
+  // windows, as after a jump of the camera.
+  void setHeightReads(std::shared_ptr<const HeightReads> reads);
 
   // True when the constructor loaded an elevation layer's per-tile height
   // bounds (StreamLayer::world_per_height > 0 and a source that has them):
