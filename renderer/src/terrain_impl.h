@@ -217,9 +217,6 @@ class TerrainRendererImpl {
   std::vector<TileKey> m_height_tiles;
   // What the last drawRings() read and wanted to read (heightReads()).
   HeightReads m_reads;
-  // Quadtree: the nodes of the last selection that wanted to split but
-  // whose children were not resident (their children's samples are wanted).
-  std::vector<NodeId> m_wanted_splits;
   std::unordered_map<NodeId, float, NodeIdHash> m_error_cache;
   // Entries kept at most (cleared beyond): a few frames' nodes, so that an
   // upload's scan stays cheap and the cache cannot grow over a long flight.

@@ -75,10 +75,6 @@ class TerrainRendererImpl::NodeSelection {
   uint32_t fallbacksWith(size_t count) const;
   // Leaves the restriction drew coarser (a neighbour could not split).
   uint32_t coarsened() const { return m_coarsened; }
-  // The nodes that wanted to split but whose children were not resident:
-  // fallbacksWith(count)'s, and the neighbours the last restriction could
-  // not split for want of their children.
-  void wantedSplits(size_t count, std::vector<NodeKey>* out) const;
   // 3. The leaves with their coarse sides.
   void leaves(std::vector<TerrainNode>* out) const;
 
@@ -147,11 +143,6 @@ class TerrainRendererImpl::NodeSelection {
   std::vector<int64_t> m_drawn_after;  // [n]: nodes drawn after the first n splits
   uint32_t m_root_fallbacks = 0;
   uint32_t m_coarsened = 0;
-  // Step 1's fallbacks, each with the splits that must be kept for it to
-  // count (0: a root; n + 1: a child of split n).
-  std::vector<std::pair<size_t, NodeKey>> m_fallbacks;
-  std::vector<NodeKey> m_unsplittable;  // the last restriction's, for want of children
-  mutable std::vector<NodeKey> m_evaluated;  // nodes whose exact error was asked for
 };
 
 TerrainRendererImpl::NodeSelection::NodeSelection(TerrainRendererImpl& terrain, const Camera& camera,
@@ -208,8 +199,6 @@ bool TerrainRendererImpl::NodeSelection::wantsSplit(const NodeKey& k, const Node
       !(m_terrain.tileErrorBound(k.level, k.x, k.y) * (1.0 + 1e-6) * world_per_height * m_pixels / dist >
         m_terrain.m_config.error_px))
     return false;
-  // Its exact error reads the next finer level under it.
-  m_evaluated.push_back(k);
   const double e = m_terrain.nodeError(k.level, k.x, k.y) * world_per_height;
   if (!(e > 0.0)) return false;
   *projected_px = dist > 0.0 ? e * m_pixels / dist : INFINITY;
@@ -237,10 +226,7 @@ void TerrainRendererImpl::NodeSelection::splitByError(uint64_t budget_triangles)
     double e = 0.0;
     const Want w = evaluate(r, &e);
     if (drawn(r)) ++drawn_nodes;
-    if (w == Want::kFallback) {
-      ++m_root_fallbacks;
-      m_fallbacks.emplace_back(0, r);
-    }
+    if (w == Want::kFallback) ++m_root_fallbacks;
     if (w == Want::kSplit) candidates.push({e, r});
   }
   m_drawn_after.assign(1, drawn_nodes);
@@ -259,10 +245,7 @@ void TerrainRendererImpl::NodeSelection::splitByError(uint64_t budget_triangles)
       double e = 0.0;
       const Want w = evaluate(child, &e);
       if (visible(child)) ++delta;
-      if (w == Want::kFallback) {
-        ++split.fallbacks;
-        m_fallbacks.emplace_back(m_order.size() + 1, child);
-      }
+      if (w == Want::kFallback) ++split.fallbacks;
       if (w == Want::kSplit) children[wanting++] = {std::min(e, c.error_px), child};
     }
     drawn_nodes += delta;
@@ -284,7 +267,6 @@ uint32_t TerrainRendererImpl::NodeSelection::splitDepthFirst() {
     if (!m_terrain.nodeVisible(m_camera, b) || !wantsSplit(k, b, &e)) continue;
     if (!childrenResident(k)) {
       ++fallbacks;
-      m_fallbacks.emplace_back(0, k);
       continue;
     }
     m_split.insert(k);
@@ -314,14 +296,6 @@ double TerrainRendererImpl::NodeSelection::boundWith(size_t count) const {
   // Above kMaxTerrainErrorPx (a node nearer than its error is high, or
   // with the camera in its box: infinite) the bound reported is that.
   return std::min(std::max(error_px, next), kMaxTerrainErrorPx);
-}
-
-void TerrainRendererImpl::NodeSelection::wantedSplits(size_t count, std::vector<NodeKey>* out) const {
-  out->clear();
-  for (const auto& [after, key] : m_fallbacks)
-    if (after <= count) out->push_back(key);
-  out->insert(out->end(), m_unsplittable.begin(), m_unsplittable.end());
-  out->insert(out->end(), m_evaluated.begin(), m_evaluated.end());
 }
 
 uint32_t TerrainRendererImpl::NodeSelection::fallbacksWith(size_t count) const {
@@ -477,7 +451,6 @@ uint32_t TerrainRendererImpl::NodeSelection::restrictNeighbours() {
   // leaves after each one (restrictNeighboursByRescan(), the reference).
   std::unordered_set<NodeKey, NodeIdHash> frozen;
   m_coarsened = 0;
-  m_unsplittable.clear();
   uint32_t forced = 0;
   collectLeaves();
   std::vector<Queued> first;
@@ -499,7 +472,6 @@ uint32_t TerrainRendererImpl::NodeSelection::restrictNeighbours() {
       for (int c = 0; c < 4; ++c) work.push(queued(childOf(nb, c)));
       work.push(queued(l));
     } else {
-      if (!frozen.count(nb)) m_unsplittable.push_back(nb);
       const NodeKey a = coarsenBeside(l, nb, &frozen);
       work.push(queued(a));
       pushLeavesAround(a, &work);
@@ -644,7 +616,6 @@ void TerrainRendererImpl::selectNodes(const Camera& camera, const Viewport& view
     m_frame.forced_splits = m_exact_node_error ? selection.unrestricted() : selection.restrictWithin(budget, &kept);
     m_frame.fallback_nodes = selection.fallbacksWith(kept);
   }
-  selection.wantedSplits(kept, &m_wanted_splits);
   selection.leaves(&m_nodes);
   m_frame.coarsened_nodes = selection.coarsened();
   // The flat method selects its roots here too; it has no bound to meet.
@@ -672,10 +643,8 @@ void TerrainRendererImpl::drawQuadtree(uint32_t p, const Camera& camera, const V
   for (const TerrainNode& node : m_nodes) {
     if (!node.drawn) continue;
     // Its samples and their normals' (no transition band here).
-    const glm::i64vec2 s0 = glm::i64vec2(node.x, node.y) * cells - int64_t(1);
-    const glm::i64vec2 s1 = glm::i64vec2(node.x + 1, node.y + 1) * cells + int64_t(1);
-    noteHeightReads(node.level, s0, s1);
-    m_reads.rects.push_back({node.level, s0, s1});
+    noteHeightReads(node.level, glm::i64vec2(node.x, node.y) * cells - int64_t(1),
+                    glm::i64vec2(node.x + 1, node.y + 1) * cells + int64_t(1));
     by_mask[node.coarse_sides].emplace_back(nodeBox(camera, node.level, node.x, node.y).distance(),
                                             gridOrigin(camera, node.level, {node.x * cells, node.y * cells}));
     m_frame.triangles += m_patch_masks[node.coarse_sides].count / 3;
@@ -685,13 +654,6 @@ void TerrainRendererImpl::drawQuadtree(uint32_t p, const Camera& camera, const V
     finest = std::min(finest, node.level);
     coarsest = std::max(coarsest, node.level);
   }
-  // The samples of the children the selection wanted but did not have.
-  for (const NodeId& k : m_wanted_splits)
-    for (uint32_t l = k.level; l-- > 0;) {
-      const int64_t f = int64_t(1) << (k.level - l);
-      m_reads.rects.push_back({l, glm::i64vec2(k.x * f, k.y * f) * cells - int64_t(1),
-                               glm::i64vec2((k.x + 1) * f, (k.y + 1) * f) * cells + int64_t(1)});
-    }
   std::vector<TerrainGridOrigin> origins;
   origins.reserve(m_frame.nodes);
   for (auto& v : by_mask) {

@@ -256,9 +256,10 @@ class TerrainRenderer {
   // The height samples the last draw read, and those it would have read
   // had their tiles been resident, for the streamer's plans of the height
   // layer (Streamer::setHeightReads()): the clipmap's every ring square
-  // from level 0 out (a ring is drawn only when its square is resident);
-  // the quadtree's drawn leaves and the children of the nodes that wanted
-  // to split (for their error or the restriction) but could not.
+  // from level 0 out (a ring is drawn only when its square is resident),
+  // one snap of the ring wider. None for the quadtree and the other
+  // methods (their windows stay whole): its node errors read the finer
+  // levels under every node it evaluates (docs/decisions.md D297).
   const HeightReads& heightReads() const;
   // Bytes of the height stack texture (video memory), with its gradients
   // when lit per pixel.
