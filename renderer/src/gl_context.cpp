@@ -76,6 +76,13 @@ namespace {
 // terrain frame bins a few MiB; 256 MiB covers 4K frames with room, and is
 // memory the process already had.
 constexpr size_t kSoftwareGlHeapKeepBytes = size_t(256) << 20;
+// Blocks up to this size come from the heap, not from mmap: setting the
+// trim threshold turns off glibc's sliding mmap threshold, which left it at
+// 128 KiB, so every frame's larger buffers (the ground seen's points and
+// corners, the depth rows read back, the selection's vectors) were mapped,
+// faulted in page by page and unmapped again. 32 MiB is glibc's largest
+// (docs/decisions.md D298).
+constexpr size_t kSoftwareGlMmapThresholdBytes = size_t(32) << 20;
 }  // namespace
 
 bool keepHeapForSoftwareGl() {
@@ -85,7 +92,10 @@ bool keepHeapForSoftwareGl() {
   if (!software) return false;
   static std::once_flag once;
   static bool applied = false;
-  std::call_once(once, [] { applied = mallopt(M_TRIM_THRESHOLD, int(kSoftwareGlHeapKeepBytes)) == 1; });
+  std::call_once(once, [] {
+    applied = mallopt(M_TRIM_THRESHOLD, int(kSoftwareGlHeapKeepBytes)) == 1 &&
+              mallopt(M_MMAP_THRESHOLD, int(kSoftwareGlMmapThresholdBytes)) == 1;
+  });
   return applied;
 }
 

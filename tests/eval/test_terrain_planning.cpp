@@ -135,10 +135,11 @@ Orbit flyOrbit(const std::string& dem, bool terrain_planning) {
   return out;
 }
 
-std::string tileDem(const test::TempDir& dir) {
+std::string tileDem(const test::TempDir& dir, uint32_t tile_px = 128) {
   TilerOptions opt;
   opt.input_path = test::bundledDataPath("mount_st_helens_30m.tif");
-  opt.output_path = dir.file("helens.cst");
+  opt.output_path = dir.file("helens" + std::to_string(tile_px) + ".cst");
+  opt.tile_px = tile_px;
   opt.threads = 2;
   opt.fsync = false;
   TilerSummary summary;
@@ -190,34 +191,44 @@ TEST(TerrainPlanning, EveryTileSampledOverMountainSlopesIsPlanned) {
 // orbit around St Helens loads at most twice the clip-level tiles its
 // frames sample when the plan follows the ground the frames show, at the
 // PSNR of loading whole windows, which load several times more.
+// A flight low around the crater of `dem` stretched under a 16384^2
+// procedural texture (vertical scale 0.5, rings of `ring_cells`), looking
+// `pitch_deg` down at the slopes: keyframes `step` radians and `dt_s`
+// apart, at `radius` and `height`. 320x180.
+FlightRunOptions craterOrbit(const std::string& dem, uint32_t ring_cells, int keys, double step, double dt_s,
+                             double radius, double height, double pitch_deg) {
+  FlightRunOptions o;
+  o.source = test::procedural(16384, 128);
+  std::vector<std::string> warnings;
+  TerrainLayerConfig tl;
+  const Status s = openTerrainLayer("", o.source->geometry(), dem, 0.5, true, ring_cells, &tl, &warnings);
+  EXPECT_TRUE(s.ok()) << s.toString();
+  if (s) o.terrain = tl;
+  for (int i = 0; i < keys; ++i) {
+    const double angle = i * step;
+    Keyframe key;
+    key.t_s = i * dt_s;
+    key.position = {8192.0 + radius * std::cos(angle), height, 8192.0 + radius * std::sin(angle)};
+    key.heading_deg = std::atan2(-std::cos(angle), std::sin(angle)) * 180.0 / test::kPi;
+    key.pitch_deg = pitch_deg;
+    o.path.keyframes.push_back(key);
+  }
+  o.viewport = {320, 180};
+  o.streamer.io_threads = 2;
+  return o;
+}
+
 TEST(TerrainPlanning, LoadsAtMostTwiceTheTilesTheFramesSample) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
   const std::string dem = tileDem(dir);
   FlightRun runs[2];
   for (int k = 0; k < 2; ++k) {
-    FlightRunOptions o;
-    o.source = test::procedural(16384, 128);
-    std::vector<std::string> warnings;
-    TerrainLayerConfig tl;
-    const Status s = openTerrainLayer("", o.source->geometry(), dem, 0.5, true, 64, &tl, &warnings);
-    ASSERT_TRUE(s.ok()) << s.toString();
-    o.terrain = tl;
-    // Low around the crater, looking a little down at the slopes.
-    for (int i = 0; i <= 6; ++i) {
-      const double angle = i * (test::kPi / 18);
-      Keyframe key;
-      key.t_s = i * 0.25;
-      key.position = {8192.0 + 4000.0 * std::cos(angle), 500.0, 8192.0 + 4000.0 * std::sin(angle)};
-      key.heading_deg = std::atan2(-std::cos(angle), std::sin(angle)) * 180.0 / test::kPi;
-      key.pitch_deg = -12.0;
-      o.path.keyframes.push_back(key);
-    }
+    FlightRunOptions o = craterOrbit(dem, 64, 7, test::kPi / 18, 0.25, 4000.0, 500.0, -12.0);
+    ASSERT_TRUE(o.terrain.has_value());
     o.frames = 90;
-    o.viewport = {320, 180};
     o.reference_every = 10;
     o.sample_tiles = true;
-    o.streamer.io_threads = 2;
     o.streamer.planner.scope = k == 0 ? PlanScope::kSampled : PlanScope::kWindow;
     ASSERT_TRUE(runFlight(o, &runs[k]).ok());
   }
@@ -244,36 +255,13 @@ TEST(TerrainPlanning, LoadsAtMostTwiceTheTilesTheFramesSample) {
 TEST(TerrainPlanning, HeightLoadsAreTheTilesTheRingsRead) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
-  TilerOptions opt;
-  opt.input_path = test::bundledDataPath("mount_st_helens_30m.tif");
-  opt.output_path = dir.file("helens32.cst");
-  opt.tile_px = 32;
-  opt.threads = 2;
-  opt.fsync = false;
-  TilerSummary summary;
-  ASSERT_TRUE(tileImage(opt, &summary).ok());
+  const std::string dem = tileDem(dir, 32);
   FlightRun runs[2];
   for (int k = 0; k < 2; ++k) {
-    FlightRunOptions o;
-    o.source = test::procedural(16384, 128);
-    std::vector<std::string> warnings;
-    TerrainLayerConfig tl;
-    const Status s = openTerrainLayer("", o.source->geometry(), opt.output_path, 0.5, true, 32, &tl, &warnings);
-    ASSERT_TRUE(s.ok()) << s.toString();
-    o.terrain = tl;
-    for (int i = 0; i <= 8; ++i) {
-      const double angle = i * (test::kPi / 12);
-      Keyframe key;
-      key.t_s = i * 0.5;
-      key.position = {8192.0 + 3500.0 * std::cos(angle), 400.0, 8192.0 + 3500.0 * std::sin(angle)};
-      key.heading_deg = std::atan2(-std::cos(angle), std::sin(angle)) * 180.0 / test::kPi;
-      key.pitch_deg = -10.0;
-      o.path.keyframes.push_back(key);
-    }
+    FlightRunOptions o = craterOrbit(dem, 32, 9, test::kPi / 12, 0.5, 3500.0, 400.0, -10.0);
+    ASSERT_TRUE(o.terrain.has_value());
     o.frames = 120;
-    o.viewport = {320, 180};
     o.reference_every = 20;
-    o.streamer.io_threads = 2;
     o.streamer.planner.scope = k == 0 ? PlanScope::kSampled : PlanScope::kWindow;
     ASSERT_TRUE(runFlight(o, &runs[k]).ok());
   }

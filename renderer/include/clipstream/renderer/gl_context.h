@@ -40,11 +40,15 @@ std::string currentGlDescription();
 // When the current context is Mesa's software rasterizer (llvmpipe,
 // softpipe), keeps up to kSoftwareGlHeapKeepBytes of freed heap in the
 // process instead of returning it to the kernel (glibc's M_TRIM_THRESHOLD,
-// process-wide, set once); otherwise does nothing. llvmpipe bins each
-// frame's triangles into 64 KiB blocks it frees after the frame: with
-// glibc's default trim threshold the heap shrinks after every frame and the
-// next frame faults every page back in: a third of a terrain frame's time
-// at 1280x720 (docs/terrain.md, "Frame cost"). Flight::create calls it; a
+// process-wide, set once), and serves blocks up to 32 MiB from the heap
+// (M_MMAP_THRESHOLD); otherwise does nothing. llvmpipe bins each frame's
+// triangles into 64 KiB blocks it frees after the frame: with glibc's
+// default trim threshold the heap shrinks after every frame and the next
+// frame faults every page back in: a third of a terrain frame's time at
+// 1280x720 (docs/terrain.md, "Frame cost"). Setting the trim threshold
+// fixes the mmap threshold at its 128 KiB start, so without the second
+// setting every larger per-frame buffer was mapped and faulted in afresh
+// (docs/decisions.md D298). Flight::create calls it; a
 // program drawing without a Flight may call it after making its context
 // current. Returns whether it applied the setting.
 bool keepHeapForSoftwareGl();
