@@ -329,6 +329,7 @@ std::vector<std::pair<std::string, std::string>> terrainMeasureColumns(const Fli
 }
 }  // namespace
 
+// Long: one column a line, in the file's order; splitting the list would only scatter it.
 std::string summaryTsv(const FlightRun& run, const RunDescription& d) {
   const RunSummary& s = run.summary;
   std::string keys, values;
