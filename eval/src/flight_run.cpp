@@ -252,6 +252,18 @@ Status createTerrainReferences(const FlightRunOptions& o, const std::shared_ptr<
   return okStatus();
 }
 
+// One layer's clip levels (those below `pyramid_level`): the tiles of
+// `sampled` there (packTileKey()), the loads `levels` counted there (null:
+// none), and loads over sampled (left as it is when none was sampled).
+void clipLevelOverFetch(const std::unordered_set<uint64_t>& sampled, uint32_t pyramid_level,
+                        const std::vector<LevelCounters>* levels, uint64_t* loaded, uint64_t* sampled_count,
+                        double* ratio) {
+  for (uint64_t key : sampled)
+    if ((key >> 58) < pyramid_level) ++*sampled_count;
+  for (uint32_t l = 0; levels && l < pyramid_level && l < levels->size(); ++l) *loaded += (*levels)[l].loads;
+  if (*sampled_count > 0) *ratio = double(*loaded) / double(*sampled_count);
+}
+
 // The run's summary from its frames (over-fetch ratios included), and the
 // per-judged-frame sums turned into means. `accuracy` is null without the
 // flat reference; over terrain `terrain_sampled` holds the sampled tiles.
@@ -314,31 +326,17 @@ void summarizeFlight(const FlightRunOptions& o, const Flight& flight, const FlyA
   if (run->summary.tiles_sampled > 0)
     run->summary.over_fetch_ratio = double(colour_loads) / double(run->summary.tiles_sampled);
   // Without the pyramid: the clip levels' loads over their sampled tiles.
-  const uint32_t pyramid_level = flight.firstPlan().pyramid_level;
+  RunSummary& sum = run->summary;
   const std::unordered_set<uint64_t>& sampled = accuracy ? accuracy->sampledSet() : terrain_sampled;
-  for (uint64_t key : sampled)
-    if ((key >> 58) < pyramid_level) ++run->summary.tiles_sampled_stack;
-  if (!run->streamer.layers.empty()) {
-    const std::vector<LevelCounters>& levels = run->streamer.layers[0].levels;
-    for (uint32_t l = 0; l < pyramid_level && l < levels.size(); ++l)
-      run->summary.tiles_loaded_stack += levels[l].loads;
-  }
-  if (run->summary.tiles_sampled_stack > 0)
-    run->summary.over_fetch_stack_ratio =
-        double(run->summary.tiles_loaded_stack) / double(run->summary.tiles_sampled_stack);
+  clipLevelOverFetch(sampled, flight.firstPlan().pyramid_level,
+                     run->streamer.layers.empty() ? nullptr : &run->streamer.layers[0].levels,
+                     &sum.tiles_loaded_stack, &sum.tiles_sampled_stack, &sum.over_fetch_stack_ratio);
   // The height layer's clip levels (layer 1 over terrain): the levels its
   // plan holds whole are loaded once, as the colour's pyramid.
-  if (o.terrain && run->streamer.layers.size() > 1) {
-    const uint32_t height_pyramid = flight.streamer().plan(1).pyramid_level;
-    for (uint64_t key : height_sampled)
-      if ((key >> 58) < height_pyramid) ++run->summary.height_tiles_sampled_stack;
-    const std::vector<LevelCounters>& levels = run->streamer.layers[1].levels;
-    for (uint32_t l = 0; l < height_pyramid && l < levels.size(); ++l)
-      run->summary.height_tiles_loaded_stack += levels[l].loads;
-    if (run->summary.height_tiles_sampled_stack > 0)
-      run->summary.height_over_fetch_stack_ratio =
-          double(run->summary.height_tiles_loaded_stack) / double(run->summary.height_tiles_sampled_stack);
-  }
+  if (o.terrain && run->streamer.layers.size() > 1)
+    clipLevelOverFetch(height_sampled, flight.streamer().plan(1).pyramid_level, &run->streamer.layers[1].levels,
+                       &sum.height_tiles_loaded_stack, &sum.height_tiles_sampled_stack,
+                       &sum.height_over_fetch_stack_ratio);
 }
 
 // The flight's settings from the run's options.
