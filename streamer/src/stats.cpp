@@ -34,6 +34,7 @@ std::string StreamerStats::toJson() const {
   j["entry_overhead_bytes"] = entry_overhead_bytes;
   j["queue_depth"] = queue_depth;
   j["in_flight"] = in_flight;
+  j["reads_held"] = reads_held;
   j["decode_ms_total"] = finite(decode_ms_total);
   j["queue_latency_p50_ms"] = finite(queue_latency_p50_ms);
   j["queue_latency_p99_ms"] = finite(queue_latency_p99_ms);

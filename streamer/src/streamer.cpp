@@ -733,6 +733,7 @@ StreamerStats Streamer::stats() const {
     out.ram_peak_bytes = s.cache->peakBytes();
     out.queue_depth = s.queue.size();
     out.in_flight = s.in_flight;
+    out.reads_held = !s.queue.empty() && s.read_allowance <= 0;
     out.decode_ms_total = s.decode_ms_total;
     out.max_texture_lod = s.layers.empty() ? 0 : s.layers[0].published_lod;
     out.ram_entries = s.cache->size();

@@ -239,7 +239,8 @@ void Streamer::Impl::issueReads() {
 
 // The throttle (docs/decisions.md D61): with an upload budget of
 // B tiles a frame, the loaders read no further ahead of the uploads than
-// throttle_read_ahead_frames x B wanted tiles waiting in RAM (or on their
+// throttle_read_ahead_frames x B wanted tiles, or
+// throttle_read_ahead_min_tiles if more, waiting in RAM (or on their
 // way) for the GPU. Reads go in load order, coarse levels first, so when
 // the uploads cannot keep up the finer levels wait to be read instead of
 // being read, decoded and evicted unseen, and every read of a coarse tile
@@ -251,9 +252,10 @@ void Streamer::Impl::setReadAllowance(uint64_t budget) {
     return;
   }
   const uint64_t frames = std::max<uint64_t>(config.throttle_read_ahead_frames, 1);
-  const uint64_t limit = budget > uint64_t(std::numeric_limits<int64_t>::max()) / frames
-                             ? uint64_t(std::numeric_limits<int64_t>::max())
-                             : budget * frames;
+  const uint64_t limit = std::max<uint64_t>(budget > uint64_t(std::numeric_limits<int64_t>::max()) / frames
+                                                ? uint64_t(std::numeric_limits<int64_t>::max())
+                                                : budget * frames,
+                                            config.throttle_read_ahead_min_tiles);
   uint64_t backlog = 0;
   for (const LayerTile& k : pending)
     if (cache->contains(k)) ++backlog;

@@ -21,13 +21,15 @@
 
 namespace clipstream::test {
 
-// Polls until nothing is queued or in flight. Sleeps in short steps; the
-// timeout only turns a hang into a failure.
+// Polls until nothing is in flight and nothing queued that the loaders may
+// read before the next hand-off (the throttle holds the rest:
+// StreamerStats::reads_held). Sleeps in short steps; the timeout only turns
+// a hang into a failure.
 inline bool waitIdle(const Streamer& s, double timeout_s = 30.0) {
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (std::chrono::steady_clock::now() < end) {
     const StreamerStats st = s.stats();
-    if (st.queue_depth == 0 && st.in_flight == 0) return true;
+    if ((st.queue_depth == 0 || st.reads_held) && st.in_flight == 0) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   return false;

@@ -90,6 +90,9 @@ std::vector<HandoffRecord> fly(const DeterministicFlight& d, StreamerStats* fina
   cfg.deterministic_io.enabled = true;
   cfg.deterministic_io.reads_per_frame = d.reads_per_frame;
   cfg.deterministic_io.latency_frames = d.latency_frames;
+  // 32 frames of the 6 uploads (192 tiles) may wait: the throttle binds
+  // only after the first updates, whose reads the rate test counts.
+  cfg.throttle_read_ahead_frames = 32;
   Streamer s(source, cfg);
   const Viewport vp{256, 160};
   std::vector<HandoffRecord> out;

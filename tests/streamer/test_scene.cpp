@@ -246,6 +246,9 @@ StreamerConfig sceneConfig(unsigned threads) {
   cfg.prefetch = false;
   cfg.planner.clip_tiles = 8;
   cfg.planner.scope = PlanScope::kWindow;  // whole windows: each layer's are checked
+  // The tests wait for the loaders between hand-offs (waitIdle()): every
+  // window's tiles may wait in RAM for the GPU, as the default's 64 may not.
+  cfg.throttle_read_ahead_min_tiles = 4096;
   return cfg;
 }
 

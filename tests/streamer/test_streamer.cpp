@@ -400,18 +400,20 @@ TEST(Streamer, MaxTextureLodNeverHidesATileOnTheGpu) {
 }
 
 // The throttle's rule: with an upload budget of B tiles a frame, at most
-// throttle_read_ahead_frames x B wanted tiles wait in RAM for the GPU (the
-// first frame, before any budget is seen, may read a frame's worth more);
-// without throttling the loaders read as fast as they may. Reads go in load
-// order, so the tiles that wait are the finest.
+// throttle_read_ahead_frames x B wanted tiles, or
+// throttle_read_ahead_min_tiles if more, wait in RAM for the GPU (the first
+// frame, before any budget is seen, may read a frame's worth more); without
+// throttling the loaders read as fast as they may. Reads go in load order,
+// so the tiles that wait are the finest.
 TEST(Streamer, ThrottleReadsNoFurtherAheadOfTheUploadsThanItsFrames) {
   const Viewport vp{800, 600};
   Camera cam = lookingDown(4000.0, 4000.0, 300.0);
   cam.pitch_rad = -0.7;
-  auto run = [&](bool throttle, uint64_t* most_waiting, uint64_t* frames_to_settle) {
+  auto run = [&](bool throttle, uint32_t min_tiles, uint64_t* most_waiting, uint64_t* frames_to_settle) {
     StreamerConfig cfg = baseConfig(2, 8);
     cfg.throttle = throttle;
     cfg.throttle_read_ahead_frames = 4;
+    cfg.throttle_read_ahead_min_tiles = min_tiles;
     cfg.deterministic_io.enabled = true;
     cfg.deterministic_io.reads_per_frame = 16;
     cfg.deterministic_io.latency_frames = 2;
@@ -429,13 +431,21 @@ TEST(Streamer, ThrottleReadsNoFurtherAheadOfTheUploadsThanItsFrames) {
     EXPECT_TRUE(s.settled());
     EXPECT_EQ(s.stats().total.gpu_handoffs, rankPlanTiles(s.geometry(), s.plan()).size());
   };
-  uint64_t waiting_on = 0, waiting_off = 0, frames_on = 0, frames_off = 0;
-  run(true, &waiting_on, &frames_on);
-  run(false, &waiting_off, &frames_off);
+  uint64_t waiting_on = 0, waiting_floor = 0, waiting_off = 0, frames_on = 0, frames_floor = 0, frames_off = 0;
+  run(true, 0, &waiting_on, &frames_on);
+  run(true, 48, &waiting_floor, &frames_floor);
+  run(false, 0, &waiting_off, &frames_off);
+  std::printf("  tiles waiting at most: %llu with 4 frames of 2, %llu with a floor of 48, %llu unthrottled\n",
+              static_cast<unsigned long long>(waiting_on), static_cast<unsigned long long>(waiting_floor),
+              static_cast<unsigned long long>(waiting_off));
   EXPECT_LE(waiting_on, 4u * 2u + 16u);
-  EXPECT_GT(waiting_off, 4u * 2u + 16u) << "the rule must bind in this test";
-  // Holding reads back costs no upload: both hand the same tiles at 2 a frame.
+  // The floor, when above the frames' share: more wait, but no more than it.
+  EXPECT_GT(waiting_floor, 4u * 2u + 16u) << "the floor must bind in this test";
+  EXPECT_LE(waiting_floor, 48u + 16u);
+  EXPECT_GT(waiting_off, 48u + 16u) << "the rule must bind in this test";
+  // Holding reads back costs no upload: all hand the same tiles at 2 a frame.
   EXPECT_LE(frames_on, frames_off + 4);
+  EXPECT_LE(frames_floor, frames_off + 4);
 }
 
 TEST(Streamer, BudgetBelowTheNeededSetKeepsCoarseLevelsAndDoesNotThrash) {

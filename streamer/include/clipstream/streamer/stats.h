@@ -47,6 +47,9 @@ struct StreamerStats {
   uint64_t ram_peak_bytes = 0;
   uint64_t queue_depth = 0;
   uint64_t in_flight = 0;
+  // The throttle's allowance is spent: the queued reads wait for the next
+  // hand-off (takeReady()), however long the caller waits.
+  bool reads_held = false;
   double decode_ms_total = 0.0;
   double queue_latency_p50_ms = 0.0;
   double queue_latency_p99_ms = 0.0;

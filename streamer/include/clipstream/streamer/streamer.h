@@ -99,12 +99,18 @@ struct StreamerConfig {
   // docs/terrain.md, "Planning against the terrain").
   bool terrain_bounds = true;
   // With throttling: at most this many frames of the upload budget (the
-  // last non-zero max_tiles of takeReady()) wait in RAM, or on their way,
-  // for the GPU; past that the loaders wait. 32 keeps every flight of the
-  // sweep as accurate as without the bound; 8 cost 2 dB at one upload a
-  // frame, where tiles read ahead are the ones the uploads need next
-  // (docs/decisions.md D61).
-  uint32_t throttle_read_ahead_frames = 32;
+  // last non-zero max_tiles of takeReady()), and never fewer than
+  // throttle_read_ahead_min_tiles, wait in RAM, or on their way, for the
+  // GPU; past that the loaders wait (docs/decisions.md D61, D299).
+  // 4 frames: over terrain the wanted set turns over faster than 16
+  // uploads a frame take it, and with 32 frames (512 tiles) the loaders
+  // read 68 tiles a frame on Rainier's mountainside, 4 for each upload, on
+  // the cores llvmpipe draws with: its frame 58.6 ms against 46.4 with 4
+  // frames (27 tiles a frame), the same PSNR. 32 tiles at least: at one
+  // upload a frame the tiles read ahead are the ones the uploads need next,
+  // and 8 cost 2 dB there.
+  uint32_t throttle_read_ahead_frames = 4;
+  uint32_t throttle_read_ahead_min_tiles = 32;
   PlannerConfig planner;
   // Non-empty: record the request stream here (written under OutputFile's
   // rule: a temporary name, published at shutdown(); a regular file there
