@@ -252,10 +252,9 @@ void Streamer::Impl::setReadAllowance(uint64_t budget) {
     return;
   }
   const uint64_t frames = std::max<uint64_t>(config.throttle_read_ahead_frames, 1);
-  const uint64_t limit = std::max<uint64_t>(budget > uint64_t(std::numeric_limits<int64_t>::max()) / frames
-                                                ? uint64_t(std::numeric_limits<int64_t>::max())
-                                                : budget * frames,
-                                            config.throttle_read_ahead_min_tiles);
+  const uint64_t most = uint64_t(std::numeric_limits<int64_t>::max());
+  const uint64_t by_frames = budget > most / frames ? most : budget * frames;
+  const uint64_t limit = std::max<uint64_t>(by_frames, config.throttle_read_ahead_min_tiles);
   uint64_t backlog = 0;
   for (const LayerTile& k : pending)
     if (cache->contains(k)) ++backlog;

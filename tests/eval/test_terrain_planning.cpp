@@ -187,10 +187,6 @@ TEST(TerrainPlanning, EveryTileSampledOverMountainSlopesIsPlanned) {
               r.finer_tiles);
 }
 
-// Over-fetch over terrain (docs/terrain.md, "Over-fetch over terrain"): an
-// orbit around St Helens loads at most twice the clip-level tiles its
-// frames sample when the plan follows the ground the frames show, at the
-// PSNR of loading whole windows, which load several times more.
 // A flight low around the crater of `dem` stretched under a 16384^2
 // procedural texture (vertical scale 0.5, rings of `ring_cells`), looking
 // `pitch_deg` down at the slopes: keyframes `step` radians and `dt_s`
@@ -218,6 +214,10 @@ FlightRunOptions craterOrbit(const std::string& dem, uint32_t ring_cells, int ke
   return o;
 }
 
+// Over-fetch over terrain (docs/terrain.md, "Over-fetch over terrain"): an
+// orbit around St Helens loads at most twice the clip-level tiles its
+// frames sample when the plan follows the ground the frames show, at the
+// PSNR of loading whole windows, which load several times more.
 TEST(TerrainPlanning, LoadsAtMostTwiceTheTilesTheFramesSample) {
   CLIPSTREAM_REQUIRE_GL();
   test::TempDir dir;
